@@ -1,0 +1,27 @@
+"""mitsuba-eventfield: render and process event fields (event cameras behind light-field optics).
+
+    import mitsuba_eventfield as ef
+    scene = ef.load_scene("scenes/demo/demo.xml")          # + scenes/demo/demo.motion.toml
+    events = ef.render_events(scene, duration=0.02, steps=40, spp=4)
+    ef.write_events("demo.h5", events)
+
+Importing this package configures Dr.Jit's libLLVM (see ``_llvm``) before Mitsuba loads; import it before
+``mitsuba``/``drjit`` in your own scripts.
+"""
+from . import _llvm
+
+_llvm.configure()
+
+from ._version import __version__  # noqa: E402
+from .backend import choose_variant, set_variant  # noqa: E402
+from .errors import ConfigError, EventFieldError  # noqa: E402
+from .eventio import H5EventWriter, read_events, write_events  # noqa: E402
+from .events import EventStream  # noqa: E402
+from .motion import Motion, load_motion, parse_motion  # noqa: E402
+from .preview import event_frame_rgb, write_preview  # noqa: E402
+from .render import RenderSummary, render_events  # noqa: E402
+from .scene import TimedScene, load_scene  # noqa: E402
+
+__all__ = ["__version__", "choose_variant", "set_variant", "EventFieldError", "ConfigError", "EventStream",
+           "H5EventWriter", "read_events", "write_events", "Motion", "load_motion", "parse_motion",
+           "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "TimedScene", "load_scene"]

@@ -1,0 +1,46 @@
+"""Event frames as images: ON events red, OFF events blue, on white, over a time window."""
+from __future__ import annotations
+
+import numpy as np
+
+from .atomic import atomic_output
+from .errors import EventFieldError
+from .events import EventStream
+
+
+def event_frame_rgb(events: EventStream, t0_us=None, t1_us=None, saturation: int | None = None) -> np.ndarray:
+    """(H, W, 3) uint8 RGB image of the events in [t0, t1): net ON red, net OFF blue, on white.
+
+    Colour strength is the net count (ON - OFF) over ``saturation`` (default: the 99th percentile of the
+    non-zero |net| counts, at least 1). Pixels whose events cancel are drawn light grey.
+    """
+    win = events.time_window(t0_us, t1_us)
+    net = win.signed_counts().astype(np.float64)
+    if saturation is None:
+        nz = np.abs(net[net != 0])
+        saturation = max(1.0, float(np.percentile(nz, 99))) if len(nz) else 1.0
+    a_on, a_off = np.clip(net / saturation, 0, 1), np.clip(-net / saturation, 0, 1)
+    img = np.ones(net.shape + (3,))
+    img[..., 1] -= np.maximum(a_on, a_off)
+    img[..., 2] -= a_on                      # ON -> red
+    img[..., 0] -= a_off                     # OFF -> blue
+    cancelled = (net == 0) & (win.counts() > 0)
+    img[cancelled] = 0.85
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def write_preview(path: str, events: EventStream, t0_us=None, t1_us=None, scale: int = 1) -> str:
+    import cv2
+    if not path.lower().endswith(".png"):
+        raise EventFieldError(f"{path}: preview must be a .png file")
+    if scale < 1:
+        raise EventFieldError(f"scale = {scale}: must be an integer >= 1")
+    if events.width == 0 or events.height == 0:
+        raise EventFieldError("cannot preview a 0x0 sensor")
+    img = event_frame_rgb(events, t0_us, t1_us)
+    if scale > 1:
+        img = np.repeat(np.repeat(img, scale, axis=0), scale, axis=1)
+    with atomic_output(path, "preview") as tmp:
+        if not cv2.imwrite(tmp, img[..., ::-1]):
+            raise EventFieldError(f"{path}: OpenCV could not write the PNG")
+    return path

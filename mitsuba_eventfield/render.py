@@ -1,0 +1,320 @@
+"""The time-stepping loop: scene at time t -> radiance render -> event integrator -> events (memory or file).
+
+Steps are uniform (``steps``) or adaptive: after each step the next one is sized so that the largest per-pixel
+log-brightness change is predicted to stay under ``max_log_change`` x C; a step whose change exceeds twice
+that is rendered again, shorter (only the render is repeated, the pixel state is untouched).
+
+Every step renders with the same sampler seed by default: the Monte-Carlo noise pattern is then frozen, so a
+static pixel never fires (independent seeds make noise fire events: DESIGN.md section 3).
+"""
+from __future__ import annotations
+
+import math
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import backend
+from ._version import __version__
+from .errors import EventFieldError
+from .events import EventStream
+from .eventio import H5EventWriter, format_of, write_events
+from .atomic import check_writable
+from .scene import TimedScene, load_scene
+
+mi, dr = backend.mi, backend.dr
+
+SEED_MODES = ("fixed", "independent")
+# Memory model used to refuse a frame that cannot fit: bytes per Monte-Carlo sample in flight and per pixel
+# (film, radiance tensor, pixel state). Conservative; measured peak is lower (benchmarks/bench_foundation.py).
+BYTES_PER_SAMPLE = 64
+BYTES_PER_PIXEL = 96
+MAX_WAVEFRONT = 2**32 - 1
+
+
+@dataclass
+class RenderSummary:
+    """What a render did: counts, timings split by stage, and where the events went."""
+    events: int = 0
+    on: int = 0
+    off: int = 0
+    duration_s: float = 0.0
+    steps: int = 0
+    rejected_steps: int = 0
+    wall_s: float = 0.0
+    render_s: float = 0.0
+    events_s: float = 0.0
+    motion_s: float = 0.0
+    write_s: float = 0.0
+    width: int = 0
+    height: int = 0
+    output: str | None = None
+    notes: list = field(default_factory=list)
+
+    @property
+    def rate(self) -> float:
+        return self.events / self.duration_s if self.duration_s > 0 else 0.0
+
+    def as_dict(self) -> dict:
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        d["rate_ev_per_s"] = self.rate
+        return d
+
+    def format(self) -> str:
+        overhead = self.events_s + self.motion_s + self.write_s
+        lines = [f"{self.events} events ({self.on} ON, {self.off} OFF) in {self.duration_s * 1e3:.3f} ms simulated "
+                 f"on {self.width}x{self.height}: {self.rate:.4g} ev/s",
+                 f"{self.steps} steps ({self.rejected_steps} re-rendered shorter), wall {self.wall_s:.2f} s: "
+                 f"render {self.render_s:.2f} s, events {self.events_s:.2f} s, motion {self.motion_s:.2f} s, "
+                 f"write {self.write_s:.2f} s (overhead {100 * overhead / max(self.render_s, 1e-9):.1f}% of render)"]
+        if self.output:
+            lines.append(f"wrote {self.output}")
+        lines += self.notes
+        return "\n".join(lines)
+
+
+def _check_number(name, value, low=None, integer=False, allow_none=False):
+    if value is None and allow_none:
+        return None
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) \
+        and math.isfinite(value) and (not integer or float(value).is_integer())
+    if not ok or (low is not None and value <= low):
+        kind = "an integer" if integer else "a finite number"
+        rng = f" > {low}" if low is not None else ""
+        raise EventFieldError(f"{name} = {value!r}: must be {kind}{rng}")
+    return int(value) if integer else float(value)
+
+
+def _available_memory() -> int:
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def check_memory(width: int, height: int, spp: int, where: str = "film") -> int:
+    """Refuse a frame whose render buffers cannot fit; return the estimated bytes."""
+    samples = width * height * spp
+    if samples > MAX_WAVEFRONT:
+        raise EventFieldError(f"{where}: {width}x{height} pixels x {spp} spp = {samples} samples per frame exceeds "
+                              f"Mitsuba's single-wavefront limit of {MAX_WAVEFRONT}; lower the resolution or spp")
+    need = samples * BYTES_PER_SAMPLE + width * height * BYTES_PER_PIXEL
+    avail = _available_memory()
+    if need > 0.8 * avail:
+        raise EventFieldError(f"{where}: {width}x{height} pixels x {spp} spp needs about {need / 2**30:.1f} GiB of "
+                              f"render buffers, more than 80% of the {avail / 2**30:.1f} GiB available")
+    return need
+
+
+def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off, linlog_threshold):
+    from .plugins.event_integrator import integrator_class, is_event_integrator
+    integ = timed.scene.integrator()
+    if not is_event_integrator(integ):  # any scene: wrap its radiance integrator
+        integ = integrator_class()(_props_with_inner(integ))
+    c_on = threshold_on if threshold_on is not None else threshold
+    c_off = threshold_off if threshold_off is not None else threshold
+    for name, v in (("threshold_on", c_on), ("threshold_off", c_off), ("linlog_threshold", linlog_threshold)):
+        _check_number(name, v, low=0, allow_none=True)
+    integ.configure(threshold_on=c_on, threshold_off=c_off, linlog_threshold=linlog_threshold)
+    return integ
+
+
+def _props_with_inner(inner):
+    props = mi.Properties("eventfield")
+    props["inner"] = inner
+    return props
+
+
+class _Sink:
+    """Where a step's events go: an in-memory list or a streaming HDF5 writer (other formats: at the end)."""
+
+    def __init__(self, output, fmt, width, height, meta):
+        self.output, self.width, self.height, self.meta = output, width, height, meta
+        self.fmt = format_of(output, fmt) if output else None
+        self.writer = H5EventWriter(output, width, height, meta) if self.fmt == "h5" else None
+        self.parts = []
+
+    def add(self, x, y, t, p, complete_until_us):
+        if self.writer is not None:
+            self.writer.append(x, y, t, p, complete_until_us)
+        elif len(t):
+            self.parts.append((x, y, t, p))
+
+    def stream(self, meta):
+        if not self.parts:
+            return EventStream.empty(self.width, self.height, meta)
+        return EventStream(*(np.concatenate([part[i] for part in self.parts]) for i in range(4)),
+                           self.width, self.height, meta)
+
+    def finish(self, end_us, meta):
+        if self.writer is not None:
+            self.writer.close(end_us=end_us, meta=meta)
+            return None
+        ev = self.stream(meta)
+        if self.output:
+            write_events(self.output, ev, self.fmt)
+        return ev
+
+    def abort(self):
+        if self.writer is not None:
+            self.writer.abort()
+
+
+def render_events(scene, duration: float | None = None, *, steps: int | None = None, adaptive: bool = False,
+                  max_log_change: float = 0.5, min_step: float | None = None, max_step: float | None = None,
+                  spp: int = 4, seed: int = 0, seed_mode: str = "fixed", threshold: float | None = None,
+                  threshold_on: float | None = None, threshold_off: float | None = None,
+                  linlog_threshold: float | None = None, output: str | None = None, fmt: str | None = None,
+                  progress: bool = False, t_start: float = 0.0, extra_meta: dict | None = None):
+    """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
+
+    Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by
+    extension; HDF5 is written in chunks while rendering, the others at the end) and returns a
+    :class:`RenderSummary`. Either way the summary is also in ``stream.meta["render"]``.
+    """
+    timed = load_scene(scene)
+    if duration is None:
+        duration = timed.motion.duration if timed.motion and timed.motion.duration else None
+        if duration is None:
+            raise EventFieldError("duration not given (pass duration=..., --duration, or set `duration` in the "
+                                  "motion file)")
+    duration = _check_number("duration", duration, low=0)
+    t_start = _check_number("t_start", t_start)
+    spp = _check_number("spp", spp, low=0, integer=True)
+    seed = _check_number("seed", seed, low=-1, integer=True)
+    if seed_mode not in SEED_MODES:
+        raise EventFieldError(f"seed_mode = {seed_mode!r}: allowed values are {', '.join(SEED_MODES)}")
+    if adaptive:
+        max_log_change = _check_number("max_log_change", max_log_change, low=0)
+        max_step = _check_number("max_step", max_step if max_step is not None else duration / 20, low=0)
+        min_step = _check_number("min_step", min_step if min_step is not None else min(1e-6, max_step), low=0)
+        if min_step > max_step:
+            raise EventFieldError(f"min_step = {min_step} is larger than max_step = {max_step}")
+    else:
+        steps = _check_number("steps", steps if steps is not None else 100, low=0, integer=True)
+    width, height = timed.film_size
+    check_memory(width, height, spp, where=f"{timed.path or 'scene'}: film")
+    if output:
+        check_writable(output, "event file")
+        format_of(output, fmt)
+    integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold)
+    integ.reset()
+
+    summary = RenderSummary(width=width, height=height, duration_s=duration, output=os.path.abspath(output) if output else None)
+    meta = _metadata(timed, integ, duration=duration, t_start=t_start, spp=spp, seed=seed, seed_mode=seed_mode,
+                     stepping=({"mode": "adaptive", "max_log_change": max_log_change, "min_step_s": min_step,
+                                "max_step_s": max_step} if adaptive else {"mode": "uniform", "steps": steps}))
+    if extra_meta:
+        meta.update(extra_meta)
+    t_end = t_start + duration
+    end_us = int(round(t_end * 1e6))
+    sink = _Sink(output, fmt, width, height, meta)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=round(duration * 1e3, 6), unit="ms", unit_scale=False, desc="rendering", file=sys.stderr,
+                   bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} ms sim [{elapsed}<{remaining}]{postfix}")
+    wall0 = time.perf_counter()
+    try:
+        def render_at(t, step_index):
+            t0 = time.perf_counter()
+            timed.set_time(t)
+            t1 = time.perf_counter()
+            step_seed = seed if seed_mode == "fixed" else seed + step_index
+            mi.render(timed.scene, integrator=integ, seed=step_seed, spp=spp)
+            dr.sync_thread()
+            t2 = time.perf_counter()
+            summary.motion_s += t1 - t0
+            summary.render_s += t2 - t1
+
+        render_at(t_start, 0)
+        integ.commit(t_start, t_start)   # initialises every pixel's reference; fires nothing
+        t, k = t_start, 0
+        dt = (duration / steps) if not adaptive else max(min_step, max_step / 16)
+        c_min = min(integ.threshold_on, integ.threshold_off)
+        while t < t_end - 1e-12:
+            if adaptive:
+                dt = min(dt, t_end - t)
+                t_next = t + dt
+            else:
+                t_next = t_start + (k + 1) * duration / steps
+            render_at(t_next, k + 1)
+            if adaptive:
+                change = integ.staged_max_change()
+                if change > 2 * max_log_change * c_min and dt > min_step * (1 + 1e-9):
+                    dt = max(min_step, 0.9 * dt * max_log_change * c_min / change)
+                    summary.rejected_steps += 1
+                    continue
+            te = time.perf_counter()
+            x, y, ts, p = integ.commit(t, t_next)
+            t_us = np.rint(ts * 1e6).astype(np.int64)
+            order = np.argsort(t_us, kind="stable")
+            x, y, t_us, p = x[order], y[order], t_us[order], p[order]
+            tw = time.perf_counter()
+            sink.add(x, y, t_us, p, complete_until_us=int(math.floor(t_next * 1e6)))
+            summary.write_s += time.perf_counter() - tw
+            summary.events_s += tw - te
+            n_on = int(np.count_nonzero(p > 0))
+            summary.events += len(p)
+            summary.on += n_on
+            summary.off += len(p) - n_on
+            if adaptive:
+                rate = change / dt
+                grow = min(max_step, 2 * dt)
+                dt = min(grow, max(min_step, 0.9 * max_log_change * c_min / rate)) if rate > 0 else grow
+            if bar is not None:
+                bar.update(round((t_next - t) * 1e3, 9))
+                bar.set_postfix_str(f"{summary.events} events")
+            t, k = t_next, k + 1
+        summary.steps = k
+        summary.wall_s = time.perf_counter() - wall0
+        if timed.is_static:
+            summary.notes.append("scene is static: every event comes from Monte-Carlo noise (0 with a fixed seed)")
+        meta["render"] = summary.as_dict()
+        tw = time.perf_counter()
+        stream = sink.finish(end_us, {"render": meta["render"]})
+        summary.write_s += time.perf_counter() - tw
+        summary.wall_s = time.perf_counter() - wall0   # the file's copy lacks only this final write
+    except BaseException:
+        sink.abort()
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    if stream is not None:
+        stream.meta = meta
+        stream.meta["render"] = summary.as_dict()
+        return stream if output is None else summary
+    return summary
+
+
+def _metadata(timed: TimedScene, integ, **run) -> dict:
+    sensor = timed.sensor
+    optics = sensor.optics_metadata() if hasattr(sensor, "optics_metadata") else {"design": "conventional camera",
+                                                                                   "sensor": type(sensor).__name__}
+    for key in timed.params.keys():  # first-level sensor parameters worth recording (e.g. sensor.x_fov)
+        name = key.split(".")[-1]
+        if key.count(".") == 1 and name in ("x_fov", "focus_distance", "aperture_radius") \
+                and key.startswith(_sensor_id(timed)):
+            optics[name] = float(timed.params[key][0])
+    return {"package": "mitsuba-eventfield", "package_version": __version__, "mitsuba_version": mi.__version__,
+            "drjit_version": dr.__version__, "variant": mi.variant(), "python": platform.python_version(),
+            "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "width": timed.film_size[0],
+            "height": timed.film_size[1], "duration_us": int(round(run["duration"] * 1e6)),
+            "t_start_us": int(round(run["t_start"] * 1e6)), "optics": optics,
+            "pixel_model": integ.pixel_model_metadata(), "spp": run["spp"], "seed": run["seed"],
+            "seed_mode": run["seed_mode"], "stepping": run["stepping"], "scene": timed.describe(),
+            "command": " ".join(sys.argv) if sys.argv and sys.argv[0] else None}
+
+
+def _sensor_id(timed: TimedScene) -> str:
+    sid = timed.sensor.id()
+    return sid + "." if sid else "sensor."

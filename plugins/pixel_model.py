@@ -1,0 +1,70 @@
+"""The ideal event pixel, as pure functions the integrator and the tests share.
+
+An event fires each time the pixel's log brightness ``L`` moves by a contrast threshold from its reference
+level; the reference then moves by exactly one threshold (so several events can fire in one step, and no
+residual is lost). Between two rendered instants ``L`` is taken as linear in time, which fixes the timestamp of
+every crossing (the ESIM model).
+
+Dr.Jit side (per pixel, dense): :func:`linlog`, :func:`count_crossings`.
+NumPy side (sparse, only pixels that fired): :func:`expand_crossings` turns the per-pixel counts into events.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def linlog(dr, intensity, linear_below: float):
+    """Log brightness with a linear segment below ``linear_below`` (C1-continuous), so zero radiance is finite.
+
+    For I >= I_l: log(I); below: log(I_l) + (I - I_l) / I_l, the tangent of log at I_l. Real photoreceptors
+    behave alike (dark current), and it keeps Monte-Carlo zeros from producing -inf.
+    """
+    il = float(linear_below)
+    return dr.select(intensity >= il, dr.log(dr.maximum(intensity, il)), math.log(il) + (intensity - il) / il)
+
+
+def linlog_np(intensity, linear_below: float):
+    """NumPy twin of :func:`linlog` (used by oracles and offline tools)."""
+    i = np.asarray(intensity, dtype=np.float64)
+    il = float(linear_below)
+    return np.where(i >= il, np.log(np.maximum(i, il)), math.log(il) + (i - il) / il)
+
+
+def count_crossings(dr, Int, log_now, log_ref, c_on, c_off):
+    """Signed number of threshold crossings per pixel and the new reference level.
+
+    ``n > 0``: n ON events (L rose by n*c_on from the reference); ``n < 0``: |n| OFF events.
+    """
+    rise = log_now - log_ref
+    n_on = dr.maximum(dr.floor(rise / c_on), 0.0)
+    n_off = dr.maximum(dr.floor(-rise / c_off), 0.0)
+    new_ref = log_ref + n_on * c_on - n_off * c_off
+    return Int(n_on) - Int(n_off), new_ref
+
+
+def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: float, t1: float):
+    """Events of the pixels that fired during (t0, t1].
+
+    All inputs are 1-D arrays over the *firing* pixels (``n != 0``). Crossing k (1-based) of a pixel sits at
+    level ``ref + k*C*sign``; its time is where the linear segment from ``log_prev`` (at t0) to ``log_now`` (at
+    t1) meets that level. Returns (pixel index, time in seconds float64, polarity int8), unsorted.
+    """
+    n = np.asarray(n, dtype=np.int64)
+    counts = np.abs(n)
+    total = int(counts.sum())
+    if total == 0:
+        return np.empty(0, np.int64), np.empty(0, np.float64), np.empty(0, np.int8)
+    rep = lambda a: np.repeat(np.asarray(a, dtype=np.float64), counts)  # noqa: E731
+    starts = np.cumsum(counts) - counts
+    k = np.arange(total, dtype=np.int64) - np.repeat(starts, counts) + 1
+    sign = np.repeat(np.sign(n), counts)
+    step = np.where(sign > 0, rep(c_on), rep(c_off))
+    lp, ln = rep(log_prev), rep(log_now)
+    level = rep(log_ref) + sign * k * step
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = (level - lp) / (ln - lp)
+    frac = np.clip(np.nan_to_num(frac, nan=1.0), 0.0, 1.0)
+    t = t0 + frac * (t1 - t0)
+    return np.repeat(np.asarray(pixel, dtype=np.int64), counts), t, sign.astype(np.int8)

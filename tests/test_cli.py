@@ -1,0 +1,77 @@
+"""The command line, as a user runs it: the demo job, info, preview, and bad input."""
+import os
+import subprocess
+import sys
+
+import h5py
+import pytest
+
+from conftest import DEMO, ROOT
+
+BROKEN_XML = '<scene version="3.0.0"><shape type="sphere"></scene>'
+UNKNOWN_PLUGIN = '<scene version="3.0.0"><shape type="hyperboloid_xyz"/></scene>'
+
+
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", *args], capture_output=True, text=True,
+                          timeout=600, cwd=cwd)
+
+
+def test_render_info_preview(tmp_path):
+    out, png = tmp_path / "demo.h5", tmp_path / "demo.png"
+    r = run("render", DEMO, "-o", str(out), "--preview", str(png), "-D", "width=64", "-D", "height=48",
+            "--duration", "0.01", "--steps", "10", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "events" in r.stdout and "ev/s" in r.stdout and "wall" in r.stdout
+    with h5py.File(out, "r") as f:
+        assert f["events/t"].shape[0] > 100
+    assert png.stat().st_size > 0
+    info = run("info", str(out))
+    assert info.returncode == 0 and "64x48" in info.stdout and "pixel_model" in info.stdout
+    p2 = tmp_path / "window.png"
+    pv = run("preview", str(out), "-o", str(p2), "--t0", "2", "--t1", "4")
+    assert pv.returncode == 0 and p2.stat().st_size > 0
+
+
+def _write(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text)
+    return str(p)
+
+
+BAD = {
+    "malformed_xml": (lambda d: [_write(d, "bad.xml", BROKEN_XML)], "bad.xml"),
+    "unknown_plugin": (lambda d: [_write(d, "unk.xml", UNKNOWN_PLUGIN)], "hyperboloid_xyz"),
+    "missing_motion_id": (lambda d: [DEMO, "--motion", _write(d, "m.motion.toml",
+                                                              "[objects.ghost]\nvelocity = [1, 0, 0]\n")],
+                          "objects.ghost"),
+    "threshold_zero": (lambda d: [DEMO, "--threshold", "0"], "threshold_on = 0.0"),
+    "negative_duration": (lambda d: [DEMO, "--duration", "-1"], "duration = -1.0: must be a finite number > 0"),
+    "unwritable_output": (lambda d: [DEMO, "-o", "/nonexistent_dir/x.h5"], "/nonexistent_dir does not exist"),
+    "huge_resolution": (lambda d: [DEMO, "-D", "width=200000", "-D", "height=200000"], "200000x200000"),
+    "over_memory": (lambda d: [DEMO, "-D", "width=60000", "-D", "height=60000", "--spp", "1"], "GiB of render buffers"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_input_one_line_error_no_output(tmp_path, case):
+    make_args, expected = BAD[case]
+    args = make_args(tmp_path)
+    out = tmp_path / "out.h5"
+    if "-o" not in args:
+        args += ["-o", str(out)]
+    args += ["-D", "width=32", "-D", "height=24"] if case not in ("huge_resolution", "over_memory") and args[0] == DEMO else []
+    before = set(os.listdir(tmp_path))
+    r = run("render", *args, "--quiet")
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith("eventfield: error:") and expected in lines[0], lines[0]
+    assert set(os.listdir(tmp_path)) == before        # nothing written, not even a temporary
+
+
+def test_corrupt_event_file_is_a_clear_error(tmp_path):
+    bad = tmp_path / "x.h5"
+    bad.write_bytes(b"not hdf5")
+    r = run("info", str(bad))
+    assert r.returncode == 2 and "cannot read as h5" in r.stderr

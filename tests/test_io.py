@@ -1,0 +1,107 @@
+"""Event files: lossless round trips, the DSEC layout as plain h5py sees it, atomic writes."""
+import json
+import os
+
+import h5py
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+
+
+@pytest.fixture(scope="module")
+def stream():
+    rng = np.random.default_rng(1)
+    n = 5000
+    t = np.sort(rng.integers(0, 25_000, n))
+    return ef.EventStream(rng.integers(0, 40, n), rng.integers(0, 30, n), t, rng.choice([-1, 1], n), 40, 30,
+                          {"seed": 7, "optics": {"design": "test"}, "duration_us": 25_000})
+
+
+@pytest.mark.parametrize("ext", [".h5", ".npz", ".txt", ".aedat4"])
+def test_round_trip(tmp_path, stream, ext):
+    path = str(tmp_path / f"ev{ext}")
+    ef.write_events(path, stream)
+    back = ef.read_events(path)
+    assert back.equals(stream)
+    if ext in (".h5", ".npz"):
+        assert back.meta["seed"] == 7 and back.meta["optics"] == {"design": "test"}
+    assert [p for p in os.listdir(tmp_path) if p.startswith(".")] == []   # no temporary left
+
+
+def test_dsec_layout_with_plain_h5py(tmp_path, stream):
+    path = str(tmp_path / "ev.h5")
+    ef.write_events(path, stream)
+    with h5py.File(path, "r") as f:
+        ev = f["events"]
+        assert {k: ev[k].dtype for k in "xytp"} == {"x": np.uint16, "y": np.uint16, "t": np.int64, "p": np.uint8}
+        t = ev["t"][()] + f["t_offset"][()]
+        assert np.array_equal(t, stream.t)
+        assert np.array_equal(ev["p"][()], (stream.p > 0).astype(np.uint8))
+        ms = f["ms_to_idx"][()]
+        assert len(ms) == 26                                  # 0..25 ms inclusive
+        assert np.array_equal(ms, np.searchsorted(stream.t, np.arange(26) * 1000, side="left"))
+        meta = json.loads(f["eventfield"].attrs["meta_json"])
+        assert meta["seed"] == 7 and f["eventfield"].attrs["width"] == 40
+
+
+def test_streaming_writer_index_matches_whole_file(tmp_path, stream):
+    """Chunks appended step by step (as the renderer does) give the same file as one write."""
+    path = str(tmp_path / "streamed.h5")
+    with ef.H5EventWriter(path, 40, 30, {"a": 1}, chunk=700) as w:
+        for t0 in range(0, 25_000, 1_300):
+            s = stream.time_window(t0, t0 + 1_300)
+            w.append(s.x, s.y, s.t, s.p, complete_until_us=t0 + 1_299)
+        w.close(end_us=25_000)
+    back = ef.read_events(path)
+    assert back.equals(stream)
+    with h5py.File(path, "r") as f:
+        assert np.array_equal(f["ms_to_idx"][()], np.searchsorted(stream.t, np.arange(26) * 1000))
+
+
+def test_writer_leaves_nothing_on_error(tmp_path, stream):
+    path = tmp_path / "broken.h5"
+    with pytest.raises(RuntimeError):
+        with ef.H5EventWriter(str(path), 40, 30) as w:
+            w.append(stream.x[:10], stream.y[:10], stream.t[:10], stream.p[:10])
+            raise RuntimeError("render failed")
+    assert os.listdir(tmp_path) == []
+
+
+def test_render_interrupted_leaves_no_file(tmp_path, demo_small, monkeypatch):
+    """A failure in the middle of a streamed render removes the partial file."""
+    from mitsuba_eventfield import render as render_mod
+    calls = {"n": 0}
+    real = render_mod.H5EventWriter.append
+
+    def failing_append(self, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(render_mod.H5EventWriter, "append", failing_append)
+    with pytest.raises(KeyboardInterrupt):
+        ef.render_events(demo_small, 0.005, steps=5, output=str(tmp_path / "out.h5"))
+    assert os.listdir(tmp_path) == []
+
+
+def test_render_streams_to_h5_same_as_memory(tmp_path, demo_small):
+    mem = ef.render_events(demo_small, 0.004, steps=6)
+    summary = ef.render_events(demo_small, 0.004, steps=6, output=str(tmp_path / "d.h5"))
+    disk = ef.read_events(str(tmp_path / "d.h5"))
+    assert summary.events == len(mem) > 0
+    assert disk.equals(mem)
+    for key in ("width", "height", "optics", "pixel_model", "seed", "spp", "package_version", "stepping"):
+        assert key in disk.meta
+    assert disk.meta["pixel_model"]["threshold_on"] == 0.2
+
+
+def test_preview_colours(tmp_path):
+    ev = ef.EventStream([1, 2, 2], [0, 0, 0], [0, 1, 2], [1, -1, -1], 4, 1)
+    img = ef.event_frame_rgb(ev, saturation=1)
+    assert tuple(img[0, 0]) == (255, 255, 255)     # no events: white
+    assert tuple(img[0, 1]) == (255, 0, 0)         # ON: red
+    assert tuple(img[0, 2]) == (0, 0, 255)         # OFF: blue
+    ef.write_preview(str(tmp_path / "p.png"), ev)
+    assert os.path.getsize(tmp_path / "p.png") > 0
