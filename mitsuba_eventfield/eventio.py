@@ -59,6 +59,7 @@ class H5EventWriter:
         self.written = 0           # events already in the file
         self.chunk = int(chunk)
         self._buffer = []          # small appends are gathered into chunk-sized writes
+        self._ms_buffer = []       # ms_to_idx entries waiting for the next flush
         self.last_t = None
         self._ms_written = 0
         self._closed = False
@@ -99,17 +100,24 @@ class H5EventWriter:
             self.ds[k].resize((n1,))
             self.ds[k][n0:n1] = v
         self.written, self._buffer = n1, []
+        self._flush_ms_index()
+
+    def _flush_ms_index(self):
+        if not self._ms_buffer:
+            return
+        idx = np.concatenate(self._ms_buffer)
+        m0 = self.ms_to_idx.shape[0]
+        self.ms_to_idx.resize((m0 + len(idx),))
+        self.ms_to_idx[m0:] = idx
+        self._ms_buffer = []
 
     def _write_ms_index(self, t_chunk, chunk_start, until_us):
         last_ms = until_us // 1000
         if last_ms < self._ms_written:
             return
         bounds = np.arange(self._ms_written, last_ms + 1, dtype=np.int64) * 1000
-        idx = chunk_start + np.searchsorted(t_chunk, bounds, side="left")
-        m0 = self._ms_written
-        self.ms_to_idx.resize((last_ms + 1,))
-        self.ms_to_idx[m0:] = idx.astype(np.uint64)
-        self._ms_written = last_ms + 1
+        self._ms_buffer.append((chunk_start + np.searchsorted(t_chunk, bounds, side="left")).astype(np.uint64))
+        self._ms_written = last_ms + 1   # entries decided (buffered until the next flush)
 
     def close(self, end_us: int | None = None, meta: dict | None = None):
         """Finish the index up to ``end_us`` (default: last event), write the metadata and publish the file."""
@@ -118,6 +126,7 @@ class H5EventWriter:
         self._flush()
         end = end_us if end_us is not None else (self.last_t or 0)
         self._write_ms_index(np.empty(0, np.int64), self.count, int(end))
+        self._flush_ms_index()
         if meta:
             self.meta.update(meta)
         g = self.f.create_group("eventfield")

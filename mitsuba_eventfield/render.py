@@ -256,7 +256,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
             te = time.perf_counter()
             x, y, ts, p = integ.commit(t, t_next)
             t_us = np.rint(ts * 1e6).astype(np.int64)
-            order = np.argsort(t_us, kind="stable")
+            order = _time_order(t_us, int(math.floor(t * 1e6)))
             x, y, t_us, p = x[order], y[order], t_us[order], p[order]
             tw = time.perf_counter()
             sink.add(x, y, t_us, p, complete_until_us=int(math.floor(t_next * 1e6)))
@@ -294,6 +294,15 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
         stream.meta["render"] = summary.as_dict()
         return stream if output is None else summary
     return summary
+
+
+def _time_order(t_us: np.ndarray, step_start_us: int) -> np.ndarray:
+    """Stable time order of one step's events. Offsets within a step usually fit 16 bits, where NumPy's
+    stable sort is a radix sort (about 8x faster than comparison sorting here)."""
+    offset = t_us - step_start_us
+    if len(offset) and offset.min() >= 0 and offset.max() < 2**16:
+        return np.argsort(offset.astype(np.uint16), kind="stable")
+    return np.argsort(t_us, kind="stable")
 
 
 def _metadata(timed: TimedScene, integ, **run) -> dict:

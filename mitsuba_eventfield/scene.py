@@ -64,7 +64,8 @@ class TimedScene:
         keys = set(self.params.keys())
         if f"{name}.to_world" in keys:
             key = f"{name}.to_world"
-            return _Binding(name, key, "to_world", type(self.params[key])(self.params[key]))
+            current = self.params[key]   # keep the t=0 placement as a float64 matrix: composing in NumPy
+            return _Binding(name, key, "to_world", (type(current), np.array(current.matrix.numpy()).reshape(4, 4)))
         if f"{name}.vertex_positions" in keys:
             key = f"{name}.vertex_positions"
             positions = mi.Point3f(dr.unravel(mi.Point3f, self.params[key]))
@@ -85,16 +86,21 @@ class TimedScene:
             return
         for b in self._bindings:
             m = self.motion.objects[b.name].matrix(self.time)
-            if b.kind == "to_world":
-                self.params[b.key] = type(b.base)(m) @ b.base
+            if b.kind == "to_world":  # composed on the host: no Dr.Jit kernel for a 4x4 product
+                transform_type, base = b.base
+                self.params[b.key] = transform_type(m @ base)
             else:
                 mat = mi.Matrix4f(m)
                 dr.make_opaque(mat)  # a literal matrix would compile a new kernel every step
                 xf = mi.Transform4f(mat)
                 positions, normals = b.base
-                self.params[b.key] = dr.ravel(xf @ positions)
+                new = [dr.ravel(xf @ positions)]
                 if normals is not None:
-                    self.params[b.name + ".vertex_normals"] = dr.ravel(dr.normalize(xf @ normals))
+                    new.append(dr.ravel(dr.normalize(xf @ normals)))
+                dr.eval(*new)          # positions and normals in one kernel
+                self.params[b.key] = new[0]
+                if normals is not None:
+                    self.params[b.name + ".vertex_normals"] = new[1]
         self.params.update()
 
     def describe(self) -> dict:

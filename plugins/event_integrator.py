@@ -111,9 +111,9 @@ def _define_class():
                                                     dr.gather(mi.Float, flat, idx + 2)))
             if self.size is not None and self.size != (width, height):
                 raise ValueError(f"film size changed from {self.size} to {(width, height)} between steps")
+            # left unevaluated: commit() fuses it with the crossing count into one kernel
             self.staged = pixel_model.linlog(dr, intensity, self.linlog_threshold)
             self.staged_image = image
-            dr.eval(self.staged)
 
         def staged_max_change(self) -> float:
             """Largest |Delta L| of the staged frame against the last committed one (0 before the first commit)."""
@@ -143,14 +143,15 @@ def _define_class():
                 dr.eval(self.log_prev, self.log_ref)
                 return _no_events()
             n, new_ref = pixel_model.count_crossings(dr, mi.Int32, log_now, self.log_ref, self.c_on, self.c_off)
-            dr.eval(n, new_ref)
+            dr.eval(n, new_ref, log_now)
             fired = dr.compress(n != 0)
             if dr.width(fired) == 0:
                 out = _no_events()
-            else:
-                g = lambda a: dr.gather(type(a), a, fired).numpy()  # noqa: E731
-                pix, t, p = pixel_model.expand_crossings(fired.numpy(), g(n), g(self.log_prev), g(log_now),
-                                                         g(self.log_ref), g(self.c_on), g(self.c_off), t0, t1)
+            else:  # only firing pixels leave Dr.Jit, gathered in a single kernel
+                sparse = [dr.gather(type(a), a, fired) for a in
+                          (n, self.log_prev, log_now, self.log_ref, self.c_on, self.c_off)]
+                dr.eval(*sparse)
+                pix, t, p = pixel_model.expand_crossings(fired.numpy(), *(a.numpy() for a in sparse), t0, t1)
                 out = ((pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p)
             self.log_prev, self.log_ref = log_now, new_ref
             return out

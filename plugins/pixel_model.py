@@ -53,18 +53,19 @@ def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: floa
     """
     n = np.asarray(n, dtype=np.int64)
     counts = np.abs(n)
-    total = int(counts.sum())
-    if total == 0:
+    if len(n) == 0:
         return np.empty(0, np.int64), np.empty(0, np.float64), np.empty(0, np.int8)
-    rep = lambda a: np.repeat(np.asarray(a, dtype=np.float64), counts)  # noqa: E731
-    starts = np.cumsum(counts) - counts
-    k = np.arange(total, dtype=np.int64) - np.repeat(starts, counts) + 1
-    sign = np.repeat(np.sign(n), counts)
-    step = np.where(sign > 0, rep(c_on), rep(c_off))
-    lp, ln = rep(log_prev), rep(log_now)
-    level = rep(log_ref) + sign * k * step
+    pixel = np.asarray(pixel, dtype=np.int64)
+    lp, ln, ref = (np.asarray(a, dtype=np.float64) for a in (log_prev, log_now, log_ref))
+    step = np.where(n > 0, np.asarray(c_on, dtype=np.float64), np.asarray(c_off, dtype=np.float64))
+    sign = np.sign(n)
+    if counts.max() > 1:  # repeat each firing pixel once per crossing; k = 1..n within the pixel
+        idx = np.repeat(np.arange(len(n)), counts)
+        k = np.arange(len(idx), dtype=np.int64) - (np.cumsum(counts) - counts)[idx] + 1
+        pixel, lp, ln, ref, step, sign = pixel[idx], lp[idx], ln[idx], ref[idx], step[idx], sign[idx]
+    else:                 # the common case with short steps: one crossing per pixel
+        k = 1
     with np.errstate(divide="ignore", invalid="ignore"):
-        frac = (level - lp) / (ln - lp)
+        frac = (ref + sign * k * step - lp) / (ln - lp)
     frac = np.clip(np.nan_to_num(frac, nan=1.0), 0.0, 1.0)
-    t = t0 + frac * (t1 - t0)
-    return np.repeat(np.asarray(pixel, dtype=np.int64), counts), t, sign.astype(np.int8)
+    return pixel, t0 + frac * (t1 - t0), sign.astype(np.int8)
