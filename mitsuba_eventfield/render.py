@@ -119,11 +119,13 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
     integ = timed.scene.integrator()
     if not is_event_integrator(integ):  # any scene: wrap its radiance integrator
         integ = integrator_class()(_props_with_inner(integ))
-    c_on = threshold_on if threshold_on is not None else threshold
-    c_off = threshold_off if threshold_off is not None else threshold
-    for name, v in (("threshold_on", c_on), ("threshold_off", c_off), ("linlog_threshold", linlog_threshold)):
-        _check_number(name, v, low=0, allow_none=True)
-    integ.configure(threshold_on=c_on, threshold_off=c_off, linlog_threshold=linlog_threshold)
+    pick = lambda *vals: next(v for v in vals if v is not None)  # noqa: E731  (first given value)
+    values = {"threshold_on": pick(threshold_on, threshold, integ.scene_defaults["threshold_on"]),
+              "threshold_off": pick(threshold_off, threshold, integ.scene_defaults["threshold_off"]),
+              "linlog_threshold": pick(linlog_threshold, integ.scene_defaults["linlog_threshold"])}
+    for name, v in values.items():
+        _check_number(name, v, low=0)
+    integ.configure(**values)
     return integ
 
 

@@ -151,12 +151,20 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
 
 
 def _mitsuba_message(e: Exception) -> str:
-    """The informative part of a Mitsuba loader error, on one line."""
-    text = " ".join(str(e).split())
+    """The informative part of a Mitsuba loader error, on one line.
+
+    Mitsuba prefixes the XML location and, for a Python plugin, embeds the whole Python traceback; keep the
+    location and the final exception line only.
+    """
+    import re
+    raw = str(e)
+    if "Traceback (most recent call last)" in raw:
+        head = raw.split("Traceback (most recent call last)")[0]
+        errors = re.findall(r"^\s*(?:\w+\.)*\w*(?:Error|Exception): (.+)$", raw, flags=re.M)
+        raw = head + (errors[-1] if errors else "")
+    text = " ".join(raw.split())
     for marker in ("Error while loading", "Critical Dr.Jit compiler failure"):
         if marker in text:
             text = text[text.index(marker):]
-    # strip "[file.cpp:123]" source locations that mean nothing to a user
-    import re
-    text = re.sub(r"\[[\w./]+\.cpp:\d+\]\s*", "", text)
-    return text[:400]
+    text = re.sub(r"\[[\w./]+\.cpp:\d+\]\s*", "", text)   # C++ source locations mean nothing to a user
+    return text[:500]

@@ -58,9 +58,11 @@ def _define_class():
             if self.inner is None:
                 self.inner = mi.load_dict({"type": "path"})
             c = float(props.get("threshold", DEFAULT_THRESHOLD))
-            self.configure(threshold_on=float(props.get("threshold_on", c)),
-                           threshold_off=float(props.get("threshold_off", c)),
-                           linlog_threshold=float(props.get("linlog_threshold", DEFAULT_LINLOG)))
+            # the scene's own values: per-render overrides fall back to these, never to an earlier override
+            self.scene_defaults = {"threshold_on": float(props.get("threshold_on", c)),
+                                   "threshold_off": float(props.get("threshold_off", c)),
+                                   "linlog_threshold": float(props.get("linlog_threshold", DEFAULT_LINLOG))}
+            self.configure(**self.scene_defaults)
 
         # ---------------------------------------------------------------- configuration
         def configure(self, threshold_on=None, threshold_off=None, linlog_threshold=None):

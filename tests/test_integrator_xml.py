@@ -1,0 +1,56 @@
+"""The `eventfield` integrator declared in XML: its thresholds, its nested integrator, its errors."""
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+
+SCENE = """<scene version="3.0.0">
+  <integrator type="eventfield">
+    <float name="threshold_on" value="{on}"/>
+    <float name="threshold_off" value="0.3"/>
+    <integrator type="direct"/>
+  </integrator>
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="16"/></film></sensor>
+  <emitter type="constant"><float name="radiance" value="1"/></emitter>
+  <shape type="sphere" id="ball"><point name="center" value="0, 0, 4"/><float name="radius" value="0.5"/></shape>
+</scene>"""
+MOTION = {"objects": {"ball": {"velocity": [100.0, 0.0, 0.0]}}}   # ~8 px in 0.01 s
+
+
+def test_xml_thresholds_and_nested_integrator(tmp_path):
+    path = tmp_path / "s.xml"
+    path.write_text(SCENE.format(on=0.35))
+    timed = ef.load_scene(str(path), motion=MOTION)
+    integ = timed.scene.integrator()
+    assert "direct" in str(integ.inner).lower() or "Direct" in type(integ.inner).__name__
+    ev = ef.render_events(timed, 0.01, steps=10)
+    assert ev.meta["pixel_model"]["threshold_on"] == 0.35 and ev.meta["pixel_model"]["threshold_off"] == 0.3
+    # an override applies to one render only; the next render is back to the scene's values
+    ev2 = ef.render_events(timed, 0.01, steps=10, threshold=0.1)
+    assert ev2.meta["pixel_model"]["threshold_on"] == 0.1 and len(ev2) > len(ev)
+    ev3 = ef.render_events(timed, 0.01, steps=10)
+    assert ev3.meta["pixel_model"]["threshold_on"] == 0.35 and ev3.equals(ev)
+
+
+def test_net_events_follow_log_change(tmp_path):
+    """Per pixel, ON minus OFF equals the log-brightness change over C_on/C_off to within one event."""
+    import mitsuba as mi
+    path = tmp_path / "s.xml"
+    path.write_text(SCENE.format(on=0.3))
+    timed = ef.load_scene(str(path), motion=MOTION)
+    ev = ef.render_events(timed, 0.01, steps=20)
+    frames = []
+    for t in (0.0, 0.01):
+        timed.set_time(t)
+        frames.append(np.array(mi.render(timed.scene, spp=4, seed=0))[..., 0])
+    dlog = np.log(np.maximum(frames[1], 1e-3)) - np.log(np.maximum(frames[0], 1e-3))
+    assert len(ev) > 50
+    assert np.all(np.abs(ev.signed_counts() - dlog / 0.3) <= 1.0 + 1e-4)
+
+
+def test_bad_threshold_in_xml_is_a_clear_error(tmp_path):
+    path = tmp_path / "bad.xml"
+    path.write_text(SCENE.format(on=-0.2))
+    with pytest.raises(ef.EventFieldError, match=r"bad.xml.*threshold_on = -0.2.*must be a finite number > 0"):
+        ef.load_scene(str(path))
