@@ -21,7 +21,10 @@ from .motion import Motion, load_motion, parse_motion  # noqa: E402
 from .preview import event_frame_rgb, write_preview  # noqa: E402
 from .render import RenderSummary, render_events  # noqa: E402
 from .scene import TimedScene, load_scene  # noqa: E402
+from . import scan  # noqa: E402
+from .scan import ScanCurve, curve_from_dict, event_angles, make_curve  # noqa: E402
 
 __all__ = ["__version__", "choose_variant", "set_variant", "EventFieldError", "ConfigError", "EventStream",
            "H5EventWriter", "read_events", "write_events", "Motion", "load_motion", "parse_motion",
-           "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "TimedScene", "load_scene"]
+           "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "TimedScene", "load_scene", "scan",
+           "ScanCurve", "make_curve", "curve_from_dict", "event_angles"]

@@ -85,6 +85,11 @@ class EventStream:
         return (self.width, self.height) == (other.width, other.height) and len(self) == len(other) and all(
             np.array_equal(a, b) for a, b in ((self.x, other.x), (self.y, other.y), (self.t, other.t), (self.p, other.p)))
 
+    def scan_angles(self, actual: bool = True):
+        """Galvo mirror angles (x, y), mechanical radians, of every event (see ``scan.event_angles``)."""
+        from .scan import event_angles
+        return event_angles(self, actual)
+
     @staticmethod
     def concatenate(streams) -> "EventStream":
         streams = list(streams)

@@ -45,6 +45,7 @@ class RenderSummary:
     duration_s: float = 0.0
     steps: int = 0
     rejected_steps: int = 0
+    reused_steps: int = 0
     wall_s: float = 0.0
     render_s: float = 0.0
     events_s: float = 0.0
@@ -175,12 +176,16 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   spp: int = 4, seed: int = 0, seed_mode: str = "fixed", threshold: float | None = None,
                   threshold_on: float | None = None, threshold_off: float | None = None,
                   linlog_threshold: float | None = None, output: str | None = None, fmt: str | None = None,
-                  progress: bool = False, t_start: float = 0.0, extra_meta: dict | None = None):
+                  progress: bool = False, t_start: float = 0.0, reuse: bool = True,
+                  extra_meta: dict | None = None):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
     Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by
     extension; HDF5 is written in chunks while rendering, the others at the end) and returns a
     :class:`RenderSummary`. Either way the summary is also in ``stream.meta["render"]``.
+
+    ``reuse``: when the scene is static and the view periodic (galvo scan, or a fixed camera), render one
+    period and feed its frames again (identical events, much faster); False renders every step.
     """
     timed = load_scene(scene)
     if duration is None:
@@ -225,8 +230,14 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
         bar = tqdm(total=round(duration * 1e3, 6), unit="ms", unit_scale=False, desc="rendering", file=sys.stderr,
                    bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} ms sim [{elapsed}<{remaining}]{postfix}")
     wall0 = time.perf_counter()
+    reuse = None if adaptive or not reuse or seed_mode != "fixed" else _reuse_plan(timed, duration, steps, width, height, summary.notes)
+    cache = []                                          # log-brightness frames of one period, for reuse
     try:
         def render_at(t, step_index):
+            if reuse and step_index >= reuse:           # the view repeats: feed the cached frame, no render
+                integ.stage_log(cache[step_index % reuse], (width, height))
+                summary.reused_steps += 1
+                return
             t0 = time.perf_counter()
             timed.set_time(t)
             t1 = time.perf_counter()
@@ -236,6 +247,10 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
             t2 = time.perf_counter()
             summary.motion_s += t1 - t0
             summary.render_s += t2 - t1
+            if reuse:
+                frame = mi.Float(integ.staged)
+                dr.eval(frame)
+                cache.append(frame)
 
         render_at(t_start, 0)
         integ.commit(t_start, t_start)   # initialises every pixel's reference; fires nothing
@@ -278,8 +293,9 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
             t, k = t_next, k + 1
         summary.steps = k
         summary.wall_s = time.perf_counter() - wall0
-        if timed.is_static:
-            summary.notes.append("scene is static: every event comes from Monte-Carlo noise (0 with a fixed seed)")
+        if timed.is_static and timed.scan_period == 0.0:
+            summary.notes.append("static scene seen by a fixed view: events can only come from Monte-Carlo noise "
+                                 "(none with a fixed seed)")
         meta["render"] = summary.as_dict()
         tw = time.perf_counter()
         stream = sink.finish(end_us, {"render": meta["render"]})
@@ -296,6 +312,38 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
         stream.meta["render"] = summary.as_dict()
         return stream if output is None else summary
     return summary
+
+
+def _reuse_plan(timed: TimedScene, duration: float, steps: int, width: int, height: int, notes: list):
+    """Number of steps after which every rendered frame repeats (static scene, periodic view), or None.
+
+    Reuse is exact: the galvo reduces time to the scan phase on the host (rounded to 1 ns), so a render one
+    period later is bit-identical to the cached frame; the integrator then sees the same input either way.
+    """
+    if not timed.is_static:
+        return None
+    period = timed.scan_period
+    if period is None:
+        notes.append("static scene, but the scan is not periodic: every step rendered")
+        return None
+    if period == 0.0:
+        k = 1
+    else:
+        k_float = period / (duration / steps)
+        k = int(round(k_float))
+        if k < 1 or abs(k_float - k) > 1e-6 * k_float:
+            notes.append(f"static scene, but the step ({duration / steps * 1e6:.4g} us) does not divide the scan "
+                         f"period ({period * 1e6:.4g} us): every step rendered")
+            return None
+    if k >= steps:
+        return None
+    if k * width * height * 4 > 0.25 * _available_memory():
+        notes.append(f"static scene, but caching {k} frames would need too much memory: every step rendered")
+        return None
+    what = "one frame" if period == 0.0 else f"one scan period ({k} steps, {period * 1e3:.4g} ms)"
+    notes.append(f"static scene: rendered {what} and reused it for the other {steps + 1 - k} steps "
+                 "(events identical to rendering every step)")
+    return k
 
 
 def _time_order(t_us: np.ndarray, step_start_us: int) -> np.ndarray:

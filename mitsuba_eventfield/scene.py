@@ -38,6 +38,19 @@ class TimedScene:
         self.params = mi.traverse(scene)
         self.time = 0.0
         self._bindings = [self._bind(name) for name in (motion.objects if motion else {})]
+        # time-varying sensors (the galvo) expose an opaque `time` parameter and reduce t to a scan phase
+        self._sensor_times = [(key, node) for key, (_, _, node, _) in self.params.properties.items()
+                              if key.endswith(".time") and hasattr(node, "phase_time")]
+
+    @property
+    def scan_period(self) -> float | None:
+        """Period of the view (the galvo scan); 0.0 for a time-invariant sensor; None if aperiodic."""
+        periods = [node.period for _, node in self._sensor_times]
+        if not periods:
+            return 0.0
+        if any(p is None for p in periods) or len(set(periods)) > 1:
+            return None
+        return periods[0]
 
     @property
     def is_static(self) -> bool:
@@ -82,8 +95,10 @@ class TimedScene:
     def set_time(self, t: float) -> None:
         """Move every object to its pose at time ``t`` (seconds)."""
         self.time = float(t)
-        if not self._bindings:
+        if not self._bindings and not self._sensor_times:
             return
+        for key, node in self._sensor_times:
+            self.params[key] = mi.Float(node.phase_time(self.time))
         for b in self._bindings:
             m = self.motion.objects[b.name].matrix(self.time)
             if b.kind == "to_world":  # composed on the host: no Dr.Jit kernel for a 4x4 product

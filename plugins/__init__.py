@@ -17,6 +17,10 @@ def register() -> None:
         return
     from .event_integrator import integrator_class
 
+    from .galvo_sensor import sensor_class as galvo_class
+
     cls = integrator_class()
     mi.register_integrator("eventfield", lambda props: cls(props))
+    galvo = galvo_class()
+    mi.register_sensor("galvo", lambda props: galvo(props))
     _registered.add(variant)

@@ -111,11 +111,15 @@ def _define_class():
                 idx = dr.arange(mi.UInt32, width * height) * channels
                 intensity = mi.luminance(mi.Color3f(dr.gather(mi.Float, flat, idx), dr.gather(mi.Float, flat, idx + 1),
                                                     dr.gather(mi.Float, flat, idx + 2)))
-            if self.size is not None and self.size != (width, height):
-                raise ValueError(f"film size changed from {self.size} to {(width, height)} between steps")
             # left unevaluated: commit() fuses it with the crossing count into one kernel
-            self.staged = pixel_model.linlog(dr, intensity, self.linlog_threshold)
+            self.stage_log(pixel_model.linlog(dr, intensity, self.linlog_threshold), (width, height))
             self.staged_image = image
+
+        def stage_log(self, log_brightness, size):
+            """Stage a log-brightness frame directly (period reuse feeds cached frames through here)."""
+            if self.size is not None and self.size != tuple(size):
+                raise ValueError(f"film size changed from {self.size} to {tuple(size)} between steps")
+            self.staged, self.staged_size, self.staged_image = log_brightness, tuple(size), None
 
         def staged_max_change(self) -> float:
             """Largest |Delta L| of the staged frame against the last committed one (0 before the first commit)."""
@@ -132,7 +136,7 @@ def _define_class():
             """
             if self.staged is None:
                 raise RuntimeError("commit() without a staged frame: render first")
-            height, width = self.staged_image.shape[0], self.staged_image.shape[1]
+            width, height = self.staged_size
             log_now, self.staged, self.staged_image = self.staged, None, None
             if self.log_prev is None:
                 n_pix = width * height

@@ -1,0 +1,411 @@
+"""Galvo scan curves: the one definition used by the galvo sensor, the device waveforms and the calibration.
+
+A curve gives the two **mechanical** mirror angles (x, y) in radians at time t (seconds); the optical
+deflection is twice that. Every curve evaluates on NumPy arrays and on Dr.Jit arrays with the same code path
+(``xp`` is ``numpy`` or ``drjit``), so what the renderer traces is what the device is told to drive.
+
+Curves (``make_curve(name, **params)`` or ``curve_from_dict``), angles in degrees at the interface:
+
+* ``circle``: frequency, amplitude (radius), phase, centre offsets. x = A cos(2 pi f t + phi), y = A sin(...).
+* ``lissajous``: freq_x, freq_y, amplitude_x, amplitude_y, phase_x, phase_y (x = A_x sin(2 pi f_x t + phi_x)).
+  ``line`` is a Lissajous with one axis at zero amplitude.
+* ``raster``: triangle wave in x at ``frequency`` (two lines per period of x), slow triangle in y over ``lines``.
+* ``moore``: a Moore curve (the closed Hilbert curve) of a given ``order`` traversed at constant speed once per
+  period: a space-filling scan of the square [-A, A]^2.
+
+``with_bandwidth(natural_hz, damping)`` returns what a mirror with a second-order response actually does:
+each sinusoid is scaled by |H| and delayed by arg H (exact for circles and Lissajous; other curves are filtered
+harmonic by harmonic from a table).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+from fractions import Fraction
+
+import numpy as np
+
+from .errors import ConfigError
+
+DEFAULT_MAX_ANGLE_DEG = 10.0   # mechanical; +-10 V at 1 V/deg on a GVS01x-class controller (DESIGN.md section 5)
+TWO_PI = 2.0 * math.pi
+
+
+def _xp(t):
+    """numpy for NumPy input or Python numbers, drjit for Dr.Jit arrays."""
+    if isinstance(t, (np.ndarray, float, int, np.floating, np.integer)):
+        return np
+    import drjit as dr
+    return dr
+
+
+def _frac(xp, v):
+    return v - xp.floor(v)
+
+
+def second_order_response(freq_hz, natural_hz: float, damping: float):
+    """Complex frequency response of a unity-gain second-order system (mirror + servo) at ``freq_hz``."""
+    w = TWO_PI * np.asarray(freq_hz, dtype=np.float64)
+    wn = TWO_PI * natural_hz
+    return wn ** 2 / (wn ** 2 - w ** 2 + 2j * damping * wn * w)
+
+
+@dataclass(frozen=True)
+class ScanCurve:
+    """Base class. Subclasses define :meth:`angles` and :meth:`velocity` (rad and rad/s, mechanical)."""
+    max_angle_deg: float = DEFAULT_MAX_ANGLE_DEG
+
+    @property
+    def name(self) -> str:
+        return getattr(self, "kind", "curve")
+
+    @property
+    def period(self) -> float | None:
+        raise NotImplementedError
+
+    def angles(self, t):
+        raise NotImplementedError
+
+    def velocity(self, t):
+        raise NotImplementedError
+
+    def optical_angles(self, t):
+        """Beam deflection = twice the mechanical angle."""
+        ax, ay = self.angles(t)
+        return 2 * ax, 2 * ay
+
+    def peak_angle_deg(self) -> float:
+        t = np.linspace(0.0, self.period or 1.0, 4097)
+        ax, ay = self.angles(t)
+        return float(np.degrees(max(np.max(np.abs(ax)), np.max(np.abs(ay)))))
+
+    def to_dict(self) -> dict:
+        d = {k: v for k, v in asdict(self).items() if not k.startswith("_") and k != "kind"}
+        d["curve"] = self.name
+        return d
+
+    # ------------------------------------------------------------------ inverse: when is a point reached?
+    def times_of(self, point_rad, tol_rad: float | None = None, samples: int = 20000) -> np.ndarray:
+        """All times in [0, period) at which the curve passes through ``point_rad`` (x, y), refined to
+        machine precision; ``tol_rad`` is how close the curve must come (default: 1e-6 of its extent)."""
+        from scipy.optimize import minimize_scalar
+        T = self.period
+        if T is None:
+            raise ValueError(f"{self.name}: not periodic, so the time of a point is not defined")
+        px, py = point_rad
+        t = np.arange(samples) * (T / samples)
+        ax, ay = self.angles(t)
+        d2 = (ax - px) ** 2 + (ay - py) ** 2
+        extent = max(np.ptp(ax), np.ptp(ay), 1e-12)
+        tol = 1e-6 * extent if tol_rad is None else tol_rad
+        minima = np.nonzero((d2 <= np.roll(d2, 1)) & (d2 < np.roll(d2, -1)))[0]
+        out = []
+        for i in minima:
+            f = lambda s: float(np.sum((np.array(self.angles(np.float64(s))) - (px, py)) ** 2))  # noqa: E731
+            r = minimize_scalar(f, bounds=(t[i] - T / samples, t[i] + T / samples), method="bounded",
+                                options={"xatol": 1e-15 * max(T, 1.0)})
+            if r.fun <= tol ** 2:
+                out.append(r.x % T)
+        return np.sort(np.array(out))
+
+    def time_of(self, point_rad, tol_rad: float | None = None) -> float:
+        """First time in [0, period) at which the curve passes through ``point_rad``."""
+        ts = self.times_of(point_rad, tol_rad)
+        if len(ts) == 0:
+            raise ValueError(f"{self.name}: the curve does not pass through {tuple(point_rad)} rad")
+        return float(ts[0])
+
+    def phase_time(self, t: float) -> float:
+        """``t`` reduced into [0, period), in float64 and rounded to the nanosecond, so that instants one period
+        apart give bit-identical values (float32 time would lose the phase after a few seconds)."""
+        T = self.period
+        if T is None:
+            return t
+        return round(math.fmod(t, T) % T, 9)
+
+    def validate(self, where: str = "scan") -> "ScanCurve":
+        if not (math.isfinite(self.max_angle_deg) and self.max_angle_deg > 0):
+            raise ConfigError(f"{where}: max_angle = {self.max_angle_deg!r}: must be a finite number > 0 degrees")
+        peak = self.peak_angle_deg()
+        if peak > self.max_angle_deg * (1 + 1e-9):
+            raise ConfigError(f"{where}: the {self.name} scan reaches {peak:.4g} mechanical degrees, beyond the "
+                              f"mirror's limit of +-{self.max_angle_deg:g} degrees (max_angle)")
+        return self
+
+
+def _positive_frequency(value, where, name):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"{where}: {name} = {value!r}: must be a finite frequency > 0 Hz")
+
+
+def _finite(value, where, name):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{where}: {name} = {value!r}: must be a finite number")
+
+
+@dataclass(frozen=True)
+class Lissajous(ScanCurve):
+    """x = ox + Ax sin(2 pi fx t + phx), y = oy + Ay sin(2 pi fy t + phy); angles in degrees, phases in degrees."""
+    freq_x: float = 250.0
+    freq_y: float = 250.0
+    amplitude_x: float = 1.0
+    amplitude_y: float = 1.0
+    phase_x: float = 90.0
+    phase_y: float = 0.0
+    offset_x: float = 0.0
+    offset_y: float = 0.0
+    kind: str = "lissajous"      # "circle" and "line" are Lissajous curves too; kept for metadata and messages
+
+    def _params(self):
+        r = math.radians
+        return (TWO_PI * self.freq_x, TWO_PI * self.freq_y, r(self.amplitude_x), r(self.amplitude_y),
+                r(self.phase_x), r(self.phase_y), r(self.offset_x), r(self.offset_y))
+
+    @property
+    def period(self) -> float | None:
+        fx, fy = (Fraction(f).limit_denominator(10_000) for f in (self.freq_x, self.freq_y))
+        if self.amplitude_x == 0:
+            fx = fy
+        if self.amplitude_y == 0:
+            fy = fx
+        if abs(float(fx) - self.freq_x) > 1e-9 * self.freq_x or abs(float(fy) - self.freq_y) > 1e-9 * self.freq_y:
+            return None
+        # gcd of two rationals: gcd(numerators) / lcm(denominators)
+        g = Fraction(math.gcd(fx.numerator * fy.denominator, fy.numerator * fx.denominator),
+                     fx.denominator * fy.denominator)
+        return float(1 / g)
+
+    def angles(self, t):
+        xp = _xp(t)
+        wx, wy, ax, ay, px, py, ox, oy = self._params()
+        return ox + ax * xp.sin(wx * t + px), oy + ay * xp.sin(wy * t + py)
+
+    def velocity(self, t):
+        xp = _xp(t)
+        wx, wy, ax, ay, px, py, _, _ = self._params()
+        return ax * wx * xp.cos(wx * t + px), ay * wy * xp.cos(wy * t + py)
+
+    def peak_angle_deg(self) -> float:
+        return max(abs(self.offset_x) + abs(self.amplitude_x), abs(self.offset_y) + abs(self.amplitude_y))
+
+    def with_bandwidth(self, natural_hz: float, damping: float = 0.7) -> "Lissajous":
+        """Steady-state response of second-order mirrors: each axis scaled by |H(f)| and delayed by arg H(f)."""
+        hx, hy = second_order_response(self.freq_x, natural_hz, damping), second_order_response(self.freq_y, natural_hz, damping)
+        return replace(self, amplitude_x=self.amplitude_x * abs(hx), amplitude_y=self.amplitude_y * abs(hy),
+                       phase_x=self.phase_x + math.degrees(np.angle(hx)),
+                       phase_y=self.phase_y + math.degrees(np.angle(hy)))
+
+
+def circle(frequency=250.0, amplitude=1.0, phase=0.0, offset_x=0.0, offset_y=0.0,
+           max_angle_deg=DEFAULT_MAX_ANGLE_DEG) -> Lissajous:
+    """Counter-clockwise circle of radius ``amplitude`` mechanical degrees, starting at angle ``phase``."""
+    c = Lissajous(max_angle_deg=max_angle_deg, freq_x=frequency, freq_y=frequency, amplitude_x=amplitude,
+                  amplitude_y=amplitude, phase_x=phase + 90.0, phase_y=phase, offset_x=offset_x, offset_y=offset_y,
+                  kind="circle")
+    return c
+
+
+@dataclass(frozen=True)
+class TabulatedCurve(ScanCurve):
+    """A periodic curve given by samples over one period, linearly interpolated (raster, Moore, filtered)."""
+    period_s: float = 1.0
+    source: dict = field(default_factory=dict)       # how the table was made, for metadata
+    _table: tuple = field(default=(), repr=False)     # ((x...), (y...)) in radians, len N (periodic)
+    kind: str = "tabulated"
+
+    @property
+    def period(self) -> float:
+        return self.period_s
+
+    def _lookup(self, t, derivative=False):
+        xp = _xp(t)
+        tx, ty = self._table
+        n = len(tx)
+        u = _frac(xp, t / self.period_s) * n
+        if xp is np:
+            i0 = np.floor(u).astype(np.int64) % n
+            i1 = (i0 + 1) % n
+            w = u - np.floor(u)
+            ax, ay = np.asarray(tx), np.asarray(ty)
+            g = lambda a, i: a[i]  # noqa: E731
+        else:
+            import mitsuba as mi
+            import drjit as dr
+            i0 = mi.UInt32(dr.floor(u)) % n
+            i1 = (i0 + 1) % n
+            w = u - dr.floor(u)
+            ax, ay = mi.Float(tx), mi.Float(ty)
+            g = lambda a, i: dr.gather(mi.Float, a, i)  # noqa: E731
+        x0, x1, y0, y1 = g(ax, i0), g(ax, i1), g(ay, i0), g(ay, i1)
+        if derivative:
+            s = n / self.period_s
+            return (x1 - x0) * s, (y1 - y0) * s
+        return x0 + (x1 - x0) * w, y0 + (y1 - y0) * w
+
+    def angles(self, t):
+        return self._lookup(t)
+
+    def velocity(self, t):
+        return self._lookup(t, derivative=True)
+
+    def peak_angle_deg(self) -> float:
+        return float(np.degrees(max(np.max(np.abs(self._table[0])), np.max(np.abs(self._table[1])))))
+
+    def to_dict(self) -> dict:
+        return dict(self.source, max_angle_deg=self.max_angle_deg)
+
+    def with_bandwidth(self, natural_hz: float, damping: float = 0.7) -> "TabulatedCurve":
+        n = len(self._table[0])
+        freqs = np.fft.rfftfreq(n, d=self.period_s / n)
+        h = second_order_response(freqs, natural_hz, damping)
+        filt = [np.fft.irfft(np.fft.rfft(np.asarray(a)) * h, n) for a in self._table]
+        src = dict(self.source, bandwidth_hz=natural_hz, damping=damping)
+        return replace(self, source=src, _table=(tuple(filt[0]), tuple(filt[1])))
+
+
+def raster(frequency=250.0, lines=8, amplitude_x=1.0, amplitude_y=1.0, samples_per_line=64,
+           max_angle_deg=DEFAULT_MAX_ANGLE_DEG) -> TabulatedCurve:
+    """x: triangle wave at ``frequency`` (a line each half period); y: a triangle over ``lines`` lines and back."""
+    if not isinstance(lines, int) or lines < 1:
+        raise ConfigError(f"scan: lines = {lines!r}: must be an integer >= 1")
+    period = lines / frequency                       # `lines` half-periods of x down, `lines` back up
+    n = 2 * lines * samples_per_line
+    s = np.arange(n) / n
+    tri = lambda u: 1.0 - 4.0 * np.abs(_frac(np, u + 0.25) - 0.5)  # noqa: E731  (range [-1, 1], starts at 0)
+    x = math.radians(amplitude_x) * tri(s * lines)
+    y = math.radians(amplitude_y) * tri(s)
+    src = {"curve": "raster", "frequency": frequency, "lines": lines, "amplitude_x": amplitude_x,
+           "amplitude_y": amplitude_y, "samples_per_line": samples_per_line}
+    return TabulatedCurve(max_angle_deg=max_angle_deg, period_s=period, source=src, _table=(tuple(x), tuple(y)),
+                          kind="raster")
+
+
+def moore_vertices(order: int) -> np.ndarray:
+    """Vertices of the closed Moore curve of ``order`` on the unit square [-1, 1]^2 (L-system)."""
+    if not isinstance(order, int) or not 1 <= order <= 8:
+        raise ConfigError(f"scan: order = {order!r}: the Moore curve order must be an integer in 1..8")
+    axiom, rules = "LFL+F+LFL", {"L": "-RF+LFL+FR-", "R": "+LF-RFR-FL+"}
+    s = axiom
+    for _ in range(order - 1):
+        s = "".join(rules.get(c, c) for c in s)
+    pos, heading, pts = np.array([0, 0]), np.array([0, 1]), [np.array([0, 0])]
+    for c in s:
+        if c == "F":
+            pos = pos + heading
+            pts.append(pos)
+        elif c == "+":
+            heading = np.array([heading[1], -heading[0]])
+        elif c == "-":
+            heading = np.array([-heading[1], heading[0]])
+    p = np.array(pts, dtype=np.float64)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    return 2 * (p - lo) / (hi - lo) - 1
+
+
+def moore(frequency=10.0, order=3, amplitude=1.0, samples_per_segment=8,
+          max_angle_deg=DEFAULT_MAX_ANGLE_DEG) -> TabulatedCurve:
+    """Space-filling scan: the Moore curve of ``order`` over [-A, A]^2 degrees, once per 1/frequency seconds."""
+    v = moore_vertices(order)
+    closed = np.vstack([v, v[:1]])                   # the last vertex is adjacent to the first
+    seg = np.linspace(0, 1, samples_per_segment, endpoint=False)
+    pts = np.concatenate([a + (b - a) * seg[:, None] for a, b in zip(closed[:-1], closed[1:])])
+    a = math.radians(amplitude)
+    src = {"curve": "moore", "frequency": frequency, "order": order, "amplitude": amplitude,
+           "samples_per_segment": samples_per_segment}
+    return TabulatedCurve(max_angle_deg=max_angle_deg, period_s=1.0 / frequency, source=src,
+                          _table=(tuple(a * pts[:, 0]), tuple(a * pts[:, 1])), kind="moore")
+
+
+CURVES = ("circle", "lissajous", "line", "raster", "moore")
+_ARGS = {
+    "circle": {"frequency", "amplitude", "phase", "offset_x", "offset_y"},
+    "lissajous": {"freq_x", "freq_y", "amplitude_x", "amplitude_y", "phase_x", "phase_y", "offset_x", "offset_y"},
+    "line": {"frequency", "amplitude", "phase", "axis"},
+    "raster": {"frequency", "lines", "amplitude_x", "amplitude_y", "samples_per_line"},
+    "moore": {"frequency", "order", "amplitude", "samples_per_segment"},
+}
+_FREQ_KEYS = ("frequency", "freq_x", "freq_y")
+
+
+def make_curve(name: str, max_angle_deg: float = DEFAULT_MAX_ANGLE_DEG, bandwidth_hz: float = 0.0,
+               damping: float = 0.7, where: str = "scan", **params) -> ScanCurve:
+    """Build and validate a curve by name; errors name ``where``, the parameter and its allowed range."""
+    if name not in CURVES:
+        raise ConfigError(f"{where}: unknown curve {name!r}; allowed: {', '.join(CURVES)}")
+    unknown = set(params) - _ARGS[name]
+    if unknown:
+        raise ConfigError(f"{where}: parameter {sorted(unknown)[0]!r} does not apply to a {name} scan; "
+                          f"allowed: {', '.join(sorted(_ARGS[name]))}")
+    for k in _FREQ_KEYS:
+        if k in params:
+            _positive_frequency(params[k], where, k)
+    for k, v in params.items():
+        if k not in _FREQ_KEYS and k != "axis":
+            _finite(v, where, k)
+    _finite(max_angle_deg, where, "max_angle")
+    if name == "circle":
+        curve = circle(max_angle_deg=max_angle_deg, **params)
+    elif name == "lissajous":
+        curve = Lissajous(max_angle_deg=max_angle_deg, **params)
+    elif name == "line":
+        axis = params.pop("axis", "x")
+        if axis not in ("x", "y"):
+            raise ConfigError(f"{where}: axis = {axis!r}: allowed values are 'x', 'y'")
+        f, a, ph = params.get("frequency", 250.0), params.get("amplitude", 1.0), params.get("phase", 0.0)
+        curve = Lissajous(max_angle_deg=max_angle_deg, freq_x=f, freq_y=f, amplitude_x=a if axis == "x" else 0.0,
+                          amplitude_y=a if axis == "y" else 0.0, phase_x=ph, phase_y=ph, kind="line")
+    elif name == "raster":
+        curve = raster(max_angle_deg=max_angle_deg, **{k: (int(v) if k in ("lines", "samples_per_line") else v)
+                                                       for k, v in params.items()})
+    else:
+        curve = moore(max_angle_deg=max_angle_deg, **{k: (int(v) if k in ("order", "samples_per_segment") else v)
+                                                      for k, v in params.items()})
+    if bandwidth_hz:
+        _positive_frequency(bandwidth_hz, where, "bandwidth")
+        if not (math.isfinite(damping) and damping > 0):
+            raise ConfigError(f"{where}: damping = {damping!r}: must be a finite number > 0")
+        curve = curve.with_bandwidth(bandwidth_hz, damping)
+    return curve.validate(where)
+
+
+def curve_to_dict(curve: ScanCurve, bandwidth_hz: float = 0.0, damping: float = 0.7) -> dict:
+    """A description from which :func:`curve_from_dict` rebuilds the same curve (stored in event metadata)."""
+    if isinstance(curve, TabulatedCurve):
+        d = dict(curve.source)
+        d.pop("bandwidth_hz", None), d.pop("damping", None)
+    else:
+        d = curve.to_dict()
+        if d["curve"] == "circle":
+            d = {"curve": "circle", "frequency": curve.freq_x, "amplitude": curve.amplitude_x,
+                 "phase": curve.phase_y, "offset_x": curve.offset_x, "offset_y": curve.offset_y}
+        elif d["curve"] == "line":
+            axis = "x" if curve.amplitude_x else "y"
+            d = {"curve": "line", "axis": axis, "frequency": curve.freq_x,
+                 "amplitude": curve.amplitude_x or curve.amplitude_y, "phase": curve.phase_x}
+        d.pop("max_angle_deg", None)
+    d["max_angle_deg"] = curve.max_angle_deg
+    if bandwidth_hz:
+        d["bandwidth_hz"], d["damping"] = bandwidth_hz, damping
+    return d
+
+
+def curve_from_dict(d: dict, where: str = "scan") -> ScanCurve:
+    d = dict(d)
+    name = d.pop("curve", None)
+    return make_curve(name, max_angle_deg=d.pop("max_angle_deg", DEFAULT_MAX_ANGLE_DEG),
+                      bandwidth_hz=d.pop("bandwidth_hz", 0.0), damping=d.pop("damping", 0.7), where=where, **d)
+
+
+def event_angles(events, actual: bool = True):
+    """Mechanical mirror angles (x, y) in radians at each event's timestamp, from the stream's metadata alone.
+
+    ``actual``: include the recorded mirror bandwidth (what the mirror did), else the commanded curve.
+    """
+    optics = events.meta.get("optics", {})
+    if optics.get("design") != "galvo" or "scan" not in optics:
+        raise ValueError("the event stream's metadata describes no galvo scan (optics.design != 'galvo')")
+    d = dict(optics["scan"])
+    if not actual:
+        d.pop("bandwidth_hz", None), d.pop("damping", None)
+    curve = curve_from_dict(d, where="event metadata")
+    return curve.angles(np.asarray(events.t, dtype=np.float64) * 1e-6)

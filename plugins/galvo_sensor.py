@@ -1,0 +1,152 @@
+"""Mitsuba sensor plugin ``galvo``: a pinhole or thin-lens camera looking through a two-axis scanning mirror.
+
+XML (angles in mechanical degrees, lengths in scene units, frequencies in Hz)::
+
+    <sensor type="galvo">
+        <float name="fov" value="40"/>                 <!-- horizontal field of view of the camera -->
+        <float name="aperture_radius" value="0"/>      <!-- > 0: thin lens focused at focus_distance -->
+        <float name="focus_distance" value="1"/>
+        <float name="mirror_distance" value="0.03"/>   <!-- camera centre to the X mirror pivot -->
+        <float name="mirror_separation" value="0.01"/> <!-- X mirror pivot to Y mirror pivot -->
+        <string name="curve" value="circle"/>          <!-- circle | lissajous | line | raster | moore -->
+        <float name="frequency" value="250"/>
+        <float name="amplitude" value="1"/>
+        <float name="max_angle" value="10"/>           <!-- the mirror's mechanical limit -->
+        <float name="bandwidth" value="0"/>            <!-- > 0: second-order mirror response, natural Hz -->
+        <float name="damping" value="0.7"/>
+        <transform name="to_world"> ... </transform>
+        <film type="hdrfilm"> ... </film>
+    </sensor>
+
+Curve parameters are those of ``mitsuba_eventfield.scan.make_curve`` (freq_x, amplitude_y, phase, lines,
+order, ...). The scan instant comes from the opaque parameter ``<id>.time`` (set by the time-stepping loop,
+reduced modulo the scan period on the host), plus the ray's own time within the shutter. Changing it never
+recompiles a kernel.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from . import galvo_optics as go
+
+_FLOAT_PARAMS = ("frequency", "amplitude", "phase", "offset_x", "offset_y", "freq_x", "freq_y", "amplitude_x",
+                 "amplitude_y", "phase_x", "phase_y")
+_INT_PARAMS = ("lines", "order", "samples_per_line", "samples_per_segment")
+_classes: dict = {}
+
+
+def sensor_class():
+    variant = mi.variant()
+    if variant not in _classes:
+        _classes[variant] = _define_class()
+    return _classes[variant]
+
+
+def curve_from_props(props) -> tuple:
+    """(scan curve as driven, description dict) from the plugin's properties."""
+    from mitsuba_eventfield.scan import curve_to_dict, make_curve
+    name = props.get("curve", "circle")
+    params = {k: float(props.get(k)) for k in _FLOAT_PARAMS if k in props}
+    params.update({k: int(props.get(k)) for k in _INT_PARAMS if k in props})
+    if "axis" in props:
+        params["axis"] = props.get("axis")
+    bandwidth = float(props.get("bandwidth", 0.0))
+    damping = float(props.get("damping", 0.7))
+    curve = make_curve(name, max_angle_deg=float(props.get("max_angle", 10.0)), bandwidth_hz=bandwidth,
+                       damping=damping, where="sensor 'galvo'", **params)
+    return curve, curve_to_dict(curve if not bandwidth else make_curve(
+        name, max_angle_deg=float(props.get("max_angle", 10.0)), where="sensor 'galvo'", **params), bandwidth, damping)
+
+
+def _define_class():
+    class GalvoSensor(mi.Sensor):
+        def __init__(self, props):
+            super().__init__(props)
+            self.curve, self.scan_description = curve_from_props(props)
+            size = self.film().size()
+            self.aspect = size.x / size.y
+            self.fov_x = float(mi.parse_fov(props, self.aspect))
+            self.tan_half = math.tan(math.radians(self.fov_x) / 2)
+            self.aperture_radius = float(props.get("aperture_radius", 0.0))
+            self.focus_distance = float(props.get("focus_distance", 1.0))
+            self.mirror_distance = float(props.get("mirror_distance", 0.03))
+            self.mirror_separation = float(props.get("mirror_separation", 0.01))
+            self.near_clip = float(props.get("near_clip", 1e-2))
+            self.far_clip = float(props.get("far_clip", 1e4))
+            for name, v, ok in (("fov", self.fov_x, 0 < self.fov_x < 180),
+                                ("aperture_radius", self.aperture_radius, self.aperture_radius >= 0),
+                                ("focus_distance", self.focus_distance, self.focus_distance > 0),
+                                ("mirror_distance", self.mirror_distance, self.mirror_distance >= 0),
+                                ("mirror_separation", self.mirror_separation, self.mirror_separation >= 0)):
+                if not (math.isfinite(v) and ok):
+                    raise ValueError(f"sensor 'galvo': {name} = {v!r} is out of range")
+            self.m_needs_sample_3 = self.aperture_radius > 0
+            self.scan_time = mi.Float(0.0)
+            dr.make_opaque(self.scan_time)
+
+        # ------------------------------------------------------------ parameters
+        def traverse(self, callback):
+            super().traverse(callback)
+            callback.put("time", self.scan_time, mi.ParamFlags.NonDifferentiable)
+
+        def parameters_changed(self, keys=[]):
+            dr.make_opaque(self.scan_time)
+            super().parameters_changed(keys)
+
+        @property
+        def period(self):
+            return self.curve.period
+
+        def phase_time(self, t: float) -> float:
+            return self.curve.phase_time(t)
+
+        def optics_metadata(self) -> dict:
+            return {"design": "galvo", "scan": self.scan_description, "fov_x_deg": self.fov_x,
+                    "aperture_radius": self.aperture_radius, "focus_distance": self.focus_distance,
+                    "mirror_distance": self.mirror_distance, "mirror_separation": self.mirror_separation,
+                    "angle_convention": "mechanical radians; optical deflection = 2x; +x pans the view to camera "
+                                        "+x, +y tilts it to camera +y (plugins/galvo_optics.py)"}
+
+        # ------------------------------------------------------------ rays
+        def _camera_ray(self, sample2, sample3):
+            film = self.film()
+            size, crop, offset = film.size(), film.crop_size(), film.crop_offset()
+            u = (offset.x + sample2.x * crop.x) / size.x
+            v = (offset.y + sample2.y * crop.y) / size.y
+            dx, dy, dz = go.pinhole_direction(dr, u, v, self.tan_half, self.aspect)
+            if self.aperture_radius <= 0:
+                return (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)), (dx, dy, dz)
+            lens = mi.warp.square_to_uniform_disk_concentric(sample3) * self.aperture_radius
+            k = self.focus_distance / dz                       # focus plane z = focus_distance
+            fx, fy, fz = dx * k - lens.x, dy * k - lens.y, dz * k
+            n = dr.sqrt(fx * fx + fy * fy + fz * fz)
+            return (lens.x, lens.y, mi.Float(0.0)), (fx / n, fy / n, fz / n)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            wavelengths, weight = self.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f), sample1, active)
+            o, d = self._camera_ray(sample2, sample3)
+            theta_x, theta_y = self.curve.angles(self.scan_time + (time - self.shutter_open()))
+            o, d = go.galvo_transform(dr, o, d, theta_x, theta_y, self.mirror_distance, self.mirror_separation)
+            to_world = self.world_transform()
+            ray = mi.Ray3f(to_world @ mi.Point3f(*o), dr.normalize(to_world @ mi.Vector3f(*d)), time, wavelengths)
+            ray.maxt = self.far_clip
+            return ray, weight
+
+        def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
+            ray, weight = self.sample_ray(time, sample1, sample2, sample3, active)
+            rd = mi.RayDifferential3f(ray)
+            rd.has_differentials = False
+            return rd, weight
+
+        def bbox(self):
+            p = self.world_transform() @ mi.ScalarPoint3f(0, 0, 0)
+            return mi.ScalarBoundingBox3f(p, p)
+
+        def to_string(self):
+            return (f"GalvoSensor[fov_x={self.fov_x}, curve={self.scan_description}, "
+                    f"mirrors=({self.mirror_distance}, {self.mirror_separation}), aperture={self.aperture_radius}]")
+
+    return GalvoSensor

@@ -1,0 +1,113 @@
+"""Scan curves: geometry, derivatives, periods, inverse time, NumPy = Dr.Jit, bandwidth, validation."""
+import math
+
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield import scan
+
+CURVES = {
+    "circle": dict(frequency=250.0, amplitude=2.0, phase=30.0),
+    "lissajous": dict(freq_x=300.0, freq_y=200.0, amplitude_x=1.5, amplitude_y=1.0, phase_x=10.0, phase_y=50.0),
+    "line": dict(frequency=100.0, amplitude=1.0, axis="x"),
+    "raster": dict(frequency=400.0, lines=4, amplitude_x=1.0, amplitude_y=0.5),
+    "moore": dict(frequency=20.0, order=3, amplitude=1.0),
+}
+PERIODS = {"circle": 1 / 250, "lissajous": 1 / 100, "line": 1 / 100, "raster": 4 / 400, "moore": 1 / 20}
+
+
+@pytest.mark.parametrize("name", sorted(CURVES))
+def test_period_and_periodicity(name):
+    c = scan.make_curve(name, **CURVES[name])
+    assert math.isclose(c.period, PERIODS[name], rel_tol=1e-12)
+    t = np.linspace(0, c.period, 777)
+    a0, a1 = np.array(c.angles(t)), np.array(c.angles(t + c.period))
+    assert np.allclose(a0, a1, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(CURVES))
+def test_velocity_is_the_derivative(name):
+    c = scan.make_curve(name, **CURVES[name])
+    t = np.linspace(0, c.period, 501)[1:-1] + 1e-7        # away from table knots
+    h = 1e-9
+    num = (np.array(c.angles(t + h)) - np.array(c.angles(t - h))) / (2 * h)
+    assert np.allclose(np.array(c.velocity(t)), num, rtol=1e-4, atol=1e-6 * np.abs(num).max())
+
+
+def test_circle_geometry_and_time_of():
+    c = scan.make_curve("circle", frequency=250.0, amplitude=2.0, phase=30.0)
+    t = np.linspace(0, c.period, 100)
+    x, y = c.angles(t)
+    assert np.allclose(np.hypot(x, y), math.radians(2.0))
+    assert np.allclose(np.arctan2(y[0], x[0]), math.radians(30.0))
+    for t0 in (0.0, 0.0011, 0.0037):
+        assert abs(c.time_of(c.angles(t0)) - t0) < 1e-12
+    assert c.peak_angle_deg() == pytest.approx(2.0)
+
+
+def test_lissajous_self_crossings_have_several_times():
+    c = scan.make_curve("lissajous", freq_x=300.0, freq_y=200.0, amplitude_x=1.0, amplitude_y=1.0,
+                        phase_x=0.0, phase_y=0.0)
+    ts = c.times_of((0.0, 0.0))      # the origin is crossed more than once per period
+    assert len(ts) >= 2
+    for t in ts:
+        assert np.allclose(c.angles(t), (0.0, 0.0), atol=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(CURVES))
+def test_numpy_and_drjit_agree(name):
+    import mitsuba as mi
+    c = scan.make_curve(name, **CURVES[name])
+    t = np.linspace(0, 2 * c.period, 1001)
+    a_np = np.array(c.angles(t))
+    a_dr = np.array([np.array(v) for v in c.angles(mi.Float(t.astype(np.float32)))])
+    a_np32 = np.array(c.angles(t.astype(np.float32).astype(np.float64)))
+    assert np.allclose(a_dr, a_np32, atol=2e-6 * np.abs(a_np).max())
+
+
+def test_moore_curve_is_closed_space_filling_and_unit_step():
+    v = scan.moore_vertices(3)
+    assert len(v) == 4 ** 3
+    step = np.diff(np.vstack([v, v[:1]]), axis=0)
+    assert np.allclose(np.abs(step).sum(axis=1), 2 / 7)      # unit grid moves, including the closing one
+    assert len({tuple(p) for p in np.round(v, 9)}) == 64     # visits every cell once
+
+
+def test_bandwidth_shrinks_and_delays():
+    cmd = scan.make_curve("circle", frequency=250.0, amplitude=2.0)
+    # critically damped second order: gain falls and lag grows monotonically with f / fn
+    # (at zeta 0.7 the gain peaks slightly above 1 at low f / fn)
+    slow = scan.make_curve("circle", frequency=250.0, amplitude=2.0, bandwidth_hz=2500.0, damping=1.0)
+    fast = scan.make_curve("circle", frequency=250.0, amplitude=2.0, bandwidth_hz=500.0, damping=1.0)
+    h = scan.second_order_response(250.0, 500.0, 1.0)
+    assert abs(h) == pytest.approx(1 / (1 + 0.5 ** 2))                 # |H| = 1 / (1 + (f/fn)^2) at zeta 1
+    assert fast.amplitude_x == pytest.approx(2.0 * abs(h))
+    assert fast.amplitude_x < slow.amplitude_x < cmd.amplitude_x
+    assert fast.phase_x < slow.phase_x < cmd.phase_x
+    # tabulated curves are filtered harmonic by harmonic: a pure sine table gets the same gain
+    r = scan.make_curve("raster", frequency=100.0, lines=2, amplitude_x=1.0, amplitude_y=1.0, bandwidth_hz=300.0)
+    assert r.peak_angle_deg() < 1.0
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(name="circle", frequency=0.0), "frequency = 0.0: must be a finite frequency > 0 Hz"),
+    (dict(name="circle", frequency=-5.0), "frequency = -5.0"),
+    (dict(name="circle", amplitude=12.0), "beyond the mirror's limit of +-10 degrees"),
+    (dict(name="spiral"), "unknown curve 'spiral'; allowed: circle, lissajous, line, raster, moore"),
+    (dict(name="circle", freq_x=3.0), "'freq_x' does not apply to a circle scan"),
+    (dict(name="moore", order=12), "order must be an integer in 1..8"),
+])
+def test_validation(kwargs, message):
+    name = kwargs.pop("name")
+    with pytest.raises(ef.ConfigError, match=message.replace("(", r"\(").replace("+", r"\+")):
+        scan.make_curve(name, **kwargs)
+
+
+@pytest.mark.parametrize("name", sorted(CURVES))
+def test_dict_round_trip(name):
+    c = scan.make_curve(name, bandwidth_hz=800.0, **CURVES[name])
+    d = scan.curve_to_dict(scan.make_curve(name, **CURVES[name]), 800.0, 0.7)
+    c2 = scan.curve_from_dict(d)
+    t = np.linspace(0, c.period, 50)
+    assert np.allclose(np.array(c.angles(t)), np.array(c2.angles(t)))
