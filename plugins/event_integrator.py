@@ -24,24 +24,14 @@ import mitsuba as mi
 import numpy as np
 
 from . import pixel_model
+from ._per_variant import per_variant
 
 DEFAULT_THRESHOLD = 0.2
 DEFAULT_LINLOG = 1e-3
 
 
-_classes: dict = {}
-
-
-def integrator_class():
-    """The EventIntegrator class for the active variant (Mitsuba base classes differ per variant)."""
-    variant = mi.variant()
-    if variant not in _classes:
-        _classes[variant] = _define_class()
-    return _classes[variant]
-
-
 def is_event_integrator(obj) -> bool:
-    return any(isinstance(obj, cls) for cls in _classes.values())
+    return any(isinstance(obj, cls) for cls in integrator_class.classes.values())
 
 
 def _define_class():
@@ -83,7 +73,8 @@ def _define_class():
         def reset(self):
             self.size = None           # (width, height) once the first frame is seen
             self.log_prev = None       # L at the last committed instant
-            self.log_ref = None        # reference level of each pixel
+            self.anchor = None         # log brightness at the first commit; reference = anchor + counts * C
+            self.k_on = self.k_off = None  # ON / OFF events fired so far by each pixel (Int32)
             self.c_on = self.c_off = None
             self.staged = None         # L of the frame rendered but not yet committed
             self.staged_image = None
@@ -142,25 +133,40 @@ def _define_class():
                 n_pix = width * height
                 self.size = (width, height)
                 self.log_prev = mi.Float(log_now)
-                self.log_ref = mi.Float(log_now)
+                self.anchor = mi.Float(log_now)
+                self.k_on = dr.zeros(mi.Int32, n_pix)
+                self.k_off = dr.zeros(mi.Int32, n_pix)
                 self.c_on = dr.full(mi.Float, self.threshold_on, n_pix)
                 self.c_off = dr.full(mi.Float, self.threshold_off, n_pix)
-                dr.make_opaque(self.c_on, self.c_off)
-                dr.eval(self.log_prev, self.log_ref)
+                dr.make_opaque(self.c_on, self.c_off, self.k_on, self.k_off)
+                dr.eval(self.log_prev, self.anchor)
                 return _no_events()
-            n, new_ref = pixel_model.count_crossings(dr, mi.Int32, log_now, self.log_ref, self.c_on, self.c_off)
-            dr.eval(n, new_ref, log_now)
+            log_ref = pixel_model.reference_level(dr, mi.Float, self.anchor, self.k_on, self.k_off, self.c_on,
+                                                  self.c_off)
+            n = pixel_model.count_crossings(dr, mi.Int32, log_now, log_ref, self.c_on, self.c_off)
+            k_on, k_off = self.k_on + dr.maximum(n, 0), self.k_off + dr.maximum(-n, 0)
+            dr.eval(n, k_on, k_off, log_now, log_ref)
             fired = dr.compress(n != 0)
             if dr.width(fired) == 0:
                 out = _no_events()
             else:  # only firing pixels leave Dr.Jit, gathered in a single kernel
                 sparse = [dr.gather(type(a), a, fired) for a in
-                          (n, self.log_prev, log_now, self.log_ref, self.c_on, self.c_off)]
+                          (n, self.log_prev, log_now, log_ref, self.c_on, self.c_off)]
                 dr.eval(*sparse)
                 pix, t, p = pixel_model.expand_crossings(fired.numpy(), *(a.numpy() for a in sparse), t0, t1)
                 out = ((pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p)
-            self.log_prev, self.log_ref = log_now, new_ref
+            self.log_prev, self.k_on, self.k_off = log_now, k_on, k_off
             return out
+
+        def periodic_key(self):
+            """Integer array that, with the previous log brightness, fixes every future event of the ideal pixel
+            (net event count per pixel), or None when no such exact key exists (unequal ON/OFF thresholds).
+            Equal keys one scan period apart, with identical input frames, mean the events repeat exactly."""
+            if self.k_on is None or self.threshold_on != self.threshold_off:
+                return None
+            key = self.k_on - self.k_off
+            dr.eval(key)
+            return key
 
         def traverse(self, callback):
             self.inner.traverse(callback)
@@ -171,6 +177,9 @@ def _define_class():
 
 
     return EventIntegrator
+
+
+integrator_class = per_variant(_define_class)   # the EventIntegrator class of the active variant
 
 
 def _no_events():

@@ -31,20 +31,11 @@ import drjit as dr
 import mitsuba as mi
 
 from . import galvo_optics as go
+from ._per_variant import per_variant
 
 _FLOAT_PARAMS = ("frequency", "amplitude", "phase", "offset_x", "offset_y", "freq_x", "freq_y", "amplitude_x",
                  "amplitude_y", "phase_x", "phase_y")
 _INT_PARAMS = ("lines", "order", "samples_per_line", "samples_per_segment")
-_classes: dict = {}
-
-
-def sensor_class():
-    variant = mi.variant()
-    if variant not in _classes:
-        _classes[variant] = _define_class()
-    return _classes[variant]
-
-
 def curve_from_props(props) -> tuple:
     """(scan curve as driven, description dict) from the plugin's properties."""
     from mitsuba_eventfield.scan import curve_to_dict, make_curve
@@ -150,3 +141,6 @@ def _define_class():
                     f"mirrors=({self.mirror_distance}, {self.mirror_separation}), aperture={self.aperture_radius}]")
 
     return GalvoSensor
+
+
+sensor_class = per_variant(_define_class)   # the GalvoSensor class of the active variant

@@ -33,15 +33,24 @@ def linlog_np(intensity, linear_below: float):
 
 
 def count_crossings(dr, Int, log_now, log_ref, c_on, c_off):
-    """Signed number of threshold crossings per pixel and the new reference level.
-
-    ``n > 0``: n ON events (L rose by n*c_on from the reference); ``n < 0``: |n| OFF events.
-    """
+    """Signed number of threshold crossings per pixel: n > 0 means n ON events (L rose by n*c_on from the
+    reference), n < 0 means |n| OFF events."""
     rise = log_now - log_ref
     n_on = dr.maximum(dr.floor(rise / c_on), 0.0)
     n_off = dr.maximum(dr.floor(-rise / c_off), 0.0)
-    new_ref = log_ref + n_on * c_on - n_off * c_off
-    return Int(n_on) - Int(n_off), new_ref
+    return Int(n_on) - Int(n_off)
+
+
+def reference_level(dr, Float, anchor, k_on, k_off, c_on, c_off):
+    """Reference level from the pixel's initial level and its integer ON/OFF event counts.
+
+    Kept exact by construction instead of accumulated (``ref += C`` drifts by a rounding error per event):
+    with equal thresholds it depends on ``k_on - k_off`` only, so a pixel whose counts return to the same net
+    value is back in bit-identical state, which is what makes periodic scans provably periodic in events.
+    """
+    symmetric = Float(k_on - k_off) * c_on
+    general = Float(k_on) * c_on - Float(k_off) * c_off
+    return anchor + dr.select(c_on == c_off, symmetric, general)
 
 
 def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: float, t1: float):

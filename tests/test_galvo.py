@@ -153,8 +153,19 @@ def test_static_period_reuse_equals_full_render():
     full = ef.render_events(timed, 0.012, steps=60, reuse=False)
     assert len(full) > 100 and reused.equals(full)
     r = reused.meta["render"]
-    assert r["reused_steps"] == 41 and any("reused" in n for n in r["notes"])
-    assert full.meta["render"]["reused_steps"] == 0
+    # period 1 is rendered, period 2 reuses its frames, and the pixel state then repeats, so period 3 is copied
+    assert r["reused_steps"] == 21 and r["copied_steps"] == 20
+    assert any("reused" in n for n in r["notes"]) and any("repeated" in n for n in r["notes"])
+    assert full.meta["render"]["reused_steps"] == full.meta["render"]["copied_steps"] == 0
+
+
+def test_event_copy_equals_computation_over_many_periods():
+    """Copying events once the pixel state repeats is exact, also with a start time inside a period."""
+    timed = _square_scene("circle", frequency=250.0, amplitude=0.5)
+    fast = ef.render_events(timed, 0.04, steps=400, t_start=0.0017)        # 10 periods
+    assert fast.meta["render"]["copied_steps"] >= 300
+    slow = ef.render_events(timed, 0.04, steps=400, t_start=0.0017, reuse=False)
+    assert len(slow) > 1000 and fast.equals(slow)
 
 
 def test_event_angles_recovered_from_metadata_alone(tmp_path):

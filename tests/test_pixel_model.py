@@ -19,13 +19,19 @@ def test_off_events_below_reference():
     assert np.allclose(t, 2.0 + (0.05 + 0.2) / 0.55)
 
 
-def test_count_crossings_dense():
+def test_count_crossings_and_exact_reference():
     import drjit as dr
     import mitsuba as mi
-    n, ref = pm.count_crossings(dr, mi.Int32, mi.Float([0.65, -0.45, 0.1]), mi.Float([0.0, 0.0, 0.0]),
-                                mi.Float([0.2] * 3), mi.Float([0.2] * 3))
+    n = pm.count_crossings(dr, mi.Int32, mi.Float([0.65, -0.45, 0.1]), mi.Float([0.0, 0.0, 0.0]),
+                           mi.Float([0.2] * 3), mi.Float([0.2] * 3))
     assert list(n.numpy()) == [3, -2, 0]
-    assert np.allclose(ref.numpy(), [0.6, -0.4, 0.0])
+    # the reference is a function of the integer counts: up 3 and down 3 is exactly back to the anchor
+    c = mi.Float([0.2, 0.2, 0.3])
+    ref = pm.reference_level(dr, mi.Float, mi.Float([0.1234567] * 3), mi.Int32([3, 5, 3]), mi.Int32([3, 2, 3]),
+                             c, mi.Float([0.2, 0.2, 0.2]))
+    assert ref.numpy()[0] == np.float32(0.1234567)
+    assert np.isclose(ref.numpy()[1], 0.1234567 + 3 * 0.2)
+    assert np.isclose(ref.numpy()[2], 0.1234567 + 3 * 0.3 - 3 * 0.2)
 
 
 def test_linlog_is_continuous_and_finite():

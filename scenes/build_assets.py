@@ -1,0 +1,49 @@
+"""Build the procedural assets of the bundled scenes (committed; re-run after changing this file).
+
+    python scenes/build_assets.py
+
+* scenes/fan/fan.ply: a four-blade fan (hub + blades, built with trimesh), axis +z, radius 0.25 m.
+* scenes/*/text.png, letters.png: 8-bit grey textures with large text and a grid (OpenCV), so edges of every
+  orientation exist.
+"""
+import os
+
+import cv2
+import numpy as np
+import trimesh
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def fan_mesh(radius=0.25, blades=4, hub_radius=0.05, thickness=0.01) -> trimesh.Trimesh:
+    parts = [trimesh.creation.cylinder(radius=hub_radius, height=thickness * 2, sections=32)]
+    blade_len = radius - hub_radius * 0.6
+    for i in range(blades):
+        blade = trimesh.creation.box(extents=[blade_len, 0.07, thickness])
+        blade.apply_translation([hub_radius * 0.6 + blade_len / 2, 0, 0])
+        blade.apply_transform(trimesh.transformations.rotation_matrix(np.radians(12), [1, 0, 0]))  # pitch
+        blade.apply_transform(trimesh.transformations.rotation_matrix(2 * np.pi * i / blades, [0, 0, 1]))
+        parts.append(blade)
+    mesh = trimesh.util.concatenate(parts)
+    mesh.merge_vertices()
+    return mesh
+
+
+def text_texture(path, words, size=(512, 256), grid=32):
+    img = np.full((size[1], size[0]), 200, np.uint8)
+    img[::grid, :] = 90
+    img[:, ::grid] = 90
+    font = cv2.FONT_HERSHEY_DUPLEX
+    for i, word in enumerate(words):
+        (w, h), _ = cv2.getTextSize(word, font, 3.0, 8)
+        y = int(size[1] * (i + 1) / (len(words) + 1) + h / 2)
+        cv2.putText(img, word, ((size[0] - w) // 2, y), font, 3.0, 20, 8, cv2.LINE_AA)
+    cv2.imwrite(path, img)
+
+
+if __name__ == "__main__":
+    fan_mesh().export(os.path.join(HERE, "fan", "fan.ply"))
+    text_texture(os.path.join(HERE, "fan", "text.png"), ["EVENT", "FIELDS"])
+    text_texture(os.path.join(HERE, "galvo_static", "letters.png"), ["CVPR"], size=(256, 256))
+    text_texture(os.path.join(HERE, "galvo_static", "text.png"), ["LIGHT", "FIELD"])
+    print("assets written")
