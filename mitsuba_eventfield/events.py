@@ -32,7 +32,7 @@ class EventStream:
             raise ValueError(f"x, y, t, p must have one length (got {len(self.x)}, {len(self.y)}, {n}, {len(self.p)})")
         if n and (self.x.max() >= self.width or self.y.max() >= self.height):
             raise ValueError(f"event coordinates exceed the {self.width}x{self.height} sensor")
-        if n and not np.isin(self.p, (-1, 1)).all():
+        if n and (self.p.min() < -1 or self.p.max() > 1 or not np.all(self.p)):
             raise ValueError("polarity must be +1 or -1")
 
     @classmethod

@@ -121,7 +121,8 @@ class ScanCurve:
         T = self.period
         if T is None:
             return t
-        return round(math.fmod(t, T) % T, 9)
+        phase, whole = round(math.fmod(t, T) % T, 9), round(T, 9)
+        return 0.0 if phase >= whole else phase     # fmod can land a hair below T: that instant is phase 0
 
     def validate(self, where: str = "scan") -> "ScanCurve":
         if not (math.isfinite(self.max_angle_deg) and self.max_angle_deg > 0):

@@ -82,6 +82,7 @@ def _define_class():
         def traverse(self, callback):
             super().traverse(callback)
             callback.put("time", self.scan_time, mi.ParamFlags.NonDifferentiable)
+            callback.put("to_world", self.m_to_world, mi.ParamFlags.NonDifferentiable)   # camera motion
 
         def parameters_changed(self, keys=[]):
             dr.make_opaque(self.scan_time)

@@ -206,3 +206,23 @@ def test_bad_galvo_parameters(params, message):
     sensor = dict({"type": "galvo", "film": {"type": "hdrfilm", "width": 8, "height": 8}}, **params)
     with pytest.raises(Exception, match=message.replace("+", r"\+")):
         mi.load_dict({"type": "scene", "sensor": sensor})
+
+
+def test_galvo_camera_moves_through_motion_file():
+    """The galvo's to_world is a motion target like any shape: a 0.3 m sideways move shifts a point at 2 m
+    by f * 0.3 / 2 pixels."""
+    mi = _mi()
+    sc = mi.load_dict({"type": "scene", "integrator": {"type": "direct"},
+                       "sensor": {"type": "galvo", "id": "cam", "amplitude": 0.0, "fov": 40,
+                                  "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
+                                  "sampler": {"type": "stratified", "sample_count": 16, "jitter": False}},
+                       "led": {"type": "sphere", "center": [0, 0, 2], "radius": 0.05,
+                               "emitter": {"type": "area", "radiance": 1.0}}})
+    timed = ef.load_scene(sc, motion={"objects": {"cam": {"velocity": [1.0, 0, 0]}}})
+    xs = np.mgrid[0:32, 0:32][1] + 0.5
+    cx = []
+    for t in (0.0, 0.3):
+        timed.set_time(t)
+        img = np.array(mi.render(sc))[..., 0]
+        cx.append((img * xs).sum() / img.sum())
+    assert cx[1] - cx[0] == pytest.approx(go.focal_length_px(32, 40) * 0.3 / 2.0, rel=0.02)

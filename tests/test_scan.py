@@ -111,3 +111,14 @@ def test_dict_round_trip(name):
     c2 = scan.curve_from_dict(d)
     t = np.linspace(0, c.period, 50)
     assert np.allclose(np.array(c.angles(t)), np.array(c2.angles(t)))
+
+
+def test_phase_time_is_exact_one_period_apart():
+    """Instants one period apart give the same sensor time (what makes period reuse bit-exact), also where
+    fmod lands a hair below the period."""
+    c = scan.make_curve("circle", frequency=250.0, amplitude=1.0)
+    dt = c.period / 20
+    for k in range(0, 2000, 7):
+        assert c.phase_time(k * dt) == c.phase_time((k + 20) * dt)
+        assert 0.0 <= c.phase_time(k * dt) < c.period
+    assert c.phase_time(0.2) == 0.0 and c.phase_time(50 * c.period) == 0.0
