@@ -39,7 +39,10 @@ def _write(tmp_path, name, text):
     return str(p)
 
 
+GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
 BAD = {
+    "galvo_amplitude": (lambda d: [GALVO, "-D", "amplitude=20"], "beyond the mirror's limit of +-10 degrees"),
+    "galvo_frequency": (lambda d: [GALVO, "-D", "frequency=0"], "frequency = 0.0: must be a finite frequency > 0"),
     "malformed_xml": (lambda d: [_write(d, "bad.xml", BROKEN_XML)], "bad.xml"),
     "unknown_plugin": (lambda d: [_write(d, "unk.xml", UNKNOWN_PLUGIN)], "hyperboloid_xyz"),
     "missing_motion_id": (lambda d: [DEMO, "--motion", _write(d, "m.motion.toml",
@@ -60,7 +63,8 @@ def test_bad_input_one_line_error_no_output(tmp_path, case):
     out = tmp_path / "out.h5"
     if "-o" not in args:
         args += ["-o", str(out)]
-    args += ["-D", "width=32", "-D", "height=24"] if case not in ("huge_resolution", "over_memory") and args[0] == DEMO else []
+    small = case not in ("huge_resolution", "over_memory") and args[0] in (DEMO, GALVO)
+    args += ["-D", "width=32", "-D", "height=24"] if small else []
     before = set(os.listdir(tmp_path))
     r = run("render", *args, "--quiet")
     assert r.returncode == 2, (r.stdout, r.stderr)
