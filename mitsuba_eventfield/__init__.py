@@ -23,8 +23,10 @@ from .render import RenderSummary, render_events  # noqa: E402
 from .scene import TimedScene, load_scene  # noqa: E402
 from . import scan  # noqa: E402
 from .scan import ScanCurve, curve_from_dict, event_angles, make_curve  # noqa: E402
+from .views import ViewStack, extract_views, split_events, view_of_pixel  # noqa: E402
 
 __all__ = ["__version__", "choose_variant", "set_variant", "EventFieldError", "ConfigError", "EventStream",
            "H5EventWriter", "read_events", "write_events", "Motion", "load_motion", "parse_motion",
            "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "TimedScene", "load_scene", "scan",
-           "ScanCurve", "make_curve", "curve_from_dict", "event_angles"]
+           "ScanCurve", "make_curve", "curve_from_dict", "event_angles", "ViewStack", "extract_views", "split_events",
+           "view_of_pixel"]

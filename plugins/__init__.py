@@ -23,4 +23,7 @@ def register() -> None:
     mi.register_integrator("eventfield", lambda props: cls(props))
     galvo = galvo_class()
     mi.register_sensor("galvo", lambda props: galvo(props))
+    from .kaleidoscope_sensor import sensor_class as kaleido_class
+    kaleido = kaleido_class()
+    mi.register_sensor("kaleidoscope", lambda props: kaleido(props))
     _registered.add(variant)

@@ -1,0 +1,89 @@
+"""Views of spatially multiplexed captures (kaleidoscope tiles, microlens arrays) as aligned stacks.
+
+The layout comes from the optics metadata the ``kaleidoscope`` sensor writes into every event file, so a
+capture can be split without its scene:
+
+    stack = ef.extract_views(frame, events.meta["optics"])   # (n*n, h, w[, C]), unflipped and aligned
+    streams = ef.split_events(events)                        # one EventStream per view, view coordinates
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .events import EventStream
+
+
+@dataclass
+class ViewStack:
+    """n x n views: ``images[k]`` with index ``ij[k]`` and sub-aperture centre ``positions[k]`` (metres on the
+    main lens, local frame). Views are unflipped and share one pixel grid: a point on the focus plane sits at
+    the same pixel in every view."""
+    images: np.ndarray
+    ij: np.ndarray
+    positions: np.ndarray
+
+    def view(self, i: int, j: int) -> np.ndarray:
+        k = int(np.nonzero((self.ij[:, 0] == i) & (self.ij[:, 1] == j))[0][0])
+        return self.images[k]
+
+
+def _layout(optics: dict):
+    if optics.get("design") not in ("kaleidoscope", "microlens") or "views" not in optics:
+        raise ValueError("the metadata describes no kaleidoscope or microlens layout (optics.design)")
+    return optics["design"], optics["views"]
+
+
+def extract_views(frame: np.ndarray, optics: dict, margin: int = 0) -> ViewStack:
+    """Split a film image (H, W[, C]) into its views; ``margin`` crops pixels off each tile edge (seams)."""
+    design, views = _layout(optics)
+    out = []
+    for v in views:
+        if design == "kaleidoscope":
+            x0, y0, w, h = v["tile"]
+            tile = frame[y0 + margin:y0 + h - margin, x0 + margin:x0 + w - margin]
+            if v["flip_x"]:
+                tile = tile[:, ::-1]
+            if v["flip_y"]:
+                tile = tile[::-1]
+        else:
+            ox, oy = v["pixel_offset"]
+            tile = frame[oy::v["stride"], ox::v["stride"]]
+        out.append(np.ascontiguousarray(tile))
+    return ViewStack(np.stack(out), np.array([[v["i"], v["j"]] for v in views]),
+                     np.array([v["subaperture"] for v in views], dtype=np.float64))
+
+
+def view_of_pixel(x, y, optics: dict):
+    """Per pixel: (view index k, x and y in that view's unflipped coordinates)."""
+    design, views = _layout(optics)
+    x, y = np.asarray(x, np.int64), np.asarray(y, np.int64)
+    n = optics["n"]
+    if design == "kaleidoscope":
+        tw, th = views[0]["tile"][2], views[0]["tile"][3]
+        col, row = x // tw, y // th
+        k = row * n + col
+        flip_x = np.array([v["flip_x"] for v in views])[k]
+        flip_y = np.array([v["flip_y"] for v in views])[k]
+        vx, vy = x - col * tw, y - row * th
+        return k, np.where(flip_x, tw - 1 - vx, vx), np.where(flip_y, th - 1 - vy, vy)
+    col, row = x % n, y % n
+    return row * n + col, x // n, y // n
+
+
+def split_events(events: EventStream) -> list:
+    """One EventStream per view (same order as the metadata's views), in unflipped view coordinates."""
+    optics = events.meta.get("optics", {})
+    design, views = _layout(optics)
+    k, vx, vy = view_of_pixel(events.x, events.y, optics)
+    if design == "kaleidoscope":
+        w, h = views[0]["tile"][2], views[0]["tile"][3]
+    else:
+        w, h = events.width // optics["n"], events.height // optics["n"]
+    out = []
+    for idx, v in enumerate(views):
+        sel = k == idx
+        meta = dict(events.meta, view={"i": v["i"], "j": v["j"], "subaperture": v["subaperture"]})
+        out.append(EventStream(vx[sel], vy[sel], events.t[sel], events.p[sel], w, h, meta))
+    return out
