@@ -131,6 +131,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("eventfield: interrupted (no partial output kept)", file=sys.stderr)
         return 130
+    except BrokenPipeError:          # e.g. `eventfield info f.h5 | head`: the reader left; not an error of ours
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@
 * scenes/fan/fan.ply: a four-blade fan (hub + blades, built with trimesh), axis +z, radius 0.25 m.
 * scenes/*/text.png, letters.png: 8-bit grey textures with large text and a grid (OpenCV), so edges of every
   orientation exist.
+* scenes/moving_grid/grid.png: dark lines on white, both orientations (the paper's grid experiment).
 """
 import os
 
@@ -41,9 +42,19 @@ def text_texture(path, words, size=(512, 256), grid=32):
     cv2.imwrite(path, img)
 
 
+def grid_texture(path, size=256, pitch=32, width=4):
+    img = np.full((size, size), 235, np.uint8)
+    for k in range(pitch // 2, size, pitch):
+        img[k - width // 2:k + width // 2, :] = 25
+        img[:, k - width // 2:k + width // 2] = 25
+    cv2.imwrite(path, img)
+
+
 if __name__ == "__main__":
     fan_mesh().export(os.path.join(HERE, "fan", "fan.ply"))
     text_texture(os.path.join(HERE, "fan", "text.png"), ["EVENT", "FIELDS"])
     text_texture(os.path.join(HERE, "galvo_static", "letters.png"), ["CVPR"], size=(256, 256))
     text_texture(os.path.join(HERE, "galvo_static", "text.png"), ["LIGHT", "FIELD"])
+    grid_texture(os.path.join(HERE, "moving_grid", "grid.png"))
+    text_texture(os.path.join(HERE, "falling", "text.png"), ["SLOW", "MOTION"])
     print("assets written")
