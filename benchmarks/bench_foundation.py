@@ -9,7 +9,6 @@ Targets (issue 2; ratios from one run, never absolute times, since these machine
 Writes benchmarks/results/foundation.json and foundation.md. Usage: ./run bench  [--steps N]
 """
 import argparse
-import json
 import os
 import resource
 import subprocess
@@ -18,6 +17,8 @@ import tempfile
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from _report import write_results  # noqa: E402
 ROOT = os.path.dirname(HERE)
 DEMO = os.path.join(ROOT, "scenes", "demo", "demo.xml")
 STEP = 0.5e-3   # seconds per step in every run
@@ -72,9 +73,6 @@ def main():
                        "no kernel compiled after warm-up": timing["kernels_compiled_after_warmup"] == 0,
                        "10x longer run peak memory within 10%": long["peak_rss_mib"] <= 1.10 * short["peak_rss_mib"]},
            "bench_wall_s": time.time() - t0}
-    os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
-    with open(os.path.join(HERE, "results", "foundation.json"), "w") as f:
-        json.dump(res, f, indent=2)
     t = timing
     md = [f"# Foundation benchmark ({t['resolution']}, {t['spp']} spp, demo scene, streaming to HDF5)", "",
           "| per step | ms |", "|---|---|"]
@@ -86,10 +84,7 @@ def main():
            f"- peak RSS: {short['peak_rss_mib']:.0f} MiB for {short['steps']} steps ({short['events']} events), "
            f"{long['peak_rss_mib']:.0f} MiB for {long['steps']} steps ({long['events']} events): ratio "
            f"**{res['peak_memory_long_over_short']:.3f}** (target <= 1.10)", ""]
-    with open(os.path.join(HERE, "results", "foundation.md"), "w") as f:
-        f.write("\n".join(md))
-    print("\n".join(md))
-    print(json.dumps(res["targets"], indent=2))
+    write_results("foundation", res, md)
 
 
 if __name__ == "__main__":

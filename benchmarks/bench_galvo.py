@@ -6,12 +6,14 @@
 
 Writes benchmarks/results/galvo.json and galvo.md.  Usage: ./run bench galvo
 """
-import json
 import os
+import sys
 import statistics
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from _report import write_results  # noqa: E402
 SCENE = os.path.join(os.path.dirname(HERE), "scenes", "galvo_static", "galvo_static.xml")
 
 
@@ -78,9 +80,6 @@ def main():
            "targets": {"reuse >= 20x faster than 50 periods in full": reuse["speedup"] >= 20,
                        "reuse gives identical events": reuse["identical_events"],
                        "galvo render <= 1.1x perspective": cam["ratio"] <= 1.1}}
-    os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
-    with open(os.path.join(HERE, "results", "galvo.json"), "w") as f:
-        json.dump(res, f, indent=2)
     md = ["# Galvo benchmark", "",
           f"- static scene ({reuse['resolution']}, {reuse['periods']} periods of a 250 Hz circle, "
           f"{reuse['steps']} steps, {reuse['events']} events): reuse **{reuse['speedup']:.1f}x** faster than "
@@ -89,10 +88,7 @@ def main():
           f"{reuse['identical_events']}",
           f"- render time galvo / perspective ({cam['resolution']}, {cam['spp']} spp, median of "
           f"{cam['repetitions']}): **{cam['ratio']:.3f}** (target <= 1.1)", ""]
-    with open(os.path.join(HERE, "results", "galvo.md"), "w") as f:
-        f.write("\n".join(md))
-    print("\n".join(md))
-    print(json.dumps(res["targets"], indent=2))
+    write_results("galvo", res, md)
 
 
 if __name__ == "__main__":

@@ -7,13 +7,15 @@
 
 Writes benchmarks/results/kaleidoscope.json and .md.  Usage: ./run bench kaleidoscope
 """
-import json
 import os
+import sys
 import re
 import statistics
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from _report import write_results  # noqa: E402
 SCENE = os.path.join(os.path.dirname(HERE), "scenes", "falling", "falling.xml")
 
 
@@ -76,18 +78,12 @@ def main(size=240, spp=4, reps=9):
     res = {"film": f"{size}x{size}", "spp": spp, "views": f"{n}x{n}", "repetitions": reps,
            "kaleidoscope_over_perspective": mk / mp, "separate_cameras_over_kaleidoscope": ms / mk,
            "targets": {"kaleidoscope <= 1.2x perspective": mk / mp <= 1.2}}
-    os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
-    with open(os.path.join(HERE, "results", "kaleidoscope.json"), "w") as f:
-        json.dump(res, f, indent=2)
     md = ["# Kaleidoscope benchmark", "",
           f"- one kaleidoscope render ({n}x{n} views, {size}x{size} film, {spp} spp) / plain perspective render of "
           f"the same film: **{mk / mp:.3f}** (target <= 1.2; median of {reps})",
           f"- {n}x{n} separate cameras (one render each, {size // n}x{size // n}) / one kaleidoscope render: "
           f"**{ms / mk:.2f}x**", ""]
-    with open(os.path.join(HERE, "results", "kaleidoscope.md"), "w") as f:
-        f.write("\n".join(md))
-    print("\n".join(md))
-    print(json.dumps(res["targets"], indent=2))
+    write_results("kaleidoscope", res, md)
 
 
 if __name__ == "__main__":

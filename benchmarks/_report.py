@@ -1,0 +1,15 @@
+"""Where benchmark results go: benchmarks/results/<name>.json (everything) and <name>.md (the summary)."""
+import json
+import os
+
+RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+
+
+def write_results(name: str, results: dict, markdown_lines: list) -> None:
+    os.makedirs(RESULTS, exist_ok=True)
+    with open(os.path.join(RESULTS, f"{name}.json"), "w") as f:
+        json.dump(results, f, indent=2)
+    with open(os.path.join(RESULTS, f"{name}.md"), "w") as f:
+        f.write("\n".join(markdown_lines))
+    print("\n".join(markdown_lines))
+    print(json.dumps(results.get("targets", {}), indent=2))
