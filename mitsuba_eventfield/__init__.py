@@ -19,14 +19,19 @@ from .eventio import H5EventWriter, read_events, write_events  # noqa: E402
 from .events import EventStream  # noqa: E402
 from .motion import Motion, load_motion, parse_motion  # noqa: E402
 from .preview import event_frame_rgb, write_preview  # noqa: E402
-from .render import RenderSummary, render_events  # noqa: E402
+from .render import RenderSummary, render_events, render_frames  # noqa: E402
+from . import reconstruct  # noqa: E402
 from .scene import TimedScene, load_scene  # noqa: E402
 from . import scan  # noqa: E402
 from .scan import ScanCurve, curve_from_dict, event_angles, make_curve  # noqa: E402
 from .views import ViewStack, extract_views, split_events, view_of_pixel  # noqa: E402
+from .lightfield import LightField, from_galvo, from_spatial, galvo_lightfields, galvo_view_times  # noqa: E402
+from .refocus import depth_planes, focal_stack, refocus, track_focus  # noqa: E402
+from .depth import DepthMap, depth_from_focus, focus_measure  # noqa: E402
 
 __all__ = ["__version__", "choose_variant", "set_variant", "EventFieldError", "ConfigError", "EventStream",
            "H5EventWriter", "read_events", "write_events", "Motion", "load_motion", "parse_motion",
-           "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "TimedScene", "load_scene", "scan",
+           "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "render_frames", "reconstruct", "TimedScene", "load_scene", "scan",
            "ScanCurve", "make_curve", "curve_from_dict", "event_angles", "ViewStack", "extract_views", "split_events",
-           "view_of_pixel"]
+           "view_of_pixel", "LightField", "from_galvo", "from_spatial", "galvo_lightfields", "galvo_view_times",
+           "depth_planes", "focal_stack", "refocus", "track_focus", "DepthMap", "depth_from_focus", "focus_measure"]

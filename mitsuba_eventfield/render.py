@@ -344,6 +344,29 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     return summary
 
 
+def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
+                  linlog_threshold: float | None = None) -> np.ndarray:
+    """Frames of the scene at the given times (seconds): (T, H, W) log brightness exactly as the event pixel
+    sees it (lin-log, fixed seed), or linear radiance with ``log=False``. Ground truth for reconstruction, and
+    the frame input of the complementary filter."""
+    from .plugins import pixel_model
+    from .plugins.event_integrator import DEFAULT_LINLOG, is_event_integrator
+    timed = load_scene(scene)
+    spp = _check_number("spp", spp, low=0, integer=True)
+    integ = timed.scene.integrator()
+    if linlog_threshold is None:
+        linlog_threshold = integ.linlog_threshold if is_event_integrator(integ) else DEFAULT_LINLOG
+    inner = integ.inner if is_event_integrator(integ) else integ
+    frames = []
+    for t in np.atleast_1d(np.asarray(times, dtype=np.float64)):
+        timed.set_time(float(t))
+        img = mi.render(timed.scene, integrator=inner, seed=seed, spp=spp)
+        arr = np.array(img)
+        lum = arr[..., 0] if arr.shape[-1] == 1 else arr[..., 0] * 0.212671 + arr[..., 1] * 0.715160 + arr[..., 2] * 0.072169
+        frames.append(pixel_model.linlog_np(lum, linlog_threshold) if log else lum)
+    return np.stack(frames)
+
+
 def _count(summary: RenderSummary, p: np.ndarray) -> None:
     n_on = int(np.count_nonzero(p > 0))
     summary.events += len(p)

@@ -1,0 +1,126 @@
+"""LightField: views x H x W (x C) of linear intensity, each view's position and time, and how disparity
+depends on depth, so that refocus, focal stacks and depth from focus work alike for both optical designs.
+
+Disparity model: a point at depth z appears in view k displaced from the reference (position 0) by
+``alpha(z) * position[k]`` pixels (x right, y down), with ``alpha_axis(z) = A_axis + B_axis / z``:
+
+* kaleidoscope / microlens: position = sub-aperture centre on the main lens (metres); thin-lens geometry gives
+  alpha = (w / W) D (1/z - 1/S): A = -(w/W) D / S, B = (w/W) D (image plane W wide mapped to w pixels, lens to
+  image plane D, focus distance S);
+* galvo: position = optical deflection (2 x mechanical angle, radians); alpha = f (1 - pivot / z) with the
+  X mirror's pivot for x and the Y mirror's for y (plugins/galvo_optics.py).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class LightField:
+    views: np.ndarray              # (K, H, W) or (K, H, W, C), linear intensity
+    positions: np.ndarray          # (K, 2)
+    times: np.ndarray              # (K,) seconds
+    A: tuple                       # disparity model alpha(z) = A + B / z, per axis (x, y)
+    B: tuple
+    kind: str = "generic"
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.views = np.asarray(self.views, dtype=np.float64)
+        self.positions = np.asarray(self.positions, dtype=np.float64).reshape(-1, 2)
+        self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
+        if not (len(self.views) == len(self.positions) == len(self.times)):
+            raise ValueError("views, positions and times must have one length")
+        if not np.all(np.isfinite(self.views)):
+            raise ValueError("light field views contain NaN or infinite values")
+
+    @property
+    def shape(self):
+        return self.views.shape[1:3]
+
+    def alpha(self, depth):
+        """(alpha_x, alpha_y) at depth(s) z: pixels of displacement per unit of view position."""
+        inv = 0.0 if np.isinf(depth) else 1.0 / np.asarray(depth, dtype=np.float64)
+        return self.A[0] + self.B[0] * inv, self.A[1] + self.B[1] * inv
+
+    def depth_for_alpha(self, alpha_x):
+        """Inverse of the x disparity model: the depth at which views align with slope ``alpha_x``."""
+        d = (alpha_x - self.A[0])
+        return math.inf if d == 0 else self.B[0] / d
+
+    def shifts(self, depth) -> np.ndarray:
+        """(K, 2) pixel displacement of a point at ``depth`` in each view."""
+        ax, ay = self.alpha(depth)
+        return np.stack([ax * self.positions[:, 0], ay * self.positions[:, 1]], axis=-1)
+
+    def subset(self, index) -> "LightField":
+        return LightField(self.views[index], self.positions[index], self.times[index], self.A, self.B, self.kind,
+                          dict(self.meta))
+
+
+def _exp(log_frames):
+    return np.exp(np.asarray(log_frames, dtype=np.float64))
+
+
+def galvo_disparity_model(optics: dict, width: int):
+    f = (width / 2) / math.tan(math.radians(optics["fov_x_deg"]) / 2)
+    d1, s = optics["mirror_distance"], optics["mirror_separation"]
+    return (f, f), (-f * d1, -f * (d1 + s))
+
+
+def spatial_disparity_model(optics: dict, view_w: int, view_h: int):
+    D, S = optics["lens_to_image_plane"], optics["focus_distance"]
+    W, H = optics["image_plane_size"]
+    kx, ky = view_w / W * D, view_h / H * D
+    return (-kx / S, -ky / S), (kx, ky)
+
+
+def from_galvo(log_frames, times, optics: dict, meta: dict | None = None) -> LightField:
+    """A light field from galvo frames (log intensity, e.g. reconstructed) at known times: each frame is the view
+    at the scan position (optical angles) of its time."""
+    from .scan import curve_from_dict
+    curve = curve_from_dict(optics["scan"], where="event metadata")
+    ax, ay = curve.angles(np.asarray(times, dtype=np.float64))
+    frames = _exp(log_frames)
+    A, B = galvo_disparity_model(optics, frames.shape[2])
+    return LightField(frames, np.stack([2 * ax, 2 * ay], axis=-1), times, A, B, "galvo", dict(meta or {}))
+
+
+def galvo_view_times(optics: dict, t_period_start: float, views: int) -> np.ndarray:
+    """``views`` instants evenly spread over the scan period that starts at ``t_period_start``."""
+    from .scan import curve_from_dict
+    period = curve_from_dict(optics["scan"]).period
+    if period is None:
+        raise ValueError("the scan is not periodic: choose view times explicitly")
+    return t_period_start + (np.arange(views) + 0.5) * period / views
+
+
+def galvo_lightfields(events, views: int = 32, method: str = "direct", periods=None, **method_kw):
+    """Sliding light fields from a galvo stream, one per scan period: reconstruct ``views`` frames per period
+    (``method`` of ``reconstruct``) and place each at its scan position. Yields LightField objects."""
+    from . import reconstruct as rc
+    from .scan import curve_from_dict
+    optics = events.meta["optics"]
+    period = curve_from_dict(optics["scan"]).period
+    t0 = events.meta.get("t_start_us", 0) * 1e-6
+    n_periods = int(round(events.duration_us * 1e-6 / period))
+    wanted = range(n_periods) if periods is None else periods
+    all_times = np.concatenate([galvo_view_times(optics, t0 + p * period, views) for p in wanted])
+    frames = rc.reconstruct(events, all_times, method, **method_kw)
+    for i, p in enumerate(wanted):
+        sl = slice(i * views, (i + 1) * views)
+        yield from_galvo(frames[sl], all_times[sl], optics, {"period_index": p})
+
+
+def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool = True) -> LightField:
+    """A light field from one kaleidoscope/microlens film image (log or linear): its n x n extracted views."""
+    from .views import extract_views
+    frame = np.asarray(log_or_linear_frame, dtype=np.float64)
+    stack = extract_views(_exp(frame) if log else frame, optics)
+    h, w = stack.images.shape[1:3]
+    A, B = spatial_disparity_model(optics, w, h)
+    return LightField(stack.images, stack.positions, np.full(len(stack.images), time), A, B, optics["design"],
+                      {"ij": stack.ij.tolist()})
