@@ -3,7 +3,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+
+import numpy as np
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -49,7 +52,176 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--t0", type=float, help="window start, ms (default: first event)")
     p.add_argument("--t1", type=float, help="window end, ms (default: last event)")
     p.add_argument("--scale", type=int, default=1, help="integer upscaling of the image")
+    f = sub.add_parser("frame", help="render frames (linear radiance) of a scene at given times: EXR + PNG")
+    f.add_argument("scene")
+    f.add_argument("-o", "--output", required=True, help="EXR path (PNG alongside); several times: _0000 suffixes")
+    f.add_argument("--times", default="0", help="comma-separated times in ms (default 0)")
+    f.add_argument("--spp", type=int, default=16)
+    f.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
+
+    lf_args = argparse.ArgumentParser(add_help=False)
+    lf_args.add_argument("file", help="event file")
+    lf_args.add_argument("--method", help="reconstruction: direct, highpass, complementary, galvo (default: "
+                                          "direct with --start-frame, else galvo / highpass)")
+    lf_args.add_argument("--start-frame", help="EXR of the linear frame at the stream start (eventfield frame)")
+    lf_args.add_argument("--period", type=int, default=0, help="galvo: scan period index (default 0)")
+    lf_args.add_argument("--views", type=int, default=32, help="galvo: views per scan period (default 32)")
+    lf_args.add_argument("--time", type=float, help="kaleidoscope: time in ms (default: stream end)")
+
+    rc = sub.add_parser("reconstruct", help="log-intensity frames from events: EXR + PNG per frame")
+    rc.add_argument("file")
+    rc.add_argument("-o", "--output", required=True, help="output directory (created)")
+    rc.add_argument("--method", default="direct", help="direct, highpass, complementary, galvo (default direct)")
+    g = rc.add_mutually_exclusive_group()
+    g.add_argument("--times", help="comma-separated times in ms")
+    g.add_argument("--fps", type=float, help="frames per second over the whole stream")
+    rc.add_argument("--start-frame", help="EXR of the linear frame at the stream start")
+    rc.add_argument("--cutoff", type=float, default=5.0, help="filter cutoff in Hz (highpass, complementary)")
+
+    rf = sub.add_parser("refocus", parents=[lf_args], help="refocus the light field at one or more depths")
+    rf.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside; _<depth> suffix for several)")
+    rf.add_argument("--depth", required=True, help="comma-separated depths in scene units (inf allowed)")
+
+    dp = sub.add_parser("depth", parents=[lf_args], help="depth from focus: EXR (depth, confidence) + colour PNG")
+    dp.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside)")
+    dp.add_argument("--near", type=float, required=True, help="nearest depth searched")
+    dp.add_argument("--far", type=float, required=True, help="farthest depth searched")
+    dp.add_argument("--planes", type=int, default=32)
+    dp.add_argument("--measure", default="variance", help="sml, tenengrad or variance (default)")
+    dp.add_argument("--min-confidence", type=float, default=0.2, help="greyed out below this in the PNG")
     return ap
+
+
+def _times_ms(text, what="--times"):
+    try:
+        vals = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise __import__("mitsuba_eventfield").EventFieldError(f"{what} {text!r}: expected comma-separated numbers")
+    return vals
+
+
+def _start_log(path, events):
+    """Log intensity (as the pixel sees it) of a linear EXR frame, checked against the stream's size."""
+    import mitsuba_eventfield as ef
+    from .images import read_exr
+    from .plugins.pixel_model import linlog_np
+    if path is None:
+        return None
+    channels, _ = read_exr(path)
+    img = channels.get("Y", channels.get("R"))
+    if img is None or img.shape != (events.height, events.width):
+        raise ef.EventFieldError(f"{path}: needs a Y (or R) channel of {events.width}x{events.height}, got "
+                                 f"{None if img is None else img.shape[::-1]}")
+    return linlog_np(img, events.meta.get("pixel_model", {}).get("linlog_threshold", 1e-3))
+
+
+def _out_meta(a, events, **extra):
+    from ._version import __version__
+    return dict({"package_version": __version__, "command": a.command, "source": os.path.abspath(a.file),
+                 "optics": events.meta.get("optics"), "pixel_model": events.meta.get("pixel_model")}, **extra)
+
+
+def _save_image(png_path, linear, meta, suffix=""):
+    from .images import to_uint8, write_exr, write_png
+    root = os.path.splitext(png_path)[0] + suffix
+    write_exr(root + ".exr", {"Y": linear}, meta)
+    write_png(root + ".png", to_uint8(linear))
+    return root
+
+
+def _frame(a) -> int:
+    import mitsuba_eventfield as ef
+    from .atomic import check_writable
+    check_writable(a.output, "frame")
+    defines = dict(item.partition("=")[::2] for item in a.define)
+    scene = ef.load_scene(a.scene, **defines)
+    times = [t * 1e-3 for t in _times_ms(a.times)]
+    frames = ef.render_frames(scene, times, spp=a.spp, log=False)
+    for k, (t, img) in enumerate(zip(times, frames)):
+        root = _save_image(a.output.replace(".exr", ".png"), img, {"scene": os.path.abspath(a.scene), "time_s": t,
+                                                                    "spp": a.spp}, f"_{k:04d}" if len(times) > 1 else "")
+        print(f"wrote {root}.exr/.png (t = {t * 1e3:g} ms)")
+    return 0
+
+
+def _reconstruct(a) -> int:
+    import numpy as np
+
+    import mitsuba_eventfield as ef
+    ev = ef.read_events(a.file)
+    t0 = ev.meta.get("t_start_us", 0) * 1e-6
+    if a.times:
+        times = np.array(_times_ms(a.times)) * 1e-3
+    else:
+        fps = a.fps or 1000.0
+        n = max(1, int(round(ev.duration_us * 1e-6 * fps)))
+        times = t0 + (np.arange(n) + 1) / fps
+    kw = {}
+    if a.method == "direct":
+        kw = {"log_start": _start_log(a.start_frame, ev), "t_start": t0}
+    elif a.method in ("highpass", "complementary"):
+        kw = {"cutoff_hz": a.cutoff}
+        if a.method == "complementary":
+            start = _start_log(a.start_frame, ev)
+            if start is None:
+                raise ef.EventFieldError("--method complementary needs --start-frame (a frame to anchor to)")
+            kw.update(frames=start[None], frame_times=[t0])
+    try:
+        frames = ef.reconstruct.reconstruct(ev, times, a.method, **kw)
+    except ValueError as e:
+        raise ef.EventFieldError(f"{a.file}: {e}") from None
+    os.makedirs(a.output, exist_ok=True)
+    for k, (t, log_img) in enumerate(zip(times, frames)):
+        _save_image(os.path.join(a.output, f"frame_{k:04d}.png"), np.exp(log_img),
+                    _out_meta(a, ev, method=a.method, time_s=float(t), domain="linear = exp(log intensity)"))
+    print(f"wrote {len(times)} frames ({a.method}) to {a.output}")
+    return 0
+
+
+def _lightfield(a, ev):
+    import mitsuba_eventfield as ef
+    try:
+        return ef.lightfield.from_events(ev, period=a.period, views=a.views,
+                                         time=None if a.time is None else a.time * 1e-3, method=a.method,
+                                         log_start=_start_log(a.start_frame, ev))
+    except (ValueError, KeyError, StopIteration) as e:
+        raise ef.EventFieldError(f"{a.file}: {e}") from None
+
+
+def _refocus(a) -> int:
+    import math
+
+    import mitsuba_eventfield as ef
+    ev = ef.read_events(a.file)
+    depths = [math.inf if v.strip() == "inf" else float(v) for v in a.depth.split(",")]
+    for z in depths:
+        if not z > 0:
+            raise ef.EventFieldError(f"--depth {z}: depths must be > 0 (inf allowed)")
+    lf = _lightfield(a, ev)
+    for z in depths:
+        root = _save_image(a.output, ef.refocus(lf, z), _out_meta(a, ev, depth=z, views=len(lf.views)),
+                           f"_{z:g}" if len(depths) > 1 else "")
+        print(f"wrote {root}.png/.exr (refocused at {z:g})")
+    return 0
+
+
+def _depth(a) -> int:
+    import mitsuba_eventfield as ef
+    from .images import depth_png, write_exr, write_png
+    ev = ef.read_events(a.file)
+    if not (0 < a.near < a.far) or a.planes < 2:
+        raise ef.EventFieldError(f"--near {a.near} --far {a.far} --planes {a.planes}: need 0 < near < far, planes >= 2")
+    if a.measure not in ef.depth.MEASURES:
+        raise ef.EventFieldError(f"--measure {a.measure!r}: allowed: {', '.join(ef.depth.MEASURES)}")
+    lf = _lightfield(a, ev)
+    dm = ef.depth_from_focus(lf, a.near, a.far, a.planes, a.measure)
+    root = os.path.splitext(a.output)[0]
+    meta = _out_meta(a, ev, near=a.near, far=a.far, planes=a.planes, measure=a.measure, views=len(lf.views))
+    write_exr(root + ".exr", {"depth": dm.depth, "confidence": dm.confidence}, meta)
+    write_png(root + ".png", depth_png(dm.depth, dm.confidence, a.near, a.far, a.min_confidence))
+    print(f"wrote {root}.exr (depth, confidence) and {root}.png; median depth of confident pixels "
+          f"{float(np.median(dm.depth[dm.confidence >= a.min_confidence])) if (dm.confidence >= a.min_confidence).any() else float('nan'):.4g}")
+    return 0
 
 
 def _render(a) -> int:
@@ -124,7 +296,8 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     from .errors import EventFieldError
     try:
-        return {"render": _render, "info": _info, "preview": _preview}[args.command](args)
+        return {"render": _render, "info": _info, "preview": _preview, "frame": _frame, "reconstruct": _reconstruct,
+                "refocus": _refocus, "depth": _depth}[args.command](args)
     except EventFieldError as e:
         print(f"eventfield: error: {e}", file=sys.stderr)
         return 2

@@ -2,7 +2,10 @@
 
 Measures (``focus_measure``): ``sml`` (sum-modified-Laplacian), ``tenengrad`` (Sobel gradient energy), both
 summed over a window; and ``variance`` (angular consistency: the spread of the aligned views at a pixel is
-smallest at the right depth), which uses the views themselves rather than the refocused image.
+smallest at the right depth), which uses the views themselves rather than the refocused image. ``variance``
+is the most robust on views reconstructed from events but resamples every view per plane (Lanczos): about
+8x the cost of the others. (Summing shifted squared views in the Fourier domain instead was 4x faster but
+10x less accurate: squaring doubles the bandwidth and the shift aliases.)
 
 Confidence in [0, 1] is c / (c + c0) with c = peak - median of a pixel's focus curve and c0 = 5% of the
 90th percentile of c over the image: a textureless pixel has a flat curve and gets ~0 instead of a confident

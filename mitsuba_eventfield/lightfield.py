@@ -124,3 +124,31 @@ def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool
     A, B = spatial_disparity_model(optics, w, h)
     return LightField(stack.images, stack.positions, np.full(len(stack.images), time), A, B, optics["design"],
                       {"ij": stack.ij.tolist()})
+
+
+def from_events(events, period: int = 0, views: int = 32, time: float | None = None, method: str | None = None,
+                log_start=None, **method_kw) -> LightField:
+    """One light field from an event stream, whatever its optics.
+
+    * galvo: the scan period ``period`` (index from the stream start), ``views`` views. Default method:
+      ``direct`` from ``log_start`` when given, else the static-scene ``galvo`` solver;
+    * kaleidoscope / microlens: the film at ``time`` seconds (default: stream end), split into its views.
+      Default method: ``direct`` from ``log_start`` when given, else ``highpass`` (moving content only).
+    """
+    from . import reconstruct as rc
+    optics = events.meta.get("optics", {})
+    design = optics.get("design")
+    t0 = events.meta.get("t_start_us", 0) * 1e-6
+    if method is None:
+        method = "direct" if log_start is not None else ("galvo" if design == "galvo" else "highpass")
+    kw = dict(method_kw)
+    if method == "direct":
+        kw.update(log_start=log_start, t_start=t0)
+    if design == "galvo":
+        return next(galvo_lightfields(events, views, method, periods=[period], **kw))
+    if design in ("kaleidoscope", "microlens"):
+        t = t0 + events.duration_us * 1e-6 if time is None else time
+        frame = rc.reconstruct(events, [t], method, **kw)[0]
+        return from_spatial(frame, optics, time=t, log=True)
+    raise ValueError("the stream's metadata describes no light-field optics (optics.design is "
+                     f"{design!r}; expected galvo, kaleidoscope or microlens)")

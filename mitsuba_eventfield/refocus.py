@@ -49,15 +49,18 @@ class _Spectra:
         v = lf.views if lf.views.ndim == 4 else lf.views[..., None]
         padded = np.pad(v, ((0, 0), (pad, pad), (pad, pad), (0, 0)), mode="reflect")
         self.hp, self.wp = padded.shape[1:3]
-        self.spec = np.fft.rfft2(padded, axes=(1, 2))              # (K, Hp, Wp//2+1, C)
+        self.spec = np.fft.rfft2(padded, axes=(1, 2)).astype(np.complex64)   # (K, Hp, Wp//2+1, C)
         self.ky = np.fft.fftfreq(self.hp)[:, None]
         self.kx = np.fft.rfftfreq(self.wp)[None, :]
         self.channels = lf.views.ndim == 4
 
     def shifted_sum(self, shifts) -> np.ndarray:
-        phase = np.exp(2j * np.pi * (self.kx[None] * shifts[:, 0, None, None]
-                                     + self.ky[None] * shifts[:, 1, None, None]))       # (K, Hp, Wp//2+1)
-        total = np.einsum("khw,khwc->hwc", phase, self.spec)
+        # the phase ramp is separable: exp(2 pi i (ky dy + kx dx)) = col(ky) row(kx), so no per-pixel exp
+        col = np.exp(2j * np.pi * self.ky[:, 0][None, :] * shifts[:, 1, None]).astype(np.complex64)  # (K, Hp)
+        row = np.exp(2j * np.pi * self.kx[0][None, :] * shifts[:, 0, None]).astype(np.complex64)     # (K, Wp')
+        total = np.zeros(self.spec.shape[1:], np.complex64)
+        for k in range(len(shifts)):       # measured fastest: ~8x an einsum over (K, H, W) here
+            total += np.outer(col[k], row[k])[..., None] * self.spec[k]
         img = np.fft.irfft2(total, s=(self.hp, self.wp), axes=(0, 1))
         p = self.pad
         img = img[p:self.hp - p, p:self.wp - p]

@@ -271,17 +271,19 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
             if grid:
                 K, period_us, base_us = grid
                 p_idx, j = divmod(k, K)
-            if copy_from is not None:                    # the pixel state repeats: copy, shifted by periods
-                x, y, t_us, p = period_events[j]
-                x, y, t_us, p = x, y, t_us + (p_idx - copy_from) * period_us, p
-                summary.copied_steps += 1
+            if copy_from is not None:                    # the pixel state repeats: copy whole periods, shifted
+                block = min(K - j, steps - k)            # j == 0 here: copying starts at a period boundary
+                x, y, t_us, p = period_block(block)
+                t_next = t_start + (k + block) * duration / steps
                 tw = time.perf_counter()
-                sink.add(x, y, t_us, p, complete_until_us=int(math.floor(t_next * 1e6)))
+                sink.add(x, y, t_us + (p_idx - copy_from) * period_us, p,
+                         complete_until_us=int(math.floor(t_next * 1e6)))
                 summary.write_s += time.perf_counter() - tw
                 _count(summary, p)
+                summary.copied_steps += block
                 if bar is not None:
                     bar.update(round((t_next - t) * 1e3, 9))
-                t, k = t_next, k + 1
+                t, k = t_next, k + block
                 continue
             render_at(t_next, k + 1)
             if adaptive:
@@ -305,6 +307,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                     key = integ.periodic_key()
                     if key is not None and prev_key is not None and bool((key == prev_key).numpy().all()):
                         copy_from = p_idx
+                        period_block = _period_blocks([period_events[i] for i in range(K)])
                         summary.notes.append(f"pixel state repeated after period {p_idx + 1}: the events of the "
                                              "later periods are exact copies, shifted by whole periods")
                     prev_key = key
@@ -365,6 +368,17 @@ def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
         lum = arr[..., 0] if arr.shape[-1] == 1 else arr[..., 0] * 0.212671 + arr[..., 1] * 0.715160 + arr[..., 2] * 0.072169
         frames.append(pixel_model.linlog_np(lum, linlog_threshold) if log else lum)
     return np.stack(frames)
+
+
+def _period_blocks(steps_events):
+    """The events of one period's steps, concatenated once; ``block(n)``: those of its first n steps."""
+    ends = np.cumsum([len(e[2]) for e in steps_events])
+    whole = [np.concatenate([e[i] for e in steps_events]) for i in range(4)]
+
+    def block(n):
+        m = int(ends[n - 1]) if n else 0
+        return tuple(a[:m] for a in whole)
+    return block
 
 
 def _count(summary: RenderSummary, p: np.ndarray) -> None:

@@ -1,0 +1,75 @@
+"""The light-field commands as a user runs them: render, frame, reconstruct, refocus, depth."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+
+GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", *args], capture_output=True, text=True,
+                          timeout=600)
+
+
+@pytest.fixture(scope="module")
+def galvo_capture(tmp_path_factory):
+    d = tmp_path_factory.mktemp("galvo")
+    small = ["-D", "width=120", "-D", "height=90"]
+    r = run("render", GALVO, "-o", str(d / "g.h5"), "--duration", "0.004", "--steps", "32", "--quiet", *small)
+    assert r.returncode == 0, r.stderr
+    r = run("frame", GALVO, "-o", str(d / "start.exr"), *small)
+    assert r.returncode == 0, r.stderr
+    r = run("frame", GALVO, "-o", str(d / "small.exr"), "-D", "width=60", "-D", "height=45")  # wrong size
+    assert r.returncode == 0, r.stderr
+    return d
+
+
+def test_reconstruct_refocus_depth_outputs(galvo_capture):
+    from mitsuba_eventfield.images import read_exr
+    d = galvo_capture
+    r = run("reconstruct", str(d / "g.h5"), "-o", str(d / "rec"), "--times", "1,2,3", "--start-frame",
+            str(d / "start.exr"))
+    assert r.returncode == 0, r.stderr
+    assert sorted(os.listdir(d / "rec")) == [f"frame_000{k}.{e}" for k in range(3) for e in ("exr", "png")]
+    frame, meta = read_exr(str(d / "rec" / "frame_0001.exr"))
+    assert frame["Y"].shape == (90, 120) and np.all(np.isfinite(frame["Y"])) and meta["method"] == "direct"
+    r = run("refocus", str(d / "g.h5"), "-o", str(d / "rf.png"), "--depth", "0.5,2.5", "--start-frame",
+            str(d / "start.exr"), "--views", "16")
+    assert r.returncode == 0, r.stderr
+    near, _ = read_exr(str(d / "rf_0.5.exr"))
+    far, meta = read_exr(str(d / "rf_2.5.exr"))
+    assert meta["depth"] == 2.5 and meta["optics"]["design"] == "galvo"
+    assert not np.allclose(near["Y"], far["Y"])
+    r = run("depth", str(d / "g.h5"), "-o", str(d / "depth.png"), "--near", "0.3", "--far", "4", "--planes", "16",
+            "--start-frame", str(d / "start.exr"), "--views", "16", "--measure", "tenengrad")
+    assert r.returncode == 0, r.stderr
+    dm, meta = read_exr(str(d / "depth.exr"))
+    assert set(dm) == {"depth", "confidence"} and meta["planes"] == 16
+    conf = dm["confidence"] > 0.3
+    # the card (0.5 m, image centre-right area) is nearer than the wall (2.5 m) where both are confident
+    card, wall = np.s_[38:55, 62:85], np.s_[5:25, 5:40]
+    assert np.median(dm["depth"][card][conf[card]]) < np.median(dm["depth"][wall][conf[wall]])
+    assert os.path.getsize(d / "depth.png") > 0
+
+
+@pytest.mark.parametrize("args, message", [
+    (["refocus", "{d}/g.h5", "-o", "{d}/x.png", "--depth", "-1"], "depths must be > 0"),
+    (["depth", "{d}/g.h5", "-o", "{d}/x.png", "--near", "2", "--far", "1"], "need 0 < near < far"),
+    (["depth", "{d}/g.h5", "-o", "{d}/x.png", "--near", "1", "--far", "2", "--measure", "blur"], "--measure 'blur'"),
+    (["reconstruct", "{d}/g.h5", "-o", "{d}/rec2", "--method", "e2vid"], "unknown reconstruction method 'e2vid'"),
+    (["reconstruct", "{d}/g.h5", "-o", "{d}/rec3", "--method", "complementary"], "needs --start-frame"),
+    (["refocus", "{d}/g.h5", "-o", "{d}/x.png", "--depth", "1", "--start-frame", "{d}/small.exr"],
+     "small.exr: needs a Y (or R) channel of 120x90"),
+])
+def test_bad_input(galvo_capture, args, message):
+    d = galvo_capture
+    r = run(*[a.format(d=d) for a in args])
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and message in lines[0], r.stderr
+    assert not os.path.exists(d / "x.png") and not os.path.exists(d / "x.exr")
