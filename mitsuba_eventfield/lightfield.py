@@ -51,9 +51,13 @@ class LightField:
         d = (alpha_x - self.A[0])
         return math.inf if d == 0 else self.B[0] / d
 
-    def shifts(self, depth) -> np.ndarray:
-        """(K, 2) pixel displacement of a point at ``depth`` in each view."""
-        ax, ay = self.alpha(depth)
+    def shifts(self, depth=None, alpha=None) -> np.ndarray:
+        """(K, 2) pixel displacement in each view of a point at ``depth``, or for a disparity slope ``alpha``
+        (pixels per unit of view position; a number, or (alpha_x, alpha_y))."""
+        if alpha is None:
+            ax, ay = self.alpha(depth)
+        else:
+            ax, ay = (alpha, alpha) if np.isscalar(alpha) else alpha
         return np.stack([ax * self.positions[:, 0], ay * self.positions[:, 1]], axis=-1)
 
     def subset(self, index) -> "LightField":

@@ -76,11 +76,12 @@ def _spectra(lf: LightField, max_shift: float) -> _Spectra:
     return cached
 
 
-def refocus(lf: LightField, depth: float) -> np.ndarray:
-    """The light field refocused at ``depth`` (scene units; math.inf allowed): (H, W[, C]) linear intensity."""
-    if not (depth > 0):
-        raise ValueError(f"depth = {depth!r}: must be > 0 (math.inf for infinity)")
-    shifts = lf.shifts(depth)
+def refocus(lf: LightField, depth: float | None = None, alpha=None) -> np.ndarray:
+    """The light field refocused at ``depth`` (scene units; math.inf allowed) or at the disparity slope
+    ``alpha`` (pixels per unit of view position, see ``LightField``): (H, W[, C]) linear intensity."""
+    if alpha is None and not (depth is not None and depth > 0):
+        raise ValueError(f"depth = {depth!r}: must be > 0 (math.inf for infinity), or give alpha")
+    shifts = lf.shifts(depth, alpha)
     spectra = _spectra(lf, np.abs(shifts).max())
     return np.maximum(spectra.shifted_sum(shifts) / len(lf.views), 0.0)
 

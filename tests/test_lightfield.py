@@ -87,6 +87,14 @@ def test_refocus_matches_thin_lens_and_is_sharpest_at_each_plane(kaleido_lf, cap
         assert abs(1 / best - 1 / z) <= (1 / planes[0] - 1 / planes[-1]) / (len(planes) - 1) + 1e-9   # one plane
 
 
+def test_refocus_at_disparity_equals_refocus_at_depth(kaleido_lf):
+    lf, _ = kaleido_lf
+    assert np.allclose(ef.refocus(lf, alpha=lf.alpha(NEAR)), ef.refocus(lf, NEAR))
+    assert np.allclose(ef.refocus(lf, alpha=0.0), lf.views.mean(0), atol=1e-5)   # no shift: the plain average
+    with pytest.raises(ValueError, match="must be > 0"):
+        ef.refocus(lf, -1.0)
+
+
 def _mitsuba_depth(mi, optics):
     """Ground truth: Mitsuba's depth AOV from a pinhole matching the centre view, converted to z."""
     near_clip = 1e-3                     # rays start this far along z: Mitsuba's distance is measured from there
