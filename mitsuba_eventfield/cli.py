@@ -34,6 +34,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--threshold-on", type=float, help="ON threshold (overrides --threshold)")
     r.add_argument("--threshold-off", type=float, help="OFF threshold (overrides --threshold)")
     r.add_argument("--linlog-threshold", type=float, help="radiance below which the response is linear (1e-3)")
+    r.add_argument("--preset", help="event pixel preset: ideal (default), davis346, prophesee_gen4")
+    r.add_argument("--pixel", action="append", default=[], metavar="NAME=VALUE",
+                   help="pixel-model parameter, e.g. --pixel refractory_s=1e-4 --pixel shot_noise_hz=2 (repeatable; "
+                        "see docs/pixel_model.md)")
     r.add_argument("--variant", help="Mitsuba variant or backend: cuda, llvm, llvm_ad_mono, ... (default: auto)")
     r.add_argument("--color", action="store_true", help="render in colour (rgb variant); events use luminance")
     r.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE",
@@ -224,6 +228,20 @@ def _depth(a) -> int:
     return 0
 
 
+def _pixel_overrides(items):
+    import mitsuba_eventfield as ef
+    out = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        try:
+            out[name] = int(value) if name in ("seed", "readout_cap_native_pixels") else float(value)
+        except ValueError:
+            raise ef.EventFieldError(f"--pixel {item!r}: expected NAME=NUMBER") from None
+        if not eq:
+            raise ef.EventFieldError(f"--pixel {item!r}: expected NAME=NUMBER")
+    return out
+
+
 def _render(a) -> int:
     import os
 
@@ -247,7 +265,7 @@ def _render(a) -> int:
         min_step=a.min_step, max_step=a.max_step, spp=a.spp, seed=a.seed,
         seed_mode="independent" if a.independent_seeds else "fixed", threshold=a.threshold,
         threshold_on=a.threshold_on, threshold_off=a.threshold_off, linlog_threshold=a.linlog_threshold,
-        output=a.output, progress=not a.quiet)
+        output=a.output, progress=not a.quiet, preset=a.preset, pixel=_pixel_overrides(a.pixel))
     print(summary.format())
     if a.preview:
         ev = ef.read_events(a.output) if fmt_ext != ".txt" else None

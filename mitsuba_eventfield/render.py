@@ -47,6 +47,9 @@ class RenderSummary:
     rejected_steps: int = 0
     reused_steps: int = 0       # steps whose frame came from the one-period cache
     copied_steps: int = 0       # steps whose events were copied from the previous period (state repeated)
+    dropped_readout: int = 0    # events the readout cap dropped
+    dropped_refractory: int = 0  # crossings suppressed by the refractory period
+    noise_events: int = 0       # shot-noise events emitted
     wall_s: float = 0.0
     render_s: float = 0.0
     events_s: float = 0.0
@@ -116,18 +119,28 @@ def check_memory(width: int, height: int, spp: int, where: str = "film") -> int:
     return need
 
 
-def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off, linlog_threshold):
+def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off, linlog_threshold, preset=None,
+                      pixel=None):
+    """The scene's eventfield integrator (or one wrapping its radiance integrator), configured for this render:
+    the scene's own pixel settings, then ``preset``, then explicit values (never an earlier render's)."""
+    from .plugins import pixel_model
     from .plugins.event_integrator import integrator_class, is_event_integrator
     integ = timed.scene.integrator()
     if not is_event_integrator(integ):  # any scene: wrap its radiance integrator
         integ = integrator_class()(_props_with_inner(integ))
-    pick = lambda *vals: next(v for v in vals if v is not None)  # noqa: E731  (first given value)
-    values = {"threshold_on": pick(threshold_on, threshold, integ.scene_defaults["threshold_on"]),
-              "threshold_off": pick(threshold_off, threshold, integ.scene_defaults["threshold_off"]),
-              "linlog_threshold": pick(linlog_threshold, integ.scene_defaults["linlog_threshold"])}
-    for name, v in values.items():
-        _check_number(name, v, low=0)
-    integ.configure(**values)
+    overrides = {} if preset is not None else dict(integ.scene_overrides)
+    explicit = {"threshold_on": threshold_on if threshold_on is not None else threshold,
+                "threshold_off": threshold_off if threshold_off is not None else threshold,
+                "linlog_threshold": linlog_threshold}
+    explicit.update(pixel or {})
+    for name, v in explicit.items():
+        if v is not None:
+            overrides[name] = v
+    try:
+        config = pixel_model.pixel_config(preset or integ.scene_preset, "pixel model", **overrides)
+    except ValueError as e:
+        raise EventFieldError(str(e)) from None
+    integ.configure(config)
     return integ
 
 
@@ -177,8 +190,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   spp: int = 4, seed: int = 0, seed_mode: str = "fixed", threshold: float | None = None,
                   threshold_on: float | None = None, threshold_off: float | None = None,
                   linlog_threshold: float | None = None, output: str | None = None, fmt: str | None = None,
-                  progress: bool = False, t_start: float = 0.0, reuse: bool = True,
-                  extra_meta: dict | None = None):
+                  progress: bool = False, t_start: float = 0.0, reuse: bool = True, preset: str | None = None,
+                  pixel: dict | None = None, extra_meta: dict | None = None):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
     Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by
@@ -187,6 +200,9 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
 
     ``reuse``: when the scene is static and the view periodic (galvo scan, or a fixed camera), render one
     period and feed its frames again (identical events, much faster); False renders every step.
+
+    ``preset`` ("ideal", "davis346", "prophesee_gen4") and ``pixel`` (PixelConfig fields, e.g.
+    ``{"refractory_s": 1e-4, "shot_noise_hz": 2}``) choose the event pixel; default: the scene's own.
     """
     timed = load_scene(scene)
     if duration is None:
@@ -213,7 +229,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     if output:
         check_writable(output, "event file")
         format_of(output, fmt)
-    integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold)
+    integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel)
     integ.reset()
 
     summary = RenderSummary(width=width, height=height, duration_s=duration, output=os.path.abspath(output) if output else None)
@@ -235,7 +251,9 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     cache = []                                          # log-brightness frames of one period, for reuse
     # periodic view on a uniform grid: timestamps from the in-period phase plus whole periods (integers), so an
     # event copied from the previous period is bit-identical to one computed
-    grid = None if adaptive else _phase_grid(timed, duration, steps, t_start)
+    # (not for pixel models with state across steps, e.g. refractory: they need absolute times, and their
+    # events are never copied anyway)
+    grid = None if adaptive or not integ.deterministic else _phase_grid(timed, duration, steps, t_start)
     period_events, copy_from, prev_key = {}, None, None
     try:
         def render_at(t, step_index):
@@ -300,7 +318,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                 x, y, ts, p = integ.commit(t, t_next)
                 t_us = np.rint(ts * 1e6).astype(np.int64)
             order = _time_order(t_us, int(math.floor(t * 1e6)))
-            x, y, t_us, p = x[order], y[order], t_us[order], p[order]
+            x, y, t_us, p = integ.readout(x[order], y[order], t_us[order], p[order])
             if reuse and grid:
                 period_events[j] = (x, y, t_us, p)
                 if j == K - 1:                           # end of a period: has the pixel state come back?
@@ -325,6 +343,12 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                 bar.set_postfix_str(f"{summary.events} events")
             t, k = t_next, k + 1
         summary.steps = k
+        summary.dropped_readout, summary.dropped_refractory = integ.readout_dropped(), integ.refractory_dropped
+        summary.noise_events = integ.noise_events
+        if summary.dropped_readout:
+            total = summary.events + summary.dropped_readout
+            summary.notes.append(f"readout cap dropped {summary.dropped_readout} of {total} events "
+                                 f"({100 * summary.dropped_readout / total:.1f}%)")
         summary.wall_s = time.perf_counter() - wall0
         if timed.is_static and timed.scan_period == 0.0:
             summary.notes.append("static scene seen by a fixed view: events can only come from Monte-Carlo noise "

@@ -6,6 +6,8 @@ XML::
         <float name="threshold" value="0.2"/>          <!-- contrast threshold C (log units), ON and OFF -->
         <float name="threshold_on" value="0.25"/>      <!-- optional: separate ON / OFF thresholds -->
         <float name="linlog_threshold" value="1e-3"/>  <!-- radiance below which the response is linear -->
+        <string name="preset" value="ideal"/>          <!-- ideal | davis346 | prophesee_gen4 -->
+        <float name="refractory_s" value="5e-4"/>      <!-- any PixelConfig field overrides the preset -->
         <integrator type="path"><integer name="max_depth" value="4"/></integrator>   <!-- default: path -->
     </integrator>
 
@@ -14,10 +16,16 @@ photo) and stages its log brightness. The time-stepping loop (``mitsuba_eventfie
 :meth:`EventIntegrator.commit` with the step's start and end time to turn the staged frame into events, or
 discards it (adaptive stepping re-renders a shorter step). State lives in Dr.Jit arrays: log brightness at the
 previous instant, reference level and per-pixel ON/OFF thresholds.
+
+Pixel realism (``pixel_model.PixelConfig``; all off in the default ``ideal`` preset): threshold mismatch and
+per-crossing jitter, leak, shot noise and the photoreceptor low-pass evolve in the step's single Dr.Jit kernel
+(random numbers from a per-pixel PCG32, seeded); refractory selection happens on the sparse events of the
+step, timestamp quantisation and the readout cap in :meth:`readout`, once the step's events are time-sorted.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 
 import drjit as dr
 import mitsuba as mi
@@ -39,50 +47,63 @@ def _define_class():
         def __init__(self, props: mi.Properties):
             super().__init__(props)
             self.inner = None
+            overrides = {}
+            names = {f.name for f in fields(pixel_model.PixelConfig)} - {"preset"}
             for name in props.keys():
                 value = props.get(name)
                 if isinstance(value, mi.Integrator):
                     if self.inner is not None:
                         raise ValueError("integrator 'eventfield': give at most one nested radiance integrator")
                     self.inner = value
+                elif name in names:
+                    overrides[name] = int(value) if name in ("seed", "readout_cap_native_pixels") else float(value)
+                elif name == "threshold":
+                    overrides.setdefault("threshold_on", float(value))
+                    overrides.setdefault("threshold_off", float(value))
+                elif name != "preset":
+                    raise ValueError(f"integrator 'eventfield': unknown parameter {name!r}; allowed: preset, "
+                                     f"threshold, {', '.join(sorted(names))}")
             if self.inner is None:
                 self.inner = mi.load_dict({"type": "path"})
-            c = float(props.get("threshold", DEFAULT_THRESHOLD))
-            # the scene's own values: per-render overrides fall back to these, never to an earlier override
-            self.scene_defaults = {"threshold_on": float(props.get("threshold_on", c)),
-                                   "threshold_off": float(props.get("threshold_off", c)),
-                                   "linlog_threshold": float(props.get("linlog_threshold", DEFAULT_LINLOG))}
-            self.configure(**self.scene_defaults)
+            self.scene_preset = props.get("preset", "ideal")
+            self.scene_overrides = overrides
+            self.configure(pixel_model.pixel_config(self.scene_preset, "integrator 'eventfield'", **overrides))
 
         # ---------------------------------------------------------------- configuration
-        def configure(self, threshold_on=None, threshold_off=None, linlog_threshold=None):
-            """Set the pixel parameters (checked) and forget all pixel state."""
-            for name, value in (("threshold_on", threshold_on), ("threshold_off", threshold_off),
-                                ("linlog_threshold", linlog_threshold)):
-                if value is not None and not (math.isfinite(value) and value > 0):
-                    raise ValueError(f"integrator 'eventfield': {name} = {value!r} is not allowed (must be a finite "
-                                     "number > 0)")
-            if threshold_on is not None:
-                self.threshold_on = float(threshold_on)
-            if threshold_off is not None:
-                self.threshold_off = float(threshold_off)
-            if linlog_threshold is not None:
-                self.linlog_threshold = float(linlog_threshold)
+        def configure(self, config=None, **legacy):
+            """Set the pixel model (a PixelConfig; or threshold_on/off/linlog_threshold keywords) and forget all
+            pixel state."""
+            if config is None:
+                base = self.config.as_dict() if hasattr(self, "config") else {}
+                base.update({k: v for k, v in legacy.items() if v is not None})
+                preset = base.pop("preset", "ideal")
+                config = pixel_model.pixel_config(preset, "integrator 'eventfield'", **base)
+            self.config = config.validate("integrator 'eventfield'")
+            self.threshold_on, self.threshold_off = config.threshold_on, config.threshold_off
+            self.linlog_threshold = config.linlog_threshold
             self.reset()
 
         def reset(self):
             self.size = None           # (width, height) once the first frame is seen
-            self.log_prev = None       # L at the last committed instant
+            self.log_prev = None       # (filtered) log brightness at the last committed instant
             self.anchor = None         # log brightness at the first commit; reference = anchor + counts * C
             self.k_on = self.k_off = None  # ON / OFF events fired so far by each pixel (Int32)
+            self.offset = None         # reference drift from leak and jitter (None when neither is on)
             self.c_on = self.c_off = None
-            self.staged = None         # L of the frame rendered but not yet committed
-            self.staged_image = None
+            self.staged = self.staged_intensity = self.staged_image = None
+            self.rng = self.leak_rate = self.last_emit = self.limiter = None
+            self.refractory_dropped = 0
+            self.noise_events = 0
 
         def pixel_model_metadata(self) -> dict:
-            return {"model": "ideal", "threshold_on": self.threshold_on, "threshold_off": self.threshold_off,
-                    "linlog_threshold": self.linlog_threshold,
-                    "timestamps": "linear interpolation of log brightness between rendered instants"}
+            d = {"model": "ideal" if not (self.config.stochastic or self.config.threshold_sigma) else "realistic",
+                 "timestamps": "linear interpolation of log brightness between rendered instants"}
+            d.update(self.config.as_dict())
+            return d
+
+        @property
+        def deterministic(self) -> bool:
+            return not self.config.stochastic
 
         # ---------------------------------------------------------------- Mitsuba entry point
         def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
@@ -104,13 +125,14 @@ def _define_class():
                                                     dr.gather(mi.Float, flat, idx + 2)))
             # left unevaluated: commit() fuses it with the crossing count into one kernel
             self.stage_log(pixel_model.linlog(dr, intensity, self.linlog_threshold), (width, height))
-            self.staged_image = image
+            self.staged_intensity, self.staged_image = intensity, image
 
         def stage_log(self, log_brightness, size):
             """Stage a log-brightness frame directly (period reuse feeds cached frames through here)."""
             if self.size is not None and self.size != tuple(size):
                 raise ValueError(f"film size changed from {self.size} to {tuple(size)} between steps")
-            self.staged, self.staged_size, self.staged_image = log_brightness, tuple(size), None
+            self.staged, self.staged_size = log_brightness, tuple(size)
+            self.staged_intensity = self.staged_image = None
 
         def staged_max_change(self) -> float:
             """Largest |Delta L| of the staged frame against the last committed one (0 before the first commit)."""
@@ -119,6 +141,34 @@ def _define_class():
             return float(dr.max(dr.abs(self.staged - self.log_prev)).array[0])
 
         # ---------------------------------------------------------------- events
+        def _init_state(self, log_now, width, height):
+            cfg, n_pix = self.config, width * height
+            rng = np.random.default_rng(cfg.seed)
+            self.size = (width, height)
+            self.log_prev = mi.Float(log_now)
+            self.anchor = mi.Float(log_now)
+            self.k_on, self.k_off = dr.zeros(mi.Int32, n_pix), dr.zeros(mi.Int32, n_pix)
+            self.c_on = mi.Float(pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_on, cfg.threshold_sigma))
+            self.c_off = mi.Float(pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_off, cfg.threshold_sigma))
+            if cfg.leak_rate_hz or cfg.threshold_jitter:
+                self.offset = dr.zeros(mi.Float, n_pix)
+            if cfg.leak_rate_hz:
+                rates = cfg.leak_rate_hz * np.maximum(1 + cfg.leak_jitter * rng.standard_normal(n_pix), 0)
+                self.leak_rate = mi.Float(rates.astype(np.float32))
+                # a sensor in steady state has its pixels at random phases of their leak cycle
+                self.offset = -mi.Float(rng.random(n_pix).astype(np.float32)) * self.c_on
+            if cfg.shot_noise_hz or cfg.threshold_jitter:
+                self.rng = mi.PCG32(size=n_pix, initstate=mi.UInt64((cfg.seed * 2654435761 + 12345) % 2**64),
+                                    initseq=dr.arange(mi.UInt64, n_pix))
+            if cfg.refractory_s:
+                self.last_emit = np.full(n_pix, -np.inf)
+            if cfg.readout_cap:
+                cap = cfg.readout_cap * (n_pix / cfg.readout_cap_native_pixels if cfg.readout_cap_native_pixels else 1)
+                self.limiter = pixel_model.ReadoutLimiter(cap, cfg.seed)
+            state = [self.log_prev, self.anchor, self.k_on, self.k_off, self.c_on, self.c_off]
+            state += [v for v in (self.offset, self.leak_rate) if v is not None]
+            dr.make_opaque(*state)
+
         def commit(self, t0: float, t1: float):
             """Accept the staged frame as the brightness at time t1 (seconds) and return the events of (t0, t1].
 
@@ -127,42 +177,93 @@ def _define_class():
             """
             if self.staged is None:
                 raise RuntimeError("commit() without a staged frame: render first")
+            cfg = self.config
             width, height = self.staged_size
-            log_now, self.staged, self.staged_image = self.staged, None, None
+            log_in, intensity = self.staged, self.staged_intensity
+            self.staged = self.staged_intensity = self.staged_image = None
             if self.log_prev is None:
-                n_pix = width * height
-                self.size = (width, height)
-                self.log_prev = mi.Float(log_now)
-                self.anchor = mi.Float(log_now)
-                self.k_on = dr.zeros(mi.Int32, n_pix)
-                self.k_off = dr.zeros(mi.Int32, n_pix)
-                self.c_on = dr.full(mi.Float, self.threshold_on, n_pix)
-                self.c_off = dr.full(mi.Float, self.threshold_off, n_pix)
-                dr.make_opaque(self.c_on, self.c_off, self.k_on, self.k_off)
+                self._init_state(log_in, width, height)
                 dr.eval(self.log_prev, self.anchor)
                 return _no_events()
+            if intensity is None and (cfg.cutoff_hz or cfg.shot_noise_hz):
+                intensity = pixel_model.linlog_inverse(dr, log_in, self.linlog_threshold)
+            dt = mi.Float(t1 - t0)
+            dr.make_opaque(dt)                      # a new literal per step would recompile the kernel
+            log_now = log_in
+            if cfg.cutoff_hz:
+                alpha = pixel_model.lowpass_alpha(dr, intensity, dt, cfg.cutoff_hz, cfg.bright_intensity,
+                                                  cfg.cutoff_min_fraction)
+                log_now = self.log_prev + alpha * (log_in - self.log_prev)
+            offset = self.offset
+            if cfg.leak_rate_hz:
+                offset = offset - self.leak_rate * self.c_on * dt      # the reference sinks: ON events
+            c_on, c_off = self.c_on, self.c_off
+            if cfg.threshold_jitter:
+                g = mi.warp.square_to_std_normal(mi.Point2f(self.rng.next_float32(), self.rng.next_float32()))
+                c_on = dr.maximum(c_on + cfg.threshold_jitter * g.x, self.c_on * 0.1)
+                c_off = dr.maximum(c_off + cfg.threshold_jitter * g.y, self.c_off * 0.1)
             log_ref = pixel_model.reference_level(dr, mi.Float, self.anchor, self.k_on, self.k_off, self.c_on,
                                                   self.c_off)
-            n = pixel_model.count_crossings(dr, mi.Int32, log_now, log_ref, self.c_on, self.c_off)
-            k_on, k_off = self.k_on + dr.maximum(n, 0), self.k_off + dr.maximum(-n, 0)
-            dr.eval(n, k_on, k_off, log_now, log_ref)
+            if offset is not None:
+                log_ref = log_ref + offset
+            n = pixel_model.count_crossings(dr, mi.Int32, log_now, log_ref, c_on, c_off)
+            n_on, n_off = dr.maximum(n, 0), dr.maximum(-n, 0)
+            k_on, k_off = self.k_on + n_on, self.k_off + n_off
+            if cfg.threshold_jitter:                # the reference moved by the jittered thresholds
+                offset = offset + mi.Float(n_on) * (c_on - self.c_on) - mi.Float(n_off) * (c_off - self.c_off)
+            todo = [n, k_on, k_off, log_now, log_ref]
+            noise = None
+            if cfg.shot_noise_hz:
+                prob = pixel_model.shot_noise_probability(dr, intensity, dt, cfg.shot_noise_hz, cfg.bright_intensity,
+                                                          cfg.shot_noise_bright_factor)
+                u, u_pol, u_t = self.rng.next_float32(), self.rng.next_float32(), self.rng.next_float32()
+                noise = (u < prob, u_pol, u_t)
+                todo += [u_pol, u_t, noise[0]]
+            todo += [v for v in (offset, getattr(self.rng, "state", None)) if v is not None]
+            dr.eval(*todo)
             fired = dr.compress(n != 0)
             if dr.width(fired) == 0:
-                out = _no_events()
+                pix, t, p = np.empty(0, np.int64), np.empty(0), np.empty(0, np.int8)
             else:  # only firing pixels leave Dr.Jit, gathered in a single kernel
-                sparse = [dr.gather(type(a), a, fired) for a in
-                          (n, self.log_prev, log_now, log_ref, self.c_on, self.c_off)]
+                sparse = [dr.gather(type(a), a, fired) for a in (n, self.log_prev, log_now, log_ref, c_on, c_off)]
                 dr.eval(*sparse)
                 pix, t, p = pixel_model.expand_crossings(fired.numpy(), *(a.numpy() for a in sparse), t0, t1)
-                out = ((pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p)
-            self.log_prev, self.k_on, self.k_off = log_now, k_on, k_off
-            return out
+            if noise is not None:
+                noisy = dr.compress(noise[0])
+                if dr.width(noisy):
+                    npix = noisy.numpy().astype(np.int64)
+                    pol = np.where(dr.gather(mi.Float, noise[1], noisy).numpy() < 0.5, 1, -1).astype(np.int8)
+                    nt = t0 + dr.gather(mi.Float, noise[2], noisy).numpy().astype(np.float64) * (t1 - t0)
+                    pix, t, p = np.concatenate([pix, npix]), np.concatenate([t, nt]), np.concatenate([p, pol])
+                    self.noise_events += len(npix)
+            if cfg.refractory_s and len(t):
+                keep = pixel_model.refractory_filter(pix, t, self.last_emit, cfg.refractory_s)
+                self.refractory_dropped += int(len(t) - keep.sum())
+                pix, t, p = pix[keep], t[keep], p[keep]
+            self.log_prev, self.k_on, self.k_off, self.offset = log_now, k_on, k_off, offset
+            return (pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p
+
+        def readout(self, x, y, t_us, p):
+            """The sensor's output stage on one step's time-sorted events: clock quantisation, readout cap."""
+            cfg = self.config
+            if cfg.timestamp_resolution_us:
+                res = cfg.timestamp_resolution_us
+                t_us = (np.floor(t_us / res) * res).astype(np.int64)
+            if self.limiter is not None and len(t_us):
+                keep = self.limiter.filter(t_us)
+                x, y, t_us, p = x[keep], y[keep], t_us[keep], p[keep]
+            return x, y, t_us, p
+
+        def readout_dropped(self) -> int:
+            return 0 if self.limiter is None else self.limiter.dropped
 
         def periodic_key(self):
             """Integer array that, with the previous log brightness, fixes every future event of the ideal pixel
-            (net event count per pixel), or None when no such exact key exists (unequal ON/OFF thresholds).
+            (net event count per pixel), or None when no such exact key exists (unequal ON/OFF thresholds, or a
+            pixel model whose state drifts or draws noise).
             Equal keys one scan period apart, with identical input frames, mean the events repeat exactly."""
-            if self.k_on is None or self.threshold_on != self.threshold_off:
+            if self.k_on is None or not self.deterministic or self.threshold_on != self.threshold_off \
+                    or self.config.threshold_sigma:
                 return None
             key = self.k_on - self.k_off
             dr.eval(key)
@@ -172,9 +273,7 @@ def _define_class():
             self.inner.traverse(callback)
 
         def to_string(self):
-            return (f"EventIntegrator[threshold_on={self.threshold_on}, threshold_off={self.threshold_off}, "
-                    f"linlog_threshold={self.linlog_threshold}, inner={self.inner}]")
-
+            return f"EventIntegrator[preset={self.config.preset}, inner={self.inner}]"
 
     return EventIntegrator
 

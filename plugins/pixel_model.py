@@ -25,6 +25,13 @@ def linlog(dr, intensity, linear_below: float):
     return dr.select(intensity >= il, dr.log(dr.maximum(intensity, il)), math.log(il) + (intensity - il) / il)
 
 
+def linlog_inverse(dr, log_brightness, linear_below: float):
+    """Radiance from lin-log brightness (the inverse of :func:`linlog`)."""
+    il = float(linear_below)
+    lil = math.log(il)
+    return dr.select(log_brightness >= lil, dr.exp(log_brightness), il * (1.0 + log_brightness - lil))
+
+
 def linlog_np(intensity, linear_below: float):
     """NumPy twin of :func:`linlog` (used by oracles and offline tools)."""
     i = np.asarray(intensity, dtype=np.float64)
@@ -78,3 +85,179 @@ def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: floa
         frac = (ref + sign * k * step - lp) / (ln - lp)
     frac = np.clip(np.nan_to_num(frac, nan=1.0), 0.0, 1.0)
     return pixel, t0 + frac * (t1 - t0), sign.astype(np.int8)
+
+
+# ======================================================================================== pixel realism
+# Every effect below is off in the ``ideal`` preset. Dense per-pixel state evolves in Dr.Jit (low-pass,
+# leak, noise draws); the sparse steps act on the few events of a step in NumPy (refractory, readout cap).
+
+from dataclasses import asdict, dataclass, fields  # noqa: E402
+
+
+@dataclass
+class PixelConfig:
+    """Parameters of the event pixel (log units for thresholds, seconds, hertz, radiance for intensities)."""
+    threshold_on: float = 0.2
+    threshold_off: float = 0.2
+    threshold_sigma: float = 0.0          # per-pixel ON/OFF threshold mismatch (fixed per pixel), log units
+    threshold_jitter: float = 0.0         # per-crossing (per pixel and step) threshold noise, log units
+    refractory_s: float = 0.0             # no two events of a pixel closer than this
+    leak_rate_hz: float = 0.0             # spontaneous ON events per pixel per second (reference drift)
+    leak_jitter: float = 0.0              # relative per-pixel spread of the leak rate
+    shot_noise_hz: float = 0.0            # noise events per pixel per second in the dark
+    shot_noise_bright_factor: float = 0.25  # rate at intensity >= bright_intensity, relative to the dark rate
+    cutoff_hz: float = 0.0                # photoreceptor 3 dB cutoff at bright_intensity (0: no low-pass)
+    cutoff_min_fraction: float = 0.01     # dim pixels: cutoff never below this fraction of cutoff_hz
+    bright_intensity: float = 1.0         # radiance treated as "bright" by the low-pass and shot noise
+    linlog_threshold: float = 1e-3        # radiance below which the response is linear
+    timestamp_resolution_us: float = 0.0  # > 0: timestamps floored to this clock (sensors: 1 us)
+    readout_cap: float = 0.0              # events per second the readout can pass (0: unlimited)
+    readout_cap_native_pixels: int = 0    # > 0: readout_cap is for a sensor of this many pixels; scaled by film
+    seed: int = 0                         # seeds the mismatch and every noise draw
+    preset: str = "ideal"
+
+    @property
+    def stochastic(self) -> bool:
+        """True if the state can drift or draw noise (then periodic event copying is invalid)."""
+        return bool(self.threshold_jitter or self.leak_rate_hz or self.shot_noise_hz or self.cutoff_hz
+                    or self.readout_cap or self.refractory_s)
+
+    def validate(self, where: str = "pixel model") -> "PixelConfig":
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in ("preset",):
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{where}: {f.name} = {v!r}: must be a finite number")
+        for name in ("threshold_on", "threshold_off", "linlog_threshold", "bright_intensity"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{where}: {name} = {getattr(self, name)!r}: must be > 0")
+        for name in ("threshold_sigma", "threshold_jitter", "refractory_s", "leak_rate_hz", "leak_jitter",
+                     "shot_noise_hz", "cutoff_hz", "timestamp_resolution_us", "readout_cap",
+                     "readout_cap_native_pixels"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{where}: {name} = {getattr(self, name)!r}: must be >= 0 (rates, times and "
+                                 "spreads cannot be negative)")
+        c = min(self.threshold_on, self.threshold_off)
+        for name in ("threshold_sigma", "threshold_jitter"):
+            if getattr(self, name) * 4 >= c:
+                raise ValueError(f"{where}: {name} = {getattr(self, name)}: with thresholds of {c} it would make "
+                                 f"thresholds <= 0 (C - 4 sigma <= 0); must be < {c / 4:g}")
+        if not 0 < self.shot_noise_bright_factor <= 1 or not 0 < self.cutoff_min_fraction <= 1:
+            raise ValueError(f"{where}: shot_noise_bright_factor and cutoff_min_fraction must be in (0, 1]")
+        if self.readout_cap and self.readout_cap < READOUT_BINS_PER_MS * 1000 * 2:
+            raise ValueError(f"{where}: readout_cap = {self.readout_cap:g} events/s is below the smallest the "
+                             f"limiter can enforce ({READOUT_BINS_PER_MS * 2000:g})")
+        return self
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+# Presets. Sources (see docs/pixel_presets.md): v2e (Hu et al., CVPRW 2021) defaults for a DVS: thresholds
+# 0.2, mismatch 0.03, leak 0.1 Hz with 10% spread; its "noisy" setting: 5 Hz shot noise, 30 Hz cutoff.
+# Lichtsteiner et al. (JSSC 2008): 2.1% threshold mismatch. iniVation DAVIS346: 12 MEvt/s readout.
+# Finateu et al. (ISSCC 2020, the Sony/Prophesee IMX636): 1280x720, 1.066 GEPS readout. IEBCS (Joubert et
+# al. 2021): ~100 us refractory for a Prophesee sensor. DESIGN.md section 4 gathers these.
+PRESETS = {
+    "ideal": {},
+    "davis346": dict(threshold_sigma=0.03, refractory_s=5e-4, leak_rate_hz=0.1, leak_jitter=0.1,
+                     shot_noise_hz=1.0, cutoff_hz=300.0, timestamp_resolution_us=1.0, readout_cap=12e6,
+                     readout_cap_native_pixels=346 * 260),
+    "prophesee_gen4": dict(threshold_on=0.25, threshold_off=0.25, threshold_sigma=0.03, refractory_s=1e-4,
+                           leak_rate_hz=0.1, leak_jitter=0.1, shot_noise_hz=0.1, cutoff_hz=1000.0,
+                           timestamp_resolution_us=1.0, readout_cap=1.066e9,
+                           readout_cap_native_pixels=1280 * 720),
+}
+
+
+def pixel_config(preset: str = "ideal", where: str = "pixel model", **overrides) -> PixelConfig:
+    if preset not in PRESETS:
+        raise ValueError(f"{where}: unknown preset {preset!r}; allowed: {', '.join(PRESETS)}")
+    names = {f.name for f in fields(PixelConfig)}
+    unknown = set(overrides) - names
+    if unknown:
+        raise ValueError(f"{where}: unknown pixel parameter {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(names))}")
+    values = dict(PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
+    return PixelConfig(preset=preset, **values).validate(where)
+
+
+def sample_thresholds(rng: np.random.Generator, n: int, nominal: float, sigma: float) -> np.ndarray:
+    """Per-pixel thresholds ~ N(nominal, sigma), floored at nominal / 10 so none is ever <= 0."""
+    if sigma == 0:
+        return np.full(n, nominal, np.float32)
+    return np.maximum(rng.normal(nominal, sigma, n), nominal / 10).astype(np.float32)
+
+
+def lowpass_alpha(dr, intensity, dt, cutoff_hz, bright_intensity, min_fraction):
+    """Blend factor of the photoreceptor's first-order low-pass over dt; cutoff proportional to intensity."""
+    f = cutoff_hz * dr.clip(intensity / bright_intensity, min_fraction, 1.0)
+    return 1.0 - dr.exp(-2.0 * math.pi * f * dt)
+
+
+def shot_noise_probability(dr, intensity, dt, rate_hz, bright_intensity, bright_factor):
+    """Probability of a noise event in dt: rate falls linearly from rate_hz (dark) to bright_factor * rate_hz."""
+    frac = dr.clip(intensity / bright_intensity, 0.0, 1.0)
+    rate = rate_hz * (1.0 - (1.0 - bright_factor) * frac)
+    return dr.minimum(rate * dt, 1.0)
+
+
+def refractory_filter(pixel, t, last_emit, period):
+    """Keep only events at least ``period`` after the pixel's previous kept event (greedy, in time order).
+
+    pixel, t: events of one step sorted by time (any pixels); last_emit: per-pixel array of the last kept
+    time (updated in place). Returns the keep mask. Vectorised over the rank of each event within its pixel.
+    """
+    keep = np.zeros(len(t), bool)
+    if len(t) == 0:
+        return keep
+    order = np.lexsort((t, pixel))
+    p_s, t_s = pixel[order], t[order]
+    start = np.r_[0, np.nonzero(np.diff(p_s))[0] + 1]
+    rank = np.arange(len(p_s)) - np.repeat(start, np.diff(np.r_[start, len(p_s)]))
+    kept_sorted = np.zeros(len(p_s), bool)
+    for r in range(int(rank.max()) + 1):
+        sel = np.nonzero(rank == r)[0]
+        ok = t_s[sel] >= last_emit[p_s[sel]] + period
+        kept_sorted[sel[ok]] = True
+        last_emit[p_s[sel[ok]]] = t_s[sel[ok]]
+    keep[order] = kept_sorted
+    return keep
+
+
+READOUT_BINS_PER_MS = 9
+
+
+class ReadoutLimiter:
+    """Drops events at random so that no 1 ms window ever holds more than cap * 1 ms of them.
+
+    Time is cut into bins of 1/9 ms, each allowed 1/10 of the 1 ms budget: any 1 ms window overlaps at most 10
+    bins, so the cap holds for every window (saturated throughput is 90% of the cap). Within an overfull bin
+    the survivors are a uniformly random subset. State carries across steps (a bin may span two).
+    """
+
+    def __init__(self, cap_ev_s: float, seed: int = 0):
+        self.bin_us = 1000.0 / READOUT_BINS_PER_MS
+        self.budget = int(cap_ev_s * 1e-3 / (READOUT_BINS_PER_MS + 1))
+        self.rng = np.random.default_rng(seed + 7919)
+        self.open_bin, self.used = -1, 0
+        self.dropped = 0
+
+    def filter(self, t_us: np.ndarray) -> np.ndarray:
+        """Keep mask for time-sorted timestamps (int us)."""
+        if len(t_us) == 0:
+            return np.zeros(0, bool)
+        b = np.floor(t_us / self.bin_us).astype(np.int64)
+        key = self.rng.random(len(t_us))
+        order = np.lexsort((key, b))                         # random order within each bin
+        b_s = b[order]
+        start = np.r_[0, np.nonzero(np.diff(b_s))[0] + 1]
+        rank = np.arange(len(b_s)) - np.repeat(start, np.diff(np.r_[start, len(b_s)]))
+        rank = rank + np.where(b_s == self.open_bin, self.used, 0)   # budget already used in a carried bin
+        keep = np.zeros(len(t_us), bool)
+        keep[order] = rank < self.budget
+        last = b_s[-1]
+        self.used = int(np.count_nonzero(keep[order][b_s == last])) + (self.used if last == self.open_bin else 0)
+        self.open_bin = int(last)
+        self.dropped += int(len(t_us) - keep.sum())
+        return keep

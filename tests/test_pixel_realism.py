@@ -1,0 +1,187 @@
+"""Pixel realism: every effect measured against its configuration, and the ideal pixel untouched."""
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import analytic as an
+import mitsuba_eventfield as ef
+from conftest import DEMO
+from mitsuba_eventfield.plugins import pixel_model as pm
+
+
+def _mi():
+    import mitsuba as mi
+    return mi
+
+
+def _uniform_scene(radiance=0.5, size=32):
+    """A static emitter filling the view: every pixel sees the same radiance."""
+    mi = _mi()
+    return ef.load_scene(mi.load_dict({
+        "type": "scene", "integrator": {"type": "direct"},
+        "sensor": {"type": "perspective", "fov": 30, "film": {"type": "hdrfilm", "width": size, "height": size,
+                                                              "rfilter": {"type": "box"}}},
+        "wall": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0, 0, 1]).rotate([0, 1, 0], 180).scale(2),
+                 "emitter": {"type": "area", "radiance": radiance}}}), motion=None)
+
+
+def test_threshold_mismatch_spread_measured_from_events(capsys):
+    """Within one rising swing, consecutive ON events of a pixel are exactly its ON threshold apart in log
+    brightness: evaluating the exact analytic log brightness at the event times measures every pixel's
+    threshold, and their spread over 1024 pixels is the configured mismatch."""
+    mi = _mi()
+    d = an.scene_dict(mi, 0)
+    d["sensor"]["film"]["height"] = 16
+    speed = 0.5 * an.PIX / 1e-4
+    timed = ef.load_scene(mi.load_dict(d), motion={"objects": {"plane": {"velocity": [speed, 0, 0]}}})
+    sigma, c = 0.01, 0.1
+    ev = ef.render_events(timed, 0.012, steps=120, threshold=c, pixel={"threshold_sigma": sigma, "seed": 3})  # edge out of view
+    L = np.log(an.exact_intensity(ev.t * 1e-6, speed))[np.arange(len(ev)), ev.x]   # exact L at each event
+    pix = ev.y.astype(np.int64) * 64 + ev.x
+    order = np.lexsort((ev.t, pix))
+    pix, L, p = pix[order], L[order], ev.p[order]
+    same = (np.diff(pix) == 0) & (p[1:] > 0) & (p[:-1] > 0)      # consecutive ON events of one pixel
+    steps = np.diff(L)[same]
+    est = np.array([np.median(steps[pix[1:][same] == k]) for k in np.unique(pix[1:][same])])
+    with capsys.disabled():
+        print(f"\n[mismatch] configured sigma {sigma}, measured {est.std():.5f} over {len(est)} pixels "
+              f"(mean threshold {est.mean():.4f}, nominal {c}, floor {c / 10})")
+    assert abs(est.std() - sigma) / sigma < 0.1
+    assert abs(est.mean() - c) < 0.002 and est.min() > 0
+
+
+def test_refractory_gaps(capsys):
+    timed = ef.load_scene(DEMO, width=48, height=36)
+    period = 1e-3
+    ev = ef.render_events(timed, 0.02, steps=80, pixel={"refractory_s": period})
+    ideal = ef.render_events(timed, 0.02, steps=80)
+    order = np.lexsort((ev.t, ev.y.astype(np.int64) * 48 + ev.x))
+    pix = (ev.y.astype(np.int64) * 48 + ev.x)[order]
+    gaps = np.diff(ev.t[order])[np.diff(pix) == 0]
+    with capsys.disabled():
+        print(f"\n[refractory {period * 1e3} ms] {len(ev)} events (ideal {len(ideal)}); smallest gap of a pixel "
+              f"{gaps.min()} us; suppressed {ev.meta['render']['dropped_refractory']}")
+    assert gaps.min() >= period * 1e6 - 1                           # 1 us: timestamp rounding
+    assert ev.meta["render"]["dropped_refractory"] == len(ideal) - len(ev) > 0
+
+
+@pytest.mark.parametrize("effect", ["leak", "shot"])
+def test_noise_rates_on_a_static_scene(effect, capsys):
+    radiance, size, duration = 0.5, 32, 1.0
+    if effect == "leak":
+        rate = 5.0
+        pixel = {"leak_rate_hz": rate, "leak_jitter": 0.1}
+        expected = rate
+    else:
+        rate = 8.0
+        pixel = {"shot_noise_hz": rate, "bright_intensity": 1.0}
+        expected = rate * (1 - 0.75 * radiance)                      # linear in intensity, 0.25 x when bright
+    ev = ef.render_events(_uniform_scene(radiance, size), duration, steps=400, pixel=dict(pixel, seed=5))
+    measured = len(ev) / (size * size * duration)
+    on_fraction = np.count_nonzero(ev.p > 0) / len(ev)
+    with capsys.disabled():
+        print(f"\n[{effect}] configured {expected:.3f} Hz per pixel, measured {measured:.3f} Hz "
+              f"({len(ev)} events, ON fraction {on_fraction:.3f}); rendered "
+              f"{ev.meta['render']['steps'] + 1 - ev.meta['render']['reused_steps']} frame(s)")
+    assert abs(measured - expected) / expected < 0.05
+    assert on_fraction == 1.0 if effect == "leak" else abs(on_fraction - 0.5) < 0.03
+
+
+def test_readout_cap_holds_in_every_millisecond(capsys):
+    timed = ef.load_scene(DEMO, width=96, height=72)
+    ideal = ef.render_events(timed, 0.01, steps=40)
+    cap = 0.5 * len(ideal) / 0.01                                    # half the offered rate
+    ev = ef.render_events(timed, 0.01, steps=40, pixel={"readout_cap": cap, "seed": 1})
+    t = ev.t
+    in_window = np.searchsorted(t, t + 1000, side="left") - np.arange(len(t))   # events in [t_i, t_i + 1 ms)
+    r = ev.meta["render"]
+    with capsys.disabled():
+        print(f"\n[readout cap {cap:.3g} ev/s] offered {len(ideal)}, passed {len(ev)}, dropped {r['dropped_readout']} "
+              f"({100 * r['dropped_readout'] / len(ideal):.1f}%); busiest 1 ms window {in_window.max()} "
+              f"(cap {cap * 1e-3:.0f})")
+    assert in_window.max() <= cap * 1e-3
+    assert r["dropped_readout"] == len(ideal) - len(ev) > 0
+    assert any("readout cap dropped" in n for n in r["notes"])
+
+
+def test_timestamp_clock_and_determinism():
+    timed = ef.load_scene(DEMO, width=32, height=24)
+    a = ef.render_events(timed, 0.004, steps=8, preset="davis346", pixel={"timestamp_resolution_us": 10})
+    b = ef.render_events(timed, 0.004, steps=8, preset="davis346", pixel={"timestamp_resolution_us": 10})
+    c = ef.render_events(timed, 0.004, steps=8, preset="davis346", pixel={"timestamp_resolution_us": 10, "seed": 9})
+    assert np.all(a.t % 10 == 0) and a.is_sorted
+    assert a.equals(b) and not a.equals(c)
+    assert a.meta["pixel_model"]["preset"] == "davis346" and a.meta["pixel_model"]["refractory_s"] == 5e-4
+
+
+def test_lowpass_attenuates_like_a_first_order_filter(capsys, monkeypatch):
+    """A photoreceptor cutoff equal to the texture's temporal frequency scales the log-brightness swing by
+    1/sqrt(2) (all pixels 'bright', so the filter is linear). The swing is read from the events: the
+    reference's peak-to-peak plus one threshold of hysteresis."""
+    mi = _mi()
+    monkeypatch.setattr(an, "B", 0.1)                       # log(1 + 0.1 sin): nearly a pure sinusoid
+    speed = 0.5 * an.PIX / 1e-4
+    f_signal = speed / an.LAM
+    c = 0.005
+    motion = {"objects": {"plane": {"velocity": [speed, 0, 0]}}}
+
+    def swing(pixel):
+        # 12 ms: the plane moves 60 px, its edge stays out of view (PLANE_HALF is 128 px from the centre)
+        ev = ef.render_events(ef.load_scene(mi.load_dict(an.scene_dict(mi, 0)), motion=motion), 0.012, steps=240,
+                              threshold=c, pixel=pixel)
+        late = ev.t > 6_000                                 # after the filter's start-up
+        pp = []
+        for col in range(0, an.WIDTH, 4):
+            sel = ev.x == col
+            level = np.cumsum(ev.p[sel])[late[sel]]
+            pp.append((level.max() - level.min()) * c + c)
+        return np.median(pp)
+
+    ratio = swing({"cutoff_hz": f_signal, "bright_intensity": 1e-3}) / swing({})
+    with capsys.disabled():
+        print(f"\n[low-pass at the signal frequency {f_signal:.0f} Hz] log swing ratio {ratio:.3f} "
+              f"(first order: {1 / math.sqrt(2):.3f})")
+    assert abs(ratio - 1 / math.sqrt(2)) < 0.03
+
+
+def test_lowpass_is_slower_for_dim_pixels():
+    import drjit as dr
+    alpha = pm.lowpass_alpha(dr, _mi().Float([1.0, 0.1, 0.001]), 1e-3, 300.0, 1.0, 0.01)
+    a = alpha.numpy()
+    assert a[0] > a[1] > a[2] > 0
+    assert np.isclose(a[0], 1 - math.exp(-2 * math.pi * 300 * 1e-3))
+
+
+@pytest.mark.parametrize("pixel, message", [
+    ({"leak_rate_hz": -1.0}, "leak_rate_hz = -1.0: must be >= 0"),
+    ({"shot_noise_hz": -0.5}, "shot_noise_hz = -0.5: must be >= 0"),
+    ({"threshold_sigma": 0.08}, "would make thresholds <= 0"),
+    ({"refractory_s": float("nan")}, "refractory_s = nan: must be a finite number"),
+    ({"colour": 1.0}, "unknown pixel parameter 'colour'"),
+])
+def test_bad_pixel_parameters(pixel, message):
+    timed = ef.load_scene(DEMO, width=16, height=12)
+    with pytest.raises(ef.EventFieldError, match=message):
+        ef.render_events(timed, 0.001, steps=2, pixel=pixel)
+
+
+def test_thresholds_are_floored_never_negative():
+    t = pm.sample_thresholds(np.random.default_rng(0), 1_000_000, 0.2, 0.049)   # the largest sigma allowed
+    assert t.min() >= 0.02 and abs(t.std() - 0.049) < 0.001
+
+
+def test_cli_preset_and_bad_preset(tmp_path):
+    run = lambda *a: subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "render", DEMO, *a,  # noqa: E731
+                                     "-D", "width=32", "-D", "height=24", "--quiet", "--duration", "0.002",
+                                     "--steps", "4"], capture_output=True, text=True, timeout=300)
+    ok = run("-o", str(tmp_path / "d.h5"), "--preset", "davis346", "--pixel", "shot_noise_hz=3")
+    assert ok.returncode == 0, ok.stderr
+    meta = ef.read_events(str(tmp_path / "d.h5")).meta["pixel_model"]
+    assert meta["preset"] == "davis346" and meta["shot_noise_hz"] == 3.0
+    bad = run("-o", str(tmp_path / "e.h5"), "--preset", "dvs9000")
+    assert bad.returncode == 2 and "unknown preset 'dvs9000'; allowed: ideal, davis346, prophesee_gen4" in bad.stderr
+    assert not os.path.exists(tmp_path / "e.h5")
