@@ -3,6 +3,7 @@ import json
 import os
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+os.makedirs(RESULTS, exist_ok=True)
 
 
 def write_results(name: str, results: dict, markdown_lines: list) -> None:

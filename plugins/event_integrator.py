@@ -212,34 +212,48 @@ def _define_class():
             if cfg.threshold_jitter:                # the reference moved by the jittered thresholds
                 offset = offset + mi.Float(n_on) * (c_on - self.c_on) - mi.Float(n_off) * (c_off - self.c_off)
             todo = [n, k_on, k_off, log_now, log_ref]
+            if cfg.threshold_jitter:                # gathered below: evaluate here, in the one kernel
+                todo += [c_on, c_off]
             noise = None
             if cfg.shot_noise_hz:
                 prob = pixel_model.shot_noise_probability(dr, intensity, dt, cfg.shot_noise_hz, cfg.bright_intensity,
                                                           cfg.shot_noise_bright_factor)
                 u, u_pol, u_t = self.rng.next_float32(), self.rng.next_float32(), self.rng.next_float32()
-                noise = (u < prob, u_pol, u_t)
-                todo += [u_pol, u_t, noise[0]]
+                noise = (u < prob, u_pol, u_t, mi.Int32(dr.select(u < prob, 1, 0)))
+                todo += list(noise)
             todo += [v for v in (offset, getattr(self.rng, "state", None)) if v is not None]
             dr.eval(*todo)
-            fired = dr.compress(n != 0)
+            # one compress over every pixel that produced anything (crossings or noise), one gather kernel
+            fired = dr.compress((n != 0) | noise[0]) if noise is not None else dr.compress(n != 0)
             if dr.width(fired) == 0:
                 pix, t, p = np.empty(0, np.int64), np.empty(0), np.empty(0, np.int8)
-            else:  # only firing pixels leave Dr.Jit, gathered in a single kernel
-                sparse = [dr.gather(type(a), a, fired) for a in (n, self.log_prev, log_now, log_ref, c_on, c_off)]
+            else:
+                cols = [n, self.log_prev, log_now, log_ref, c_on, c_off]
+                if noise is not None:
+                    cols += [noise[3], noise[1], noise[2]]
+                sparse = [dr.gather(type(a), a, fired) for a in cols]
                 dr.eval(*sparse)
-                pix, t, p = pixel_model.expand_crossings(fired.numpy(), *(a.numpy() for a in sparse), t0, t1)
-            if noise is not None:
-                noisy = dr.compress(noise[0])
-                if dr.width(noisy):
-                    npix = noisy.numpy().astype(np.int64)
-                    pol = np.where(dr.gather(mi.Float, noise[1], noisy).numpy() < 0.5, 1, -1).astype(np.int8)
-                    nt = t0 + dr.gather(mi.Float, noise[2], noisy).numpy().astype(np.float64) * (t1 - t0)
-                    pix, t, p = np.concatenate([pix, npix]), np.concatenate([t, nt]), np.concatenate([p, pol])
+                arr = [a.numpy() for a in sparse]
+                fpix = fired.numpy().astype(np.int64)
+                sig = arr[0] != 0
+                pix, t, p = pixel_model.expand_crossings(fpix[sig], *(a[sig] for a in arr[:6]), t0, t1)
+                hit = arr[6] != 0 if noise is not None else None
+                before = self.last_emit[fpix[hit]] if (noise is not None and cfg.refractory_s) else None
+                if cfg.refractory_s:
+                    keep, crossings = pixel_model.refractory_crossings(pix, t, self.last_emit, cfg.refractory_s)
+                    self.refractory_dropped += int(len(t) - keep.sum())
+                    pix, t, p = pix[keep], t[keep], p[keep]
+                if noise is not None:
+                    npix = fpix[hit]
+                    pol = np.where(arr[7][hit] < 0.5, 1, -1).astype(np.int8)
+                    nt = t0 + arr[8][hit].astype(np.float64) * (t1 - t0)
+                    if cfg.refractory_s:
+                        keep = pixel_model.refractory_extra(npix, nt, before, crossings, self.last_emit,
+                                                            cfg.refractory_s)
+                        self.refractory_dropped += int(len(nt) - keep.sum())
+                        npix, nt, pol = npix[keep], nt[keep], pol[keep]
                     self.noise_events += len(npix)
-            if cfg.refractory_s and len(t):
-                keep = pixel_model.refractory_filter(pix, t, self.last_emit, cfg.refractory_s)
-                self.refractory_dropped += int(len(t) - keep.sum())
-                pix, t, p = pix[keep], t[keep], p[keep]
+                    pix, t, p = np.concatenate([pix, npix]), np.concatenate([t, nt]), np.concatenate([p, pol])
             self.log_prev, self.k_on, self.k_off, self.offset = log_now, k_on, k_off, offset
             return (pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p
 

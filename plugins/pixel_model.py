@@ -202,26 +202,47 @@ def shot_noise_probability(dr, intensity, dt, rate_hz, bright_intensity, bright_
     return dr.minimum(rate * dt, 1.0)
 
 
-def refractory_filter(pixel, t, last_emit, period):
-    """Keep only events at least ``period`` after the pixel's previous kept event (greedy, in time order).
+def refractory_crossings(pixel, t, last_emit, period):
+    """Refractory selection for one step's crossings, as ``expand_crossings`` returns them: grouped by pixel,
+    time-ordered and evenly spaced within a pixel (linear brightness between rendered instants). Closed form,
+    identical to greedy selection: the first crossing at least ``period`` after the pixel's last kept event,
+    then every ceil(period / spacing)-th one. Updates ``last_emit`` (per-pixel, seconds) in place.
+    Returns (keep mask, per-group (pixel, first kept time) for :func:`refractory_extra`)."""
+    n = len(t)
+    if n == 0:
+        return np.zeros(0, bool), (np.empty(0, np.int64), np.empty(0))
+    start = np.r_[0, np.nonzero(np.diff(pixel))[0] + 1]
+    size = np.diff(np.r_[start, n])
+    gp, t0g = pixel[start], t[start]
+    multi = size > 1
+    spacing = np.where(multi, t[np.minimum(start + 1, n - 1)] - t0g, 1.0)
+    wait = last_emit[gp] + period - t0g                     # > 0: the first crossing is too early
+    with np.errstate(invalid="ignore"):
+        first_multi = np.maximum(0, np.ceil(wait / spacing - 1e-9))
+    first = np.where(multi, np.nan_to_num(first_multi, nan=0.0, neginf=0.0), np.where(wait <= 0, 0, 1))
+    stride = np.where(multi, np.maximum(1, np.ceil(period / spacing - 1e-9)), 1)
+    rank = np.arange(n) - np.repeat(start, size)
+    f_r, s_r = np.repeat(first, size), np.repeat(stride, size)
+    keep = (rank >= f_r) & (((rank - f_r) % s_r) == 0)
+    kept_groups = first < size
+    last_idx = start + first + stride * np.floor((size - 1 - first) / stride)
+    last_emit[gp[kept_groups]] = t[last_idx[kept_groups].astype(np.int64)]
+    first_kept = np.where(kept_groups, t[np.minimum(start + first, n - 1).astype(np.int64)], np.inf)
+    return keep, (gp, first_kept)
 
-    pixel, t: events of one step sorted by time (any pixels); last_emit: per-pixel array of the last kept
-    time (updated in place). Returns the keep mask. Vectorised over the rank of each event within its pixel.
-    """
-    keep = np.zeros(len(t), bool)
-    if len(t) == 0:
-        return keep
-    order = np.lexsort((t, pixel))
-    p_s, t_s = pixel[order], t[order]
-    start = np.r_[0, np.nonzero(np.diff(p_s))[0] + 1]
-    rank = np.arange(len(p_s)) - np.repeat(start, np.diff(np.r_[start, len(p_s)]))
-    kept_sorted = np.zeros(len(p_s), bool)
-    for r in range(int(rank.max()) + 1):
-        sel = np.nonzero(rank == r)[0]
-        ok = t_s[sel] >= last_emit[p_s[sel]] + period
-        kept_sorted[sel[ok]] = True
-        last_emit[p_s[sel[ok]]] = t_s[sel[ok]]
-    keep[order] = kept_sorted
+
+def refractory_extra(pixel, t, before, crossings, last_emit, period):
+    """Refractory check of extra single events (shot noise; at most one per pixel and step) against the step's
+    kept crossings: kept only if at least ``period`` after the pixel's previous emission (``before``: its
+    last_emit before this step) and outside [first kept - period, last kept + period] of this step's crossings
+    (conservative: the gap guarantee always holds). Touches only these pixels."""
+    gp, first_kept = crossings                           # gp ascending (compress order)
+    i = np.minimum(np.searchsorted(gp, pixel), max(len(gp) - 1, 0))
+    has = (len(gp) > 0) & (gp[i] == pixel) if len(gp) else np.zeros(len(pixel), bool)
+    first = np.where(has, first_kept[i] if len(gp) else np.inf, np.inf)
+    after_all = t >= last_emit[pixel] + period
+    keep = (t >= before + period) & (~np.isfinite(first) | (t <= first - period) | after_all)
+    last_emit[pixel[keep]] = np.maximum(last_emit[pixel[keep]], t[keep])
     return keep
 
 
@@ -248,6 +269,14 @@ class ReadoutLimiter:
         if len(t_us) == 0:
             return np.zeros(0, bool)
         b = np.floor(t_us / self.bin_us).astype(np.int64)
+        first = int(b[0])
+        counts = np.bincount(b - first)
+        if first == self.open_bin:
+            counts[0] += self.used
+        if counts.max() <= self.budget:                  # nothing overflows: keep all, no random draw needed
+            last = len(counts) - 1
+            self.used, self.open_bin = int(counts[last]), first + last
+            return np.ones(len(t_us), bool)
         key = self.rng.random(len(t_us))
         order = np.lexsort((key, b))                         # random order within each bin
         b_s = b[order]

@@ -185,3 +185,30 @@ def test_cli_preset_and_bad_preset(tmp_path):
     bad = run("-o", str(tmp_path / "e.h5"), "--preset", "dvs9000")
     assert bad.returncode == 2 and "unknown preset 'dvs9000'; allowed: ideal, davis346, prophesee_gen4" in bad.stderr
     assert not os.path.exists(tmp_path / "e.h5")
+
+
+def test_refractory_holds_with_shot_noise_too():
+    timed = ef.load_scene(DEMO, width=48, height=36)
+    period = 1e-3
+    ev = ef.render_events(timed, 0.02, steps=80, pixel={"refractory_s": period, "shot_noise_hz": 200.0, "seed": 2})
+    assert ev.meta["render"]["noise_events"] > 100
+    key = ev.y.astype(np.int64) * 48 + ev.x
+    order = np.lexsort((ev.t, key))
+    gaps = np.diff(ev.t[order])[np.diff(key[order]) == 0]
+    assert gaps.min() >= period * 1e6 - 1
+
+
+def test_scan_frequency_sweep_loses_events_beyond_the_cap(capsys):
+    """The paper's scan-frequency experiment at small scale (benchmarks/scan_frequency.py runs the chart)."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "benchmarks"))
+    from scan_frequency import sweep
+    rows, cap = sweep([100, 1000], width=86, height=66, views=16, steps_per_period=16)
+    slow, fast = rows
+    with capsys.disabled():
+        print(f"\n[scan sweep, cap {cap / 1e6:.1f} Mev/s] 100 Hz: offered {slow['offered_ev_s'] / 1e6:.1f} Mev/s, "
+              f"dropped {slow['dropped_fraction']:.1%}, edge contrast {slow['edge_contrast']:.2f}; 1000 Hz: offered "
+              f"{fast['offered_ev_s'] / 1e6:.1f} Mev/s, dropped {fast['dropped_fraction']:.1%}, edge contrast "
+              f"{fast['edge_contrast']:.2f}")
+    assert slow["offered_ev_s"] < cap < fast["offered_ev_s"]
+    assert slow["dropped_fraction"] < 0.02 < 0.3 < fast["dropped_fraction"]
+    assert slow["edge_contrast"] > 0.9 > 0.7 > fast["edge_contrast"]
