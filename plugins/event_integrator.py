@@ -187,8 +187,10 @@ def _define_class():
                 return _no_events()
             if intensity is None and (cfg.cutoff_hz or cfg.shot_noise_hz):
                 intensity = pixel_model.linlog_inverse(dr, log_in, self.linlog_threshold)
-            dt = mi.Float(t1 - t0)
-            dr.make_opaque(dt)                      # a new literal per step would recompile the kernel
+            dt = None
+            if cfg.cutoff_hz or cfg.leak_rate_hz or cfg.shot_noise_hz:
+                dt = mi.Float(t1 - t0)
+                dr.make_opaque(dt)                  # a new literal per step would recompile the kernel
             log_now = log_in
             if cfg.cutoff_hz:
                 alpha = pixel_model.lowpass_alpha(dr, intensity, dt, cfg.cutoff_hz, cfg.bright_intensity,

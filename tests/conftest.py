@@ -19,3 +19,14 @@ def mono_variant():
 def demo_small():
     """The bundled demo scene at 48x36 (its XML defaults make the resolution a parameter)."""
     return ef.load_scene(DEMO, width=48, height=36)
+
+
+def steady_state_kernels(history, steps):
+    """JIT kernels after the first three of ``steps`` (+1 initial) steps, and those among them that were not
+    in-memory cache hits. A disk-cache load counts as a miss (the kernel was new to this process). The first
+    steps may meet one variant of a kernel keyed on a buffer's runtime memory alignment: not a per-step
+    recompilation, so they are left out."""
+    import drjit as dr
+    jit = [k for k in history if k.get("type") == dr.KernelType.JIT]
+    steady = jit[int(round(3 * len(jit) / (steps + 1))):]
+    return steady, [k for k in steady if not k.get("cache_hit") or k.get("cache_disk")]
