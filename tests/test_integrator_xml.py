@@ -54,3 +54,20 @@ def test_bad_threshold_in_xml_is_a_clear_error(tmp_path):
     path.write_text(SCENE.format(on=-0.2))
     with pytest.raises(ef.EventFieldError, match=r"bad.xml.*threshold_on = -0.2: must be > 0"):
         ef.load_scene(str(path))
+
+
+def test_pixel_preset_and_overrides_in_xml(tmp_path):
+    xml = SCENE.format(on=0.3).replace('<float name="threshold_off" value="0.3"/>',
+                                       '<float name="threshold_off" value="0.3"/>\n    <string name="preset" '
+                                       'value="davis346"/>\n    <float name="refractory_s" value="0.002"/>')
+    path = tmp_path / "p.xml"
+    path.write_text(xml)
+    timed = ef.load_scene(str(path), motion=MOTION)
+    ev = ef.render_events(timed, 0.01, steps=10)
+    pm = ev.meta["pixel_model"]
+    assert pm["preset"] == "davis346" and pm["refractory_s"] == 0.002 and pm["threshold_on"] == 0.35 - 0.05
+    assert pm["shot_noise_hz"] == 1.0                    # from the preset
+    bad = tmp_path / "q.xml"
+    bad.write_text(xml.replace('name="refractory_s"', 'name="refractory_time"'))
+    with pytest.raises(ef.EventFieldError, match="unknown parameter 'refractory_time'"):
+        ef.load_scene(str(bad))
