@@ -1,5 +1,9 @@
 """Calibration from the data itself (installed as ``mitsuba_eventfield.calibration``).
 
-Planned (issue 7): galvo view/phase calibration by template matching along the scan curve, depth vs. curve-size
-fits, kaleidoscope tile registration. Nothing is implemented here yet.
+* ``galvo``: where each frame sits on the scan curve (phase) and the curve's size, from patch or LED tracks;
+* ``depth``: curve size against known depths, the paper's linear model and the geometric inverse-depth model;
+* ``kaleidoscope``: tile seams, flips, sub-pixel view registration, flat-field;
+* ``store``: save / load calibration files (JSON) and apply them to light fields.
 """
+from .depth import DepthCalibration, fit_depth  # noqa: F401
+from .galvo import CalibrationError, GalvoCalibration, PatchTrack, fit_galvo, fit_tracks, track_patch, track_point  # noqa: F401

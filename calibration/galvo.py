@@ -1,0 +1,220 @@
+"""Galvo view calibration from the data itself (the paper's supplement, section 1).
+
+A patch of the scene, followed through frames reconstructed over a scan, moves along the scan curve: its
+displacement from the first frame is
+
+    delta(t) = S * (angles(t + tau0) - angles(tau0))          (pixels; S = diag(Sx, Sy), per radian)
+
+where ``angles`` is the commanded curve of ``mitsuba_eventfield.scan`` (the same code that drives the mirror
+and the simulation), ``tau0`` is where on the curve the first frame sits (its phase) and S the pixels per
+radian of mechanical angle at the patch's depth (the curve "size", depth-dependent through the pivot). Template
+matching (OpenCV, normalised correlation, sub-pixel parabola refinement) measures delta; a robust
+least-squares fit (scipy) gives tau0, Sx, Sy and their standard errors. The fit refuses, with the reason,
+when the data cannot determine it: too few frames, a textureless patch, weak matches, or an uncertain result.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from mitsuba_eventfield.errors import EventFieldError
+from mitsuba_eventfield.scan import ScanCurve
+
+
+class CalibrationError(EventFieldError):
+    """The data cannot determine the calibration; the message says why."""
+
+
+MIN_PATCH_STD = 0.02            # log-intensity spread below which a patch is textureless
+MIN_MATCH_SCORE = 0.6           # normalised correlation below which a match is not trusted
+
+
+@dataclass
+class PatchTrack:
+    """Sub-pixel displacement of one patch in each frame relative to the first, with match scores."""
+    centre: tuple
+    delta: np.ndarray           # (K, 2) pixels, x right, y down
+    score: np.ndarray           # (K,) normalised correlation of the best match
+
+
+def _subpixel_peak(corr, x, y):
+    """Parabola through the peak and its neighbours, per axis."""
+    def off(c_m, c_0, c_p):
+        den = c_m - 2 * c_0 + c_p
+        return 0.0 if den >= 0 else float(np.clip(0.5 * (c_m - c_p) / den, -0.5, 0.5))
+    h, w = corr.shape
+    dx = off(corr[y, x - 1], corr[y, x], corr[y, x + 1]) if 0 < x < w - 1 else 0.0
+    dy = off(corr[y - 1, x], corr[y, x], corr[y + 1, x]) if 0 < y < h - 1 else 0.0
+    return x + dx, y + dy
+
+
+def track_patch(frames, centre, half: int = 12, search: int = 16) -> PatchTrack:
+    """Follow the patch of size (2 half + 1)^2 around ``centre`` (x, y) of frames[0] through all frames."""
+    import cv2
+    frames = np.asarray(frames, dtype=np.float32)
+    k, h, w = frames.shape
+    cx, cy = int(round(centre[0])), int(round(centre[1]))
+    if not (half + search <= cx < w - half - search and half + search <= cy < h - half - search):
+        raise CalibrationError(f"patch at ({cx}, {cy}) with half-size {half} and search radius {search} does not "
+                               f"fit in the {w}x{h} frames")
+    tpl = frames[0, cy - half:cy + half + 1, cx - half:cx + half + 1]
+    if tpl.std() < MIN_PATCH_STD:
+        raise CalibrationError(f"patch at ({cx}, {cy}) is textureless (std {tpl.std():.4f} < {MIN_PATCH_STD}): "
+                               "nothing to match; choose a textured patch")
+    delta, score = np.zeros((k, 2)), np.zeros(k)
+    for i in range(k):
+        win = frames[i, cy - half - search:cy + half + search + 1, cx - half - search:cx + half + search + 1]
+        corr = cv2.matchTemplate(win, tpl, cv2.TM_CCOEFF_NORMED)
+        _, best, _, (bx, by) = cv2.minMaxLoc(corr)
+        sx, sy = _subpixel_peak(corr, bx, by)
+        delta[i] = (sx - search, sy - search)
+        score[i] = best
+    return PatchTrack((cx, cy), delta, score)
+
+
+@dataclass
+class GalvoCalibration:
+    """Where the first frame sits on the scan curve, and the curve's size at the patch depth."""
+    curve: dict                  # the commanded curve (scan.curve_to_dict)
+    t_first: float               # time of the first frame in the capture's clock (s)
+    tau0: float                  # curve time of the first frame (s): the view of frame k is angles(tau0 + t_k - t_first)
+    phase_deg: float             # tau0 as a phase of the period, degrees
+    scale_px_per_rad: tuple      # (Sx, Sy) at the patch depth
+    std: dict = field(default_factory=dict)   # standard errors: phase_deg, scale_x, scale_y
+    rms_px: float = 0.0
+    frames_used: int = 0
+    patches: list = field(default_factory=list)
+
+    def radius_px(self) -> tuple:
+        """Curve size in pixels along x and y (scale x the curve's peak angle per axis)."""
+        from mitsuba_eventfield.scan import curve_from_dict
+        c = curve_from_dict(self.curve)
+        t = np.linspace(0, c.period or 1.0, 2001)
+        ax, ay = c.angles(t)
+        return (self.scale_px_per_rad[0] * np.ptp(ax) / 2, self.scale_px_per_rad[1] * np.ptp(ay) / 2)
+
+    def view_angles(self, times):
+        """Mechanical angles of the views at capture times ``times`` (s)."""
+        from mitsuba_eventfield.scan import curve_from_dict
+        return curve_from_dict(self.curve).angles(self.tau0 + np.asarray(times, dtype=np.float64) - self.t_first)
+
+    def as_dict(self) -> dict:
+        return {"kind": "galvo", **asdict(self)}
+
+
+def _model(params, curve: ScanCurve, dt):
+    tau0, sx, sy = params
+    ax, ay = curve.angles(tau0 + dt)
+    a0x, a0y = curve.angles(np.float64(tau0))
+    return np.stack([sx * (ax - a0x), sy * (ay - a0y)], axis=-1)
+
+
+def track_point(frames, threshold: float = 0.02) -> PatchTrack:
+    """Displacement of a bright point (an LED) from the first frame: intensity-weighted centroid of the pixels
+    above ``threshold`` x the frame's maximum (frames in linear intensity). A low threshold keeps the whole
+    blob: a truncated blob's centroid shifts with its sub-pixel position."""
+    frames = np.asarray(frames, dtype=np.float64)
+    ys, xs = np.mgrid[0:frames.shape[1], 0:frames.shape[2]] + 0.5
+    cents, score = [], []
+    for f in frames:
+        w = np.where(f >= threshold * f.max(), f - threshold * f.max(), 0.0)
+        if f.max() <= 0 or w.sum() <= 0:
+            raise CalibrationError("a frame has no bright point: the LED is outside the view or too dim")
+        cents.append(((w * xs).sum() / w.sum(), (w * ys).sum() / w.sum()))
+        score.append(1.0)
+    c = np.array(cents)
+    return PatchTrack(tuple(c[0]), c - c[0], np.array(score))
+
+
+def fit_galvo(frames, times, curve: ScanCurve, patches, half: int = 12, search: int = 16,
+              max_phase_std_deg: float = 5.0, max_scale_rel_std: float = 0.05) -> GalvoCalibration:
+    """Calibrate the galvo views from reconstructed frames (log intensity, (K, H, W)) at ``times`` (s).
+
+    ``patches``: centres (x, y) of textured patches at one depth (their displacements are fitted jointly).
+    Refuses (CalibrationError) with the reason when frames are too few, a patch is textureless, matches are
+    weak, or the result is too uncertain (phase std > ``max_phase_std_deg`` or scale std > 5%).
+    """
+    frames = np.asarray(frames)
+    times = np.asarray(times, dtype=np.float64)
+    if frames.ndim != 3 or len(frames) != len(times):
+        raise CalibrationError("frames must be (K, H, W) with one time per frame")
+    if len(frames) < 4:
+        raise CalibrationError(f"{len(frames)} frames: at least 4 are needed (3 unknowns, tau0 and two scales, "
+                               "from the displacements of frames 1..K-1)")
+    tracks = [track_patch(frames, c, half, search) for c in patches]
+    return fit_tracks(tracks, times, curve, max_phase_std_deg, max_scale_rel_std)
+
+
+def fit_tracks(tracks, times, curve: ScanCurve, max_phase_std_deg: float = 5.0,
+               max_scale_rel_std: float = 0.05) -> GalvoCalibration:
+    """The fit shared by patch tracks (scenes) and point tracks (LED): tau0, Sx, Sy with standard errors."""
+    from scipy.optimize import least_squares
+    times = np.asarray(times, dtype=np.float64)
+    period = curve.period
+    if period is None:
+        raise CalibrationError("the scan curve is not periodic")
+    if len(times) < 4:
+        raise CalibrationError(f"{len(times)} frames: at least 4 are needed (3 unknowns)")
+    dt = times - times[0]
+    obs, sel_t = [], []
+    for tr in tracks:
+        good = tr.score >= MIN_MATCH_SCORE
+        good[0] = True
+        obs.append(tr.delta[good])
+        sel_t.append(dt[good])
+    n_good = sum(len(o) for o in obs)
+    if n_good < 4:
+        raise CalibrationError(f"only {n_good} frames match the patches with correlation >= {MIN_MATCH_SCORE}: too "
+                               "noisy or the patch leaves the search window; use more frames or a larger search")
+
+    def residuals(p):
+        return np.concatenate([(_model(p, curve, t) - o).ravel() for t, o in zip(sel_t, obs)])
+
+    # initial guess: best tau0 on a grid (the curve is periodic: avoid local minima), scales by linear fit
+    best = None
+    o_all = np.concatenate(obs)
+    for tau in np.linspace(0, period, 72, endpoint=False):
+        a = np.concatenate([_model((tau, 1.0, 1.0), curve, t) for t in sel_t])
+        sx = float(a[:, 0] @ o_all[:, 0] / max(a[:, 0] @ a[:, 0], 1e-30))
+        sy = float(a[:, 1] @ o_all[:, 1] / max(a[:, 1] @ a[:, 1], 1e-30))
+        if sx <= 0 or sy <= 0:       # a circle fits (tau + T/2, -S) as well: the physical scales are positive
+            continue
+        cost = float(np.sum(residuals((tau, sx, sy)) ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, tau, sx, sy)
+    if best is None:
+        raise CalibrationError("no phase gives positive curve scales: the displacements do not follow the scan curve "
+                               "(wrong curve, or the patch does not move with the scan)")
+    _, tau, sx, sy = best
+    fit = least_squares(residuals, x0=[tau, sx, sy], loss="soft_l1", f_scale=0.5, method="trf",
+                        bounds=([-np.inf, 1e-9, 1e-9], [np.inf, np.inf, np.inf]),
+                        x_scale=[period / 20, abs(sx) + 1, abs(sy) + 1])
+    r = residuals(fit.x)
+    dof = max(len(r) - 3, 1)
+    sigma2 = float(r @ r) / dof
+    try:
+        cov = np.linalg.inv(fit.jac.T @ fit.jac) * sigma2
+        std = np.sqrt(np.maximum(np.diag(cov), 0))
+    except np.linalg.LinAlgError:
+        std = np.full(3, np.inf)
+    tau0, sx, sy = fit.x
+    tau0 %= period
+    phase_std = std[0] / period * 360
+    result = GalvoCalibration(curve=_curve_dict(curve), t_first=float(times[0]), tau0=float(tau0),
+                              phase_deg=float(tau0 / period * 360), scale_px_per_rad=(float(sx), float(sy)),
+                              std={"phase_deg": float(phase_std), "scale_x": float(std[1]), "scale_y": float(std[2])},
+                              rms_px=float(np.sqrt(np.mean(r ** 2))), frames_used=n_good,
+                              patches=[list(map(float, t.centre)) for t in tracks])
+    if not np.isfinite(phase_std) or phase_std > max_phase_std_deg or \
+            max(std[1] / max(abs(sx), 1e-9), std[2] / max(abs(sy), 1e-9)) > max_scale_rel_std:
+        raise CalibrationError(f"the fit is too uncertain: phase {result.phase_deg:.2f} +- {phase_std:.2f} deg, "
+                               f"scales {sx:.1f} +- {std[1]:.1f}, {sy:.1f} +- {std[2]:.1f} px/rad (rms residual "
+                               f"{result.rms_px:.2f} px): more frames, more patches or less noise are needed")
+    return result
+
+
+def _curve_dict(curve: ScanCurve) -> dict:
+    from mitsuba_eventfield.scan import curve_to_dict
+    return curve_to_dict(curve)
