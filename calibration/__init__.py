@@ -7,3 +7,5 @@
 """
 from .depth import DepthCalibration, fit_depth  # noqa: F401
 from .galvo import CalibrationError, GalvoCalibration, PatchTrack, fit_galvo, fit_tracks, track_patch, track_point  # noqa: F401
+from .kaleidoscope import KaleidoscopeCalibration, find_tiles, flat_field, register  # noqa: F401,E402
+from .store import apply_to_lightfield, load_calibration, save_calibration  # noqa: F401,E402

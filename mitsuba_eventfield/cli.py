@@ -71,6 +71,7 @@ def _parser() -> argparse.ArgumentParser:
     lf_args.add_argument("--period", type=int, default=0, help="galvo: scan period index (default 0)")
     lf_args.add_argument("--views", type=int, default=32, help="galvo: views per scan period (default 32)")
     lf_args.add_argument("--time", type=float, help="kaleidoscope: time in ms (default: stream end)")
+    lf_args.add_argument("--calibration", help="calibration JSON (eventfield calibrate): view phase, depth model")
 
     rc = sub.add_parser("reconstruct", help="log-intensity frames from events: EXR + PNG per frame")
     rc.add_argument("file")
@@ -93,6 +94,23 @@ def _parser() -> argparse.ArgumentParser:
     dp.add_argument("--planes", type=int, default=32)
     dp.add_argument("--measure", default="variance", help="sml, tenengrad or variance (default)")
     dp.add_argument("--min-confidence", type=float, default=0.2, help="greyed out below this in the PNG")
+    cal = sub.add_parser("calibrate", help="calibration from the data itself: galvo | depth | kaleidoscope")
+    csub = cal.add_subparsers(dest="kind", required=True)
+    cg = csub.add_parser("galvo", help="phase and curve size of the scan from a capture of a static scene")
+    cg.add_argument("file", help="event file (galvo)")
+    cg.add_argument("--patch", action="append", required=True, metavar="X,Y", help="textured patch centre (repeatable)")
+    cg.add_argument("--views", type=int, default=24, help="frames reconstructed over the scan period (default 24)")
+    cg.add_argument("--period", type=int, default=0, help="scan period index (default 0)")
+    cg.add_argument("--start-frame", help="EXR of the linear frame at the stream start (else: galvo solver)")
+    cg.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
+    cd = csub.add_parser("depth", help="curve size against known depths from LED captures")
+    cd.add_argument("captures", nargs="+", metavar="FILE:DEPTH", help="event file of the LED at DEPTH (scene units)")
+    cd.add_argument("--views", type=int, default=24)
+    cd.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
+    ck = csub.add_parser("kaleidoscope", help="tile seams, flips, view registration, flat-field from frames")
+    ck.add_argument("frame", help="EXR (linear) of a textured target at the focus distance")
+    ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
+    ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
     return ap
 
 
@@ -185,11 +203,85 @@ def _reconstruct(a) -> int:
 def _lightfield(a, ev):
     import mitsuba_eventfield as ef
     try:
-        return ef.lightfield.from_events(ev, period=a.period, views=a.views,
-                                         time=None if a.time is None else a.time * 1e-3, method=a.method,
-                                         log_start=_start_log(a.start_frame, ev))
+        lf = ef.lightfield.from_events(ev, period=a.period, views=a.views,
+                                       time=None if a.time is None else a.time * 1e-3, method=a.method,
+                                       log_start=_start_log(a.start_frame, ev))
     except (ValueError, KeyError, StopIteration) as e:
         raise ef.EventFieldError(f"{a.file}: {e}") from None
+    if a.calibration:
+        from .calibration import apply_to_lightfield, load_calibration
+        lf = apply_to_lightfield(lf, load_calibration(a.calibration))
+    return lf
+
+
+def _galvo_frames(ev, period, views, start_frame_log=None):
+    """Reconstructed log frames and their times over one scan period of a galvo stream."""
+    import mitsuba_eventfield as ef
+    from .scan import curve_from_dict
+    optics = ev.meta.get("optics", {})
+    if optics.get("design") != "galvo":
+        raise ef.EventFieldError("not a galvo event stream (optics.design != 'galvo')")
+    curve = curve_from_dict(optics["scan"])
+    t0 = ev.meta.get("t_start_us", 0) * 1e-6 + period * curve.period
+    times = t0 + np.arange(views) * curve.period / views
+    method = "direct" if start_frame_log is not None else "galvo"
+    kw = {"log_start": start_frame_log, "t_start": t0} if start_frame_log is not None else {"t_start": t0}
+    return ef.reconstruct.reconstruct(ev, times, method, **kw), times, curve
+
+
+def _calibrate(a) -> int:
+    import mitsuba_eventfield as ef
+    from . import calibration as cal
+    from .atomic import check_writable
+    check_writable(a.output, "calibration file")
+    try:
+        if a.kind == "galvo":
+            ev = ef.read_events(a.file)
+            patches = []
+            for p in a.patch:
+                try:
+                    x, y = (float(v) for v in p.split(","))
+                except ValueError:
+                    raise ef.EventFieldError(f"--patch {p!r}: expected X,Y") from None
+                patches.append((x, y))
+            frames, times, curve = _galvo_frames(ev, a.period, a.views, _start_log(a.start_frame, ev))
+            result = cal.fit_galvo(frames, times, curve, patches)
+            cal.save_calibration(a.output, galvo=result)
+            print(f"galvo: phase {result.phase_deg:.2f} +- {result.std['phase_deg']:.2f} deg, curve radius "
+                  f"{result.radius_px()[0]:.3f} x {result.radius_px()[1]:.3f} px, rms {result.rms_px:.3f} px "
+                  f"({result.frames_used} matches) -> {a.output}")
+        elif a.kind == "depth":
+            depths, scales = [], []
+            for item in a.captures:
+                path, _, depth = item.rpartition(":")
+                try:
+                    depth = float(depth)
+                except ValueError:
+                    raise ef.EventFieldError(f"{item!r}: expected FILE:DEPTH") from None
+                ev = ef.read_events(path)
+                frames, times, curve = _galvo_frames(ev, 0, a.views)
+                fit = cal.fit_tracks([cal.track_point(np.exp(frames))], times, curve)
+                depths.append(depth)
+                scales.append(fit.scale_px_per_rad[0])
+            result = cal.fit_depth(depths, scales)
+            cal.save_calibration(a.output, depth=result)
+            print(f"depth: inverse model rms {result.rms_inverse:.3f} px/rad (pivot {result.pivot:.4g}), linear "
+                  f"model rms {result.rms_linear:.3f} px/rad; best: {result.best} -> {a.output}")
+        else:
+            from .images import read_exr
+            channels, _ = read_exr(a.frame)
+            frame = channels.get("Y", channels.get("R"))
+            result = cal.register(np.log(np.maximum(frame, 1e-6)))
+            if a.flat:
+                flat, _ = read_exr(a.flat)
+                cal.flat_field(result, flat.get("Y", flat.get("R")))
+            cal.save_calibration(a.output, kaleidoscope=result)
+            worst = max(abs(c) for v in result.views for c in v["offset"])
+            print(f"kaleidoscope: {result.n}x{result.n} views of {result.tile[0]}x{result.tile[1]} px, largest "
+                  f"offset {worst:.3f} px -> {a.output}")
+    except ValueError as e:
+        raise ef.EventFieldError(str(e)) from None
+    return 0
 
 
 def _refocus(a) -> int:
@@ -315,7 +407,7 @@ def main(argv=None) -> int:
     from .errors import EventFieldError
     try:
         return {"render": _render, "info": _info, "preview": _preview, "frame": _frame, "reconstruct": _reconstruct,
-                "refocus": _refocus, "depth": _depth}[args.command](args)
+                "refocus": _refocus, "depth": _depth, "calibrate": _calibrate}[args.command](args)
     except EventFieldError as e:
         print(f"eventfield: error: {e}", file=sys.stderr)
         return 2

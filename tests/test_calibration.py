@@ -112,3 +112,90 @@ def test_refusals_with_reasons():
         fit_galvo(noisy, times, curve, [(30, 40)])
     with pytest.raises(CalibrationError, match="at least 3 distinct depths"):
         fit_depth([0.5, 0.5, 1.0], [1, 2, 3])
+
+
+# --- kaleidoscope -------------------------------------------------------------------------------------------
+def _mosaic(offsets, n=3, tile=64, seed=4):
+    """A kaleidoscope-like mosaic: view (i, j) is a band-limited texture shifted by offsets[(i, j)], odd tiles
+    mirrored, so neighbouring tiles are mirror images across their seam."""
+    from scipy.ndimage import fourier_shift
+    from lf_scenes import texture
+    base = texture(seed, size=tile + 32, blob=2).astype(np.float64)
+    half = (n - 1) // 2
+    mosaic = np.zeros((n * tile, n * tile))
+    for (i, j), (dx, dy) in offsets.items():
+        shifted = np.fft.ifft2(fourier_shift(np.fft.fft2(base), (dy, dx))).real[16:16 + tile, 16:16 + tile]
+        t = shifted[:, ::-1] if i % 2 else shifted
+        t = t[::-1] if j % 2 else t
+        r, c = j + half, i + half
+        mosaic[r * tile:(r + 1) * tile, c * tile:(c + 1) * tile] = t
+    return np.log(mosaic)
+
+
+def test_kaleidoscope_registration_recovers_offsets(capsys):
+    from mitsuba_eventfield.calibration.kaleidoscope import register
+    rng = np.random.default_rng(7)
+    offsets = {(i, j): ((0.0, 0.0) if (i, j) == (0, 0) else tuple(rng.uniform(-1.5, 1.5, 2)))
+               for i in (-1, 0, 1) for j in (-1, 0, 1)}
+    cal = register(_mosaic(offsets))
+    errs = [math.hypot(v["offset"][0] - offsets[(v["i"], v["j"])][0], v["offset"][1] - offsets[(v["i"], v["j"])][1])
+            for v in cal.views]
+    with capsys.disabled():
+        print(f"\n[kaleidoscope registration] n = {cal.n}, max offset error {max(errs):.3f} px (offsets up to 1.5 px)")
+    assert cal.n == 3 and cal.tile == (64, 64)
+    assert max(errs) < 0.1
+
+
+def test_kaleidoscope_tiles_found_on_a_render_and_flat_field():
+    import mitsuba as mi
+    from lf_scenes import kaleido_sensor, two_planes
+    from mitsuba_eventfield.calibration.kaleidoscope import find_tiles, flat_field, register
+    ef.set_variant("llvm_ad_mono")
+    target = two_planes(mi, kaleido_sensor(film=240, spp=4), blank_strip=False)   # a calibration target ...
+    target.pop("near")
+    target["far"]["to_world"] = mi.ScalarTransform4f().translate([0, 0, 1.0]).rotate([0, 1, 0], 180).scale(0.5)
+    frame = np.log(np.array(mi.render(mi.load_dict(target)))[..., 0])              # ... at the focus distance
+    tiles = find_tiles(frame)
+    assert tiles["x"]["n"] == tiles["y"]["n"] == 3 and tiles["x"]["seams"] == [80, 160]
+    cal = register(frame, tiles)
+    flat_scene = dict(two_planes(mi, kaleido_sensor(film=240, spp=4, relay_aperture=0.002)))
+    flat_scene["far"]["emitter"]["radiance"] = 1.0                                   # uniform white target
+    flat_scene.pop("near")
+    gains = flat_field(cal, np.array(mi.render(mi.load_dict(flat_scene)))[..., 0])
+    assert gains.shape == (9, 80, 80) and abs(gains[4].mean() - 1) < 1e-6
+    assert gains[:, :, 0].mean() < gains[:, :, 40].mean()       # the relay pupil vignettes at the seams
+    with pytest.raises(CalibrationError, match="uniform"):
+        find_tiles(np.ones((96, 96)))
+
+
+def test_calibration_file_round_trip_and_use_in_refocus(tmp_path):
+    """Galvo + depth calibration saved, loaded and applied: a light field whose metadata optics are wrong
+    (mirror distance off by 2x) gets back the right depth from depth from focus."""
+    from mitsuba_eventfield.calibration import apply_to_lightfield, load_calibration, save_calibration
+    from mitsuba_eventfield.calibration.depth import fit_depth
+    # depth calibration from exact geometry of the LED scene's galvo (the test above checks the LED fit)
+    f = go.focal_length_px(W, 40.0)
+    z = np.array([0.4, 0.7, 1.0, 1.6, 2.5])
+    dc = fit_depth(z, 2 * f * (1 - 0.1 / z))
+    scene = ef.load_scene(GALVO, width=W, height=H, amplitude=0.5, phase=70.0)
+    times = np.arange(24) / 24 / FREQ
+    frames = ef.render_frames(scene, times)
+    gc = fit_galvo(frames, times, ef.make_curve("circle", frequency=FREQ, amplitude=0.5), [(30, 40), (30, 90)])
+    path = str(tmp_path / "cal.json")
+    save_calibration(path, galvo=gc, depth=dc)
+    cal = load_calibration(path)
+    assert abs(cal["galvo"].phase_deg - gc.phase_deg) < 1e-9 and cal["depth"].best == dc.best
+    optics = dict(scene.sensor.optics_metadata(), mirror_distance=0.2)          # wrong nominal geometry
+    optics["scan"] = dict(optics["scan"], phase=0.0)                            # and unknown phase
+    lf = ef.from_galvo(frames, times, optics)
+    wrong = ef.depth_from_focus(lf, 0.3, 5.0, 32, "tenengrad")
+    right = ef.depth_from_focus(apply_to_lightfield(lf, cal), 0.3, 5.0, 32, "tenengrad")
+    card, wall = np.s_[50:80, 95:140], np.s_[20:110, 10:40]
+    good = right.confidence > 0.3
+    assert abs(np.median(right.depth[card][good[card]]) - 0.5) < 0.05
+    # at 173 px a 10 cm pivot separates 2.5 m from 5 m by 0.1 px of disparity: the wall is only "far"
+    assert np.median(right.depth[wall][good[wall]]) > 1.0
+    assert abs(np.median(wrong.depth[card][(wrong.confidence > 0.3)[card]]) - 0.5) > 0.1
+    with pytest.raises(ef.EventFieldError, match="not a version 1"):
+        (tmp_path / "bad.json").write_text('{"format": "x"}')
+        load_calibration(str(tmp_path / "bad.json"))

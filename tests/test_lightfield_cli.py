@@ -73,3 +73,27 @@ def test_bad_input(galvo_capture, args, message):
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and message in lines[0], r.stderr
     assert not os.path.exists(d / "x.png") and not os.path.exists(d / "x.exr")
+
+
+def test_calibrate_commands(galvo_capture, tmp_path):
+    import json
+    d = galvo_capture
+    cal = str(tmp_path / "cal.json")
+    r = run("calibrate", "galvo", str(d / "g.h5"), "--patch", "30,30", "--patch", "30,60", "--start-frame",
+            str(d / "start.exr"), "-o", cal)
+    assert r.returncode == 0, r.stderr
+    data = json.loads(open(cal).read())
+    assert data["format"] == "mitsuba-eventfield calibration" and abs((data["galvo"]["phase_deg"] + 180) % 360 - 180) < 2
+    r = run("depth", str(d / "g.h5"), "-o", str(tmp_path / "dc.png"), "--near", "0.3", "--far", "4", "--planes", "8",
+            "--start-frame", str(d / "start.exr"), "--views", "16", "--calibration", cal)
+    assert r.returncode == 0, r.stderr
+    kframe = tmp_path / "k.exr"
+    r = run("frame", os.path.join(ROOT, "scenes", "moving_grid", "kaleidoscope.xml"), "-o", str(kframe),
+            "-D", "views_px=120")
+    assert r.returncode == 0, r.stderr
+    r = run("calibrate", "kaleidoscope", str(kframe), "-o", cal)
+    assert r.returncode == 0 and "3x3 views of 40x40 px" in r.stdout, r.stderr + r.stdout
+    data = json.loads(open(cal).read())
+    assert {"galvo", "kaleidoscope"} <= set(data)                  # extended, not overwritten
+    bad = run("calibrate", "galvo", str(d / "g.h5"), "--patch", "1,1", "-o", cal)
+    assert bad.returncode == 2 and "does not fit in the 120x90 frames" in bad.stderr

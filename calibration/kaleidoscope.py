@@ -1,0 +1,134 @@
+"""Kaleidoscope calibration from a captured mosaic: tile seams, flips, sub-pixel view registration, flat-field.
+
+* Seams: neighbouring tiles are mirror images of each other across their shared edge (one more reflection),
+  so a seam is a line of mirror symmetry. The tile count n (odd) is the one whose n - 1 equally spaced seams
+  are the most symmetric, per axis.
+* Flips alternate with the distance from the centre tile (odd tiles are mirrored).
+* Registration: each unflipped view against the centre view by upsampled cross-correlation (scikit-image),
+  to 1/100 px.
+  For a target at the focus plane the offsets measure the residual misalignment of the optics; for one at
+  another depth they are its disparities.
+* Flat-field: a capture of a uniform white target gives each view's gain map (vignetting at the seams).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .galvo import CalibrationError
+
+
+def _symmetry_profile(img: np.ndarray, axis: int, half: int) -> np.ndarray:
+    """Score per candidate seam (between pixel c-1 and c): correlation of the strips on either side, mirrored."""
+    a = np.asarray(img, dtype=np.float64)
+    if axis == 0:
+        a = a.T
+    w = a.shape[1]
+    scores = np.full(w + 1, -1.0)
+    for c in range(half, w - half + 1):
+        left = a[:, c - half:c][:, ::-1].ravel()
+        right = a[:, c:c + half].ravel()
+        lc, rc = left - left.mean(), right - right.mean()
+        den = np.sqrt((lc @ lc) * (rc @ rc))
+        scores[c] = (lc @ rc) / den if den > 1e-12 else -1.0
+    return scores
+
+
+def find_tiles(frame: np.ndarray, candidates=(3, 5, 7, 9), half: int = 4) -> dict:
+    """Tile count per axis and seam positions from a mosaic (log or linear). Refuses if no count is clear."""
+    frame = np.asarray(frame, dtype=np.float64)
+    h, w = frame.shape
+    if frame.std() < 1e-6:
+        raise CalibrationError("the frame is uniform: seams cannot be found without texture")
+    out = {}
+    for axis, size, name in ((1, w, "x"), (0, h, "y")):
+        prof = _symmetry_profile(frame, axis, half)
+        best, ranking = None, []
+        for n in candidates:
+            if size % n:
+                continue
+            seams = [k * size // n for k in range(1, n)]
+            score = float(np.mean([prof[c] for c in seams]))
+            ranking.append((score, n))
+            if best is None or score > best[0]:
+                best = (score, n, seams)
+        if best is None:
+            raise CalibrationError(f"the {name} size {size} is not divisible by any tile count in {candidates}")
+        ranking.sort(reverse=True)
+        if best[0] < 0.5 or (len(ranking) > 1 and ranking[1][0] > best[0] - 0.05):
+            raise CalibrationError(f"no clear tile count along {name}: symmetry scores "
+                                   + ", ".join(f"n={n}: {s:.2f}" for s, n in ranking))
+        out[name] = {"n": best[1], "seams": best[2], "score": best[0]}
+    if out["x"]["n"] != out["y"]["n"]:
+        raise CalibrationError(f"tile counts differ: {out['x']['n']} along x, {out['y']['n']} along y")
+    return out
+
+
+@dataclass
+class KaleidoscopeCalibration:
+    n: int
+    tile: tuple                            # (width, height) in pixels
+    views: list = field(default_factory=list)   # per view: i, j, tile rect, flips, offset (dx, dy), response
+    flat_gain: list | None = None          # per view: mean gain (the maps themselves are not stored in JSON)
+
+    def as_dict(self) -> dict:
+        return {"kind": "kaleidoscope", **asdict(self)}
+
+    def optics_views(self) -> list:
+        """View list in the layout of the sensor metadata (for views.extract_views)."""
+        return [{k: v[k] for k in ("i", "j", "tile", "flip_x", "flip_y")} | {"subaperture": [0.0, 0.0]}
+                for v in self.views]
+
+
+def _unflipped(frame, n, tw, th):
+    half = (n - 1) // 2
+    out = []
+    for row in range(n):
+        for col in range(n):
+            i, j = col - half, row - half
+            t = frame[row * th:(row + 1) * th, col * tw:(col + 1) * tw]
+            if i % 2:
+                t = t[:, ::-1]
+            if j % 2:
+                t = t[::-1]
+            out.append((i, j, [col * tw, row * th, tw, th], bool(i % 2), bool(j % 2), np.ascontiguousarray(t)))
+    return out
+
+
+def register(frame: np.ndarray, tiles: dict | None = None, margin: int = 2) -> KaleidoscopeCalibration:
+    """Find the tiles (unless given), undo the flips and register every view to the centre one, sub-pixel."""
+    from skimage.registration import phase_cross_correlation
+    frame = np.asarray(frame, dtype=np.float64)
+    tiles = tiles or find_tiles(frame)
+    n = tiles["x"]["n"]
+    h, w = frame.shape
+    tw, th = w // n, h // n
+    parts = _unflipped(frame, n, tw, th)
+    centre = parts[len(parts) // 2][5][margin:th - margin, margin:tw - margin]
+    # Hann window on mean-free views: content entering and leaving at the borders otherwise biases the shift
+    # (measured on 64 px tiles: 0.19 px without, 0.06 px with; phase normalisation was worse either way)
+    window = np.outer(np.hanning(centre.shape[0]), np.hanning(centre.shape[1]))
+    prep = lambda a: (a - a.mean()) * window  # noqa: E731
+    views = []
+    for i, j, rect, fx, fy, img in parts:
+        v = img[margin:th - margin, margin:tw - margin]
+        # the shift that registers v onto the centre, to 1/100 px (upsampled cross-correlation)
+        (sy, sx), error, _ = phase_cross_correlation(prep(centre), prep(v), upsample_factor=100, normalization=None)
+        views.append({"i": i, "j": j, "tile": rect, "flip_x": fx, "flip_y": fy, "offset": [float(-sx), float(-sy)],
+                      "error": float(error)})
+    return KaleidoscopeCalibration(n=n, tile=(tw, th), views=views)
+
+
+def flat_field(calibration: KaleidoscopeCalibration, flat_frame: np.ndarray) -> np.ndarray:
+    """Per-view gain maps (n*n, th, tw) from a capture of a uniform target, normalised to the centre view's mean;
+    divide extracted views by them. Records each view's mean gain in the calibration."""
+    n, (tw, th) = calibration.n, calibration.tile
+    parts = _unflipped(np.asarray(flat_frame, dtype=np.float64), n, tw, th)
+    maps = np.stack([p[5] for p in parts])
+    ref = maps[len(maps) // 2].mean()
+    if ref <= 0:
+        raise CalibrationError("the flat-field frame is black")
+    gains = maps / ref
+    calibration.flat_gain = [float(g.mean()) for g in gains]
+    return np.maximum(gains, 1e-6)
