@@ -1,5 +1,10 @@
 """Device layer for the real galvo rig (installed as ``mitsuba_eventfield.device``).
 
-Planned (issue 8): SCPI/VISA signal-generator control with a safety envelope, driven by the shared scan-curve
-module. Nothing is implemented here yet.
+A function generator (SCPI over PyVISA: Keysight 33500, Rigol DG, Siglent SDG dialects) drives the two-axis
+galvo with the SAME scan curve the simulation renders (``mitsuba_eventfield.scan``). Every request is checked
+against the galvo's envelope before a byte is sent; outputs go off on any error, Ctrl-C and exit.
 """
+from .controller import AxisSine, GalvoController, sines_from_curve, tag_events  # noqa: F401
+from .dialects import DIALECTS, dialect  # noqa: F401
+from .spec import GalvoSpec, SafetyError  # noqa: F401
+from .transport import RecordingTransport, VisaTransport, simulated  # noqa: F401

@@ -111,7 +111,81 @@ def _parser() -> argparse.ArgumentParser:
     ck.add_argument("frame", help="EXR (linear) of a textured target at the focus distance")
     ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
     ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
+    dev = sub.add_parser("device", help="drive the galvo through a function generator (SCPI/VISA)")
+    dsub = dev.add_subparsers(dest="action", required=True)
+    conn = argparse.ArgumentParser(add_help=False)
+    conn.add_argument("--resource", help="VISA resource, e.g. TCPIP0::192.0.2.7::inst0::INSTR")
+    conn.add_argument("--dialect", required=True, help="keysight, rigol or siglent")
+    conn.add_argument("--simulate", action="store_true", help="a simulated instrument (pyvisa-sim), no hardware")
+    conn.add_argument("--volts-per-deg", type=float, default=0.8, help="galvo driver scaling (default 0.8 V/deg)")
+    ds = dsub.add_parser("scan", parents=[conn], help="start a scan (ramped), keep it running, stop on exit")
+    ds.add_argument("--curve", default="circle", help="circle, line or lissajous (sine only)")
+    ds.add_argument("--freq", type=float, required=True, help="Hz (x axis for lissajous)")
+    ds.add_argument("--freq-y", type=float, help="lissajous: y frequency")
+    ds.add_argument("--amplitude-deg", type=float, required=True, help="mechanical degrees (x for lissajous)")
+    ds.add_argument("--amplitude-y-deg", type=float, help="lissajous: y amplitude")
+    ds.add_argument("--phase", type=float, default=0.0, help="degrees")
+    ds.add_argument("--axis", default="x", help="line: x or y")
+    ds.add_argument("--duration", type=float, default=0.0, help="seconds to scan, then stop (0: until Ctrl-C)")
+    ds.add_argument("--metadata", help="write the capture metadata (instrument, read-back, scan) to this JSON")
+    dsub.add_parser("stop", parents=[conn], help="switch both outputs off")
+    dsub.add_parser("status", parents=[conn], help="identity, settings read back, error queue")
     return ap
+
+
+def _device(a) -> int:
+    import time
+
+    import mitsuba_eventfield as ef
+    from .device import GalvoController, GalvoSpec, VisaTransport, simulated
+    if not a.simulate and not a.resource:
+        raise ef.EventFieldError("give --resource (a VISA address) or --simulate")
+    spec = GalvoSpec(volts_per_deg=a.volts_per_deg)
+    if a.action == "scan":      # every check happens before a connection is even opened
+        if a.curve == "lissajous":
+            curve = ef.make_curve("lissajous", freq_x=a.freq, freq_y=a.freq_y or a.freq, amplitude_x=a.amplitude_deg,
+                                  amplitude_y=a.amplitude_y_deg if a.amplitude_y_deg is not None else a.amplitude_deg,
+                                  phase_x=a.phase, max_angle_deg=spec.max_mech_deg)
+        elif a.curve == "line":
+            curve = ef.make_curve("line", frequency=a.freq, amplitude=a.amplitude_deg, phase=a.phase, axis=a.axis,
+                                  max_angle_deg=spec.max_mech_deg)
+        else:
+            curve = ef.make_curve(a.curve, frequency=a.freq, amplitude=a.amplitude_deg, phase=a.phase,
+                                  max_angle_deg=spec.max_mech_deg)
+        GalvoController(None, a.dialect, spec).plan(curve)
+    transport = simulated(a.dialect) if a.simulate else VisaTransport(a.resource)
+    ctl = GalvoController(transport, a.dialect, spec)
+    try:
+        if a.action == "status":
+            print(f"instrument: {ctl.identity()}")
+            for ch in (1, 2):
+                got = {n: parse(transport.query(q)) for n, (q, parse) in ctl.d.readback(ch).items()}
+                print(f"channel {ch}: " + ", ".join(f"{k} {v}" for k, v in got.items()))
+            errs = ctl.errors()
+            print("error queue: " + ("; ".join(f"{c}: {m}" for c, m in errs) if errs else "empty"))
+        elif a.action == "stop":
+            ctl.outputs_off()
+            print("outputs off")
+        else:
+            report = ctl.start(curve)
+            print(f"scanning {curve.name} at {a.freq:g} Hz, {a.amplitude_deg:g} deg on {ctl.identity()}; read-back "
+                  + ("matches" if not report["mismatches"] else "MISMATCH: " + "; ".join(report["mismatches"])))
+            if a.metadata:
+                from .atomic import atomic_output
+                with atomic_output(a.metadata, "metadata") as tmp, open(tmp, "w") as f:
+                    json.dump(ctl.metadata(curve), f, indent=2, default=str)
+            try:
+                if a.duration > 0:
+                    time.sleep(a.duration)
+                else:
+                    while True:
+                        time.sleep(1.0)
+            finally:
+                ctl.stop()
+                print("stopped: outputs off")
+    finally:
+        transport.close()
+    return 0
 
 
 def _times_ms(text, what="--times"):
@@ -407,7 +481,8 @@ def main(argv=None) -> int:
     from .errors import EventFieldError
     try:
         return {"render": _render, "info": _info, "preview": _preview, "frame": _frame, "reconstruct": _reconstruct,
-                "refocus": _refocus, "depth": _depth, "calibrate": _calibrate}[args.command](args)
+                "refocus": _refocus, "depth": _depth, "calibrate": _calibrate,
+                "device": _device}[args.command](args)
     except EventFieldError as e:
         print(f"eventfield: error: {e}", file=sys.stderr)
         return 2

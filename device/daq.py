@@ -1,0 +1,72 @@
+"""Optional: drive the galvo from an NI-DAQmx analog-output card instead of a function generator
+(``pip install nidaqmx``). The card plays one period of the scan curve's sampled voltages, regenerated
+continuously; the curve is checked against the same envelope as for generators, before the card is touched.
+Untested on hardware here (neither the package nor a card is available): the tests check the calls it makes
+against a stand-in module.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .controller import GalvoController
+from .spec import GalvoSpec, SafetyError
+
+
+class DAQmxOutput:
+    def __init__(self, device: str = "Dev1", channels=("ao0", "ao1"), spec: GalvoSpec | None = None,
+                 rate: float = 100_000.0):
+        self.device, self.channels, self.spec, self.rate = device, tuple(channels), spec or GalvoSpec(), float(rate)
+        self.task = None
+
+    def waveform(self, curve) -> np.ndarray:
+        """(2, N) volts for one scan period, after the envelope check (raises SafetyError, touches nothing)."""
+        GalvoController(None, "keysight", self.spec).plan(curve)
+        period = curve.period
+        n = int(round(period * self.rate))
+        if n < 16:
+            raise SafetyError(f"{self.rate:g} samples/s give only {n} samples per {period * 1e3:g} ms period (need 16)")
+        t = np.arange(n) / self.rate
+        ax, ay = curve.angles(t)
+        volts = np.degrees(np.stack([ax, ay])) * self.spec.volts_per_deg
+        if np.abs(volts).max() > self.spec.max_volts:
+            raise SafetyError(f"the waveform reaches {np.abs(volts).max():.3g} V, beyond +-{self.spec.max_volts:g} V")
+        return volts
+
+    def start(self, curve) -> None:
+        volts = self.waveform(curve)
+        try:
+            import nidaqmx
+            from nidaqmx.constants import AcquisitionType
+        except ImportError:
+            raise SafetyError("NI-DAQmx output needs the nidaqmx package (pip install nidaqmx) and NI's driver") from None
+        task = nidaqmx.Task()
+        try:
+            for ch in self.channels:
+                task.ao_channels.add_ao_voltage_chan(f"{self.device}/{ch}", min_val=-self.spec.max_volts,
+                                                     max_val=self.spec.max_volts)
+            task.timing.cfg_samp_clk_timing(self.rate, sample_mode=AcquisitionType.CONTINUOUS,
+                                            samps_per_chan=volts.shape[1])
+            task.write(volts, auto_start=False)
+            task.start()
+        except BaseException:
+            task.close()
+            raise
+        self.task = task
+
+    def stop(self) -> None:
+        """Stop, drive both outputs to 0 V, release the card."""
+        if self.task is None:
+            return
+        try:
+            self.task.stop()
+            self.task.close()
+        finally:
+            self.task = None
+            try:
+                import nidaqmx
+                with nidaqmx.Task() as zero:
+                    for ch in self.channels:
+                        zero.ao_channels.add_ao_voltage_chan(f"{self.device}/{ch}")
+                    zero.write([0.0, 0.0], auto_start=True)
+            except Exception:  # noqa: BLE001  (best effort when the card is gone)
+                pass
