@@ -111,6 +111,8 @@ def _parser() -> argparse.ArgumentParser:
     ck.add_argument("frame", help="EXR (linear) of a textured target at the focus distance")
     ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
     ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
+    rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with tests/regression/")
+    rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
     dev = sub.add_parser("device", help="drive the galvo through a function generator (SCPI/VISA)")
     dsub = dev.add_subparsers(dest="action", required=True)
     conn = argparse.ArgumentParser(add_help=False)
@@ -131,6 +133,19 @@ def _parser() -> argparse.ArgumentParser:
     dsub.add_parser("stop", parents=[conn], help="switch both outputs off")
     dsub.add_parser("status", parents=[conn], help="identity, settings read back, error queue")
     return ap
+
+
+def _regression(a) -> int:
+    from . import regression
+    if a.bless:
+        for path in regression.bless():
+            print(f"wrote {path}")
+        return 0
+    problems = regression.check_all()
+    for p in problems:
+        print(p)
+    print("regression images: " + ("all match" if not problems else f"{len(problems)} difference(s)"))
+    return 1 if problems else 0
 
 
 def _device(a) -> int:
@@ -482,7 +497,7 @@ def main(argv=None) -> int:
     try:
         return {"render": _render, "info": _info, "preview": _preview, "frame": _frame, "reconstruct": _reconstruct,
                 "refocus": _refocus, "depth": _depth, "calibrate": _calibrate,
-                "device": _device}[args.command](args)
+                "device": _device, "regression": _regression}[args.command](args)
     except EventFieldError as e:
         print(f"eventfield: error: {e}", file=sys.stderr)
         return 2

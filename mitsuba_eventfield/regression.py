@@ -1,0 +1,102 @@
+"""Regression images: tiny reference renders and event frames of the bundled scenes, for CI.
+
+Each case renders one frame (linear radiance, stored as EXR) and one event frame (net ON - OFF count per
+pixel, stored as an 8-bit PNG centred on 128) at a few dozen pixels. Renders use a fixed sampler seed, so on
+one machine they are bit-identical; the tolerances only absorb floating-point differences between machines
+(LLVM versions, CPUs), while any real change of the optics, the pixel or the scene moves the images far
+beyond them (a test perturbs a sensor parameter on purpose and checks that the comparison fails).
+
+    eventfield regression            # compare with tests/regression/ (exit 1 on a difference)
+    eventfield regression --bless    # re-render the references on purpose, after a deliberate change
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REFERENCE_DIR = os.path.join(ROOT, "tests", "regression")
+
+# frame: mean relative difference and its 99th percentile; events: total count and per-pixel net count
+FRAME_MEAN_TOL, FRAME_P99_TOL = 0.005, 0.05
+EVENT_TOTAL_TOL, EVENT_PIXEL_TOL = 0.03, 0.05
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    scene: str                 # path relative to the repository
+    defines: tuple             # XML <default> values
+    frame_time: float
+    duration: float
+    steps: int
+
+
+CASES = (
+    Case("demo", "scenes/demo/demo.xml", (("width", 48), ("height", 36)), 0.01, 0.01, 10),
+    Case("galvo_static", "scenes/galvo_static/galvo_static.xml", (("width", 48), ("height", 36)), 0.0, 0.004, 16),
+    Case("fan", "scenes/fan/fan.xml", (("width", 48), ("height", 36)), 0.002, 0.004, 16),
+    Case("kaleidoscope_grid", "scenes/moving_grid/kaleidoscope.xml", (("views_px", 60),), 0.0, 0.004, 8),
+)
+
+
+def render_case(case: Case, scene_path: str | None = None, **extra_defines):
+    """(frame (H, W) linear radiance, net event counts (H, W)) of a case."""
+    import mitsuba_eventfield as ef
+    timed = ef.load_scene(scene_path or os.path.join(ROOT, case.scene), **dict(case.defines, **extra_defines))
+    frame = ef.render_frames(timed, [case.frame_time], log=False)[0]
+    events = ef.render_events(timed, case.duration, steps=case.steps)
+    return frame.astype(np.float32), events.signed_counts()
+
+
+def _paths(case: Case, directory: str):
+    return os.path.join(directory, f"{case.name}_frame.exr"), os.path.join(directory, f"{case.name}_events.png")
+
+
+def bless(directory: str = REFERENCE_DIR, cases=CASES) -> list:
+    from ._version import __version__
+    from .images import write_exr, write_png
+    os.makedirs(directory, exist_ok=True)
+    written = []
+    for case in cases:
+        frame, net = render_case(case)
+        fpath, epath = _paths(case, directory)
+        write_exr(fpath, {"Y": frame}, {"case": case.name, "package_version": __version__})
+        write_png(epath, np.clip(net + 128, 0, 255).astype(np.uint8))
+        written += [fpath, epath]
+    return written
+
+
+def compare(case: Case, frame: np.ndarray, net: np.ndarray, directory: str = REFERENCE_DIR) -> list:
+    """Differences beyond tolerance, as readable strings (empty: matches the reference)."""
+    import cv2
+
+    from .images import read_exr
+    fpath, epath = _paths(case, directory)
+    if not (os.path.exists(fpath) and os.path.exists(epath)):
+        return [f"{case.name}: no reference in {directory} (run `eventfield regression --bless`)"]
+    ref = read_exr(fpath)[0]["Y"]
+    ref_net = cv2.imread(epath, cv2.IMREAD_UNCHANGED).astype(np.int64) - 128
+    problems = []
+    if ref.shape != frame.shape:
+        return [f"{case.name}: frame is {frame.shape[::-1]}, reference {ref.shape[::-1]}"]
+    rel = np.abs(frame - ref) / (np.abs(ref) + 0.05 * max(float(ref.mean()), 1e-6))
+    if rel.mean() > FRAME_MEAN_TOL or np.percentile(rel, 99) > FRAME_P99_TOL:
+        problems.append(f"{case.name}: frame differs (mean relative {rel.mean():.4f} > {FRAME_MEAN_TOL} or p99 "
+                        f"{np.percentile(rel, 99):.4f} > {FRAME_P99_TOL})")
+    clipped = np.clip(net, -128, 127)
+    total, ref_total = np.abs(clipped).sum(), np.abs(ref_net).sum()
+    if abs(total - ref_total) > EVENT_TOTAL_TOL * max(ref_total, 1) or \
+            np.abs(clipped - ref_net).mean() > EVENT_PIXEL_TOL:
+        problems.append(f"{case.name}: events differ (|net| {total} vs {ref_total}; mean per-pixel difference "
+                        f"{np.abs(clipped - ref_net).mean():.3f} > {EVENT_PIXEL_TOL})")
+    return problems
+
+
+def check_all(directory: str = REFERENCE_DIR, cases=CASES) -> list:
+    problems = []
+    for case in cases:
+        problems += compare(case, *render_case(case), directory=directory)
+    return problems

@@ -1,0 +1,28 @@
+"""Regression images: the bundled scenes render as blessed (eventfield regression --bless re-blesses)."""
+import os
+import shutil
+
+import pytest
+
+from mitsuba_eventfield import regression as rg
+
+
+@pytest.mark.parametrize("case", rg.CASES, ids=[c.name for c in rg.CASES])
+def test_matches_reference(case):
+    problems = rg.compare(case, *rg.render_case(case))
+    assert problems == [], problems
+
+
+def test_a_changed_sensor_parameter_is_caught(tmp_path):
+    galvo = next(c for c in rg.CASES if c.name == "galvo_static")
+    frame, net = rg.render_case(galvo, amplitude=0.55)                 # the scan 10% larger
+    assert any("events differ" in p for p in rg.compare(galvo, frame, net))
+    # the demo camera's field of view one degree wider: a copy of the scene with one attribute changed
+    demo = next(c for c in rg.CASES if c.name == "demo")
+    src = os.path.join(rg.ROOT, "scenes", "demo")
+    for f in os.listdir(src):
+        shutil.copy(os.path.join(src, f), tmp_path / f)
+    xml = (tmp_path / "demo.xml").read_text().replace('<float name="fov" value="40"/>', '<float name="fov" value="41"/>')
+    (tmp_path / "demo.xml").write_text(xml)
+    problems = rg.compare(demo, *rg.render_case(demo, scene_path=str(tmp_path / "demo.xml")))
+    assert any("frame differs" in p for p in problems)
