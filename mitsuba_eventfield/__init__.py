@@ -21,6 +21,7 @@ from .motion import Motion, load_motion, parse_motion  # noqa: E402
 from .preview import event_frame_rgb, write_preview  # noqa: E402
 from .render import RenderSummary, render_events, render_frames  # noqa: E402
 from . import depth, lightfield, reconstruct  # noqa: E402
+from .sweep import SweepTable, sweep  # noqa: E402
 from .scene import TimedScene, load_scene  # noqa: E402
 from . import scan  # noqa: E402
 from .scan import ScanCurve, curve_from_dict, event_angles, make_curve  # noqa: E402
@@ -34,4 +35,4 @@ __all__ = ["__version__", "choose_variant", "set_variant", "EventFieldError", "C
            "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "render_frames", "reconstruct", "TimedScene", "load_scene", "scan",
            "ScanCurve", "make_curve", "curve_from_dict", "event_angles", "ViewStack", "extract_views", "split_events",
            "view_of_pixel", "LightField", "from_galvo", "from_spatial", "galvo_lightfields", "galvo_view_times",
-           "depth_planes", "focal_stack", "refocus", "track_focus", "DepthMap", "depth_from_focus", "focus_measure"]
+           "SweepTable", "sweep", "depth_planes", "focal_stack", "refocus", "track_focus", "DepthMap", "depth_from_focus", "focus_measure"]
