@@ -111,6 +111,14 @@ def _parser() -> argparse.ArgumentParser:
     ck.add_argument("frame", help="EXR (linear) of a textured target at the focus distance")
     ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
     ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
+    bn = sub.add_parser("bench", help="speed against accuracy of quality settings (chart + table)")
+    bn.add_argument("scene", nargs="?", default=os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                                             "scenes", "fan", "fan.xml"))
+    bn.add_argument("-o", "--output", default="out/bench", help="output directory (chart, CSV)")
+    bn.add_argument("--duration", type=float, default=0.008, help="simulated seconds (default 0.008: two periods)")
+    bn.add_argument("--steps", type=int, default=64, help="steps of the default setting")
+    bn.add_argument("-D", "--define", action="append", default=["width=96", "height=72"], metavar="NAME=VALUE")
+    bn.add_argument("--refocus-depth", type=float, default=0.6, help="depth of the downstream refocus (fan: 0.6)")
     rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with tests/regression/")
     rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
     dev = sub.add_parser("device", help="drive the galvo through a function generator (SCPI/VISA)")
@@ -133,6 +141,21 @@ def _parser() -> argparse.ArgumentParser:
     dsub.add_parser("stop", parents=[conn], help="switch both outputs off")
     dsub.add_parser("status", parents=[conn], help="identity, settings read back, error queue")
     return ap
+
+
+def _bench(a) -> int:
+    from . import bench
+    from .sweep import SweepTable
+    os.makedirs(a.output, exist_ok=True)
+    defines = dict(item.partition("=")[::2] for item in a.define)
+    rows = bench.run(a.scene, a.duration, a.steps, defines, a.refocus_depth)
+    SweepTable(rows).to_csv(os.path.join(a.output, "bench.csv"))
+    chart = bench.chart(rows, os.path.join(a.output, "bench.png"), f"{os.path.basename(a.scene)}: speed vs accuracy")
+    for r in rows:
+        print(f"{r['setting']:28s} time x{r.get('relative_time', 0):6.2f}  product err {r['product_error']:.4f}  "
+              f"timing err {r['timing_error']:.4f}  count err {r['count_error']:.4f}{'  (Pareto)' if r.get('pareto') else ''}")
+    print(f"default on or near the Pareto front: {bench.default_on_front(rows)}; wrote {chart}")
+    return 0
 
 
 def _regression(a) -> int:
@@ -497,7 +520,7 @@ def main(argv=None) -> int:
     try:
         return {"render": _render, "info": _info, "preview": _preview, "frame": _frame, "reconstruct": _reconstruct,
                 "refocus": _refocus, "depth": _depth, "calibrate": _calibrate,
-                "device": _device, "regression": _regression}[args.command](args)
+                "device": _device, "regression": _regression, "bench": _bench}[args.command](args)
     except EventFieldError as e:
         print(f"eventfield: error: {e}", file=sys.stderr)
         return 2

@@ -199,9 +199,9 @@ def test_refractory_holds_with_shot_noise_too():
 
 
 def test_scan_frequency_sweep_loses_events_beyond_the_cap(capsys):
-    """The paper's scan-frequency experiment at small scale (benchmarks/scan_frequency.py runs the chart)."""
+    """The paper's scan-frequency experiment at small scale (benchmarks/bench_scan_frequency.py runs the chart)."""
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "benchmarks"))
-    from scan_frequency import sweep
+    from bench_scan_frequency import sweep
     rows, cap = sweep([100, 1000], width=86, height=66, views=16, steps_per_period=16)
     slow, fast = rows
     with capsys.disabled():
