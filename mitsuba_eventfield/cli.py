@@ -45,6 +45,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--preview", help="also write an event-frame PNG of the last --preview-window ms")
     r.add_argument("--preview-window", type=float, default=10.0, help="preview window in ms (default 10)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--auto", action="store_true",
+                   help="choose colour, spp and steps from cheap probes (ef.auto), print and record why")
 
     i = sub.add_parser("info", help="resolution, duration, counts and metadata of an event file")
     i.add_argument("file")
@@ -462,6 +464,19 @@ def _render(a) -> int:
         if not eq or not name:
             raise ef.EventFieldError(f"-D {item!r}: expected NAME=VALUE")
         defines[name] = value
+    extra = None
+    if a.auto:
+        duration = a.duration
+        if duration is None:
+            probe = ef.load_scene(a.scene, motion=motion, **defines)
+            duration = probe.motion.duration if probe.motion and probe.motion.duration else None
+            if duration is None:
+                raise ef.EventFieldError("--auto needs --duration (or `duration` in the motion file)")
+        plan = ef.auto.plan(a.scene, duration, threshold=a.threshold or 0.2, defines=defines)
+        print("automatic choices:\n  " + plan.report().replace("\n", "\n  "))
+        ef.set_variant(a.variant, plan.color)
+        a.spp, a.steps, a.duration = plan.spp, plan.steps, duration
+        extra = {"auto_plan": plan.as_dict()}
     scene = ef.load_scene(a.scene, motion=motion, **defines)
     fmt_ext = os.path.splitext(a.output)[1].lower()
     summary = ef.render_events(
@@ -469,7 +484,7 @@ def _render(a) -> int:
         min_step=a.min_step, max_step=a.max_step, spp=a.spp, seed=a.seed,
         seed_mode="independent" if a.independent_seeds else "fixed", threshold=a.threshold,
         threshold_on=a.threshold_on, threshold_off=a.threshold_off, linlog_threshold=a.linlog_threshold,
-        output=a.output, progress=not a.quiet, preset=a.preset, pixel=_pixel_overrides(a.pixel))
+        output=a.output, progress=not a.quiet, preset=a.preset, pixel=_pixel_overrides(a.pixel), extra_meta=extra)
     print(summary.format())
     if a.preview:
         ev = ef.read_events(a.output) if fmt_ext != ".txt" else None

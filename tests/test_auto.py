@@ -1,0 +1,40 @@
+"""Automatic modelling choices, each checked against the full computation."""
+import math
+import os
+
+import numpy as np
+
+import mitsuba_eventfield as ef
+from conftest import ROOT
+
+FAN = os.path.join(ROOT, "scenes", "fan", "fan.xml")
+SMALL = {"width": 48, "height": 36}
+
+
+def test_plan_choices_hold_against_the_full_computation(capsys):
+    plan = ef.auto.plan(FAN, 0.004, defines=SMALL)
+    with capsys.disabled():
+        print("\n[auto plan, fan]\n" + plan.report())
+    # colour: the fan scene is grey -> mono; the rgb render gives the same events
+    assert plan.color is False
+    ef.set_variant(color=True)
+    rgb = ef.render_events(ef.load_scene(FAN, **SMALL), 0.004, steps=16, spp=4)
+    ef.set_variant("llvm_ad_mono")
+    mono = ef.render_events(ef.load_scene(FAN, **SMALL), 0.004, steps=16, spp=4)
+    assert len(mono) > 100 and rgb.equals(mono)
+    # spp: the chosen count meets the noise target on fresh seeds; half of it would not (unless at 1)
+    timed = ef.load_scene(FAN, **SMALL)
+    target = 0.5 * 0.2
+    assert ef.auto.noise_std(timed, plan.spp, seeds=(10, 11, 12, 13)) <= target * 1.15
+    if plan.spp > 1:
+        assert ef.auto.noise_std(timed, plan.spp // 2, seeds=(10, 11, 12, 13)) > target * 0.85
+    # steps: events with the chosen steps agree with 4x finer steps (the full computation)
+    chosen = ef.render_events(timed, 0.004, steps=plan.steps, spp=plan.spp)
+    finer = ef.render_events(timed, 0.004, steps=4 * plan.steps, spp=plan.spp)
+    assert abs(len(chosen) - len(finer)) / len(finer) < 0.05
+    assert plan.static is False
+
+
+def test_static_scene_plan_reports_reuse():
+    plan = ef.auto.plan(os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"), 0.004, defines=SMALL)
+    assert plan.static and "reused" in plan.reasons["reuse"]
