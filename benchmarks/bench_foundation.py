@@ -10,7 +10,6 @@ Writes benchmarks/results/foundation.json and foundation.md. Usage: ./run bench 
 """
 import argparse
 import os
-import resource
 import subprocess
 import sys
 import tempfile

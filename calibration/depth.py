@@ -25,6 +25,7 @@ class DepthCalibration:
     scales: list               # fitted curve scale at each depth (px per mechanical radian, x axis)
     inverse: tuple             # (p, q): S = p + q / z
     linear: tuple              # (c0, c1): z = c0 + c1 * S
+    inverse_y: tuple | None    # (p, q) fitted on the y scales, when given (the y mirror pivots further away)
     rms_inverse: float         # residual RMS of each model in scale (px/rad): the comparison
     rms_linear: float
     depth_rms_inverse: float   # and in depth (scene units)
@@ -47,16 +48,19 @@ class DepthCalibration:
             return np.where(s < p, q / (s - p), np.inf)
 
     def disparity_model(self):
-        """(A, B) of LightField.alpha(z) = A + B / z, pixels per optical radian (x axis)."""
-        p, q = self.inverse
-        return p / 2, q / 2
+        """((A_x, A_y), (B_x, B_y)) of LightField.alpha(z) = A + B / z, pixels per optical radian. Without y
+        scales the x fit is used for both axes (exact only for mirrors at one pivot)."""
+        px, qx = self.inverse
+        py, qy = self.inverse_y or self.inverse
+        return (px / 2, py / 2), (qx / 2, qy / 2)
 
     def as_dict(self) -> dict:
         return {"kind": "depth", **asdict(self)}
 
 
-def fit_depth(depths, scales) -> DepthCalibration:
-    """Fit both models to (depth, curve scale) pairs; refuses with fewer than 3 distinct depths."""
+def fit_depth(depths, scales, scales_y=None) -> DepthCalibration:
+    """Fit both models to (depth, curve scale along x) pairs, and the inverse model to the y scales when given;
+    refuses with fewer than 3 distinct depths."""
     z = np.asarray(depths, dtype=np.float64)
     s = np.asarray(scales, dtype=np.float64)
     if len(z) != len(s) or len(np.unique(z)) < 3:
@@ -70,5 +74,9 @@ def fit_depth(depths, scales) -> DepthCalibration:
     rms_inv, rms_lin = rms(p + q / z - s), rms((z - c0) / c1 - s)
     with np.errstate(divide="ignore", invalid="ignore"):
         depth_inv, depth_lin = rms(q / (s - p) - z), rms(c0 + c1 * s - z)
-    return DepthCalibration(z.tolist(), s.tolist(), (float(p), float(q)), (float(c0), float(c1)), rms_inv, rms_lin,
-                            depth_inv, depth_lin, "inverse" if rms_inv <= rms_lin else "linear")
+    inverse_y = None
+    if scales_y is not None:
+        py, qy = np.linalg.lstsq(A, np.asarray(scales_y, dtype=np.float64), rcond=None)[0]
+        inverse_y = (float(py), float(qy))
+    return DepthCalibration(z.tolist(), s.tolist(), (float(p), float(q)), (float(c0), float(c1)), inverse_y,
+                            rms_inv, rms_lin, depth_inv, depth_lin, "inverse" if rms_inv <= rms_lin else "linear")

@@ -14,7 +14,6 @@ when the data cannot determine it: too few frames, a textureless patch, weak mat
 """
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -94,6 +93,14 @@ class GalvoCalibration:
         t = np.linspace(0, c.period or 1.0, 2001)
         ax, ay = c.angles(t)
         return (self.scale_px_per_rad[0] * np.ptp(ax) / 2, self.scale_px_per_rad[1] * np.ptp(ay) / 2)
+
+    @property
+    def clock_phase_deg(self) -> float:
+        """Phase of the scan at time 0 of the capture's clock, degrees: independent of which frames were fitted,
+        so it compares directly with the phase commanded to the galvo (the mirror's lag shows up here)."""
+        from mitsuba_eventfield.scan import curve_from_dict
+        period = curve_from_dict(self.curve).period
+        return float((self.tau0 - self.t_first) % period / period * 360)
 
     def view_angles(self, times):
         """Mechanical angles of the views at capture times ``times`` (s)."""

@@ -59,7 +59,7 @@ def load_calibration(path: str) -> dict:
     for kind, cls in _KINDS.items():
         if kind in data:
             fields = dict(data[kind])
-            for key in ("scale_px_per_rad", "tile", "inverse", "linear"):
+            for key in ("scale_px_per_rad", "tile", "inverse", "linear", "inverse_y"):
                 if key in fields and isinstance(fields[key], list):
                     fields[key] = tuple(fields[key])
             out[kind] = cls(**fields)
@@ -75,6 +75,5 @@ def apply_to_lightfield(lf, calibration: dict):
         ax, ay = calibration["galvo"].view_angles(lf.times)
         positions = np.stack([2 * np.asarray(ax), 2 * np.asarray(ay)], axis=-1)
     if "depth" in calibration:
-        a, b = calibration["depth"].disparity_model()
-        A, B = (a, a), (b, b)
+        A, B = calibration["depth"].disparity_model()
     return LightField(lf.views, positions, lf.times, A, B, lf.kind, dict(lf.meta, calibrated=sorted(calibration)))

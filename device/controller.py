@@ -51,7 +51,8 @@ class GalvoController:
         self.ramp_steps, self.ramp_time, self.tol = ramp_steps, ramp_time, readback_tolerance
         self.sines = None
         self.running = False
-        atexit.register(self._emergency_off)
+        if transport is not None:              # planning-only controllers (no transport) never drive outputs
+            atexit.register(self._emergency_off)
 
     # ------------------------------------------------------------------ planning (no bytes sent)
     def plan(self, curve) -> list:

@@ -23,6 +23,10 @@ class DAQmxOutput:
         GalvoController(None, "keysight", self.spec).plan(curve)
         period = curve.period
         n = int(round(period * self.rate))
+        if abs(period * self.rate - n) > 1e-6 * max(n, 1):
+            # the card regenerates the buffer: a partial period would make the mirror jump at every wrap
+            raise SafetyError(f"{self.rate:g} samples/s give {period * self.rate:.4g} samples per "
+                              f"{period * 1e3:g} ms period: must be a whole number (e.g. {n / period:.6g} samples/s)")
         if n < 16:
             raise SafetyError(f"{self.rate:g} samples/s give only {n} samples per {period * 1e3:g} ms period (need 16)")
         t = np.arange(n) / self.rate

@@ -105,6 +105,23 @@ def plan(scene_path: str, duration: float, threshold: float = 0.2, noise_fractio
     reasons["steps"] = (f"{steps}: the 99th-percentile log change is {rate:.3g} per second; {steps} steps keep it "
                         f"under {change_fraction} x C per step")
     static = timed.is_static
-    reasons["reuse"] = ("static scene: one scan period (or frame) is rendered and reused" if static
-                        else "moving scene: every step is rendered")
+    period = timed.scan_period
+    if not static:
+        reasons["reuse"] = "moving scene: every step is rendered"
+    elif period == 0.0:
+        reasons["reuse"] = "static scene seen by a fixed view: one frame is rendered and reused"
+    elif period is None:
+        reasons["reuse"] = "static scene, aperiodic scan: every step is rendered"
+    else:
+        n_periods = duration / period
+        if abs(n_periods - round(n_periods)) <= 1e-6 * max(n_periods, 1) and round(n_periods) >= 1:
+            n = int(round(n_periods))
+            per_period = math.ceil(steps / n)              # whole steps per period, so one period can be reused
+            steps = per_period * n
+            reasons["steps"] += f"; rounded up to {per_period} per scan period ({steps} in all) for reuse"
+            reasons["reuse"] = (f"static scene: one scan period ({per_period} steps) is rendered and reused for the "
+                                f"other {n - 1}")
+        else:
+            reasons["reuse"] = (f"static scene, but {duration:g} s is not a whole number of {period * 1e3:g} ms scan "
+                                "periods: every step is rendered")
     return Plan(color=not grey, spp=spp, steps=steps, static=static, reasons=reasons, defines=defines)

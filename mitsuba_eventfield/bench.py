@@ -13,8 +13,6 @@ accurate, on the product error) is marked in the chart.
 """
 from __future__ import annotations
 
-import math
-import os
 import time
 
 import numpy as np

@@ -251,6 +251,17 @@ def _start_log(path, events):
     return linlog_np(img, events.meta.get("pixel_model", {}).get("linlog_threshold", 1e-3))
 
 
+def _luminance_channel(path):
+    """The Y (or else R) channel of an EXR frame, with a named error when it has neither."""
+    import mitsuba_eventfield as ef
+    from .images import read_exr
+    channels, _ = read_exr(path)
+    img = channels.get("Y", channels.get("R"))
+    if img is None:
+        raise ef.EventFieldError(f"{path}: needs a Y (or R) channel; it has {', '.join(sorted(channels)) or 'none'}")
+    return img
+
+
 def _out_meta(a, events, **extra):
     from ._version import __version__
     return dict({"package_version": __version__, "command": a.command, "source": os.path.abspath(a.file),
@@ -336,8 +347,11 @@ def _galvo_frames(ev, period, views, start_frame_log=None):
     if optics.get("design") != "galvo":
         raise ef.EventFieldError("not a galvo event stream (optics.design != 'galvo')")
     curve = curve_from_dict(optics["scan"])
-    t0 = ev.meta.get("t_start_us", 0) * 1e-6 + period * curve.period
-    times = t0 + np.arange(views) * curve.period / views
+    try:
+        t0 = ef.lightfield.galvo_period_starts(ev, [period])[period]
+    except ValueError as e:
+        raise ef.EventFieldError(f"--period: {e}") from None
+    times = ef.lightfield.galvo_view_times(optics, t0, views)     # bin centres, as the light-field commands use
     method = "direct" if start_frame_log is not None else "galvo"
     kw = {"log_start": start_frame_log, "t_start": t0} if start_frame_log is not None else {"t_start": t0}
     return ef.reconstruct.reconstruct(ev, times, method, **kw), times, curve
@@ -361,11 +375,12 @@ def _calibrate(a) -> int:
             frames, times, curve = _galvo_frames(ev, a.period, a.views, _start_log(a.start_frame, ev))
             result = cal.fit_galvo(frames, times, curve, patches)
             cal.save_calibration(a.output, galvo=result)
-            print(f"galvo: phase {result.phase_deg:.2f} +- {result.std['phase_deg']:.2f} deg, curve radius "
+            print(f"galvo: phase {result.phase_deg:.2f} +- {result.std['phase_deg']:.2f} deg at the first frame "
+                  f"({result.clock_phase_deg:.2f} deg at t = 0), curve radius "
                   f"{result.radius_px()[0]:.3f} x {result.radius_px()[1]:.3f} px, rms {result.rms_px:.3f} px "
                   f"({result.frames_used} matches) -> {a.output}")
         elif a.kind == "depth":
-            depths, scales = [], []
+            depths, scales, scales_y = [], [], []
             for item in a.captures:
                 path, _, depth = item.rpartition(":")
                 try:
@@ -377,18 +392,20 @@ def _calibrate(a) -> int:
                 fit = cal.fit_tracks([cal.track_point(np.exp(frames))], times, curve)
                 depths.append(depth)
                 scales.append(fit.scale_px_per_rad[0])
-            result = cal.fit_depth(depths, scales)
+                scales_y.append(fit.scale_px_per_rad[1])
+            result = cal.fit_depth(depths, scales, scales_y)
             cal.save_calibration(a.output, depth=result)
             print(f"depth: inverse model rms {result.rms_inverse:.3f} px/rad (pivot {result.pivot:.4g}), linear "
                   f"model rms {result.rms_linear:.3f} px/rad; best: {result.best} -> {a.output}")
         else:
-            from .images import read_exr
-            channels, _ = read_exr(a.frame)
-            frame = channels.get("Y", channels.get("R"))
+            frame = _luminance_channel(a.frame)
             result = cal.register(np.log(np.maximum(frame, 1e-6)))
             if a.flat:
-                flat, _ = read_exr(a.flat)
-                cal.flat_field(result, flat.get("Y", flat.get("R")))
+                flat = _luminance_channel(a.flat)
+                if flat.shape != frame.shape:
+                    raise ef.EventFieldError(f"{a.flat}: flat frame is {flat.shape[1]}x{flat.shape[0]}, the frame "
+                                             f"{a.frame} is {frame.shape[1]}x{frame.shape[0]}: they must match")
+                cal.flat_field(result, flat)
             cal.save_calibration(a.output, kaleidoscope=result)
             worst = max(abs(c) for v in result.views for c in v["offset"])
             print(f"kaleidoscope: {result.n}x{result.n} views of {result.tile[0]}x{result.tile[1]} px, largest "

@@ -77,8 +77,13 @@ class H5EventWriter:
         so ms_to_idx entries up to it can be written now."""
         t = np.asarray(t, dtype=np.int64)
         if len(t):
-            if self.last_t is not None and t[0] < self.last_t or np.any(np.diff(t) < 0):
-                raise ValueError("events must be appended in time order")
+            if self.last_t is not None and t[0] < self.last_t:
+                raise ValueError(f"{self.path}: events must be appended in time order: this chunk starts at "
+                                 f"t = {int(t[0])} us, before the last written event at {self.last_t} us")
+            back = np.flatnonzero(np.diff(t) < 0)
+            if len(back):
+                raise ValueError(f"{self.path}: events must be appended in time order: t = {int(t[back[0] + 1])} us "
+                                 f"follows {int(t[back[0]])} us within the chunk")
             self._buffer.append((np.asarray(x, np.uint16), np.asarray(y, np.uint16), t,
                                  (np.asarray(p) > 0).astype(np.uint8)))
             self.count, self.last_t = self.count + len(t), int(t[-1])

@@ -27,6 +27,7 @@ class LightField:
     B: tuple
     kind: str = "generic"
     meta: dict = field(default_factory=dict)
+    cache: dict = field(default_factory=dict, repr=False, compare=False)   # derived data (refocus spectra)
 
     def __post_init__(self):
         self.views = np.asarray(self.views, dtype=np.float64)
@@ -102,17 +103,31 @@ def galvo_view_times(optics: dict, t_period_start: float, views: int) -> np.ndar
     return t_period_start + (np.arange(views) + 0.5) * period / views
 
 
+def galvo_period_starts(events, periods=None) -> dict:
+    """{period index: start time in seconds} for the whole scan periods of a galvo stream (all, or the indices
+    ``periods``, each checked against the stream)."""
+    from .scan import curve_from_dict
+    period = curve_from_dict(events.meta["optics"]["scan"]).period
+    if period is None:
+        raise ValueError("the scan is not periodic: choose view times explicitly")
+    t0 = events.meta.get("t_start_us", 0) * 1e-6
+    n_periods = int(math.floor(events.duration_us * 1e-6 / period + 1e-9))   # whole periods only
+    wanted = range(n_periods) if periods is None else periods
+    for p in wanted:
+        if not 0 <= p < n_periods:
+            raise ValueError(f"scan period {p} is not in the stream: allowed 0..{n_periods - 1} "
+                             f"({n_periods} whole periods of {period * 1e3:g} ms)")
+    return {p: t0 + p * period for p in wanted}
+
+
 def galvo_lightfields(events, views: int = 32, method: str = "direct", periods=None, **method_kw):
     """Sliding light fields from a galvo stream, one per scan period: reconstruct ``views`` frames per period
     (``method`` of ``reconstruct``) and place each at its scan position. Yields LightField objects."""
     from . import reconstruct as rc
-    from .scan import curve_from_dict
     optics = events.meta["optics"]
-    period = curve_from_dict(optics["scan"]).period
-    t0 = events.meta.get("t_start_us", 0) * 1e-6
-    n_periods = int(round(events.duration_us * 1e-6 / period))
-    wanted = range(n_periods) if periods is None else periods
-    all_times = np.concatenate([galvo_view_times(optics, t0 + p * period, views) for p in wanted])
+    starts = galvo_period_starts(events, periods)
+    wanted = list(starts)
+    all_times = np.concatenate([galvo_view_times(optics, starts[p], views) for p in wanted])
     frames = rc.reconstruct(events, all_times, method, **method_kw)
     for i, p in enumerate(wanted):
         sl = slice(i * views, (i + 1) * views)

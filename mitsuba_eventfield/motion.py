@@ -120,9 +120,6 @@ class Motion:
     def is_static(self) -> bool:
         return all(o.is_static for o in self.objects.values())
 
-    def matrices(self, t: float) -> dict[str, np.ndarray]:
-        return {name: o.matrix(t) for name, o in self.objects.items()}
-
 
 def motion_path_for(scene_path: str) -> str:
     """Conventional motion-file path next to a scene: ``scene.xml`` -> ``scene.motion.toml``."""

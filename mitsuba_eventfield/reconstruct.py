@@ -80,7 +80,7 @@ def direct(events: EventStream, times, log_start=None, t_start: float | None = N
     return out
 
 
-def _filtered(events, times, cutoff_hz, c_on, c_off, frames=None, frame_times=None, log_start=None):
+def _filtered(events, times, cutoff_hz, c_on, c_off, frames=None, frame_times=None):
     """Shared core of the high-pass (frames None) and complementary filters, exact between events."""
     times = _check_times(times)
     h, w = events.height, events.width
@@ -91,11 +91,10 @@ def _filtered(events, times, cutoff_hz, c_on, c_off, frames=None, frame_times=No
     if frames is not None:
         frame_times = np.asarray(frame_times, dtype=np.float64)
         frames = np.asarray(frames, dtype=np.float64).reshape(len(frame_times), h * w)
-        t0 = min(t0, frame_times[0])
+        t0 = frame_times[0]           # the first frame already contains every earlier event
     # breakpoints: output times and frame times (the target changes there)
     marks = sorted(set(times.tolist()) | (set(frame_times.tolist()) if frames is not None else set()))
-    state = (frames[0].copy() if frames is not None else
-             (np.zeros(h * w) if log_start is None else np.asarray(log_start, np.float64).ravel().copy()))
+    state = frames[0].copy() if frames is not None else np.zeros(h * w)
     target = frames[0] if frames is not None else np.zeros(h * w)
     out, k_out, t_prev = np.empty((len(times), h, w)), 0, t0
     for t in marks:

@@ -69,10 +69,10 @@ class _Spectra:
 
 def _spectra(lf: LightField, max_shift: float) -> _Spectra:
     pad = int(np.ceil(max_shift)) + 4
-    cached = lf.meta.get("_spectra")
+    cached = lf.cache.get("spectra")
     if cached is None or cached.pad < pad:
         cached = _Spectra(lf, max(pad, 16))
-        lf.meta["_spectra"] = cached
+        lf.cache["spectra"] = cached
     return cached
 
 

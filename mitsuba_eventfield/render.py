@@ -175,7 +175,7 @@ class _Sink:
         if self.writer is not None:
             self.writer.close(end_us=end_us, meta=meta)
             return None
-        ev = self.stream(meta)
+        ev = self.stream({**self.meta, **meta})
         if self.output:
             write_events(self.output, ev, self.fmt)
         return ev
@@ -254,7 +254,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     # (not for pixel models with state across steps, e.g. refractory: they need absolute times, and their
     # events are never copied anyway)
     grid = None if adaptive or not integ.deterministic else _phase_grid(timed, duration, steps, t_start)
-    period_events, copy_from, prev_key = {}, None, None
+    period_events, copy_from, prev_key, period_block = {}, None, None, None
     try:
         def render_at(t, step_index):
             if reuse and step_index >= reuse:           # the view repeats: feed the cached frame, no render
@@ -273,6 +273,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
             if reuse:
                 frame = mi.Float(integ.staged)
                 dr.eval(frame)
+                integ.staged = frame                    # commit() uses the evaluated frame: no second evaluation
                 cache.append(frame)
 
         render_at(t_start, 0)
@@ -382,7 +383,8 @@ def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
     spp = _check_number("spp", spp, low=0, integer=True)
     integ = timed.scene.integrator()
     if linlog_threshold is None:
-        linlog_threshold = integ.linlog_threshold if is_event_integrator(integ) else DEFAULT_LINLOG
+        linlog_threshold = (pixel_model.pixel_config(integ.scene_preset, **integ.scene_overrides).linlog_threshold
+                            if is_event_integrator(integ) else DEFAULT_LINLOG)
     inner = integ.inner if is_event_integrator(integ) else integ
     frames = []
     for t in np.atleast_1d(np.asarray(times, dtype=np.float64)):

@@ -372,8 +372,9 @@ def make_curve(name: str, max_angle_deg: float = DEFAULT_MAX_ANGLE_DEG, bandwidt
 def curve_to_dict(curve: ScanCurve, bandwidth_hz: float = 0.0, damping: float = 0.7) -> dict:
     """A description from which :func:`curve_from_dict` rebuilds the same curve (stored in event metadata)."""
     if isinstance(curve, TabulatedCurve):
-        d = dict(curve.source)
-        d.pop("bandwidth_hz", None), d.pop("damping", None)
+        d = dict(curve.source)        # a filtered table keeps its bandwidth_hz / damping unless overridden
+        if bandwidth_hz:
+            d.pop("bandwidth_hz", None), d.pop("damping", None)
     else:
         d = curve.to_dict()
         if d["curve"] == "circle":

@@ -24,7 +24,6 @@ step, timestamp quantisation and the readout cap in :meth:`readout`, once the st
 """
 from __future__ import annotations
 
-import math
 from dataclasses import fields
 
 import drjit as dr
@@ -70,14 +69,8 @@ def _define_class():
             self.configure(pixel_model.pixel_config(self.scene_preset, "integrator 'eventfield'", **overrides))
 
         # ---------------------------------------------------------------- configuration
-        def configure(self, config=None, **legacy):
-            """Set the pixel model (a PixelConfig; or threshold_on/off/linlog_threshold keywords) and forget all
-            pixel state."""
-            if config is None:
-                base = self.config.as_dict() if hasattr(self, "config") else {}
-                base.update({k: v for k, v in legacy.items() if v is not None})
-                preset = base.pop("preset", "ideal")
-                config = pixel_model.pixel_config(preset, "integrator 'eventfield'", **base)
+        def configure(self, config):
+            """Set the pixel model (a PixelConfig) and forget all pixel state."""
             self.config = config.validate("integrator 'eventfield'")
             self.threshold_on, self.threshold_off = config.threshold_on, config.threshold_off
             self.linlog_threshold = config.linlog_threshold
@@ -90,7 +83,7 @@ def _define_class():
             self.k_on = self.k_off = None  # ON / OFF events fired so far by each pixel (Int32)
             self.offset = None         # reference drift from leak and jitter (None when neither is on)
             self.c_on = self.c_off = None
-            self.staged = self.staged_intensity = self.staged_image = None
+            self.staged = self.staged_intensity = None
             self.rng = self.leak_rate = self.last_emit = self.limiter = None
             self.refractory_dropped = 0
             self.noise_events = 0
@@ -125,19 +118,20 @@ def _define_class():
                                                     dr.gather(mi.Float, flat, idx + 2)))
             # left unevaluated: commit() fuses it with the crossing count into one kernel
             self.stage_log(pixel_model.linlog(dr, intensity, self.linlog_threshold), (width, height))
-            self.staged_intensity, self.staged_image = intensity, image
+            self.staged_intensity = intensity
 
         def stage_log(self, log_brightness, size):
             """Stage a log-brightness frame directly (period reuse feeds cached frames through here)."""
             if self.size is not None and self.size != tuple(size):
                 raise ValueError(f"film size changed from {self.size} to {tuple(size)} between steps")
             self.staged, self.staged_size = log_brightness, tuple(size)
-            self.staged_intensity = self.staged_image = None
+            self.staged_intensity = None
 
         def staged_max_change(self) -> float:
             """Largest |Delta L| of the staged frame against the last committed one (0 before the first commit)."""
             if self.log_prev is None:
                 return 0.0
+            dr.eval(self.staged)     # keep the frame: commit() must not re-run its (possibly heavy) expression
             return float(dr.max(dr.abs(self.staged - self.log_prev)).array[0])
 
         # ---------------------------------------------------------------- events
@@ -180,7 +174,7 @@ def _define_class():
             cfg = self.config
             width, height = self.staged_size
             log_in, intensity = self.staged, self.staged_intensity
-            self.staged = self.staged_intensity = self.staged_image = None
+            self.staged = self.staged_intensity = None
             if self.log_prev is None:
                 self._init_state(log_in, width, height)
                 dr.eval(self.log_prev, self.anchor)

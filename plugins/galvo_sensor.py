@@ -65,15 +65,16 @@ def _define_class():
             self.focus_distance = float(props.get("focus_distance", 1.0))
             self.mirror_distance = float(props.get("mirror_distance", 0.03))
             self.mirror_separation = float(props.get("mirror_separation", 0.01))
-            self.near_clip = float(props.get("near_clip", 1e-2))
             self.far_clip = float(props.get("far_clip", 1e4))
-            for name, v, ok in (("fov", self.fov_x, 0 < self.fov_x < 180),
-                                ("aperture_radius", self.aperture_radius, self.aperture_radius >= 0),
-                                ("focus_distance", self.focus_distance, self.focus_distance > 0),
-                                ("mirror_distance", self.mirror_distance, self.mirror_distance >= 0),
-                                ("mirror_separation", self.mirror_separation, self.mirror_separation >= 0)):
+            for name, v, ok, allowed in (
+                    ("fov", self.fov_x, 0 < self.fov_x < 180, "0 < fov < 180 degrees"),
+                    ("aperture_radius", self.aperture_radius, self.aperture_radius >= 0, ">= 0 (0: pinhole)"),
+                    ("focus_distance", self.focus_distance, self.focus_distance > 0, "> 0"),
+                    ("mirror_distance", self.mirror_distance, self.mirror_distance >= 0, ">= 0"),
+                    ("mirror_separation", self.mirror_separation, self.mirror_separation >= 0, ">= 0"),
+                    ("far_clip", self.far_clip, self.far_clip > 0, "> 0")):
                 if not (math.isfinite(v) and ok):
-                    raise ValueError(f"sensor 'galvo': {name} = {v!r} is out of range")
+                    raise ValueError(f"sensor 'galvo': {name} = {v!r} is out of range; allowed: {allowed}")
             self.m_needs_sample_3 = self.aperture_radius > 0
             self.scan_time = mi.Float(0.0)
             dr.make_opaque(self.scan_time)

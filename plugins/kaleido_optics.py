@@ -85,10 +85,14 @@ def film_to_exit(u, v, tube_width, tube_height):
     return (u - 0.5) * tube_width, (v - 0.5) * tube_height
 
 
-def subaperture(i, j, rx, ry, tube_width, tube_height, scale, xp):
-    """Main-lens crossing of the rays of cell (i, j) from relay pupil point (rx, ry)."""
-    _, _, sx = fold(xp, i * tube_width, tube_width)    # (-1)^i
-    _, _, sy = fold(xp, j * tube_height, tube_height)
+def subaperture(i, j, rx, ry, tube_width, tube_height, scale, xp, signs=None):
+    """Main-lens crossing of the rays of cell (i, j) from relay pupil point (rx, ry). ``signs``: the cells' mirror
+    signs (-1)^i, (-1)^j when the caller already has them from :func:`fold`."""
+    if signs is None:
+        _, _, sx = fold(xp, i * tube_width, tube_width)
+        _, _, sy = fold(xp, j * tube_height, tube_height)
+    else:
+        sx, sy = signs
     return -sx * (rx - i * tube_width) * scale, -sy * (ry - j * tube_height) * scale
 
 

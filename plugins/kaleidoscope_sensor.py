@@ -128,7 +128,7 @@ def _define_class():
             if self.layout == "kaleidoscope":
                 (ox, oy, oz), (dx, dy, dz), valid = self._kaleido_ray(u, v, sample3)
             else:
-                (ox, oy, oz), (dx, dy, dz), valid = self._microlens_ray(u, v, sample2, sample3, offset, crop)
+                (ox, oy, oz), (dx, dy, dz), valid = self._microlens_ray(sample2, sample3, offset, crop)
             to_world = self.world_transform()
             ray = mi.Ray3f(to_world @ mi.Point3f(ox, oy, oz), dr.normalize(to_world @ mi.Vector3f(dx, dy, dz)),
                            time, wavelengths)
@@ -155,12 +155,12 @@ def _define_class():
                 d = dr.normalize(mi.Vector3f(sx * (qx - rx), sy * (qy - ry), R + L))
                 return (px, py, mi.Float(0.0)), (d.x, d.y, d.z), valid
             scale = self.geo["lens_to_entrance"] / (R + L)
-            ax, ay = ko.subaperture(i, j, rx, ry, W, H, scale, dr)
+            ax, ay = ko.subaperture(i, j, rx, ry, W, H, scale, dr, signs=(sx, sy))
             valid &= ax * ax + ay * ay <= self.aperture * self.aperture
             o, d = ko.main_lens_ray(dr, px, py, ax, ay, self.geo["lens_to_entrance"], self.S)
             return o, d, valid
 
-        def _microlens_ray(self, u, v, sample2, sample3, offset, crop):
+        def _microlens_ray(self, sample2, sample3, offset, crop):
             n = self.n
             fx = offset.x + sample2.x * crop.x                  # film pixel coordinates
             fy = offset.y + sample2.y * crop.y

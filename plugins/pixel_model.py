@@ -143,8 +143,9 @@ class PixelConfig:
             if getattr(self, name) * 4 >= c:
                 raise ValueError(f"{where}: {name} = {getattr(self, name)}: with thresholds of {c} it would make "
                                  f"thresholds <= 0 (C - 4 sigma <= 0); must be < {c / 4:g}")
-        if not 0 < self.shot_noise_bright_factor <= 1 or not 0 < self.cutoff_min_fraction <= 1:
-            raise ValueError(f"{where}: shot_noise_bright_factor and cutoff_min_fraction must be in (0, 1]")
+        for name in ("shot_noise_bright_factor", "cutoff_min_fraction"):
+            if not 0 < getattr(self, name) <= 1:
+                raise ValueError(f"{where}: {name} = {getattr(self, name)!r}: must be in (0, 1]")
         if self.readout_cap and self.readout_cap < READOUT_BINS_PER_MS * 1000 * 2:
             raise ValueError(f"{where}: readout_cap = {self.readout_cap:g} events/s is below the smallest the "
                              f"limiter can enforce ({READOUT_BINS_PER_MS * 2000:g})")

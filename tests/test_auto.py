@@ -1,8 +1,6 @@
 """Automatic modelling choices, each checked against the full computation."""
-import math
 import os
 
-import numpy as np
 
 import mitsuba_eventfield as ef
 from conftest import ROOT
@@ -35,6 +33,14 @@ def test_plan_choices_hold_against_the_full_computation(capsys):
     assert plan.static is False
 
 
-def test_static_scene_plan_reports_reuse():
-    plan = ef.auto.plan(os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"), 0.004, defines=SMALL)
-    assert plan.static and "reused" in plan.reasons["reuse"]
+GALVO_STATIC = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")   # 250 Hz scan: 4 ms period
+
+
+def test_static_scene_plan_rounds_steps_so_periods_are_reused():
+    plan = ef.auto.plan(GALVO_STATIC, 0.012, defines=SMALL)
+    assert plan.static and "reused" in plan.reasons["reuse"] and plan.steps % 3 == 0
+    ev = ef.render_events(ef.load_scene(GALVO_STATIC, **SMALL), 0.012, steps=plan.steps, spp=plan.spp)
+    r = ev.meta["render"]           # periods 2 and 3: frames from the cache, or whole events copied once state repeats
+    assert r["reused_steps"] + r["copied_steps"] >= 2 * plan.steps // 3
+    odd = ef.auto.plan(GALVO_STATIC, 0.005, defines=SMALL)             # 1.25 periods: nothing to reuse
+    assert odd.static and "every step is rendered" in odd.reasons["reuse"]

@@ -52,6 +52,10 @@ def test_galvo_phase_and_radius_from_frames(seed, capsys):
               f"(error {err:+.3f}); radius {exact:.3f} px -> {cal.radius_px()[0]:.3f} px; rms {cal.rms_px:.3f} px")
     assert abs(err) < 1.0
     assert abs(cal.radius_px()[0] - exact) < 0.1
+    # frames starting a quarter period later: the first-frame phase moves by 90 deg, the clock phase does not
+    late = fit_galvo(ef.render_frames(scene, times + 0.25 / FREQ), times + 0.25 / FREQ, nominal, patches)
+    assert abs((late.phase_deg - phase - 90 + 180) % 360 - 180) < 1.0
+    assert abs((late.clock_phase_deg - phase + 180) % 360 - 180) < 1.0
 
 
 def test_galvo_calibration_from_event_reconstruction():

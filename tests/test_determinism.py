@@ -1,5 +1,4 @@
 """Fixed sampler seed: static scenes are silent at any spp; equal seeds give equal streams."""
-import numpy as np
 import pytest
 
 import mitsuba_eventfield as ef
@@ -32,7 +31,8 @@ def test_same_seed_same_stream_other_seed_differs(demo_small):
 
 
 def test_color_variant_renders_events_from_luminance():
-    import subprocess, sys, os
+    import subprocess
+    import sys
     code = ("import mitsuba_eventfield as ef; ef.set_variant('llvm', color=True); "
             f"s = ef.load_scene({DEMO!r}, width=32, height=24); "
             "import mitsuba as mi; assert mi.variant() == 'llvm_ad_rgb'; "

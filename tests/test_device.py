@@ -207,3 +207,11 @@ def test_daqmx_output_calls_with_a_stand_in_module(monkeypatch):
     assert [c for c in calls if c[0] == "write"][-1][1].tolist() == [0.0, 0.0]
     with pytest.raises(SafetyError):
         DAQmxOutput().waveform(ef.make_curve("raster", frequency=100, lines=4))
+
+
+def test_daq_refuses_a_rate_that_splits_the_period():
+    """A regenerated buffer holding 199.6 samples of a period would jump at every wrap."""
+    from mitsuba_eventfield.device.daq import DAQmxOutput
+    with pytest.raises(SafetyError, match=r"199.6 samples per 4 ms period: must be a whole number"):
+        DAQmxOutput(rate=49_900).waveform(CIRCLE)
+    assert DAQmxOutput(rate=50_000).waveform(CIRCLE).shape == (2, 200)

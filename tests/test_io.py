@@ -105,3 +105,27 @@ def test_preview_colours(tmp_path):
     assert tuple(img[0, 2]) == (0, 0, 255)         # OFF: blue
     ef.write_preview(str(tmp_path / "p.png"), ev)
     assert os.path.getsize(tmp_path / "p.png") > 0
+
+
+@pytest.mark.parametrize("ext", [".npz", ".h5"])
+def test_rendered_file_keeps_the_scene_metadata(tmp_path, ext):
+    """Formats written at the end of a render carry the same metadata as the streamed HDF5."""
+    from conftest import ROOT
+    scene = ef.load_scene(os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"), width=24, height=18)
+    path = str(tmp_path / f"ev{ext}")
+    ef.render_events(scene, 0.004, steps=8, spp=1, output=path)
+    meta = ef.read_events(path).meta
+    assert meta["optics"]["design"] == "galvo" and meta["duration_us"] == 4000
+    assert "pixel_model" in meta and meta["render"]["steps"] == 8
+
+
+def test_streaming_writer_refuses_out_of_order_chunks(tmp_path):
+    path = str(tmp_path / "bad.h5")
+    w = ef.H5EventWriter(path, 4, 4, {})
+    w.append([0], [0], [500], [1])
+    with pytest.raises(ValueError, match=r"bad.h5: .* starts at t = 100 us, before the last written event at 500"):
+        w.append([0], [0], [100], [1])
+    with pytest.raises(ValueError, match=r"t = 600 us follows 700 us"):
+        w.append([0, 1], [0, 1], [700, 600], [1, 1])
+    w.abort()
+    assert os.listdir(tmp_path) == []                       # nothing half-written left behind

@@ -219,3 +219,13 @@ def test_focus_tracking_follows_an_object_moving_in_depth(capsys):
               + ", ".join(f"{z:.3f}" for z in truth))
     assert np.all(np.abs(chosen - truth) / truth < 0.05)
     assert images.shape == (5, 80, 80) and np.all(np.isfinite(images))
+
+
+def test_subset_does_not_reuse_the_parent_refocus_cache(kaleido_lf):
+    lf, _ = kaleido_lf
+    ef.refocus(lf, NEAR)                                  # fills the parent's spectrum cache
+    idx = [0, 4, 8]
+    fresh = ef.LightField(lf.views[idx], lf.positions[idx], lf.times[idx], lf.A, lf.B, lf.kind, dict(lf.meta))
+    sub = lf.subset(idx)
+    assert np.allclose(ef.refocus(sub, NEAR), ef.refocus(fresh, NEAR))
+    assert not np.allclose(ef.refocus(sub, NEAR), ef.refocus(lf, NEAR), atol=1e-3)

@@ -26,6 +26,8 @@ def galvo_capture(tmp_path_factory):
     assert r.returncode == 0, r.stderr
     r = run("frame", GALVO, "-o", str(d / "small.exr"), "-D", "width=60", "-D", "height=45")  # wrong size
     assert r.returncode == 0, r.stderr
+    from mitsuba_eventfield.images import write_exr
+    write_exr(str(d / "depth_only.exr"), {"Z": np.ones((45, 60))})                                # no Y or R
     return d
 
 
@@ -65,6 +67,12 @@ def test_reconstruct_refocus_depth_outputs(galvo_capture):
     (["reconstruct", "{d}/g.h5", "-o", "{d}/rec3", "--method", "complementary"], "needs --start-frame"),
     (["refocus", "{d}/g.h5", "-o", "{d}/x.png", "--depth", "1", "--start-frame", "{d}/small.exr"],
      "small.exr: needs a Y (or R) channel of 120x90"),
+    (["refocus", "{d}/g.h5", "-o", "{d}/x.png", "--depth", "1", "--period", "9"],
+     "scan period 9 is not in the stream: allowed 0..0"),
+    (["calibrate", "galvo", "{d}/g.h5", "--patch", "30,30", "--period", "-1", "-o", "{d}/x.json"],
+     "--period: scan period -1 is not in the stream"),
+    (["calibrate", "kaleidoscope", "{d}/depth_only.exr", "-o", "{d}/x.json"],
+     "depth_only.exr: needs a Y (or R) channel; it has Z"),
 ])
 def test_bad_input(galvo_capture, args, message):
     d = galvo_capture
@@ -72,7 +80,7 @@ def test_bad_input(galvo_capture, args, message):
     assert r.returncode == 2, (r.stdout, r.stderr)
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and message in lines[0], r.stderr
-    assert not os.path.exists(d / "x.png") and not os.path.exists(d / "x.exr")
+    assert not any(os.path.exists(d / f"x.{ext}") for ext in ("png", "exr", "json"))
 
 
 def test_calibrate_commands(galvo_capture, tmp_path):
@@ -83,7 +91,10 @@ def test_calibrate_commands(galvo_capture, tmp_path):
             str(d / "start.exr"), "-o", cal)
     assert r.returncode == 0, r.stderr
     data = json.loads(open(cal).read())
-    assert data["format"] == "mitsuba-eventfield calibration" and abs((data["galvo"]["phase_deg"] + 180) % 360 - 180) < 2
+    assert data["format"] == "mitsuba-eventfield calibration"
+    from mitsuba_eventfield.calibration import load_calibration
+    clock_phase = load_calibration(cal)["galvo"].clock_phase_deg          # the scene commands phase 0
+    assert abs((clock_phase + 180) % 360 - 180) < 2, r.stdout
     r = run("depth", str(d / "g.h5"), "-o", str(tmp_path / "dc.png"), "--near", "0.3", "--far", "4", "--planes", "8",
             "--start-frame", str(d / "start.exr"), "--views", "16", "--calibration", cal)
     assert r.returncode == 0, r.stderr
