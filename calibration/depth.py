@@ -76,6 +76,9 @@ def fit_depth(depths, scales, scales_y=None) -> DepthCalibration:
         depth_inv, depth_lin = rms(q / (s - p) - z), rms(c0 + c1 * s - z)
     inverse_y = None
     if scales_y is not None:
+        if len(scales_y) != len(z) or not np.all(np.isfinite(scales_y)):
+            raise CalibrationError(f"scales_y: {len(scales_y)} values for {len(z)} depths; need one finite scale "
+                                   "per depth")
         py, qy = np.linalg.lstsq(A, np.asarray(scales_y, dtype=np.float64), rcond=None)[0]
         inverse_y = (float(py), float(qy))
     return DepthCalibration(z.tolist(), s.tolist(), (float(p), float(q)), (float(c0), float(c1)), inverse_y,

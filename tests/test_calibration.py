@@ -172,6 +172,20 @@ def test_kaleidoscope_tiles_found_on_a_render_and_flat_field():
         find_tiles(np.ones((96, 96)))
 
 
+def test_depth_calibration_keeps_each_axis_pivot(tmp_path):
+    """The y mirror sits further from the lens than the x mirror: each axis gets its own disparity model."""
+    from mitsuba_eventfield.calibration import load_calibration, save_calibration
+    f, z = 100.0, np.array([0.4, 0.7, 1.0, 1.6, 2.5])
+    dc = fit_depth(z, 2 * f * (1 - 0.10 / z), scales_y=2 * f * (1 - 0.11 / z))
+    save_calibration(str(tmp_path / "c.json"), depth=dc)
+    (ax, ay), (bx, by) = load_calibration(str(tmp_path / "c.json"))["depth"].disparity_model()
+    assert np.allclose([ax, ay, bx, by], [f, f, -0.10 * f, -0.11 * f])   # alpha = f - f d / z, per axis
+    (ax1, ay1), (bx1, by1) = fit_depth(z, 2 * f * (1 - 0.10 / z)).disparity_model()
+    assert ay1 == ax1 and by1 == bx1                                     # x only: both axes share it
+    with pytest.raises(CalibrationError, match="scales_y: 2 values for 5 depths"):
+        fit_depth(z, 2 * f * (1 - 0.10 / z), scales_y=[1.0, 2.0])
+
+
 def test_calibration_file_round_trip_and_use_in_refocus(tmp_path):
     """Galvo + depth calibration saved, loaded and applied: a light field whose metadata optics are wrong
     (mirror distance off by 2x) gets back the right depth from depth from focus."""

@@ -71,3 +71,15 @@ def test_pixel_preset_and_overrides_in_xml(tmp_path):
     bad.write_text(xml.replace('name="refractory_s"', 'name="refractory_time"'))
     with pytest.raises(ef.EventFieldError, match="unknown parameter 'refractory_time'"):
         ef.load_scene(str(bad))
+
+
+def test_render_frames_use_the_scene_linlog_threshold(tmp_path):
+    """Frames are in the pixel's own log domain: the XML's linlog_threshold, not the preset's."""
+    path = tmp_path / "s.xml"
+    path.write_text(SCENE.format(on=0.3).replace('<integrator type="direct"/>',
+                                                 '<float name="linlog_threshold" value="5"/><integrator type="direct"/>'))
+    timed = ef.load_scene(str(path))
+    lin = ef.render_frames(timed, [0.0], log=False)[0]
+    log = ef.render_frames(timed, [0.0])[0]
+    assert np.allclose(log, ef.plugins.pixel_model.linlog_np(lin, 5.0))
+    assert not np.allclose(log, ef.plugins.pixel_model.linlog_np(lin, 1e-3))

@@ -35,6 +35,9 @@ def test_reconstruction_methods_against_rendered_frames(capsys):
     assert err["direct"].mean() < 0.03
     assert err["complementary"].mean() < 0.08
     assert err["highpass"].mean() < np.abs(change).mean()      # better than knowing nothing
+    # a first frame taken mid-stream already holds the earlier events: at its own time it comes back unchanged
+    mid = ef.render_frames(timed, [0.01])
+    assert np.array_equal(rc.complementary(ev, [0.01], mid, [0.01], 20.0)[0], mid[0])
 
 
 def test_galvo_solver_recovers_the_static_image(capsys):
