@@ -20,7 +20,7 @@ from .events import EventStream  # noqa: E402
 from .motion import Motion, load_motion, parse_motion  # noqa: E402
 from .preview import event_frame_rgb, write_preview  # noqa: E402
 from .render import RenderSummary, render_events, render_frames  # noqa: E402
-from . import auto, depth, lightfield, reconstruct  # noqa: E402
+from . import auto, depth, hdr, lightfield, reconstruct  # noqa: E402
 from .sweep import SweepTable, sweep  # noqa: E402
 from .scene import TimedScene, load_scene  # noqa: E402
 from . import scan  # noqa: E402

@@ -57,4 +57,5 @@ if __name__ == "__main__":
     text_texture(os.path.join(HERE, "galvo_static", "text.png"), ["LIGHT", "FIELD"])
     grid_texture(os.path.join(HERE, "moving_grid", "grid.png"))
     text_texture(os.path.join(HERE, "falling", "text.png"), ["SLOW", "MOTION"])
+    text_texture(os.path.join(HERE, "hdr_leds", "text.png"), ["DARK", "ROOM"])
     print("assets written")
