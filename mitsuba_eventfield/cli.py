@@ -275,15 +275,13 @@ def _times_ms(text, what="--times"):
 def _start_log(path, events):
     """Log intensity (as the pixel sees it) of a linear EXR frame, checked against the stream's size."""
     import mitsuba_eventfield as ef
-    from .images import read_exr
     from .plugins.pixel_model import linlog_np
     if path is None:
         return None
-    channels, _ = read_exr(path)
-    img = channels.get("Y", channels.get("R"))
-    if img is None or img.shape != (events.height, events.width):
+    img = _luminance_channel(path)
+    if img.shape != (events.height, events.width):
         raise ef.EventFieldError(f"{path}: needs a Y (or R) channel of {events.width}x{events.height}, got "
-                                 f"{None if img is None else img.shape[::-1]}")
+                                 f"{img.shape[::-1]}")
     return linlog_np(img, events.meta.get("pixel_model", {}).get("linlog_threshold", 1e-3))
 
 
