@@ -36,57 +36,51 @@ class Dialect:
         return int(float(code)), msg.strip().strip('"')
 
 
-class Keysight33500(Dialect):
-    name = "keysight"
+class _SourceSubsystem(Dialect):
+    """Generators that follow the SCPI SOURce/OUTPut tree (Keysight, Rigol): they differ only in the leading
+    colon, the amplitude-unit command and the phase-alignment command."""
+    prefix = ""
+    sets_unit = False
+    phase_sync = ""
 
     def configure(self, ch, freq, vpp, offset, phase):
-        return [f"SOUR{ch}:FUNC SIN", f"SOUR{ch}:VOLT:UNIT VPP", f"SOUR{ch}:FREQ {_g(freq)}",
-                f"SOUR{ch}:VOLT {_g(vpp)}", f"SOUR{ch}:VOLT:OFFS {_g(offset)}", f"SOUR{ch}:PHAS {_g(phase)}"]
+        src = f"{self.prefix}SOUR{ch}"
+        return ([f"{src}:FUNC SIN"] + ([f"{src}:VOLT:UNIT VPP"] if self.sets_unit else [])
+                + [f"{src}:FREQ {_g(freq)}", f"{src}:VOLT {_g(vpp)}", f"{src}:VOLT:OFFS {_g(offset)}",
+                   f"{src}:PHAS {_g(phase)}"])
 
     def amplitude(self, ch, vpp):
-        return [f"SOUR{ch}:VOLT {_g(vpp)}"]
+        return [f"{self.prefix}SOUR{ch}:VOLT {_g(vpp)}"]
 
     def high_z(self, ch):
-        return [f"OUTP{ch}:LOAD INF"]
+        return [f"{self.prefix}OUTP{ch}:LOAD INF"]
 
     def output(self, ch, on):
-        return [f"OUTP{ch} {'ON' if on else 'OFF'}"]
+        return [f"{self.prefix}OUTP{ch} {'ON' if on else 'OFF'}"]
 
     def align_phases(self):
-        return ["SOUR1:PHAS:SYNC"]
+        return [self.phase_sync]
 
     def readback(self, ch):
-        return {"frequency": (f"SOUR{ch}:FREQ?", float), "vpp": (f"SOUR{ch}:VOLT?", float),
-                "offset": (f"SOUR{ch}:VOLT:OFFS?", float), "phase": (f"SOUR{ch}:PHAS?", float),
-                "output": (f"OUTP{ch}?", lambda s: s.strip() in ("1", "ON"))}
-
-
-class RigolDG(Dialect):
-    name = "rigol"
-
-    def configure(self, ch, freq, vpp, offset, phase):
-        return [f":SOUR{ch}:FUNC SIN", f":SOUR{ch}:FREQ {_g(freq)}", f":SOUR{ch}:VOLT {_g(vpp)}",
-                f":SOUR{ch}:VOLT:OFFS {_g(offset)}", f":SOUR{ch}:PHAS {_g(phase)}"]
-
-    def amplitude(self, ch, vpp):
-        return [f":SOUR{ch}:VOLT {_g(vpp)}"]
-
-    def high_z(self, ch):
-        return [f":OUTP{ch}:LOAD INF"]
-
-    def output(self, ch, on):
-        return [f":OUTP{ch} {'ON' if on else 'OFF'}"]
-
-    def align_phases(self):
-        return [":SOUR1:PHAS:INIT"]
-
-    def readback(self, ch):
-        return {"frequency": (f":SOUR{ch}:FREQ?", float), "vpp": (f":SOUR{ch}:VOLT?", float),
-                "offset": (f":SOUR{ch}:VOLT:OFFS?", float), "phase": (f":SOUR{ch}:PHAS?", float),
-                "output": (f":OUTP{ch}?", lambda s: s.strip() in ("1", "ON"))}
+        src = f"{self.prefix}SOUR{ch}"
+        return {"frequency": (f"{src}:FREQ?", float), "vpp": (f"{src}:VOLT?", float),
+                "offset": (f"{src}:VOLT:OFFS?", float), "phase": (f"{src}:PHAS?", float),
+                "output": (f"{self.prefix}OUTP{ch}?", lambda s: s.strip() in ("1", "ON"))}
 
     def error_query(self):
-        return ":SYST:ERR?"
+        return f"{self.prefix}SYST:ERR?"
+
+
+class Keysight33500(_SourceSubsystem):
+    name = "keysight"
+    sets_unit = True
+    phase_sync = "SOUR1:PHAS:SYNC"
+
+
+class RigolDG(_SourceSubsystem):
+    name = "rigol"
+    prefix = ":"
+    phase_sync = ":SOUR1:PHAS:INIT"
 
 
 _BSWV = re.compile(r"([A-Z]+),([^,]+)")
