@@ -6,6 +6,8 @@
 * scenes/*/text.png, letters.png: 8-bit grey textures with large text and a grid (OpenCV), so edges of every
   orientation exist.
 * scenes/moving_grid/grid.png: dark lines on white, both orientations (the paper's grid experiment).
+* scenes/dart/dart_foam.ply, dart_band.ply: a foam dart (2x a real one: 14 cm long) split into its light foam
+  segments and its dark bands + tip, so each gets its own BSDF; axis along the flight direction.
 """
 import os
 
@@ -30,15 +32,41 @@ def fan_mesh(radius=0.25, blades=4, hub_radius=0.05, thickness=0.01) -> trimesh.
     return mesh
 
 
-def text_texture(path, words, size=(512, 256), grid=32):
-    img = np.full((size[1], size[0]), 200, np.uint8)
-    img[::grid, :] = 90
-    img[:, ::grid] = 90
+DART_DIRECTION = np.array([np.sin(np.radians(35)), 0.0, -np.cos(np.radians(35))])   # keep in dart.motion.toml
+
+
+def dart_meshes(length=0.14, radius=0.013, segments=7, tip=0.02):
+    """(foam, bands): alternating body segments along +z, a rounded dark tip at +z, then turned so +z points
+    along DART_DIRECTION (the flight direction) and centred on the origin."""
+    seg = (length - tip) / segments
+    foam, bands = [], []
+    for i in range(segments):
+        c = trimesh.creation.cylinder(radius=radius, height=seg, sections=24)
+        c.apply_translation([0, 0, -length / 2 + (i + 0.5) * seg])
+        (foam if i % 2 == 0 else bands).append(c)
+    cap = trimesh.creation.capsule(height=tip * 0.6, radius=radius * 1.05, count=[16, 16])
+    cap.apply_translation([0, 0, length / 2 - tip / 2])
+    bands.append(cap)
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(z, DART_DIRECTION)
+    turn = trimesh.transformations.rotation_matrix(np.arccos(z @ DART_DIRECTION), axis)
+    out = []
+    for parts in (foam, bands):
+        m = trimesh.util.concatenate(parts)
+        m.apply_transform(turn)
+        out.append(m)
+    return out
+
+
+def text_texture(path, words, size=(512, 256), grid=32, paper=200, lines=90, ink=20):
+    img = np.full((size[1], size[0]), paper, np.uint8)
+    img[::grid, :] = lines
+    img[:, ::grid] = lines
     font = cv2.FONT_HERSHEY_DUPLEX
     for i, word in enumerate(words):
         (w, h), _ = cv2.getTextSize(word, font, 3.0, 8)
         y = int(size[1] * (i + 1) / (len(words) + 1) + h / 2)
-        cv2.putText(img, word, ((size[0] - w) // 2, y), font, 3.0, 20, 8, cv2.LINE_AA)
+        cv2.putText(img, word, ((size[0] - w) // 2, y), font, 3.0, ink, 8, cv2.LINE_AA)
     cv2.imwrite(path, img)
 
 
@@ -53,9 +81,14 @@ def grid_texture(path, size=256, pitch=32, width=4):
 if __name__ == "__main__":
     fan_mesh().export(os.path.join(HERE, "fan", "fan.ply"))
     text_texture(os.path.join(HERE, "fan", "text.png"), ["EVENT", "FIELDS"])
+    text_texture(os.path.join(HERE, "fan", "label.png"), ["CVPR"], size=(256, 102), grid=256, paper=230, ink=30)
     text_texture(os.path.join(HERE, "galvo_static", "letters.png"), ["CVPR"], size=(256, 256))
     text_texture(os.path.join(HERE, "galvo_static", "text.png"), ["LIGHT", "FIELD"])
     grid_texture(os.path.join(HERE, "moving_grid", "grid.png"))
     text_texture(os.path.join(HERE, "falling", "text.png"), ["SLOW", "MOTION"])
     text_texture(os.path.join(HERE, "hdr_leds", "text.png"), ["DARK", "ROOM"])
+    for name, mesh in zip(("dart_foam", "dart_band"), dart_meshes()):
+        mesh.export(os.path.join(HERE, "dart", name + ".ply"))
+    # a low-contrast wall: the dart, not the wall, should dominate a focus measure around it
+    text_texture(os.path.join(HERE, "dart", "text.png"), ["NERF", "DART"], paper=170, lines=130, ink=95)
     print("assets written")
