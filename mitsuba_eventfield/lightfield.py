@@ -76,6 +76,23 @@ def galvo_disparity_model(optics: dict, width: int):
     return (f, f), (-f * d1, -f * (d1 + s))
 
 
+def galvo_field_depth(lf: "LightField", depth: float, x: float, y: float) -> float:
+    """Metric depth at pixel (x, y) from the depth a constant-shift refocus found sharpest there.
+
+    A mirror turn moves an image point at normalised coordinates (tx, ty) by (1 + tx^2) times what it moves
+    the centre along its own axis (plus a tx ty cross term that a circular scan averages out), so the shift
+    scale fitted over a full scan is alpha * s with s = 1 + (tx^2 + ty^2) / 2: off-axis points look farther.
+    Galvo depth is hypersensitive to the scale (alpha = f (1 - pivot / z) with pivot / z ~ 0.1-0.3), so even
+    5 degrees off axis biases depth by several percent. Uses the x-axis model (lf.A[0] = f, lf.B[0])."""
+    if lf.kind != "galvo":
+        raise ValueError(f"galvo_field_depth needs a galvo light field, got {lf.kind!r}")
+    h, w = lf.shape
+    f = lf.A[0]
+    tx, ty = (x + 0.5 - w / 2) / f, (y + 0.5 - h / 2) / f
+    alpha = lf.alpha(depth)[0] / (1 + (tx * tx + ty * ty) / 2)
+    return lf.depth_for_alpha(alpha)
+
+
 def spatial_disparity_model(optics: dict, view_w: int, view_h: int):
     D, S = optics["lens_to_image_plane"], optics["focus_distance"]
     W, H = optics["image_plane_size"]
@@ -92,6 +109,19 @@ def from_galvo(log_frames, times, optics: dict, meta: dict | None = None) -> Lig
     frames = _exp(log_frames)
     A, B = galvo_disparity_model(optics, frames.shape[2])
     return LightField(frames, np.stack([2 * ax, 2 * ay], axis=-1), times, A, B, "galvo", dict(meta or {}))
+
+
+def galvo_steps_per_period(optics: dict, width: int, px_per_step: float = 1.0) -> int:
+    """Render steps per scan period so the scan moves the image by at most ``px_per_step`` pixels per step
+    (at infinity, where the shift is largest): the path length of one period over ``px_per_step``."""
+    from .reconstruct import galvo_scan_shifts
+    from .scan import curve_from_dict
+    period = curve_from_dict(optics["scan"]).period
+    if period is None:
+        raise ValueError("the scan is not periodic")
+    shifts = galvo_scan_shifts(optics, np.linspace(0.0, period, 2049), math.inf, width)
+    length = float(np.hypot(*np.diff(shifts, axis=0).T).sum())
+    return max(1, int(math.ceil(length / px_per_step)))
 
 
 def galvo_view_times(optics: dict, t_period_start: float, views: int) -> np.ndarray:

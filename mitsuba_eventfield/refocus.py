@@ -76,12 +76,24 @@ def _spectra(lf: LightField, max_shift: float) -> _Spectra:
     return cached
 
 
-def refocus(lf: LightField, depth: float | None = None, alpha=None) -> np.ndarray:
+def motion_shifts(lf: LightField, motion) -> np.ndarray:
+    """(K, 2) image displacement of an object moving at ``motion`` = (vx, vy) pixels per second, in each view
+    relative to the light field's mean time. Views taken at different times (the galvo's) see a moving object
+    at different places; adding this to the disparity shifts refocuses it as it was at the mean time."""
+    vx, vy = (float(v) for v in motion)
+    dt = lf.times - lf.times.mean()
+    return np.stack([vx * dt, vy * dt], axis=-1)
+
+
+def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None) -> np.ndarray:
     """The light field refocused at ``depth`` (scene units; math.inf allowed) or at the disparity slope
-    ``alpha`` (pixels per unit of view position, see ``LightField``): (H, W[, C]) linear intensity."""
+    ``alpha`` (pixels per unit of view position, see ``LightField``): (H, W[, C]) linear intensity.
+    ``motion``: (vx, vy) image velocity in pixels per second of the object to make sharp (``motion_shifts``)."""
     if alpha is None and not (depth is not None and depth > 0):
         raise ValueError(f"depth = {depth!r}: must be > 0 (math.inf for infinity), or give alpha")
     shifts = lf.shifts(depth, alpha)
+    if motion is not None:
+        shifts = shifts + motion_shifts(lf, motion)
     spectra = _spectra(lf, np.abs(shifts).max())
     return np.maximum(spectra.shifted_sum(shifts) / len(lf.views), 0.0)
 
@@ -93,29 +105,79 @@ def depth_planes(near: float, far: float, count: int) -> np.ndarray:
     return 1.0 / np.linspace(1.0 / near, 1.0 / far, count)
 
 
-def focal_stack(lf: LightField, depths) -> np.ndarray:
+def focal_stack(lf: LightField, depths, motion=None) -> np.ndarray:
     """(D, H, W[, C]) refocused images, one per depth."""
-    return np.stack([refocus(lf, float(z)) for z in depths])
+    return np.stack([refocus(lf, float(z), motion=motion) for z in depths])
 
 
-def track_focus(lightfields, depths, roi, measure: str = "tenengrad", smooth: float = 0.0):
-    """Refocus a sequence of light fields on the object inside ``roi`` = (x0, y0, x1, y1) as it moves in
-    depth: for each light field, the depth whose refocused ROI is sharpest (sub-step refined, optionally
-    smoothed in inverse depth over time). Returns (depths chosen, refocused images)."""
+def _follow(template: np.ndarray, image: np.ndarray, roi, search: float = 1.0):
+    """The ROI of the same size where ``template`` best matches ``image`` (normalised cross-correlation),
+    searched within ``search`` ROI sizes of the old position."""
+    import cv2
+    x0, y0, x1, y1 = roi
+    h, w = image.shape[:2]
+    rw, rh = x1 - x0, y1 - y0
+    sx0, sy0 = max(0, x0 - int(search * rw)), max(0, y0 - int(search * rh))
+    sx1, sy1 = min(w, x1 + int(search * rw)), min(h, y1 + int(search * rh))
+    window = image[sy0:sy1, sx0:sx1]
+    if window.ndim == 3:
+        window, template = window.mean(-1), template.mean(-1)
+    score = cv2.matchTemplate(window.astype(np.float32), template.astype(np.float32), cv2.TM_CCOEFF_NORMED)
+    _, _, _, (bx, by) = cv2.minMaxLoc(score)
+    return (sx0 + bx, sy0 + by, sx0 + bx + rw, sy0 + by + rh)
+
+
+def _best_depth(lf, depths, roi, measure, motion):
     from .depth import focus_measure, refine_peak
     x0, y0, x1, y1 = roi
-    chosen, images, prev = [], [], None
+    stack = focal_stack(lf, depths, motion)
+    scores = np.array([focus_measure(s if s.ndim == 2 else s.mean(-1), measure)[y0:y1, x0:x1].mean()
+                       for s in stack])
+    k = int(np.argmax(scores))
+    return refine_peak(1.0 / depths, scores, k)
+
+
+def track_focus(lightfields, depths, roi, measure: str = "tenengrad", smooth: float = 0.0, follow: bool = False,
+                compensate_motion: bool = True):
+    """Refocus a sequence of light fields on the object inside ``roi`` = (x0, y0, x1, y1) pixels as it moves in
+    depth: for each light field, the depth whose refocused ROI is sharpest (sub-step refined, optionally
+    smoothed in inverse depth over time).
+
+    ``follow``: the ROI moves with the object, found in each light field (refocused at the previous depth) by
+    matching the previous refocused ROI. Then, with ``compensate_motion``, a second pass refocuses with the
+    object's image velocity (from the ROI track) taken out of every view (``motion_shifts``): views spread
+    over a scan period otherwise smear a fast object, and its motion biases the depth (it correlates with the
+    scan's position over the period). Returns (depths chosen, refocused images, ROIs, image velocities px/s).
+    """
+    lightfields = list(lightfields)
     depths = np.asarray(depths, dtype=np.float64)
-    for lf in lightfields:
-        stack = focal_stack(lf, depths)
-        scores = np.array([focus_measure(s if s.ndim == 2 else s.mean(-1), measure)[y0:y1, x0:x1].mean()
-                           for s in stack])
-        k = int(np.argmax(scores))
-        inv = refine_peak(1.0 / depths, scores, k)
+    roi = tuple(int(v) for v in roi)
+    rois, inverse, images = [], [], []
+    for lf in lightfields:                       # pass 1: where the object is, and its depth without motion
+        if follow and images:
+            x0, y0, x1, y1 = roi
+            roi = _follow(images[-1][y0:y1, x0:x1], refocus(lf, 1.0 / inverse[-1]), roi)
+        rois.append(roi)
+        inverse.append(_best_depth(lf, depths, roi, measure, None))
+        images.append(refocus(lf, 1.0 / inverse[-1]) if follow else None)
+    velocities = np.zeros((len(lightfields), 2))
+    if follow and compensate_motion and len(lightfields) > 1:
+        centres = np.array([[(r[0] + r[2]) / 2, (r[1] + r[3]) / 2] for r in rois], dtype=np.float64)
+        times = np.array([lf.times.mean() for lf in lightfields])
+        # the first ROI is the user's box, not a match: fit the matched ones (whole-pixel positions, so a
+        # smooth fit, at most quadratic, beats differences) and evaluate its derivative at every period
+        first = 1 if len(lightfields) > 2 else 0
+        degree = min(2, len(lightfields) - first - 1)
+        for i in (0, 1):
+            fit = np.polynomial.Polynomial.fit(times[first:], centres[first:, i], degree)
+            velocities[:, i] = fit.deriv()(times) if degree > 0 else 0.0
+        inverse = [_best_depth(lf, depths, r, measure, v) for lf, r, v in zip(lightfields, rois, velocities)]
+    chosen, out, prev = [], [], None
+    for lf, inv, v in zip(lightfields, inverse, velocities):
         if prev is not None and smooth > 0:
             inv = (1 - smooth) * inv + smooth * prev
         prev = inv
         z = 1.0 / inv if inv > 0 else math.inf
         chosen.append(z)
-        images.append(refocus(lf, z))
-    return np.array(chosen), np.stack(images)
+        out.append(refocus(lf, z, motion=v if follow and compensate_motion else None))
+    return np.array(chosen), np.stack(out), rois, velocities

@@ -215,7 +215,7 @@ def test_focus_tracking_follows_an_object_moving_in_depth(capsys):
     optics = timed.sensor.optics_metadata()
     times = np.linspace(0.0, 0.1, 5)                           # 1.4 m -> 0.7 m
     lfs = [ef.from_spatial(f, optics, log=False) for f in ef.render_frames(timed, times, log=False)]
-    chosen, images = ef.track_focus(lfs, ef.depth_planes(0.5, 4.0, 24), roi=(30, 30, 50, 50))
+    chosen, images, _, _ = ef.track_focus(lfs, ef.depth_planes(0.5, 4.0, 24), roi=(30, 30, 50, 50))
     truth = 1.4 - 7.0 * times
     with capsys.disabled():
         print("\n[focus tracking] chosen " + ", ".join(f"{z:.3f}" for z in chosen) + " m; true "

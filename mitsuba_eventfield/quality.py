@@ -1,0 +1,46 @@
+"""Image quality against a ground truth: PSNR and SSIM on one documented scale.
+
+Both images are divided by a white level (default: the truth's 99.9th percentile, so a few specular or LED
+pixels do not set the scale) and clipped to [0, 1]; PSNR is then 10 log10(1 / MSE) and SSIM is OpenCV's
+(Wang et al. 2004, Gaussian 11x11 window, on 8-bit codes), averaged over channels.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def white_level(truth: np.ndarray) -> float:
+    level = float(np.percentile(np.asarray(truth, np.float64), 99.9))
+    if not level > 0:
+        raise ValueError("the ground truth is black: no white level to score against")
+    return level
+
+
+def _unit(img, white):
+    return np.clip(np.asarray(img, np.float64) / white, 0.0, 1.0)
+
+
+def psnr(estimate: np.ndarray, truth: np.ndarray, white: float | None = None) -> float:
+    """dB; inf for identical images."""
+    if np.shape(estimate) != np.shape(truth):
+        raise ValueError(f"shapes differ: estimate {np.shape(estimate)}, truth {np.shape(truth)}")
+    white = white_level(truth) if white is None else white
+    mse = float(np.mean((_unit(estimate, white) - _unit(truth, white)) ** 2))
+    return float("inf") if mse == 0 else float(10 * np.log10(1.0 / mse))
+
+
+def ssim(estimate: np.ndarray, truth: np.ndarray, white: float | None = None) -> float:
+    import cv2
+    if np.shape(estimate) != np.shape(truth):
+        raise ValueError(f"shapes differ: estimate {np.shape(estimate)}, truth {np.shape(truth)}")
+    white = white_level(truth) if white is None else white
+    a = np.rint(_unit(estimate, white) * 255).astype(np.uint8)
+    b = np.rint(_unit(truth, white) * 255).astype(np.uint8)
+    score = cv2.quality.QualitySSIM_compute(a, b)[0]
+    channels = 1 if a.ndim == 2 else a.shape[-1]
+    return float(np.mean(score[:channels]))
+
+
+def scores(estimate: np.ndarray, truth: np.ndarray, white: float | None = None) -> dict:
+    white = white_level(truth) if white is None else white
+    return {"psnr_db": psnr(estimate, truth, white), "ssim": ssim(estimate, truth, white)}
