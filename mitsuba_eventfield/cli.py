@@ -129,6 +129,32 @@ def _parser() -> argparse.ArgumentParser:
     hd.add_argument("--depth", type=float, default=1.45, help="scene distance for the scan shifts (hdr_leds: 1.45)")
     hd.add_argument("--steps", type=int, default=64, help="render steps over the scan period")
     hd.add_argument("--spp", type=int, default=4)
+    _scenes = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
+    hs = sub.add_parser("highspeed", help="galvo refocus of every scan period on named depth planes, vs truth")
+    hs.add_argument("scene", nargs="?", default=os.path.join(_scenes, "fan", "fan.xml"))
+    hs.add_argument("-o", "--output", default="out/highspeed", help="output directory (EXRs, PNGs, figure, metrics)")
+    hs.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE",
+                    help="XML parameters (for the fan, on top of width=240 height=180 amplitude=2 mirror_distance=0.2)")
+    hs.add_argument("--plane", action="append", default=None, metavar="NAME=DEPTH",
+                    help="refocus plane (repeatable; default for the fan: fan=0.6 wall=1.5)")
+    hs.add_argument("--periods", type=int, help="scan periods (default: the motion file's duration)")
+    hs.add_argument("--views", type=int, default=40, help="views per scan period (default 40)")
+    hs.add_argument("--start", choices=("frame", "events"), default="frame",
+                    help="start frame the views integrate onto: one rendered frame, or the galvo solver")
+    tf = sub.add_parser("track-focus", help="galvo focus tracking of an object moving in depth, vs Mitsuba depth")
+    tf.add_argument("scene", nargs="?", default=os.path.join(_scenes, "dart", "galvo.xml"))
+    tf.add_argument("-o", "--output", default="out/track", help="output directory (PNGs, EXR, figure, metrics)")
+    tf.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
+    tf.add_argument("--roi", type=float, nargs=4, default=[0.58, 0.44, 0.78, 0.56], metavar=("X0", "Y0", "X1", "Y1"),
+                    help="object region in the first period, fractions of the image (default: the dart)")
+    tf.add_argument("--near", type=float, default=0.6, help="nearest depth searched (default 0.6)")
+    tf.add_argument("--far", type=float, default=1.5, help="farthest depth searched (default 1.5)")
+    tf.add_argument("--object-far", type=float, default=1.6,
+                    help="ground truth: object pixels are nearer than this (default 1.6; the dart's wall is at 1.8)")
+    tf.add_argument("--background", type=float, default=1.8, help="background depth for comparison (default 1.8)")
+    tf.add_argument("--planes", type=int, default=24, help="depth planes searched (default 24)")
+    tf.add_argument("--periods", type=int, help="scan periods (default: the motion file's duration)")
+    tf.add_argument("--views", type=int, default=40, help="views per scan period (default 40)")
     rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with tests/regression/")
     rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
     dev = sub.add_parser("device", help="drive the galvo through a function generator (SCPI/VISA)")
@@ -178,6 +204,50 @@ def _hdr(a) -> int:
     print(r.report())
     print(f"time split: render {r.meta['time_split_s']['render']:.1f} s, truth + solve "
           f"{r.meta['time_split_s']['truth_and_solve']:.1f} s; wrote {a.output}/hdr.png, EXRs (log) and metrics.json")
+    return 0
+
+
+FAN_DEFAULTS = {"define": ["width=240", "height=180", "amplitude=2", "mirror_distance=0.2"],
+                "plane": ["fan=0.6", "wall=1.5"]}
+
+
+def _pairs(items, what):
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"{what} {item!r}: expected NAME=VALUE")
+        out[key] = value
+    return out
+
+
+def _highspeed(a) -> int:
+    import mitsuba_eventfield as ef
+    from . import highspeed
+    fan = os.path.basename(a.scene) == "fan.xml"
+    try:
+        defines = _pairs((FAN_DEFAULTS["define"] if fan else []) + a.define, "-D")
+        planes = _pairs(a.plane if a.plane is not None else (FAN_DEFAULTS["plane"] if fan else []), "--plane")
+        r = highspeed.refocus_planes(a.scene, planes, defines, a.periods, a.views, a.start, progress=True)
+        paths = highspeed.write_planes(r, a.output)
+    except ValueError as e:
+        raise ef.EventFieldError(str(e)) from None
+    print(r.report())
+    print(f"wrote {paths['figure']}, per-plane EXRs and PNGs, {paths['metrics']}")
+    return 0
+
+
+def _track_focus(a) -> int:
+    import mitsuba_eventfield as ef
+    from . import highspeed
+    try:
+        r = highspeed.track_focus_depth(a.scene, a.roi, a.near, a.far, a.object_far, a.planes, a.background,
+                                        _pairs(a.define, "-D"), a.periods, a.views, progress=True)
+        paths = highspeed.write_track(r, a.output)
+    except (ValueError, RuntimeError) as e:
+        raise ef.EventFieldError(str(e)) from None
+    print(r.report())
+    print(f"wrote {paths['figure']}, per-period PNGs, {paths['exr']}, {paths['metrics']}")
     return 0
 
 
@@ -586,7 +656,8 @@ def main(argv=None) -> int:
     try:
         return {"render": _render, "info": _info, "preview": _preview, "frame": _frame, "reconstruct": _reconstruct,
                 "refocus": _refocus, "depth": _depth, "calibrate": _calibrate,
-                "device": _device, "regression": _regression, "bench": _bench, "hdr": _hdr}[args.command](args)
+                "device": _device, "regression": _regression, "bench": _bench, "hdr": _hdr,
+                "highspeed": _highspeed, "track-focus": _track_focus}[args.command](args)
     except EventFieldError as e:
         print(f"eventfield: error: {e}", file=sys.stderr)
         return 2

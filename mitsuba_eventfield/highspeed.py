@@ -1,0 +1,385 @@
+"""High-speed refocus with the galvo (paper section 6): one light field per scan period, refocused after capture.
+
+Pipeline (``refocus_planes`` and ``track_focus_depth``, one Python call each):
+
+1. render ``periods`` scan periods of events, steps sized so the scan moves the image at most ``px_per_step``
+   pixels per step (``lightfield.galvo_steps_per_period``);
+2. per period, ``views`` views (evenly spaced in time over the period) integrated from the events onto one
+   start frame (``start="frame"``: a conventional frame at t = 0, e.g. the RGB camera behind a beam splitter;
+   ``start="events"``: the static-scene galvo solver on the first period, right wherever nothing moved then) and
+   placed at their scan angles: a light field every period (250 per second at 250 Hz);
+3. refocus each light field on named depth planes, or follow an object moving in depth (focus tracking: the
+   sharpest depth inside a region that follows the object by template matching).
+
+Ground truth is the renderer's: the same views rendered directly (noise-free, same seed) and refocused by the
+same code, scored with PSNR/SSIM (``quality``); Mitsuba's depth AOV for the depth of the tracked object and for
+the regions that each plane should bring into focus. ``selectivity`` checks that refocus does what it says:
+the focus measure (tenengrad) of a plane's own region is higher when refocused on that plane than on the others.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+START_METHODS = ("frame", "events")
+
+
+def _check_positive(name, value, integer=False, low=0.0):
+    ok = isinstance(value, (int, np.integer)) if integer else isinstance(value, (int, float, np.number))
+    if not ok or not value > low or (not integer and not math.isfinite(value)):
+        kind = "an integer" if integer else "a number"
+        raise ValueError(f"{name} = {value!r}: must be {kind} > {low:g}")
+    return value
+
+
+@dataclass
+class Capture:
+    timed: object
+    events: object
+    lightfields: list           # one per period, from events
+    truth_lightfields: list     # same views rendered directly
+    period_s: float
+    seconds: dict
+
+
+def capture(scene_path: str, defines: dict | None = None, periods: int | None = None, views: int = 40,
+            start: str = "frame", px_per_step: float = 1.0, spp: int = 4, progress: bool = False) -> Capture:
+    """Events of ``periods`` whole scan periods (default: all of the motion file's duration) and, per period,
+    the light field from the events and the ground-truth light field of the same views."""
+    import mitsuba_eventfield as ef
+    from .lightfield import from_galvo, galvo_lightfields, galvo_steps_per_period
+    from .reconstruct import galvo_start_image
+    if start not in START_METHODS:
+        raise ValueError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
+    _check_positive("views", views, integer=True, low=1)
+    _check_positive("px_per_step", px_per_step)
+    timed = ef.load_scene(scene_path, **(defines or {}))
+    period = timed.scan_period
+    if not period:
+        raise ValueError(f"{scene_path}: needs a galvo sensor with a periodic scan")
+    if periods is None:
+        duration = timed.motion.duration if timed.motion is not None else None
+        if not duration:
+            raise ValueError(f"{scene_path}: no duration in its motion file: give periods")
+        periods = max(1, int(math.floor(duration / period + 1e-9)))
+    _check_positive("periods", periods, integer=True)
+    optics = timed.sensor.optics_metadata()
+    width = int(timed.sensor.film().size()[0])
+    steps = periods * max(2 * views, galvo_steps_per_period(optics, width, px_per_step))
+    t0 = time.perf_counter()
+    events = ef.render_events(timed, periods * period, steps=steps, spp=spp, progress=progress)
+    t1 = time.perf_counter()
+    if start == "frame":
+        log_start = ef.render_frames(timed, [0.0], spp=spp)[0]
+    else:
+        log_start = galvo_start_image(events, 0.0)
+    lfs = list(galvo_lightfields(events, views, "direct", log_start=log_start, t_start=0.0))
+    t2 = time.perf_counter()
+    truth = [from_galvo(ef.render_frames(timed, lf.times, spp=spp), lf.times, events.meta["optics"],
+                        {"period_index": k}) for k, lf in enumerate(lfs)]
+    t3 = time.perf_counter()
+    return Capture(timed, events, lfs, truth, period,
+                    {"render_events": t1 - t0, "views_from_events": t2 - t1, "ground_truth_views": t3 - t2})
+
+
+def _meta(cap: Capture, scene_path, defines, **kw) -> dict:
+    ev = cap.events
+    return {"scene": scene_path, "defines": dict(defines or {}), "events": len(ev), "periods": len(cap.lightfields),
+            "views_per_period": len(cap.lightfields[0].views), "scan_period_s": cap.period_s,
+            "light_fields_per_second": 1 / cap.period_s, "pixel_model": ev.meta["pixel_model"],
+            "optics": ev.meta["optics"], "render": ev.meta.get("render", {}), **kw}
+
+
+# ----------------------------------------------------------------------------------------- refocus on planes
+
+@dataclass
+class PlaneRefocus:
+    planes: dict                 # name -> depth
+    refocused: dict              # name -> (P, H, W): from events, one image per period
+    truth: dict                  # name -> (P, H, W): the rendered views refocused the same way
+    scores: dict                 # name -> {"psnr_db": [per period], "ssim": [...]}
+    selectivity: dict            # name -> min over other planes of focus(own region @ own) / focus(@ other)
+    period_s: float
+    meta: dict = field(default_factory=dict)
+
+    def report(self) -> str:
+        lines = [f"{len(next(iter(self.refocused.values())))} refocused light fields per plane, "
+                 f"{1 / self.period_s:g} per second; against the rendered views refocused alike:",
+                 "  plane        depth   PSNR dB (mean, min)   SSIM (mean, min)   focus selectivity"]
+        for name, z in self.planes.items():
+            p, s = np.array(self.scores[name]["psnr_db"]), np.array(self.scores[name]["ssim"])
+            lines.append(f"  {name:<10} {z:7.3g}   {p.mean():7.2f} {p.min():7.2f}       {s.mean():6.3f} {s.min():6.3f}"
+                         f"        {self.selectivity[name]:.2f}x")
+        lines.append("  time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
+        return "\n".join(lines)
+
+
+def _check_planes(planes: dict) -> dict:
+    if not planes:
+        raise ValueError("planes: give at least one name=depth")
+    out = {}
+    for name, z in planes.items():
+        z = float(z)
+        if not (z > 0 and math.isfinite(z)):
+            raise ValueError(f"plane {name!r}: depth = {z!r} must be a finite number > 0 (scene units)")
+        out[str(name)] = z
+    return out
+
+
+def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, periods: int | None = None,
+                   views: int = 40, start: str = "frame", region_tolerance: float = 0.15, spp: int = 4,
+                   progress: bool = False) -> PlaneRefocus:
+    """Refocus every scan period's light field on each named plane ({name: depth}), scored against the rendered
+    views. A plane's region (for ``selectivity``): textured pixels whose true depth at the middle of the period
+    is within ``region_tolerance`` (relative) of the plane's depth."""
+    from .depth import focus_measure
+    from .quality import scores as quality_scores
+    from .refocus import refocus
+    from .truth import textured, truth_depth
+    planes = _check_planes(planes)
+    cap = capture(scene_path, defines, periods, views, start, spp=spp, progress=progress)
+    t0 = time.perf_counter()
+    refocused = {n: np.stack([refocus(lf, z) for lf in cap.lightfields]) for n, z in planes.items()}
+    t1 = time.perf_counter()
+    truth = {n: np.stack([refocus(lf, z) for lf in cap.truth_lightfields]) for n, z in planes.items()}
+    scores = {n: {"psnr_db": [], "ssim": []} for n in planes}
+    focus = {n: {m: [] for m in planes} for n in planes}       # region n refocused on plane m
+    for k, lf in enumerate(cap.truth_lightfields):
+        z_true = truth_depth(cap.timed, float(lf.times.mean()))
+        tex = textured(np.log(np.maximum(truth[next(iter(planes))][k], 1e-6)))
+        for n in planes:
+            s = quality_scores(refocused[n][k], truth[n][k])
+            for key in s:
+                scores[n][key].append(s[key])
+            region = tex & (np.abs(z_true / planes[n] - 1) < region_tolerance)
+            for m in planes:
+                fm = focus_measure(refocused[m][k], "tenengrad")
+                focus[n][m].append(float(fm[region].mean()) if region.any() else float("nan"))
+    selectivity = {}
+    for n in planes:
+        own = np.nanmean(focus[n][n])
+        others = [np.nanmean(focus[n][m]) for m in planes if m != n]
+        selectivity[n] = float(own / max(others)) if others else float("nan")
+    t2 = time.perf_counter()
+    return PlaneRefocus(planes, refocused, truth, scores, selectivity, cap.period_s, _meta(
+        cap, scene_path, defines, planes=planes, start=start, region_tolerance=region_tolerance,
+        time_split_s={**cap.seconds, "refocus": t1 - t0, "scoring": t2 - t1}))
+
+
+# ------------------------------------------------------------------------------------------- focus tracking
+
+@dataclass
+class FocusTrack:
+    depths: np.ndarray           # (P,) metric depth per period (sharpest refocus, field-corrected)
+    truth: np.ndarray            # (P,) median true depth of the object inside its region, mid-period
+    rois: np.ndarray             # (P, 4) x0, y0, x1, y1 followed per period (pixels)
+    images: np.ndarray           # (P, H, W) refocused where the object is sharpest
+    background: np.ndarray       # (P, H, W) refocused on ``background_depth`` for comparison
+    times: np.ndarray            # (P,) middle of each period (s)
+    velocities: np.ndarray       # (P, 2) image velocity of the object (px/s) taken out of the refocus
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def relative_errors(self) -> np.ndarray:
+        return np.abs(self.depths - self.truth) / self.truth
+
+    def report(self) -> str:
+        lines = ["period  t (ms)   chosen z   true z   |rel err|"]
+        for k, (t, z, zt) in enumerate(zip(self.times, self.depths, self.truth)):
+            lines.append(f"  {k:4d} {t * 1e3:8.2f} {z:10.3f} {zt:8.3f} {abs(z - zt) / zt:10.3f}")
+        e = self.relative_errors
+        lines.append(f"median |relative depth error| {np.median(e):.3f}, max {e.max():.3f}")
+        lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
+        return "\n".join(lines)
+
+
+def roi_pixels(roi, width: int, height: int) -> tuple:
+    """(x0, y0, x1, y1) in pixels from fractions of the image size (so one ROI serves every resolution)."""
+    x0, y0, x1, y1 = (float(v) for v in roi)
+    if not (0 <= x0 < x1 <= 1 and 0 <= y0 < y1 <= 1):
+        raise ValueError(f"roi = {tuple(roi)}: must be fractions 0 <= x0 < x1 <= 1, 0 <= y0 < y1 <= 1 of the image")
+    px = (int(round(x0 * width)), int(round(y0 * height)), int(round(x1 * width)), int(round(y1 * height)))
+    if px[2] - px[0] < 3 or px[3] - px[1] < 3:
+        raise ValueError(f"roi = {tuple(roi)} is {px[2] - px[0]} x {px[3] - px[1]} pixels at {width} x {height}: "
+                         "needs at least 3 x 3")
+    return px
+
+
+def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far: float, planes: int = 24,
+                      background_depth: float | None = None, defines: dict | None = None,
+                      periods: int | None = None, views: int = 40, start: str = "frame", smooth: float = 0.0,
+                      compensate_motion: bool = True, spp: int = 4, progress: bool = False,
+                      captured: Capture | None = None) -> FocusTrack:
+    """Follow an object moving in depth: per scan period, the depth in [near, far] at which the object's region
+    is sharpest; the region starts at ``roi`` (fractions of the image) and follows the object by template
+    matching; with ``compensate_motion`` the object's image velocity is taken out of the views
+    (``refocus.track_focus``). The sharpest refocus depth is turned into metric depth at the region's centre
+    (``lightfield.galvo_field_depth``). ``captured``: a ``capture`` of the scene to reuse. Truth: the median Mitsuba depth of the region's pixels nearer than
+    ``object_far`` (the object's pixels, the background being farther)."""
+    from .lightfield import galvo_field_depth
+    from .refocus import depth_planes, refocus, track_focus
+    from .truth import truth_depth
+    if not (0 < near < far and object_far > near):
+        raise ValueError(f"near = {near}, far = {far}, object_far = {object_far}: need 0 < near < far and "
+                         "object_far > near (scene units)")
+    cap = captured or capture(scene_path, defines, periods, views, start, spp=spp, progress=progress)
+    h, w = cap.lightfields[0].shape
+    roi_px = roi_pixels(roi, w, h)
+    t0 = time.perf_counter()
+    depths, images, rois, velocities = track_focus(cap.lightfields, depth_planes(near, far, planes), roi_px,
+                                                   smooth=smooth, follow=True, compensate_motion=compensate_motion)
+    # metric depth: undo the field-dependent scan scale at the object's position (lightfield.galvo_field_depth)
+    sharpest = depths
+    depths = np.array([galvo_field_depth(lf, z, (r[0] + r[2] - 1) / 2, (r[1] + r[3] - 1) / 2)
+                       for lf, z, r in zip(cap.lightfields, sharpest, rois)])
+    bg = far if background_depth is None else background_depth
+    background = np.stack([refocus(lf, bg) for lf in cap.lightfields])
+    t1 = time.perf_counter()
+    times = np.array([float(lf.times.mean()) for lf in cap.lightfields])
+    truth = []
+    for k, t in enumerate(times):
+        x0, y0, x1, y1 = rois[k]
+        z = truth_depth(cap.timed, t)[y0:y1, x0:x1]
+        obj = z[z < object_far]
+        truth.append(float(np.median(obj)) if obj.size else float("nan"))
+    truth = np.array(truth)
+    if np.isnan(truth).any():
+        lost = [int(k) for k in np.flatnonzero(np.isnan(truth))]
+        raise RuntimeError(f"{scene_path}: the tracked region holds no pixel nearer than object_far = {object_far} "
+                           f"in periods {lost}: the object was lost (start roi {tuple(roi)})")
+    t2 = time.perf_counter()
+    return FocusTrack(depths, truth, np.array(rois), images, background, times, velocities, _meta(
+        cap, scene_path, defines, roi=list(map(float, roi)), near=near, far=far, planes=planes,
+        compensate_motion=compensate_motion,
+        object_far=object_far, background_depth=bg, start=start, smooth=smooth,
+        sharpest_refocus_depths=sharpest.tolist(),
+        time_split_s={**cap.seconds, "focus_tracking": t1 - t0, "ground_truth_depth": t2 - t1}))
+
+
+# ------------------------------------------------------------------------------------------ outputs, figures
+
+def _write_json(path, payload):
+    import json
+
+    from .atomic import atomic_output
+    with atomic_output(path, "metrics") as tmp, open(tmp, "w") as f:
+        json.dump(payload, f, indent=2, default=str)
+
+
+def _save_figure(fig, path):
+    import matplotlib.pyplot as plt
+
+    from .atomic import atomic_output
+    with atomic_output(path, "figure") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path
+
+
+def _pyplot():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def planes_figure(result: PlaneRefocus, path: str, period: int | None = None) -> str:
+    """For one scan period: refocus from events on each plane (top) and the same refocus of the rendered views
+    (bottom), one grey scale."""
+    plt = _pyplot()
+    names = list(result.planes)
+    k = len(result.refocused[names[0]]) // 2 if period is None else period
+    hi = max(float(np.percentile(result.truth[n][k], 99.5)) for n in names)
+    fig, axes = plt.subplots(2, len(names), figsize=(4 * len(names), 6.4), squeeze=False)
+    for j, n in enumerate(names):
+        s = result.scores[n]
+        for i, (label, img) in enumerate((("from events", result.refocused[n][k]),
+                                          ("rendered views (truth)", result.truth[n][k]))):
+            ax = axes[i, j]
+            ax.imshow(img, cmap="gray", vmin=0, vmax=hi)
+            title = f"on {n} ({result.planes[n]:g} m), {label}"
+            if i == 0:
+                title += f"\nPSNR {s['psnr_db'][k]:.1f} dB, SSIM {s['ssim'][k]:.3f}"
+            ax.set_title(title, fontsize=8)
+            ax.axis("off")
+    fig.suptitle(f"High-speed refocus: scan period {k} of {len(result.refocused[names[0]])} "
+                 f"({1 / result.period_s:g} light fields per second)", fontsize=9)
+    fig.tight_layout()
+    return _save_figure(fig, path)
+
+
+def track_figure(result: FocusTrack, path: str, columns: int = 6) -> str:
+    """Crops around the followed object, refocused on the tracked depth (top) and on the background (middle),
+    and the tracked depth against Mitsuba's over time (bottom)."""
+    plt = _pyplot()
+    n = len(result.depths)
+    pick = np.unique(np.linspace(0, n - 1, min(columns, n)).round().astype(int))
+    h, w = result.images.shape[1:3]
+    fig = plt.figure(figsize=(2.2 * len(pick), 6.2))
+    grid = fig.add_gridspec(3, len(pick), height_ratios=[1, 1, 1.3])
+    hi = float(np.percentile(result.background, 99.5))
+    for j, k in enumerate(pick):
+        x0, y0, x1, y1 = result.rois[k]
+        cx, cy, half = (x0 + x1) // 2, (y0 + y1) // 2, max(x1 - x0, y1 - y0)
+        box = (max(0, cy - half), min(h, cy + half), max(0, cx - half), min(w, cx + half))
+        for i, (img, label) in enumerate(((result.images[k], f"on {result.depths[k]:.2f} m"),
+                                          (result.background[k], f"on {result.meta['background_depth']:g} m"))):
+            ax = fig.add_subplot(grid[i, j])
+            ax.imshow(img[box[0]:box[1], box[2]:box[3]], cmap="gray", vmin=0, vmax=hi)
+            ax.set_title(f"{result.times[k] * 1e3:.0f} ms, {label}", fontsize=7)
+            ax.axis("off")
+    ax = fig.add_subplot(grid[2, :])
+    ax.plot(result.times * 1e3, result.truth, "k-", label="Mitsuba depth (median over the object)")
+    ax.plot(result.times * 1e3, result.depths, "o", color="tab:red", label="sharpest refocus depth (events)")
+    ax.set_xlabel("time (ms)")
+    ax.set_ylabel("depth (m)")
+    ax.legend(fontsize=7)
+    e = result.relative_errors
+    ax.set_title(f"focus tracking at {result.meta['light_fields_per_second']:g} light fields per second: median "
+                 f"|relative error| {np.median(e):.3f}, max {e.max():.3f}", fontsize=8)
+    fig.tight_layout()
+    return _save_figure(fig, path)
+
+
+def write_planes(result: PlaneRefocus, out_dir: str) -> dict:
+    """EXR per plane (channels ``events_pK`` and ``truth_pK`` per period, linear), PNG per plane and period,
+    the figure and metrics.json (scores, selectivity, time split, scene and optics metadata)."""
+    import os
+
+    from .images import to_uint8, write_exr, write_png
+    os.makedirs(out_dir, exist_ok=True)
+    meta = {k: v for k, v in result.meta.items()}
+    paths = {}
+    for n in result.planes:
+        channels = {}
+        for k in range(len(result.refocused[n])):
+            channels[f"events_p{k}"] = result.refocused[n][k]
+            channels[f"truth_p{k}"] = result.truth[n][k]
+            write_png(os.path.join(out_dir, f"{n}_p{k:03d}.png"), to_uint8(result.refocused[n][k]))
+        paths[n] = write_exr(os.path.join(out_dir, f"{n}.exr"), channels, {**meta, "plane": n})
+    paths["figure"] = planes_figure(result, os.path.join(out_dir, "highspeed.png"))
+    paths["metrics"] = os.path.join(out_dir, "metrics.json")
+    _write_json(paths["metrics"], {"scores": result.scores, "selectivity": result.selectivity, **meta})
+    return paths
+
+
+def write_track(result: FocusTrack, out_dir: str) -> dict:
+    """PNG per period (refocused on the tracked depth), an EXR of them, the figure and metrics.json."""
+    import os
+
+    from .images import to_uint8, write_exr, write_png
+    os.makedirs(out_dir, exist_ok=True)
+    for k, img in enumerate(result.images):
+        write_png(os.path.join(out_dir, f"tracked_p{k:03d}.png"), to_uint8(img))
+    paths = {"exr": write_exr(os.path.join(out_dir, "tracked.exr"),
+                              {f"p{k}": img for k, img in enumerate(result.images)}, result.meta),
+             "figure": track_figure(result, os.path.join(out_dir, "track.png")),
+             "metrics": os.path.join(out_dir, "metrics.json")}
+    _write_json(paths["metrics"], {"times_s": result.times.tolist(), "depths": result.depths.tolist(),
+                                   "image_velocity_px_per_s": result.velocities.tolist(),
+                                   "truth": result.truth.tolist(), "rois_px": result.rois.tolist(),
+                                   "relative_errors": result.relative_errors.tolist(), **result.meta})
+    return paths
