@@ -4,7 +4,8 @@
 
 * scenes/fan/fan.ply: a four-blade fan (hub + blades, built with trimesh), axis +z, radius 0.25 m.
 * scenes/*/text.png, letters.png: 8-bit grey textures with large text and a grid (OpenCV), so edges of every
-  orientation exist.
+  orientation exist; scenes/falling/text.png is the same in colour (blue-grey paper, red grid, dark green text),
+  so that its RGB frames carry colour the luminance events do not.
 * scenes/moving_grid/grid.png: dark lines on white, both orientations (the paper's grid experiment).
 """
 import os
@@ -30,15 +31,17 @@ def fan_mesh(radius=0.25, blades=4, hub_radius=0.05, thickness=0.01) -> trimesh.
     return mesh
 
 
-def text_texture(path, words, size=(512, 256), grid=32):
-    img = np.full((size[1], size[0]), 200, np.uint8)
-    img[::grid, :] = 90
-    img[:, ::grid] = 90
+def text_texture(path, words, size=(512, 256), grid=32, colors=None):
+    """``colors``: None (grey) or BGR (paper, grid, text)."""
+    paper, lines, ink = colors or (200, 90, 20)
+    img = np.full((size[1], size[0]) + ((3,) if colors else ()), paper, np.uint8)
+    img[::grid, :] = lines
+    img[:, ::grid] = lines
     font = cv2.FONT_HERSHEY_DUPLEX
     for i, word in enumerate(words):
         (w, h), _ = cv2.getTextSize(word, font, 3.0, 8)
         y = int(size[1] * (i + 1) / (len(words) + 1) + h / 2)
-        cv2.putText(img, word, ((size[0] - w) // 2, y), font, 3.0, 20, 8, cv2.LINE_AA)
+        cv2.putText(img, word, ((size[0] - w) // 2, y), font, 3.0, ink, 8, cv2.LINE_AA)
     cv2.imwrite(path, img)
 
 
@@ -56,6 +59,7 @@ if __name__ == "__main__":
     text_texture(os.path.join(HERE, "galvo_static", "letters.png"), ["CVPR"], size=(256, 256))
     text_texture(os.path.join(HERE, "galvo_static", "text.png"), ["LIGHT", "FIELD"])
     grid_texture(os.path.join(HERE, "moving_grid", "grid.png"))
-    text_texture(os.path.join(HERE, "falling", "text.png"), ["SLOW", "MOTION"])
+    text_texture(os.path.join(HERE, "falling", "text.png"), ["SLOW", "MOTION"], size=(480, 320),
+                 colors=((215, 200, 180), (60, 60, 190), (40, 110, 20)))
     text_texture(os.path.join(HERE, "hdr_leds", "text.png"), ["DARK", "ROOM"])
     print("assets written")
