@@ -129,6 +129,15 @@ def _parser() -> argparse.ArgumentParser:
     hd.add_argument("--depth", type=float, default=1.45, help="scene distance for the scan shifts (hdr_leds: 1.45)")
     hd.add_argument("--steps", type=int, default=64, help="render steps over the scan period")
     hd.add_argument("--spp", type=int, default=4)
+    sm = sub.add_parser("slomorf", help="slow-motion refocus: kaleidoscope events + 120 fps RGB frames, scored")
+    sm.add_argument("scene", nargs="?", help="kaleidoscope scene (default: the bundled scenes/falling)")
+    sm.add_argument("-o", "--output", default="out/slomorf", help="output directory (frames, video, metrics)")
+    sm.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE", help="XML default")
+    sm.add_argument("--fps", type=float, default=120.0, help="RGB camera frame rate (default 120)")
+    sm.add_argument("--factor", type=int, default=8, help="frames per RGB frame interval (default 8)")
+    sm.add_argument("--depths", default="0.55,0.8,1.4", help="refocus depths (default: falling's post, block, wall)")
+    sm.add_argument("--duration", type=float, help="seconds (default: the motion file's)")
+    sm.add_argument("--spp", type=int, default=4)
     rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with tests/regression/")
     rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
     dev = sub.add_parser("device", help="drive the galvo through a function generator (SCPI/VISA)")
@@ -178,6 +187,26 @@ def _hdr(a) -> int:
     print(r.report())
     print(f"time split: render {r.meta['time_split_s']['render']:.1f} s, truth + solve "
           f"{r.meta['time_split_s']['truth_and_solve']:.1f} s; wrote {a.output}/hdr.png, EXRs (log) and metrics.json")
+    return 0
+
+
+def _slomorf(a) -> int:
+    import mitsuba_eventfield as ef
+    from . import slomorf
+    defines = dict(item.partition("=")[::2] for item in a.define)
+    try:
+        depths = [float(v) for v in a.depths.split(",") if v.strip()]
+    except ValueError:
+        raise ef.EventFieldError(f"--depths {a.depths!r}: expected comma-separated numbers > 0") from None
+    os.makedirs(a.output, exist_ok=True)
+    try:
+        r = slomorf.slomorf(a.scene or slomorf.DEFAULT_SCENE, defines, a.fps, a.factor, a.duration, depths, a.spp, progress=True)
+    except ValueError as e:
+        raise ef.EventFieldError(str(e)) from None
+    written = slomorf.write_outputs(r, a.output)
+    print(r.report())
+    print(f"wrote {a.output}: {len(written['frames'])} frames, {len(written['refocus'])} refocused images, "
+          "slomorf.mp4, slomorf.gif, slomorf.png, metrics.json")
     return 0
 
 
@@ -586,7 +615,8 @@ def main(argv=None) -> int:
     try:
         return {"render": _render, "info": _info, "preview": _preview, "frame": _frame, "reconstruct": _reconstruct,
                 "refocus": _refocus, "depth": _depth, "calibrate": _calibrate,
-                "device": _device, "regression": _regression, "bench": _bench, "hdr": _hdr}[args.command](args)
+                "device": _device, "regression": _regression, "bench": _bench, "hdr": _hdr,
+                "slomorf": _slomorf}[args.command](args)
     except EventFieldError as e:
         print(f"eventfield: error: {e}", file=sys.stderr)
         return 2
