@@ -43,31 +43,32 @@ def test_events_beat_linear_blending_against_the_truth(result, capsys):
     m = result.metrics
     ev, ev_time, lin = (m["frames"][k] for k in ("events", "events_time", "linear"))
     assert m["interpolated_frames"] == 21 and result.is_key.sum() == 4
-    # measured: PSNR 25.9 / 23.1 dB, moving pixels 16.3 / 13.5 dB, SSIM 0.974 / 0.935 (events / linear)
-    assert ev["psnr"] > lin["psnr"] + 1.5 and ev["psnr_moving"] > lin["psnr_moving"] + 1.5
-    assert ev["ssim"] > lin["ssim"] + 0.02 and ev["psnr_worst"] > lin["psnr_worst"] + 1.0
-    assert ev["psnr"] > 24.0 and ev["psnr_moving"] > 14.5 and ev["ssim"] > 0.96
-    # the event-count fusion beats time-distance weights (measured +0.49 dB)
-    assert ev["psnr"] > ev_time["psnr"] + 0.2
-    # the motion is large enough for linear blending to fail visibly: moving pixels measured 13.5 dB
-    assert lin["psnr_moving"] < 15.0
+    # measured: PSNR 26.1 / 24.0 dB, moving pixels 16.5 / 14.4 dB, SSIM 0.963 / 0.913, worst frame 23.7 / 21.5
+    # dB (events / linear)
+    assert ev["psnr"] > lin["psnr"] + 1.4 and ev["psnr_moving"] > lin["psnr_moving"] + 1.4
+    assert ev["ssim"] > lin["ssim"] + 0.03 and ev["psnr_worst"] > lin["psnr_worst"] + 1.4
+    assert ev["psnr"] > 25.0 and ev["psnr_moving"] > 15.5 and ev["ssim"] > 0.95
+    # the event-count fusion beats time-distance weights (measured +0.34 dB)
+    assert ev["psnr"] > ev_time["psnr"] + 0.15
+    # the motion is large enough for linear blending to fail visibly: moving pixels measured 14.4 dB
+    assert lin["psnr_moving"] < 15.5
 
 
 def test_refocus_of_interpolated_frames_against_refocused_truth(result):
     rf = result.metrics["refocus"]
     ev, lin = rf["events"], rf["linear"]
-    # measured: 32.2 / 30.8 dB, SSIM 0.980 / 0.952; at the block's depth 0.8: 27.1 / 24.8 dB
-    assert ev["psnr"] > lin["psnr"] + 0.5 and ev["ssim"] > lin["ssim"] + 0.01
-    assert ev["psnr"] > 30.0 and ev["ssim"] > 0.97
+    # measured: 33.6 / 32.6 dB, SSIM 0.977 / 0.947; at the block's depth 0.8: 27.4 / 25.3 dB
+    assert ev["psnr"] > lin["psnr"] + 0.6 and ev["ssim"] > lin["ssim"] + 0.015
+    assert ev["psnr"] > 32.0 and ev["ssim"] > 0.965
     block = result.depths.index(0.8)
-    assert ev["per_depth"][block]["psnr"] > lin["per_depth"][block]["psnr"] + 1.2
+    assert ev["per_depth"][block]["psnr"] > lin["per_depth"][block]["psnr"] + 1.3
     for e, li in zip(ev["per_depth"], lin["per_depth"]):
         assert e["psnr"] > li["psnr"]
 
 
 def test_each_depth_brings_its_own_object_into_focus(result):
     """Pixels whose true depth (Mitsuba's depth AOV) is the post's, the block's or the wall's are sharpest in
-    the image refocused at that depth, by a clear factor (measured Tenengrad ratios 5.4, 3.3, 3.2)."""
+    the image refocused at that depth, by a clear factor (measured Tenengrad ratios 6.2, 2.6, 3.8)."""
     fc = result.metrics["focus_check"]
     assert fc["all_sharpest_at_own_depth"]
     for region in fc["regions"]:
