@@ -373,10 +373,13 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
 
 
 def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
-                  linlog_threshold: float | None = None) -> np.ndarray:
+                  linlog_threshold: float | None = None, rgb: bool = False) -> np.ndarray:
     """Frames of the scene at the given times (seconds): (T, H, W) log brightness exactly as the event pixel
     sees it (lin-log, fixed seed), or linear radiance with ``log=False``. Ground truth for reconstruction, and
-    the frame input of the complementary filter."""
+    the frame input of the complementary filter. ``rgb=True`` (with ``log=False``, scene loaded in a colour
+    variant): (T, H, W, 3) linear RGB, what a colour camera sees."""
+    if rgb and log:
+        raise EventFieldError("render_frames: rgb=True needs log=False (the event pixel's log is of luminance)")
     from .plugins import pixel_model
     from .plugins.event_integrator import DEFAULT_LINLOG, is_event_integrator
     timed = load_scene(scene)
@@ -391,6 +394,12 @@ def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
         timed.set_time(float(t))
         img = mi.render(timed.scene, integrator=inner, seed=seed, spp=spp)
         arr = np.array(img)
+        if rgb:
+            if arr.shape[-1] < 3:
+                raise EventFieldError("render_frames: rgb=True needs the scene loaded in a colour variant "
+                                      f"(load_scene(..., color=True)); the active variant is {mi.variant()}")
+            frames.append(arr[..., :3])
+            continue
         lum = arr[..., 0] if arr.shape[-1] == 1 else arr[..., 0] * 0.212671 + arr[..., 1] * 0.715160 + arr[..., 2] * 0.072169
         frames.append(pixel_model.linlog_np(lum, linlog_threshold) if log else lum)
     return np.stack(frames)

@@ -4,7 +4,8 @@
 
 * scenes/fan/fan.ply: a four-blade fan (hub + blades, built with trimesh), axis +z, radius 0.25 m.
 * scenes/*/text.png, letters.png: 8-bit grey textures with large text and a grid (OpenCV), so edges of every
-  orientation exist.
+  orientation exist; scenes/falling/text.png is the same in colour (blue-grey paper, red grid, dark green text),
+  so that its RGB frames carry colour the luminance events do not.
 * scenes/moving_grid/grid.png: dark lines on white, both orientations (the paper's grid experiment).
 * scenes/dart/dart_foam.ply, dart_band.ply: a foam dart (2x a real one: 14 cm long) split into its light foam
   segments and its dark bands + tip, so each gets its own BSDF; axis along the flight direction.
@@ -58,8 +59,11 @@ def dart_meshes(length=0.14, radius=0.013, segments=7, tip=0.02):
     return out
 
 
-def text_texture(path, words, size=(512, 256), grid=32, paper=200, lines=90, ink=20):
-    img = np.full((size[1], size[0]), paper, np.uint8)
+def text_texture(path, words, size=(512, 256), grid=32, colors=None):
+    """``colors``: None (grey 200 / 90 / 20) or (paper, grid, text), each a grey level or a BGR triple."""
+    paper, lines, ink = colors or (200, 90, 20)
+    rgb = any(isinstance(c, (tuple, list)) for c in (paper, lines, ink))
+    img = np.full((size[1], size[0]) + ((3,) if rgb else ()), paper, np.uint8)
     img[::grid, :] = lines
     img[:, ::grid] = lines
     font = cv2.FONT_HERSHEY_DUPLEX
@@ -81,14 +85,15 @@ def grid_texture(path, size=256, pitch=32, width=4):
 if __name__ == "__main__":
     fan_mesh().export(os.path.join(HERE, "fan", "fan.ply"))
     text_texture(os.path.join(HERE, "fan", "text.png"), ["EVENT", "FIELDS"])
-    text_texture(os.path.join(HERE, "fan", "label.png"), ["CVPR"], size=(256, 102), grid=256, paper=230, ink=30)
+    text_texture(os.path.join(HERE, "fan", "label.png"), ["CVPR"], size=(256, 102), grid=256, colors=(230, 90, 30))
     text_texture(os.path.join(HERE, "galvo_static", "letters.png"), ["CVPR"], size=(256, 256))
     text_texture(os.path.join(HERE, "galvo_static", "text.png"), ["LIGHT", "FIELD"])
     grid_texture(os.path.join(HERE, "moving_grid", "grid.png"))
-    text_texture(os.path.join(HERE, "falling", "text.png"), ["SLOW", "MOTION"])
+    text_texture(os.path.join(HERE, "falling", "text.png"), ["SLOW", "MOTION"], size=(480, 320),
+                 colors=((215, 200, 180), (60, 60, 190), (40, 110, 20)))
     text_texture(os.path.join(HERE, "hdr_leds", "text.png"), ["DARK", "ROOM"])
     for name, mesh in zip(("dart_foam", "dart_band"), dart_meshes()):
         mesh.export(os.path.join(HERE, "dart", name + ".ply"))
     # a low-contrast wall: the dart, not the wall, should dominate a focus measure around it
-    text_texture(os.path.join(HERE, "dart", "text.png"), ["NERF", "DART"], paper=170, lines=130, ink=95)
+    text_texture(os.path.join(HERE, "dart", "text.png"), ["NERF", "DART"], colors=(170, 130, 95))
     print("assets written")

@@ -1,0 +1,135 @@
+"""SloMoRF: event interpolation of 120 fps RGB frames and refocus, scored against the renderer's ground truth.
+
+Bounds come from measurements at this size (scenes/falling, 150 px film = 50 px views, 25 ms, factor 8; numbers
+in the comments), with headroom, and each is one a broken method would miss.
+"""
+import json
+import os
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from mitsuba_eventfield import backend, slomorf
+
+SCENE = os.path.join(ROOT, "scenes", "falling", "falling.xml")
+
+
+@pytest.fixture(scope="module")
+def result():
+    return slomorf.slomorf(SCENE, {"views_px": 150}, duration=0.025, factor=8)
+
+
+def test_interpolate_takes_colour_from_the_side_that_did_not_change():
+    red, blue = np.zeros((1, 2, 3)), np.zeros((1, 2, 3))
+    red[..., 0], blue[..., 2] = 0.5, 0.25
+    change = np.full((1, 2), np.log(0.5))           # the pixel halved in luminance ...
+    before, after = np.array([[3.0, 0.0]]), np.array([[0.0, 3.0]])   # ... before t (pixel 0) or after t (pixel 1)
+    out = slomorf.interpolate(red, blue, np.where(before > 0, change, 0), np.where(after > 0, change, 0),
+                              before, after, w_b=0.5, fusion="events")
+    np.testing.assert_allclose(out[0, 0], blue[0, 0])                 # already changed: the next frame's colour
+    np.testing.assert_allclose(out[0, 1], red[0, 1])                  # not yet changed: the previous frame's
+    timed = slomorf.interpolate(red, blue, np.where(before > 0, change, 0), np.where(after > 0, change, 0),
+                                w_b=0.5, fusion="time")
+    assert not np.allclose(timed[0, 0], blue[0, 0])                   # the time fusion mixes both colours
+
+
+def test_events_beat_linear_blending_against_the_truth(result, capsys):
+    with capsys.disabled():
+        print("\n[SloMoRF, 150 px film, 25 ms, 8x]\n" + result.report())
+    m = result.metrics
+    ev, ev_time, lin = (m["frames"][k] for k in ("events", "events_time", "linear"))
+    assert m["interpolated_frames"] == 21 and result.is_key.sum() == 4
+    # measured: PSNR 26.1 / 24.0 dB, moving pixels 16.5 / 14.4 dB, SSIM 0.963 / 0.913, worst frame 23.7 / 21.5
+    # dB (events / linear)
+    assert ev["psnr"] > lin["psnr"] + 1.4 and ev["psnr_moving"] > lin["psnr_moving"] + 1.4
+    assert ev["ssim"] > lin["ssim"] + 0.03 and ev["psnr_worst"] > lin["psnr_worst"] + 1.4
+    assert ev["psnr"] > 25.0 and ev["psnr_moving"] > 15.5 and ev["ssim"] > 0.95
+    # the event-count fusion beats time-distance weights (measured +0.34 dB)
+    assert ev["psnr"] > ev_time["psnr"] + 0.15
+    # the motion is large enough for linear blending to fail visibly: moving pixels measured 14.4 dB
+    assert lin["psnr_moving"] < 15.5
+
+
+def test_refocus_of_interpolated_frames_against_refocused_truth(result):
+    rf = result.metrics["refocus"]
+    ev, lin = rf["events"], rf["linear"]
+    # measured: 33.6 / 32.6 dB, SSIM 0.977 / 0.947; at the block's depth 0.8: 27.4 / 25.3 dB
+    assert ev["psnr"] > lin["psnr"] + 0.6 and ev["ssim"] > lin["ssim"] + 0.015
+    assert ev["psnr"] > 32.0 and ev["ssim"] > 0.965
+    block = result.depths.index(0.8)
+    assert ev["per_depth"][block]["psnr"] > lin["per_depth"][block]["psnr"] + 1.3
+    for e, li in zip(ev["per_depth"], lin["per_depth"]):
+        assert e["psnr"] > li["psnr"]
+
+
+def test_each_depth_brings_its_own_object_into_focus(result):
+    """Pixels whose true depth (Mitsuba's depth AOV) is the post's, the block's or the wall's are sharpest in
+    the image refocused at that depth, by a clear factor (measured Tenengrad ratios 6.2, 2.6, 3.8)."""
+    fc = result.metrics["focus_check"]
+    assert fc["all_sharpest_at_own_depth"]
+    for region in fc["regions"]:
+        assert region["pixels"] > 1000
+        assert region["ratio_to_next_best"] > 1.8, region
+
+
+def test_variant_is_restored(result):
+    assert backend.mi.variant() == "llvm_ad_mono"        # conftest's; the RGB frames used llvm_ad_rgb
+
+
+def test_outputs_are_complete(result, tmp_path):
+    out = tmp_path / "s"
+    written = slomorf.write_outputs(result, str(out))
+    n = len(result.times)
+    assert len(written["frames"]) == n and len(written["refocus"]) == n * len(result.depths)
+    cap = cv2.VideoCapture(written["mp4"])
+    assert cap.isOpened()
+    frames = 0
+    while cap.read()[0]:
+        frames += 1
+    cap.release()
+    assert frames == n
+    from PIL import Image
+    with Image.open(written["gif"]) as gif:
+        assert gif.n_frames == n
+    with Image.open(written["frames"][1]) as png:
+        meta = json.loads(png.text["eventfield_meta"])
+        assert meta["frame"] == "interpolated (events)" and meta["fps"] == 120.0 and meta["optics"]["n"] == 3
+    with open(written["metrics"]) as f:
+        m = json.load(f)
+    assert set(m["time_split_s"]) == {"render_events", "render_rgb_frames", "render_truth_for_scoring",
+                                      "interpolate", "refocus", "score", "write"}
+    assert m["metrics"]["frames"]["events"]["psnr"] == result.metrics["frames"]["events"]["psnr"]
+    assert m["factor"] == 8 and m["score_domain"].startswith("8-bit") and "pixel_model" in m
+    assert not [p for p in out.rglob("*") if p.name.startswith(".")]          # no temporary files left
+
+
+@pytest.mark.parametrize("kw, words", [
+    ({"factor": 1}, ["factor = 1", "2..64"]),
+    ({"factor": 2.5}, ["factor = 2.5", "integer"]),
+    ({"depths": (0.8, 0.0)}, ["depths", "> 0"]),
+    ({"depths": (-1.0,)}, ["depths", "> 0"]),
+    ({"fps": 0.5}, ["fps = 0.5", "1..10000"]),
+    ({"fps": 2e4}, ["fps = 20000.0", "1..10000"]),
+    ({"duration": 0.001}, ["duration = 0.001", "0.00833333"]),
+])
+def test_bad_input_is_refused_before_rendering(kw, words):
+    with pytest.raises(ValueError) as err:
+        slomorf.slomorf(SCENE, {"views_px": 90}, **kw)
+    for w in words:
+        assert w in str(err.value)
+
+
+def test_cli_report_and_bad_factor(tmp_path):
+    cmd = [sys.executable, "-m", "mitsuba_eventfield.cli", "slomorf", SCENE, "-o", str(tmp_path / "c"),
+           "-D", "views_px=90", "--duration", "0.00834", "--factor", "2"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert "linear blend (baseline)" in r.stdout and "time split: render events" in r.stdout
+    assert sorted(os.listdir(tmp_path / "c")) == ["frames", "metrics.json", "refocus", "slomorf.gif", "slomorf.mp4",
+                                                  "slomorf.png"]
+    bad = subprocess.run(cmd[:-1] + ["1"], capture_output=True, text=True, timeout=600)
+    assert bad.returncode == 2 and "factor = 1: must be an integer in 2..64" in bad.stderr
