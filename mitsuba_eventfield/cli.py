@@ -164,6 +164,21 @@ def _parser() -> argparse.ArgumentParser:
     sm.add_argument("--depths", default="0.55,0.8,1.4", help="refocus depths (default: falling's post, block, wall)")
     sm.add_argument("--duration", type=float, help="seconds (default: the motion file's)")
     sm.add_argument("--spp", type=int, default=4)
+    sd = sub.add_parser("scanrate-depth", help="a metric depth map per galvo scan period, vs Mitsuba's depth")
+    sd.add_argument("scene", nargs="?", default=os.path.join(_scenes, "runner", "runner.xml"))
+    sd.add_argument("-o", "--output", default="out/scanrate", help="output directory (EXRs, PNGs, figure, metrics)")
+    sd.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
+    sd.add_argument("--periods", type=int, help="scan periods (default: the motion file's duration)")
+    sd.add_argument("--views", type=int, default=40, help="views per scan period (default 40)")
+    sd.add_argument("--near", type=float, default=0.4, help="nearest depth plane (default 0.4)")
+    sd.add_argument("--far", type=float, default=4.0, help="farthest depth plane (default 4)")
+    sd.add_argument("--planes", type=int, default=32, help="depth planes, uniform in inverse depth (default 32)")
+    sd.add_argument("--min-confidence", type=float, default=0.6, help="pixels scored and shown (default 0.6)")
+    sd.add_argument("--split-depth", type=float, default=1.2,
+                    help="errors reported for pixels nearer / farther than this (default 1.2: runner / wall)")
+    sd.add_argument("--calibration", help="calibration JSON (eventfield calibrate) instead of the nominal optics")
+    sd.add_argument("--field-correction", choices=("mean", "oriented", "off"), default="mean",
+                    help="undo the galvo's field-dependent scan scale (default: mean; see scanrate.run)")
     rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with tests/regression/")
     rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
     dev = sub.add_parser("device", help="drive the galvo through a function generator (SCPI/VISA)")
@@ -230,34 +245,52 @@ def _pairs(items, what):
     return out
 
 
+def _application(run, write, wrote) -> int:
+    """Run an application, write its outputs, print its report: bad input is one line, no traceback."""
+    from .errors import EventFieldError
+    try:
+        result = run()
+        paths = write(result)
+    except (ValueError, RuntimeError) as e:
+        raise EventFieldError(str(e)) from None
+    print(result.report())
+    print("wrote " + wrote(paths))
+    return 0
+
+
 def _highspeed(a) -> int:
-    import mitsuba_eventfield as ef
     from . import highspeed
     fan = os.path.basename(a.scene) == "fan.xml"
-    try:
+
+    def run():
         defines = _pairs((FAN_DEFAULTS["define"] if fan else []) + a.define, "-D")
         planes = _pairs(a.plane if a.plane is not None else (FAN_DEFAULTS["plane"] if fan else []), "--plane")
-        r = highspeed.refocus_planes(a.scene, planes, defines, a.periods, a.views, a.start, progress=True)
-        paths = highspeed.write_planes(r, a.output)
-    except ValueError as e:
-        raise ef.EventFieldError(str(e)) from None
-    print(r.report())
-    print(f"wrote {paths['figure']}, per-plane EXRs and PNGs, {paths['metrics']}")
-    return 0
+        return highspeed.refocus_planes(a.scene, planes, defines, a.periods, a.views, a.start, progress=True)
+    return _application(run, lambda r: highspeed.write_planes(r, a.output),
+                        lambda p: f"{p['figure']}, per-plane EXRs and PNGs, {p['metrics']}")
 
 
 def _track_focus(a) -> int:
-    import mitsuba_eventfield as ef
     from . import highspeed
-    try:
-        r = highspeed.track_focus_depth(a.scene, a.roi, a.near, a.far, a.object_far, a.planes, a.background,
-                                        _pairs(a.define, "-D"), a.periods, a.views, progress=True)
-        paths = highspeed.write_track(r, a.output)
-    except (ValueError, RuntimeError) as e:
-        raise ef.EventFieldError(str(e)) from None
-    print(r.report())
-    print(f"wrote {paths['figure']}, per-period PNGs, {paths['exr']}, {paths['metrics']}")
-    return 0
+    return _application(
+        lambda: highspeed.track_focus_depth(a.scene, a.roi, a.near, a.far, a.object_far, a.planes, a.background,
+                                            _pairs(a.define, "-D"), a.periods, a.views, progress=True),
+        lambda r: highspeed.write_track(r, a.output),
+        lambda p: f"{p['figure']}, per-period PNGs, {p['exr']}, {p['metrics']}")
+
+
+def _scanrate_depth(a) -> int:
+    from . import scanrate
+    calibration = None
+    if a.calibration:
+        from .calibration import load_calibration
+        calibration = load_calibration(a.calibration)
+    return _application(
+        lambda: scanrate.run(a.scene, _pairs(a.define, "-D"), a.periods, a.views, a.near, a.far, a.planes,
+                             min_confidence=a.min_confidence, split_depth=a.split_depth, calibration=calibration,
+                             field_correction=a.field_correction, progress=True),
+        lambda r: scanrate.write_outputs(r, a.output),
+        lambda p: f"{p['figure']}, {len(p['exr'])} depth EXRs and PNGs, {p['metrics']}")
 
 
 def _slomorf(a) -> int:
@@ -687,7 +720,7 @@ def main(argv=None) -> int:
                 "refocus": _refocus, "depth": _depth, "calibrate": _calibrate,
                 "device": _device, "regression": _regression, "bench": _bench, "hdr": _hdr,
                 "highspeed": _highspeed, "track-focus": _track_focus,
-                "slomorf": _slomorf}[args.command](args)
+                "slomorf": _slomorf, "scanrate-depth": _scanrate_depth}[args.command](args)
     except EventFieldError as e:
         print(f"eventfield: error: {e}", file=sys.stderr)
         return 2

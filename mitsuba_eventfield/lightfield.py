@@ -76,21 +76,43 @@ def galvo_disparity_model(optics: dict, width: int):
     return (f, f), (-f * d1, -f * (d1 + s))
 
 
-def galvo_field_depth(lf: "LightField", depth: float, x: float, y: float) -> float:
-    """Metric depth at pixel (x, y) from the depth a constant-shift refocus found sharpest there.
+def galvo_field_depth(lf: "LightField", depth, x, y, weight_x=0.5):
+    """Metric depth at pixel (x, y) from the depth a constant-shift refocus found sharpest there (numbers or
+    arrays that broadcast, e.g. a whole depth map with its pixel grid).
 
-    A mirror turn moves an image point at normalised coordinates (tx, ty) by (1 + tx^2) times what it moves
-    the centre along its own axis (plus a tx ty cross term that a circular scan averages out), so the shift
-    scale fitted over a full scan is alpha * s with s = 1 + (tx^2 + ty^2) / 2: off-axis points look farther.
-    Galvo depth is hypersensitive to the scale (alpha = f (1 - pivot / z) with pivot / z ~ 0.1-0.3), so even
-    5 degrees off axis biases depth by several percent. Uses the x-axis model (lf.A[0] = f, lf.B[0])."""
+    A mirror turn by e rotates the view, moving an image point at normalised coordinates (tx, ty) by
+    f e (1 + tx^2) along its own axis (plus a tx ty cross term that a circular scan averages out), and moves
+    the viewpoint by e x pivot, which shifts a point at depth z by f e pivot / z whatever its position. Over a
+    full circular scan the fitted shift slope is alpha = f s - f pivot / z with s = 1 + (tx^2 + ty^2) / 2,
+    where the constant-shift model assumes s = 1: off-axis points look farther. Galvo depth is hypersensitive
+    to this (pivot / z ~ 0.1-0.3), so even 5 degrees off axis biases depth by several percent. The (1 + tx^2)
+    and (1 + ty^2) scales differ, so what a focus measure finds also depends on the orientation of the local
+    texture: ``weight_x`` (number or per-pixel array in [0, 1]) is the share of the local gradient energy along
+    x (vertical edges see the x scale, horizontal edges the y scale; ``galvo_orientation_weight``); 0.5 takes
+    their mean. Pivots: lf.B = (-f pivot_x, -f pivot_y), lf.A = (f, f)."""
     if lf.kind != "galvo":
         raise ValueError(f"galvo_field_depth needs a galvo light field, got {lf.kind!r}")
     h, w = lf.shape
-    f = lf.A[0]
-    tx, ty = (x + 0.5 - w / 2) / f, (y + 0.5 - h / 2) / f
-    alpha = lf.alpha(depth)[0] / (1 + (tx * tx + ty * ty) / 2)
-    return lf.depth_for_alpha(alpha)
+    A = lf.A[0]                                   # alpha = A + B / z, A = f
+    wx = np.clip(np.asarray(weight_x, np.float64), 0.0, 1.0)
+    B = wx * lf.B[0] + (1 - wx) * lf.B[1]         # the constant-shift model the focal stack used, per pixel
+    tx, ty = (np.asarray(x, np.float64) + 0.5 - w / 2) / A, (np.asarray(y, np.float64) + 0.5 - h / 2) / A
+    with np.errstate(divide="ignore"):
+        alpha = A + B / np.asarray(depth, np.float64)
+        out = B / (alpha - A * (1 + wx * tx * tx + (1 - wx) * ty * ty))
+    out = np.where(out > 0, out, np.inf)          # beyond infinity after the correction: report infinity
+    return float(out) if out.ndim == 0 else out
+
+
+def galvo_orientation_weight(image, window: int = 7) -> np.ndarray:
+    """Per pixel, the share of gradient energy along x (Sobel, box-summed over ``window``): the weight of the
+    x scan scale in what a focus measure finds there (``galvo_field_depth``). 0.5 where there is no texture."""
+    import cv2
+    img = np.asarray(image, np.float32)
+    gx2 = cv2.boxFilter(cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3) ** 2, -1, (window, window))
+    gy2 = cv2.boxFilter(cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3) ** 2, -1, (window, window))
+    total = gx2 + gy2
+    return np.where(total > 1e-12, gx2 / np.maximum(total, 1e-12), 0.5).astype(np.float64)
 
 
 def spatial_disparity_model(optics: dict, view_w: int, view_h: int):

@@ -94,6 +94,8 @@ if __name__ == "__main__":
     text_texture(os.path.join(HERE, "hdr_leds", "text.png"), ["DARK", "ROOM"])
     for name, mesh in zip(("dart_foam", "dart_band"), dart_meshes()):
         mesh.export(os.path.join(HERE, "dart", name + ".ply"))
+    text_texture(os.path.join(HERE, "runner", "shirt.png"), ["RUN", "42"], size=(256, 384), grid=64)
+    text_texture(os.path.join(HERE, "runner", "wall.png"), ["TRACK", "FIELD"])
     # a low-contrast wall: the dart, not the wall, should dominate a focus measure around it
     text_texture(os.path.join(HERE, "dart", "text.png"), ["NERF", "DART"], colors=(170, 130, 95))
     print("assets written")
