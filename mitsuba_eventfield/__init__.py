@@ -25,6 +25,7 @@ from .sweep import SweepTable, sweep  # noqa: E402
 from .scene import TimedScene, load_scene  # noqa: E402
 from . import scan  # noqa: E402
 from . import slomorf  # noqa: E402  (ef.slomorf.slomorf: slow-motion refocus)
+from . import highspeed, quality, scanrate, truth  # noqa: E402  (the other applications, their scoring)
 from .scan import ScanCurve, curve_from_dict, event_angles, make_curve  # noqa: E402
 from .views import ViewStack, extract_views, split_events, view_of_pixel  # noqa: E402
 from .lightfield import LightField, from_galvo, from_spatial, galvo_lightfields, galvo_view_times  # noqa: E402

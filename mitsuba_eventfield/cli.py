@@ -226,8 +226,8 @@ def _hdr(a) -> int:
     with atomic_output(os.path.join(a.output, "metrics.json"), "metrics") as tmp, open(tmp, "w") as f:
         json.dump({"errors": r.errors, "dynamic_range": r.dynamic_range, **r.meta}, f, indent=2, default=str)
     print(r.report())
-    print(f"time split: render {r.meta['time_split_s']['render']:.1f} s, truth + solve "
-          f"{r.meta['time_split_s']['truth_and_solve']:.1f} s; wrote {a.output}/hdr.png, EXRs (log) and metrics.json")
+    print("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in r.meta["time_split_s"].items())
+          + f"; wrote {a.output}/hdr.png, EXRs (log) and metrics.json")
     return 0
 
 

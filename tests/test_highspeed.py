@@ -45,12 +45,12 @@ def test_dart_focus_tracking_follows_mitsuba_depth(dart_capture, capsys):
     with capsys.disabled():
         print("\n[focus tracking, dart at 20 m/s, 120x90]\n" + r.report())
     assert len(r.depths) == 6 and np.all(np.diff(r.truth) < 0)          # the dart approaches: 1.04 m -> 0.70 m
-    e = r.relative_errors                                               # measured: median 0.006, max 0.037
+    e = r.relative_errors                                               # measured: median 0.006, max 0.048
     assert np.median(e) < 0.03 and e.max() < 0.08
     # the region followed the dart across the image (it moves ~25 px left over 24 ms at this size)
     assert r.rois[-1][0] < r.rois[0][0] - 15
     assert np.all(r.velocities[:, 0] < 0)
-    # without taking the dart's motion out of the views, the depths are worse (measured median 0.04)
+    # without taking the dart's motion out of the views, the depths are worse (measured median 0.043, max 0.107)
     plain = hs.track_focus_depth(DART, DART_ROI, 0.6, 1.5, 1.6, captured=dart_capture, compensate_motion=False)
     assert np.median(plain.relative_errors) > np.median(e)
 

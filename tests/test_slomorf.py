@@ -101,7 +101,7 @@ def test_outputs_are_complete(result, tmp_path):
     with open(written["metrics"]) as f:
         m = json.load(f)
     assert set(m["time_split_s"]) == {"render_events", "render_rgb_frames", "render_truth_for_scoring",
-                                      "interpolate", "refocus", "score", "write"}
+                                      "interpolate", "refocus", "refocus_for_scoring", "score", "write"}
     assert m["metrics"]["frames"]["events"]["psnr"] == result.metrics["frames"]["events"]["psnr"]
     assert m["factor"] == 8 and m["score_domain"].startswith("8-bit") and "pixel_model" in m
     assert not [p for p in out.rglob("*") if p.name.startswith(".")]          # no temporary files left
