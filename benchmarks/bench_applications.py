@@ -18,9 +18,9 @@ sys.path.insert(0, HERE)
 from _report import write_results  # noqa: E402
 
 SCENES = os.path.join(ROOT, "scenes")
-# stages that render ground truth for scoring only: a user without a renderer has none of them
-TRUTH_STAGES = {"ground_truth_views", "ground_truth_depth", "ground_truth", "render_truth_for_scoring",
-                "refocus_for_scoring", "scoring", "score"}
+# stages that render ground truth or comparisons for scoring only: a user with real data has none of them
+REFERENCE_STAGES = {"ground_truth_views", "ground_truth_depth", "ground_truth", "render_truth_for_scoring",
+                    "refocus_for_scoring", "scoring", "score", "conventional_camera"}
 RENDER_STAGES = {"render_events", "render", "render_rgb_frames"}
 
 
@@ -52,7 +52,7 @@ def main():
         split = dict(result.meta["time_split_s"])
         total = sum(split.values())
         render = sum(v for k, v in split.items() if k in RENDER_STAGES)
-        processing = sum(v for k, v in split.items() if k not in RENDER_STAGES | TRUTH_STAGES)
+        processing = sum(v for k, v in split.items() if k not in RENDER_STAGES | REFERENCE_STAGES)
         rows[name] = {"wall_s": wall, "split_s": split, "share": {k: v / total for k, v in split.items()},
                       "processing_over_render": processing / render if render else math.nan}
     res = {"applications": rows,
@@ -64,7 +64,7 @@ def main():
         md.append(f"| {n} | {shares} | **{r['processing_over_render']:.2f}** |")
     slowest = max(rows.values(), key=lambda r: r["wall_s"])["wall_s"]
     md += ["", f"Slowest application / fastest: {slowest / min(r['wall_s'] for r in rows.values()):.1f}x. "
-           "Processing = everything but rendering events (and RGB frames) and the ground truth rendered for scoring.",
+           "Processing = everything but rendering events (and RGB frames) and what is rendered or computed for scoring.",
            ""]
     write_results("applications", res, md)
 

@@ -38,3 +38,32 @@ def atomic_output(path: str, what: str = "output"):
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.remove(tmp)
+
+
+def json_safe(value):
+    """``value`` with every non-finite float (NaN, inf: "no pixel", "never") as None, numpy scalars and arrays
+    as Python ones, anything else unknown as its string: strict JSON that every reader accepts."""
+    import math
+
+    import numpy as np
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    return str(value)
+
+
+def write_json(path: str, payload, what: str = "metrics") -> str:
+    """Strict JSON (``json_safe``), indented, written atomically."""
+    import json
+    with atomic_output(path, what) as tmp, open(tmp, "w") as f:
+        json.dump(json_safe(payload), f, indent=2, allow_nan=False)
+    return path

@@ -177,8 +177,8 @@ def _parser() -> argparse.ArgumentParser:
     sd.add_argument("--split-depth", type=float, default=1.2,
                     help="errors reported for pixels nearer / farther than this (default 1.2: runner / wall)")
     sd.add_argument("--calibration", help="calibration JSON (eventfield calibrate) instead of the nominal optics")
-    sd.add_argument("--field-correction", choices=("mean", "oriented", "off"), default="mean",
-                    help="undo the galvo's field-dependent scan scale (default: mean; see scanrate.run)")
+    sd.add_argument("--field-correction", choices=("oriented", "mean", "off"), default="oriented",
+                    help="undo the galvo's field-dependent scan scale (default: oriented; see scanrate.run)")
     rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with tests/regression/")
     rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
     dev = sub.add_parser("device", help="drive the galvo through a function generator (SCPI/VISA)")
@@ -204,27 +204,24 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _hdr(a) -> int:
-    import json
-
     import mitsuba_eventfield as ef
     from . import hdr
-    from .atomic import atomic_output
+    from .atomic import write_json
     from .images import write_exr
     if not a.depth > 0:
         raise ef.EventFieldError(f"--depth = {a.depth}: must be > 0")
-    os.makedirs(a.output, exist_ok=True)
-    defines = dict(item.partition("=")[::2] for item in a.define)
+    _check_output_dir(a.output)
     try:
-        r = hdr.compare(a.scene, defines, a.depth, a.steps, spp=a.spp, progress=True)
+        r = hdr.compare(a.scene, _pairs(a.define, "-D"), a.depth, a.steps, spp=a.spp, progress=True)
     except ValueError as e:
         raise ef.EventFieldError(str(e)) from None
+    os.makedirs(a.output, exist_ok=True)
     meta = {k: v for k, v in r.meta.items() if k != "time_split_s"}
     write_exr(os.path.join(a.output, "truth.exr"), {"log": r.truth_log}, meta)
     for name, img in r.estimates.items():
         write_exr(os.path.join(a.output, f"{name}.exr"), {"log": img}, meta)
     hdr.figure(r, os.path.join(a.output, "hdr.png"))
-    with atomic_output(os.path.join(a.output, "metrics.json"), "metrics") as tmp, open(tmp, "w") as f:
-        json.dump({"errors": r.errors, "dynamic_range": r.dynamic_range, **r.meta}, f, indent=2, default=str)
+    write_json(os.path.join(a.output, "metrics.json"), {"errors": r.errors, "dynamic_range": r.dynamic_range, **r.meta})
     print(r.report())
     print("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in r.meta["time_split_s"].items())
           + f"; wrote {a.output}/hdr.png, EXRs (log) and metrics.json")
@@ -245,13 +242,27 @@ def _pairs(items, what):
     return out
 
 
-def _application(run, write, wrote) -> int:
+def _check_output_dir(path: str) -> None:
+    """Before any rendering: ``path`` is a directory or can be made one (nearest existing parent writable)."""
+    from .errors import EventFieldError
+    path = os.path.abspath(path)
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise EventFieldError(f"output directory {path}: exists and is not a directory")
+    parent = path
+    while not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if not (os.path.isdir(parent) and os.access(parent, os.W_OK | os.X_OK)):
+        raise EventFieldError(f"output directory {path}: {parent} is not a writable directory")
+
+
+def _application(run, write, wrote, output: str) -> int:
     """Run an application, write its outputs, print its report: bad input is one line, no traceback."""
     from .errors import EventFieldError
+    _check_output_dir(output)
     try:
         result = run()
         paths = write(result)
-    except (ValueError, RuntimeError) as e:
+    except ValueError as e:
         raise EventFieldError(str(e)) from None
     print(result.report())
     print("wrote " + wrote(paths))
@@ -267,7 +278,7 @@ def _highspeed(a) -> int:
         planes = _pairs(a.plane if a.plane is not None else (FAN_DEFAULTS["plane"] if fan else []), "--plane")
         return highspeed.refocus_planes(a.scene, planes, defines, a.periods, a.views, a.start, progress=True)
     return _application(run, lambda r: highspeed.write_planes(r, a.output),
-                        lambda p: f"{p['figure']}, per-plane EXRs and PNGs, {p['metrics']}")
+                        lambda p: f"{p['figure']}, per-plane EXRs and PNGs, {p['metrics']}", a.output)
 
 
 def _track_focus(a) -> int:
@@ -276,7 +287,7 @@ def _track_focus(a) -> int:
         lambda: highspeed.track_focus_depth(a.scene, a.roi, a.near, a.far, a.object_far, a.planes, a.background,
                                             _pairs(a.define, "-D"), a.periods, a.views, progress=True),
         lambda r: highspeed.write_track(r, a.output),
-        lambda p: f"{p['figure']}, per-period PNGs, {p['exr']}, {p['metrics']}")
+        lambda p: f"{p['figure']}, per-period PNGs, {p['exr']}, {p['metrics']}", a.output)
 
 
 def _scanrate_depth(a) -> int:
@@ -290,7 +301,7 @@ def _scanrate_depth(a) -> int:
                              min_confidence=a.min_confidence, split_depth=a.split_depth, calibration=calibration,
                              field_correction=a.field_correction, progress=True),
         lambda r: scanrate.write_outputs(r, a.output),
-        lambda p: f"{p['figure']}, {len(p['exr'])} depth EXRs and PNGs, {p['metrics']}")
+        lambda p: f"{p['figure']}, {len(p['exr'])} depth EXRs and PNGs, {p['metrics']}", a.output)
 
 
 def _slomorf(a) -> int:
@@ -300,12 +311,13 @@ def _slomorf(a) -> int:
         depths = [float(v) for v in a.depths.split(",") if v.strip()]
     except ValueError:
         raise ef.EventFieldError(f"--depths {a.depths!r}: expected comma-separated numbers > 0") from None
-    os.makedirs(a.output, exist_ok=True)
+    _check_output_dir(a.output)
     try:
         r = slomorf.slomorf(a.scene or slomorf.DEFAULT_SCENE, _pairs(a.define, "-D"), a.fps, a.factor, a.duration,
                             depths, a.spp, progress=True)
     except ValueError as e:
         raise ef.EventFieldError(str(e)) from None
+    os.makedirs(a.output, exist_ok=True)
     written = slomorf.write_outputs(r, a.output)
     print(r.report())
     print(f"wrote {a.output}: {len(written['frames'])} frames, {len(written['refocus'])} refocused images, "

@@ -6,7 +6,9 @@ Pipeline (``refocus_planes`` and ``track_focus_depth``, one Python call each):
    pixels per step (``lightfield.galvo_steps_per_period``);
 2. per period, ``views`` views (evenly spaced in time over the period) integrated from the events onto one
    start frame (``start="frame"``: a conventional frame at t = 0, e.g. the RGB camera behind a beam splitter;
-   ``start="events"``: the static-scene galvo solver on the first period, right wherever nothing moved then) and
+   ``start="events"``: the static-scene galvo solver on the first period, right wherever nothing moved then, and
+   only up to a constant: those light fields carry an unknown overall gain, which refocus and depth ignore but
+   PSNR against the rendered views does not) and
    placed at their scan angles: a light field every period (250 per second at 250 Hz);
 3. refocus each light field on named depth planes, or follow an object moving in depth (focus tracking: the
    sharpest depth inside a region that follows the object by template matching).
@@ -23,6 +25,8 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .errors import EventFieldError
 
 START_METHODS = ("frame", "events")
 
@@ -104,6 +108,9 @@ class PlaneRefocus:
     selectivity: dict            # name -> min over other planes of focus(own region @ own) / focus(@ other)
     period_s: float
     meta: dict = field(default_factory=dict)
+    conventional: np.ndarray | None = None   # a conventional camera's frame around the middle period
+    conventional_blur: dict = field(default_factory=dict)   # name -> its mean |difference| from the instant, over
+                                                             # the mean instant, on the plane's region
 
     def report(self) -> str:
         lines = [f"{len(next(iter(self.refocused.values())))} refocused light fields per plane, "
@@ -113,6 +120,11 @@ class PlaneRefocus:
             p, s = np.array(self.scores[name]["psnr_db"]), np.array(self.scores[name]["ssim"])
             lines.append(f"  {name:<10} {z:7.3g}   {p.mean():7.2f} {p.min():7.2f}       {s.mean():6.3f} {s.min():6.3f}"
                          f"        {self.selectivity[name]:.2f}x")
+        if self.conventional is not None:
+            lines.append(f"  a conventional {self.meta['conventional_fps']:g} fps frame (pinhole, same view) differs "
+                         "from the instant it is centred on by "
+                         + ", ".join(f"{100 * v:.0f}% on the {n}" for n, v in self.conventional_blur.items())
+                         + " (motion blur; and it cannot refocus)")
         lines.append("  time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
         return "\n".join(lines)
 
@@ -122,7 +134,10 @@ def _check_planes(planes: dict) -> dict:
         raise ValueError("planes: give at least one name=depth")
     out = {}
     for name, z in planes.items():
-        z = float(z)
+        try:
+            z = float(z)
+        except (TypeError, ValueError):
+            raise ValueError(f"plane {name!r}: depth = {z!r} is not a number (scene units, > 0)") from None
         if not (z > 0 and math.isfinite(z)):
             raise ValueError(f"plane {name!r}: depth = {z!r} must be a finite number > 0 (scene units)")
         out[str(name)] = z
@@ -131,14 +146,17 @@ def _check_planes(planes: dict) -> dict:
 
 def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, periods: int | None = None,
                    views: int = 40, start: str = "frame", region_tolerance: float = 0.15, spp: int = 4,
-                   progress: bool = False) -> PlaneRefocus:
+                   conventional_fps: float | None = 60.0, progress: bool = False) -> PlaneRefocus:
     """Refocus every scan period's light field on each named plane ({name: depth}), scored against the rendered
     views. A plane's region (for ``selectivity``): textured pixels whose true depth at the middle of the period
-    is within ``region_tolerance`` (relative) of the plane's depth."""
+    is within ``region_tolerance`` (relative) of the plane's depth. ``conventional_fps``: also render what a
+    conventional camera at that frame rate records around the middle period (``truth.conventional_frame``; the
+    paper's 60 Hz comparison) and how far it is from the instant it is centred on, per plane's region (motion
+    blur; a pinhole has no defocus to compare); None: skip."""
     from .depth import focus_measure
     from .quality import scores as quality_scores
     from .refocus import refocus
-    from .truth import textured, truth_depth
+    from .truth import centre_frame, textured, truth_depth
     planes = _check_planes(planes)
     cap = capture(scene_path, defines, periods, views, start, spp=spp, progress=progress)
     t0 = time.perf_counter()
@@ -148,8 +166,9 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
     scores = {n: {"psnr_db": [], "ssim": []} for n in planes}
     focus = {n: {m: [] for m in planes} for n in planes}       # region n refocused on plane m
     for k, lf in enumerate(cap.truth_lightfields):
-        z_true = truth_depth(cap.timed, float(lf.times.mean()))
-        tex = textured(np.log(np.maximum(truth[next(iter(planes))][k], 1e-6)))
+        t_mid = float(lf.times.mean())
+        z_true = truth_depth(cap.timed, t_mid)
+        tex = textured(centre_frame(cap.timed, t_mid))         # the centre view: sharp, aligned with z_true
         for n in planes:
             s = quality_scores(refocused[n][k], truth[n][k])
             for key in s:
@@ -164,9 +183,24 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
         others = [np.nanmean(focus[n][m]) for m in planes if m != n]
         selectivity[n] = float(own / max(others)) if others else float("nan")
     t2 = time.perf_counter()
+    conventional, blur = None, {}
+    if conventional_fps is not None:
+        from .truth import conventional_frame
+        k = len(cap.lightfields) // 2
+        t_mid = float(cap.lightfields[k].times.mean())
+        conventional = conventional_frame(cap.timed, t_mid, conventional_fps, spp=spp)
+        instant = centre_frame(cap.timed, t_mid, log=False, spp=spp)
+        z_true = truth_depth(cap.timed, t_mid)
+        for n in planes:
+            region = np.abs(z_true / planes[n] - 1) < region_tolerance
+            if region.any():
+                blur[n] = float(np.abs(conventional - instant)[region].mean() / instant[region].mean())
+    t3 = time.perf_counter()
     return PlaneRefocus(planes, refocused, truth, scores, selectivity, cap.period_s, _meta(
         cap, scene_path, defines, planes=planes, start=start, region_tolerance=region_tolerance,
-        time_split_s={**cap.seconds, "refocus": t1 - t0, "scoring": t2 - t1}))
+        conventional_fps=conventional_fps,
+        time_split_s={**cap.seconds, "refocus": t1 - t0, "scoring": t2 - t1, "conventional_camera": t3 - t2}),
+        conventional, blur)
 
 
 # ------------------------------------------------------------------------------------------- focus tracking
@@ -180,6 +214,8 @@ class FocusTrack:
     background: np.ndarray       # (P, H, W) refocused on ``background_depth`` for comparison
     times: np.ndarray            # (P,) middle of each period (s)
     velocities: np.ndarray       # (P, 2) image velocity of the object (px/s) taken out of the refocus
+    truth_spread: np.ndarray     # (P, 2) 25th and 75th percentile of the object's depth in its region: the
+                                 # object's own extent in depth, against which "its depth" is defined
     meta: dict = field(default_factory=dict)
 
     @property
@@ -187,20 +223,28 @@ class FocusTrack:
         return np.abs(self.depths - self.truth) / self.truth
 
     def report(self) -> str:
-        lines = ["period  t (ms)   chosen z   true z   |rel err|"]
-        for k, (t, z, zt) in enumerate(zip(self.times, self.depths, self.truth)):
-            lines.append(f"  {k:4d} {t * 1e3:8.2f} {z:10.3f} {zt:8.3f} {abs(z - zt) / zt:10.3f}")
+        lines = ["period  t (ms)   chosen z   true z (object's p25-p75)   |rel err|"]
+        for k, (t, z, zt, (a, b)) in enumerate(zip(self.times, self.depths, self.truth, self.truth_spread)):
+            lines.append(f"  {k:4d} {t * 1e3:8.2f} {z:10.3f} {zt:8.3f} ({a:.3f}-{b:.3f}) {abs(z - zt) / zt:12.3f}")
         e = self.relative_errors
         lines.append(f"median |relative depth error| {np.median(e):.3f}, max {e.max():.3f}")
         lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
         return "\n".join(lines)
 
 
-def roi_pixels(roi, width: int, height: int) -> tuple:
-    """(x0, y0, x1, y1) in pixels from fractions of the image size (so one ROI serves every resolution)."""
-    x0, y0, x1, y1 = (float(v) for v in roi)
+def _check_roi(roi) -> tuple:
+    try:
+        x0, y0, x1, y1 = (float(v) for v in roi)
+    except (TypeError, ValueError):
+        raise ValueError(f"roi = {roi!r}: expected four numbers x0, y0, x1, y1 (fractions of the image)") from None
     if not (0 <= x0 < x1 <= 1 and 0 <= y0 < y1 <= 1):
         raise ValueError(f"roi = {tuple(roi)}: must be fractions 0 <= x0 < x1 <= 1, 0 <= y0 < y1 <= 1 of the image")
+    return x0, y0, x1, y1
+
+
+def roi_pixels(roi, width: int, height: int) -> tuple:
+    """(x0, y0, x1, y1) in pixels from fractions of the image size (so one ROI serves every resolution)."""
+    x0, y0, x1, y1 = _check_roi(roi)
     px = (int(round(x0 * width)), int(round(y0 * height)), int(round(x1 * width)), int(round(y1 * height)))
     if px[2] - px[0] < 3 or px[3] - px[1] < 3:
         raise ValueError(f"roi = {tuple(roi)} is {px[2] - px[0]} x {px[3] - px[1]} pixels at {width} x {height}: "
@@ -225,6 +269,8 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     if not (0 < near < far and object_far > near):
         raise ValueError(f"near = {near}, far = {far}, object_far = {object_far}: need 0 < near < far and "
                          "object_far > near (scene units)")
+    _check_roi(roi)                                   # before rendering: bad input costs nothing
+    _check_positive("planes", planes, integer=True, low=1)
     cap = captured or capture(scene_path, defines, periods, views, start, spp=spp, progress=progress)
     h, w = cap.lightfields[0].shape
     roi_px = roi_pixels(roi, w, h)
@@ -239,19 +285,20 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     background = np.stack([refocus(lf, bg) for lf in cap.lightfields])
     t1 = time.perf_counter()
     times = np.array([float(lf.times.mean()) for lf in cap.lightfields])
-    truth = []
+    truth, spread = [], []
     for k, t in enumerate(times):
         x0, y0, x1, y1 = rois[k]
         z = truth_depth(cap.timed, t)[y0:y1, x0:x1]
         obj = z[z < object_far]
         truth.append(float(np.median(obj)) if obj.size else float("nan"))
+        spread.append(np.percentile(obj, [25, 75]) if obj.size else [float("nan")] * 2)
     truth = np.array(truth)
     if np.isnan(truth).any():
         lost = [int(k) for k in np.flatnonzero(np.isnan(truth))]
-        raise RuntimeError(f"{scene_path}: the tracked region holds no pixel nearer than object_far = {object_far} "
+        raise EventFieldError(f"{scene_path}: the tracked region holds no pixel nearer than object_far = {object_far} "
                            f"in periods {lost}: the object was lost (start roi {tuple(roi)})")
     t2 = time.perf_counter()
-    return FocusTrack(depths, truth, np.array(rois), images, background, times, velocities, _meta(
+    return FocusTrack(depths, truth, np.array(rois), images, background, times, velocities, np.array(spread), _meta(
         cap, scene_path, defines, roi=list(map(float, roi)), near=near, far=far, planes=planes,
         compensate_motion=compensate_motion,
         object_far=object_far, background_depth=bg, start=start, smooth=smooth,
@@ -260,14 +307,6 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
 
 
 # ------------------------------------------------------------------------------------------ outputs, figures
-
-def _write_json(path, payload):
-    import json
-
-    from .atomic import atomic_output
-    with atomic_output(path, "metrics") as tmp, open(tmp, "w") as f:
-        json.dump(payload, f, indent=2, default=str)
-
 
 def _save_figure(fig, path):
     import matplotlib.pyplot as plt
@@ -293,7 +332,8 @@ def planes_figure(result: PlaneRefocus, path: str, period: int | None = None) ->
     names = list(result.planes)
     k = len(result.refocused[names[0]]) // 2 if period is None else period
     hi = max(float(np.percentile(result.truth[n][k], 99.5)) for n in names)
-    fig, axes = plt.subplots(2, len(names), figsize=(4 * len(names), 6.4), squeeze=False)
+    extra = result.conventional is not None
+    fig, axes = plt.subplots(2, len(names) + extra, figsize=(4 * (len(names) + extra), 6.4), squeeze=False)
     for j, n in enumerate(names):
         s = result.scores[n]
         for i, (label, img) in enumerate((("from events", result.refocused[n][k]),
@@ -305,6 +345,14 @@ def planes_figure(result: PlaneRefocus, path: str, period: int | None = None) ->
                 title += f"\nPSNR {s['psnr_db'][k]:.1f} dB, SSIM {s['ssim'][k]:.3f}"
             ax.set_title(title, fontsize=8)
             ax.axis("off")
+    if extra:
+        fps = result.meta["conventional_fps"]
+        axes[0, -1].imshow(result.conventional, cmap="gray", vmin=0, vmax=hi)
+        axes[0, -1].set_title(f"conventional {fps:g} fps frame ({1e3 / fps:.1f} ms exposure)\nmotion blur "
+                              "(|frame - instant|): " + ", ".join(f"{n} {100 * v:.0f}%" for n, v in
+                                                                   result.conventional_blur.items()), fontsize=8)
+        axes[0, -1].axis("off")
+        axes[1, -1].axis("off")
     fig.suptitle(f"High-speed refocus: scan period {k} of {len(result.refocused[names[0]])} "
                  f"({1 / result.period_s:g} light fields per second)", fontsize=9)
     fig.tight_layout()
@@ -349,6 +397,7 @@ def write_planes(result: PlaneRefocus, out_dir: str) -> dict:
     the figure and metrics.json (scores, selectivity, time split, scene and optics metadata)."""
     import os
 
+    from .atomic import write_json
     from .images import to_uint8, write_exr, write_png
     os.makedirs(out_dir, exist_ok=True)
     meta = {k: v for k, v in result.meta.items()}
@@ -360,9 +409,13 @@ def write_planes(result: PlaneRefocus, out_dir: str) -> dict:
             channels[f"truth_p{k}"] = result.truth[n][k]
             write_png(os.path.join(out_dir, f"{n}_p{k:03d}.png"), to_uint8(result.refocused[n][k]))
         paths[n] = write_exr(os.path.join(out_dir, f"{n}.exr"), channels, {**meta, "plane": n})
+    if result.conventional is not None:
+        paths["conventional"] = write_exr(os.path.join(out_dir, "conventional.exr"), {"Y": result.conventional},
+                                          {**meta, "frame": "conventional camera, centre view, linear"})
     paths["figure"] = planes_figure(result, os.path.join(out_dir, "highspeed.png"))
     paths["metrics"] = os.path.join(out_dir, "metrics.json")
-    _write_json(paths["metrics"], {"scores": result.scores, "selectivity": result.selectivity, **meta})
+    write_json(paths["metrics"], {"scores": result.scores, "selectivity": result.selectivity,
+                                   "conventional_blur": result.conventional_blur, **meta})
     return paths
 
 
@@ -370,6 +423,7 @@ def write_track(result: FocusTrack, out_dir: str) -> dict:
     """PNG per period (refocused on the tracked depth), an EXR of them, the figure and metrics.json."""
     import os
 
+    from .atomic import write_json
     from .images import to_uint8, write_exr, write_png
     os.makedirs(out_dir, exist_ok=True)
     for k, img in enumerate(result.images):
@@ -378,8 +432,9 @@ def write_track(result: FocusTrack, out_dir: str) -> dict:
                               {f"p{k}": img for k, img in enumerate(result.images)}, result.meta),
              "figure": track_figure(result, os.path.join(out_dir, "track.png")),
              "metrics": os.path.join(out_dir, "metrics.json")}
-    _write_json(paths["metrics"], {"times_s": result.times.tolist(), "depths": result.depths.tolist(),
+    write_json(paths["metrics"], {"times_s": result.times.tolist(), "depths": result.depths.tolist(),
                                    "image_velocity_px_per_s": result.velocities.tolist(),
-                                   "truth": result.truth.tolist(), "rois_px": result.rois.tolist(),
+                                   "truth": result.truth.tolist(), "truth_p25_p75": result.truth_spread.tolist(),
+                                   "rois_px": result.rois.tolist(),
                                    "relative_errors": result.relative_errors.tolist(), **result.meta})
     return paths

@@ -144,7 +144,8 @@ def track_focus(lightfields, depths, roi, measure: str = "tenengrad", smooth: fl
     smoothed in inverse depth over time).
 
     ``follow``: the ROI moves with the object, found in each light field (refocused at the previous depth) by
-    matching the previous refocused ROI. Then, with ``compensate_motion``, a second pass refocuses with the
+    matching the previous refocused ROI. Then, with ``compensate_motion`` (used only with ``follow``: the
+    velocity comes from the followed ROI), a second pass refocuses with the
     object's image velocity (from the ROI track) taken out of every view (``motion_shifts``): views spread
     over a scan period otherwise smear a fast object, and its motion biases the depth (it correlates with the
     scan's position over the period). Returns (depths chosen, refocused images, ROIs, image velocities px/s).

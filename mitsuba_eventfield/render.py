@@ -185,6 +185,12 @@ class _Sink:
             self.writer.abort()
 
 
+def _advance(bar, elapsed_s: float) -> None:
+    """Move the progress bar to ``elapsed_s`` of simulated time: set from the position, not summed steps, so
+    float round-off never takes it past its total (tqdm warns then)."""
+    bar.update(min(round(elapsed_s * 1e3, 6), bar.total) - bar.n)
+
+
 def render_events(scene, duration: float | None = None, *, steps: int | None = None, adaptive: bool = False,
                   max_log_change: float = 0.5, min_step: float | None = None, max_step: float | None = None,
                   spp: int = 4, seed: int = 0, seed_mode: str = "fixed", threshold: float | None = None,
@@ -301,7 +307,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                 _count(summary, p)
                 summary.copied_steps += block
                 if bar is not None:
-                    bar.update(round((t_next - t) * 1e3, 9))
+                    _advance(bar, t_next - t_start)
                 t, k = t_next, k + block
                 continue
             render_at(t_next, k + 1)
@@ -340,7 +346,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                 grow = min(max_step, 2 * dt)
                 dt = min(grow, max(min_step, 0.9 * max_log_change * c_min / rate)) if rate > 0 else grow
             if bar is not None:
-                bar.update(round((t_next - t) * 1e3, 9))
+                _advance(bar, t_next - t_start)
                 bar.set_postfix_str(f"{summary.events} events")
             t, k = t_next, k + 1
         summary.steps = k
@@ -373,11 +379,12 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
 
 
 def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
-                  linlog_threshold: float | None = None, rgb: bool = False) -> np.ndarray:
+                  linlog_threshold: float | None = None, rgb: bool = False, sensor=None) -> np.ndarray:
     """Frames of the scene at the given times (seconds): (T, H, W) log brightness exactly as the event pixel
     sees it (lin-log, fixed seed), or linear radiance with ``log=False``. Ground truth for reconstruction, and
     the frame input of the complementary filter. ``rgb=True`` (with ``log=False``, scene loaded in a colour
-    variant): (T, H, W, 3) linear RGB, what a colour camera sees."""
+    variant): (T, H, W, 3) linear RGB, what a colour camera sees. ``sensor``: another Mitsuba sensor to look
+    through (e.g. ``truth.centre_pinhole``: a conventional camera beside the event camera)."""
     if rgb and log:
         raise EventFieldError("render_frames: rgb=True needs log=False (the event pixel's log is of luminance)")
     from .plugins import pixel_model
@@ -392,7 +399,7 @@ def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
     frames = []
     for t in np.atleast_1d(np.asarray(times, dtype=np.float64)):
         timed.set_time(float(t))
-        img = mi.render(timed.scene, integrator=inner, seed=seed, spp=spp)
+        img = mi.render(timed.scene, integrator=inner, seed=seed, spp=spp, sensor=sensor or timed.scene.sensors()[0])
         arr = np.array(img)
         if rgb:
             if arr.shape[-1] < 3:

@@ -347,7 +347,7 @@ def write_outputs(result: SloMoRFResult, out_dir: str, video_fps: float = 24.0, 
     from PIL import Image
     from PIL.PngImagePlugin import PngInfo
 
-    from .atomic import atomic_output
+    from .atomic import atomic_output, write_json
     t0 = time.perf_counter()
     os.makedirs(os.path.join(out_dir, "frames"), exist_ok=True)
     os.makedirs(os.path.join(out_dir, "refocus"), exist_ok=True)
@@ -391,10 +391,7 @@ def write_outputs(result: SloMoRFResult, out_dir: str, video_fps: float = 24.0, 
         written["gif"] = path
     written["figure"] = figure(result, os.path.join(out_dir, "slomorf.png"))
     result.meta["time_split_s"]["write"] = time.perf_counter() - t0
-    path = os.path.join(out_dir, "metrics.json")
-    with atomic_output(path, "metrics") as tmp, open(tmp, "w") as f:
-        json.dump({"metrics": result.metrics, **result.meta}, f, indent=2, default=str)
-    written["metrics"] = path
+    written["metrics"] = write_json(os.path.join(out_dir, "metrics.json"), {"metrics": result.metrics, **result.meta})
     return written
 
 

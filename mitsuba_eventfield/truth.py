@@ -11,29 +11,59 @@ import math
 import numpy as np
 
 
-def truth_depth(timed, t: float, spp: int = 1) -> np.ndarray:
-    """z depth (H, W) of the sensor's centre view at time ``t`` (s); inf where the ray hits nothing."""
+def centre_pinhole(timed, spp: int = 1):
+    """A perspective sensor with the scene sensor's field of view, pose (at the scene's current time: call
+    ``timed.set_time`` first) and film size: the galvo's centre view (zero mirror angles), which refocus and
+    depth maps are aligned to, i.e. what a conventional camera in its place would see."""
     import mitsuba as mi
     sensor = timed.sensor
     optics = sensor.optics_metadata()
     if "fov_x_deg" not in optics:
-        raise ValueError(f"truth_depth needs a sensor with a field of view (fov_x_deg); got {optics.get('design')}")
+        raise ValueError(f"a centre pinhole needs a sensor with a field of view (fov_x_deg); got "
+                         f"{optics.get('design')}")
     size = sensor.film().size()
-    w, h = int(size[0]), int(size[1])
-    pinhole = mi.load_dict({
+    return mi.load_dict({
         "type": "perspective", "fov": optics["fov_x_deg"], "fov_axis": "x", "near_clip": 1e-4,
         "to_world": mi.ScalarTransform4f(np.array(sensor.world_transform().matrix).reshape(4, 4)),
-        "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"}, "pixel_format": "luminance"},
+        "film": {"type": "hdrfilm", "width": int(size[0]), "height": int(size[1]), "rfilter": {"type": "box"},
+                 "pixel_format": "luminance"},
         "sampler": {"type": "stratified", "sample_count": spp, "jitter": False}})
-    aov = mi.load_dict({"type": "aov", "aovs": "dd:depth"})
+
+
+def truth_depth(timed, t: float, spp: int = 1) -> np.ndarray:
+    """z depth (H, W) of the sensor's centre view at time ``t`` (s); inf where the ray hits nothing."""
+    import mitsuba as mi
     timed.set_time(t)
+    pinhole = centre_pinhole(timed, spp)
+    w, h = (int(v) for v in pinhole.film().size())
+    aov = mi.load_dict({"type": "aov", "aovs": "dd:depth"})
     dist = np.array(mi.render(timed.scene, sensor=pinhole, integrator=aov))[..., 0].astype(np.float64)
-    tan_half = math.tan(math.radians(optics["fov_x_deg"]) / 2)
+    tan_half = math.tan(math.radians(timed.sensor.optics_metadata()["fov_x_deg"]) / 2)
     x = ((np.arange(w) + 0.5) / w * 2 - 1) * tan_half
     y = ((np.arange(h) + 0.5) / h * 2 - 1) * tan_half * h / w
     xx, yy = np.meshgrid(x, y)
     z = dist / np.sqrt(1 + xx * xx + yy * yy)
     return np.where(dist > 0, z, np.inf)
+
+
+def centre_frame(timed, t: float, log: bool = True, spp: int = 4) -> np.ndarray:
+    """The centre view at time ``t``: the pixel's log brightness (``log``) or linear radiance; where textured
+    pixels are found for scoring depth maps and refocus aligned to the centre."""
+    import mitsuba_eventfield as ef
+    timed.set_time(t)
+    return ef.render_frames(timed, [t], spp=spp, log=log, sensor=centre_pinhole(timed))[0]
+
+
+def conventional_frame(timed, t_mid: float, fps: float = 60.0, samples: int = 16, spp: int = 4) -> np.ndarray:
+    """What a conventional camera in the event camera's place records: the centre view's linear radiance
+    averaged over one exposure of 1 / ``fps`` seconds centred on ``t_mid`` (``samples`` instants): motion blurs.
+    The camera itself stays at its pose at ``t_mid``."""
+    import mitsuba_eventfield as ef
+    if not (fps > 0 and samples >= 1):
+        raise ValueError(f"fps = {fps}, samples = {samples}: need fps > 0 and samples >= 1")
+    times = t_mid + ((np.arange(samples) + 0.5) / samples - 0.5) / fps
+    timed.set_time(t_mid)
+    return ef.render_frames(timed, times, spp=spp, log=False, sensor=centre_pinhole(timed)).mean(axis=0)
 
 
 def textured(log_image: np.ndarray, threshold: float = 0.1) -> np.ndarray:
