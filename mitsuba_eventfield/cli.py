@@ -176,7 +176,11 @@ def _parser() -> argparse.ArgumentParser:
     sd.add_argument("--min-confidence", type=float, default=0.6, help="pixels scored and shown (default 0.6)")
     sd.add_argument("--split-depth", type=float, default=1.2,
                     help="errors reported for pixels nearer / farther than this (default 1.2: runner / wall)")
-    sd.add_argument("--calibration", help="calibration JSON (eventfield calibrate) instead of the nominal optics")
+    cg_ = sd.add_mutually_exclusive_group()
+    cg_.add_argument("--calibration", help="calibration JSON (eventfield calibrate) instead of the nominal optics")
+    cg_.add_argument("--calibrate", action="store_true",
+                     help="calibrate depth first from LED captures through the same galvo (scenes/led_depth), save "
+                          "it as OUTPUT/calibration.json and use it")
     sd.add_argument("--field-correction", choices=("oriented", "mean", "off"), default="oriented",
                     help="undo the galvo's field-dependent scan scale (default: oriented; see scanrate.run)")
     rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with tests/regression/")
@@ -292,10 +296,19 @@ def _track_focus(a) -> int:
 
 def _scanrate_depth(a) -> int:
     from . import scanrate
-    calibration = None
-    if a.calibration:
-        from .calibration import load_calibration
-        calibration = load_calibration(a.calibration)
+    from .calibration import load_calibration, save_calibration
+    from .errors import EventFieldError
+    calibration = load_calibration(a.calibration) if a.calibration else None
+    if a.calibrate:
+        _check_output_dir(a.output)
+        try:
+            calibration = scanrate.calibrate_depth(a.scene, _pairs(a.define, "-D"), progress=True)
+        except ValueError as e:
+            raise EventFieldError(str(e)) from None
+        os.makedirs(a.output, exist_ok=True)
+        d = calibration["depth"]
+        print(f"depth calibration (LED at {len(d.depths)} depths): pivot {d.pivot:.4g}, rms {d.rms_inverse:.3f} "
+              f"px/rad -> " + save_calibration(os.path.join(a.output, "calibration.json"), **calibration))
     return _application(
         lambda: scanrate.run(a.scene, _pairs(a.define, "-D"), a.periods, a.views, a.near, a.far, a.planes,
                              min_confidence=a.min_confidence, split_depth=a.split_depth, calibration=calibration,

@@ -18,6 +18,7 @@ pixels that are confident).
 """
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -59,6 +60,44 @@ class ScanRateDepth:
 
 
 FIELD_CORRECTIONS = ("oriented", "mean", "off")
+
+
+LED_SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes", "led_depth",
+                         "led.xml")
+CALIBRATION_DEPTHS = (0.4, 0.55, 0.75, 1.0, 1.4, 2.0)     # spans the runner and its wall, densest where dS/dz is
+
+
+def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRATION_DEPTHS, views: int = 24,
+                    progress: bool = False):
+    """The paper's one calibration step for depth from a galvo (its supplement): an LED at known depths, seen
+    through the same galvo as ``scene_path`` (fov, pivots, scan and film copied from its sensor), one scan period
+    of events each; the LED's track over views integrated from the events gives the curve scale at each depth,
+    and ``calibration.fit_depth`` the disparity model. Returns {"depth": DepthCalibration} for ``run``."""
+    import mitsuba_eventfield as ef
+    from .calibration import fit_depth, fit_tracks, track_point
+    from .scan import curve_from_dict
+    target = ef.load_scene(scene_path, **(defines or {}))
+    optics = target.sensor.optics_metadata()
+    if optics.get("design") != "galvo":
+        raise ValueError(f"{scene_path}: depth calibration needs a galvo sensor (got {optics.get('design')!r})")
+    scan = optics["scan"]
+    if scan["curve"] != "circle":
+        raise ValueError(f"{scene_path}: the LED calibration here expects a circular scan (got {scan['curve']!r})")
+    w, h = (int(v) for v in target.sensor.film().size())
+    curve = curve_from_dict(scan)
+    scales, scales_y = [], []
+    for z in depths:
+        led = ef.load_scene(LED_SCENE, width=w, height=h, depth=float(z), radius=0.006 * float(z),
+                            fov=optics["fov_x_deg"], mirror_distance=optics["mirror_distance"],
+                            mirror_separation=optics["mirror_separation"], frequency=scan["frequency"],
+                            amplitude=scan["amplitude"], phase=scan["phase"])
+        events = ef.render_events(led, curve.period, steps=4 * views, progress=progress)
+        times = (np.arange(views) + 0.5) / views * curve.period
+        frames = np.exp(ef.reconstruct.direct(events, times, ef.render_frames(led, [0.0])[0], 0.0))
+        fit = fit_tracks([track_point(frames)], times, curve)
+        scales.append(fit.scale_px_per_rad[0])
+        scales_y.append(fit.scale_px_per_rad[1])
+    return {"depth": fit_depth(list(depths), scales, scales_y)}
 
 
 def _sharp_centre_image(lf, dm) -> np.ndarray:

@@ -34,6 +34,17 @@ def test_runner_depth_every_period(runner_capture, capsys):
     assert est[1] > est[0] and all(abs(a - b) / b < 0.02 for a, b in zip(est, true))
 
 
+def test_depth_maps_with_the_calibration_from_led_captures(runner_capture):
+    # the paper's one calibration step: an LED at known depths through the same galvo gives the disparity model
+    cal = scanrate.calibrate_depth(RUNNER, {"width": 128, "height": 96})
+    d = cal["depth"]                                    # measured: pivot 0.2026 (x), S_inf 353.9 (2f = 351.7)
+    assert d.best == "inverse" and abs(d.pivot - 0.2) / 0.2 < 0.03
+    r = scanrate.run(RUNNER, captured=runner_capture, calibration=cal)
+    assert r.meta["calibrated"] == ["depth"]
+    for e in r.errors:                                  # measured: near 0.018-0.020, far 0.043-0.046
+        assert e["near"] < 0.035 and e["far"] < 0.07
+
+
 def test_field_correction_is_what_makes_the_wall_right(runner_capture):
     errs = {fc: np.mean([e["far"] for e in scanrate.run(RUNNER, captured=runner_capture, field_correction=fc).errors])
             for fc in ("off", "mean", "oriented")}
@@ -86,12 +97,13 @@ def test_field_depth_on_axis_and_orientation_weights():
 def test_scanrate_cli_outputs_and_errors(tmp_path):
     out = tmp_path / "sr"
     cmd = [sys.executable, "-m", "mitsuba_eventfield.cli", "scanrate-depth", RUNNER, "-o", str(out), "--periods", "1",
-           "--views", "24", "-D", "width=64", "-D", "height=48"]
+           "--views", "24", "-D", "width=64", "-D", "height=48", "--calibrate"]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["depth_maps_per_second"] == 100 and "depth_from_focus" in metrics["time_split_s"]
-    assert len(metrics["errors"]) == 1 and "near" in metrics["summary"]
+    assert len(metrics["errors"]) == 1 and "near" in metrics["summary"] and metrics["calibrated"] == ["depth"]
+    assert len(json.loads((out / "calibration.json").read_text())["depth"]["depths"]) == 6
     channels, meta = read_exr(str(out / "depth_p000.exr"))
     assert set(channels) == {"depth", "confidence", "truth"} and meta["period_index"] == 0
     assert channels["depth"].shape == (48, 64) and (out / "scanrate_depth.png").exists()
