@@ -8,13 +8,13 @@ Pipeline (``refocus_planes`` and ``track_focus_depth``, one Python call each):
    start frame (``start="frame"``: a conventional frame at t = 0, e.g. the RGB camera behind a beam splitter;
    ``start="events"``: the static-scene galvo solver on the first period, right wherever nothing moved then, and
    only up to a constant: those light fields carry an unknown overall gain, which refocus and depth ignore but
-   PSNR against the rendered views does not) and
-   placed at their scan angles: a light field every period (250 per second at 250 Hz);
+   PSNR against the rendered views does not) and placed at their scan angles: a light field every period (250
+   per second at 250 Hz);
 3. refocus each light field on named depth planes, or follow an object moving in depth (focus tracking: the
    sharpest depth inside a region that follows the object by template matching).
 
-Ground truth is the renderer's: the same views rendered directly (noise-free, same seed) and refocused by the
-same code, scored with PSNR/SSIM (``quality``); Mitsuba's depth AOV for the depth of the tracked object and for
+Ground truth is the renderer's: the same views rendered directly (same sampler seed, so the same Monte-Carlo
+noise as the frames the events came from) and refocused by the same code, scored with PSNR/SSIM (``quality``); Mitsuba's depth AOV for the depth of the tracked object and for
 the regions that each plane should bring into focus. ``selectivity`` checks that refocus does what it says:
 the focus measure (tenengrad) of a plane's own region is higher when refocused on that plane than on the others.
 """
@@ -86,7 +86,7 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
                         {"period_index": k}) for k, lf in enumerate(lfs)]
     t3 = time.perf_counter()
     return Capture(timed, events, lfs, truth, period,
-                    {"render_events": t1 - t0, "views_from_events": t2 - t1, "ground_truth_views": t3 - t2})
+                   {"render_events": t1 - t0, "views_from_events": t2 - t1, "ground_truth_views": t3 - t2})
 
 
 def _meta(cap: Capture, scene_path, defines, **kw) -> dict:
@@ -261,8 +261,9 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     is sharpest; the region starts at ``roi`` (fractions of the image) and follows the object by template
     matching; with ``compensate_motion`` the object's image velocity is taken out of the views
     (``refocus.track_focus``). The sharpest refocus depth is turned into metric depth at the region's centre
-    (``lightfield.galvo_field_depth``). ``captured``: a ``capture`` of the scene to reuse. Truth: the median Mitsuba depth of the region's pixels nearer than
-    ``object_far`` (the object's pixels, the background being farther)."""
+    (``lightfield.galvo_field_depth``, the mean of the x and y scales). ``captured``: a ``capture`` of the
+    scene to reuse. Truth: the median Mitsuba depth of the region's pixels nearer than ``object_far`` (the
+    object's pixels, the background being farther), with their 25th-75th percentiles (``truth_spread``)."""
     from .lightfield import galvo_field_depth
     from .refocus import depth_planes, refocus, track_focus
     from .truth import truth_depth
@@ -295,8 +296,8 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     truth = np.array(truth)
     if np.isnan(truth).any():
         lost = [int(k) for k in np.flatnonzero(np.isnan(truth))]
-        raise EventFieldError(f"{scene_path}: the tracked region holds no pixel nearer than object_far = {object_far} "
-                           f"in periods {lost}: the object was lost (start roi {tuple(roi)})")
+        raise EventFieldError(f"{scene_path}: the tracked region holds no pixel nearer than object_far = "
+                              f"{object_far} in periods {lost}: the object was lost (start roi {tuple(roi)})")
     t2 = time.perf_counter()
     return FocusTrack(depths, truth, np.array(rois), images, background, times, velocities, np.array(spread), _meta(
         cap, scene_path, defines, roi=list(map(float, roi)), near=near, far=far, planes=planes,

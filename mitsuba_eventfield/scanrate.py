@@ -7,12 +7,13 @@ at 100 Hz, 100 depth maps per second. Two corrections turn "sharpest refocus pla
 * the field-dependent scan scale (``lightfield.galvo_field_depth``): off-axis pixels move (1 + t^2) times more
   per mirror turn, so a constant-shift focal stack reads them too far; corrected per pixel, weighting the x and
   y scales by the local edge orientation (``lightfield.galvo_orientation_weight``);
-* ``calibration``: optionally, a galvo/depth calibration from the data (``calibration.apply_to_lightfield``)
-  instead of the nominal optics.
+* ``calibration``: optionally, a galvo/depth calibration from the data (``calibration.apply_to_lightfield``;
+  ``calibrate_depth`` makes the depth one from LED captures through the same galvo) instead of the nominal
+  optics.
 
 Ground truth is Mitsuba's own depth (``truth.truth_depth``) at the middle of each period. Errors are relative
-depth errors on *textured* pixels (ground-truth log-gradient above ``texture_threshold``: depth from focus knows
-nothing where there is no texture) that the method is confident about, reported separately for pixels nearer
+depth errors on *textured* pixels (log-gradient of the rendered centre view, which the depth maps are aligned
+to, above ``texture_threshold``: depth from focus knows nothing where there is no texture) that the method is confident about, reported separately for pixels nearer
 and farther than ``split_depth`` (the runner and the wall behind it), with the coverage (share of textured
 pixels that are confident).
 """
