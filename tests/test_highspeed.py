@@ -119,6 +119,18 @@ def test_highspeed_and_track_focus_cli(tmp_path):
     assert (out / "highspeed.png").stat().st_size > 1000 and (out / "fan_p000.png").exists()
     assert not [p for p in os.listdir(out) if p.startswith(".")]          # no temporary files left
 
+    out = tmp_path / "tf"
+    r = subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "track-focus", DART, "-o", str(out),
+                        "--periods", "3", "--views", "24", "-D", "width=80", "-D", "height=60"],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert len(metrics["depths"]) == len(metrics["truth"]) == len(metrics["truth_p25_p75"]) == 3
+    assert metrics["compensate_motion"] is True and len(metrics["image_velocity_px_per_s"]) == 3
+    channels, meta = read_exr(str(out / "tracked.exr"))
+    assert set(channels) == {"p0", "p1", "p2"} and meta["roi"] == [0.58, 0.44, 0.78, 0.56]
+    assert (out / "track.png").exists() and (out / "tracked_p002.png").exists()
+
     bad = subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "highspeed", FAN, "-o", str(tmp_path / "b"),
                           "--plane", "fan=-1"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "plane 'fan'" in bad.stderr and "> 0" in bad.stderr
