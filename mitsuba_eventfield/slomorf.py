@@ -1,6 +1,11 @@
 """SloMoRF (paper section 6.1): slow-motion refocus from a kaleidoscope seen by an event camera and, through a
 beam splitter, by a 120 fps RGB camera with the same views.
 
+The splitter is ideal and lossless here: both cameras see the full radiance of the same film. A real 50/50
+splitter halves each one's light, which for the event pixel is a constant in log (no events change, except
+near the lin-log knee) and for the RGB camera an exposure setting. The RGB frames are instantaneous (no
+motion blur within an exposure).
+
 One call, ``slomorf(scene)``, does the whole application and scores it against the renderer's ground truth:
 
 1. **Events** of the kaleidoscope film over the clip, in a mono variant: the event pixel responds to log
