@@ -165,9 +165,11 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
     truth = {n: np.stack([refocus(lf, z) for lf in cap.truth_lightfields]) for n, z in planes.items()}
     scores = {n: {"psnr_db": [], "ssim": []} for n in planes}
     focus = {n: {m: [] for m in planes} for n in planes}       # region n refocused on plane m
+    depth_maps = []                                             # Mitsuba depth per period (reused below)
     for k, lf in enumerate(cap.truth_lightfields):
         t_mid = float(lf.times.mean())
         z_true = truth_depth(cap.timed, t_mid)
+        depth_maps.append(z_true)
         tex = textured(centre_frame(cap.timed, t_mid))         # the centre view: sharp, aligned with z_true
         for n in planes:
             s = quality_scores(refocused[n][k], truth[n][k])
@@ -190,7 +192,7 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
         t_mid = float(cap.lightfields[k].times.mean())
         conventional = conventional_frame(cap.timed, t_mid, conventional_fps, spp=spp)
         instant = centre_frame(cap.timed, t_mid, log=False, spp=spp)
-        z_true = truth_depth(cap.timed, t_mid)
+        z_true = depth_maps[k]
         for n in planes:
             region = np.abs(z_true / planes[n] - 1) < region_tolerance
             if region.any():
