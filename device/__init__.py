@@ -7,4 +7,5 @@ against the galvo's envelope before a byte is sent; outputs go off on any error,
 from .controller import AxisSine, GalvoController, sines_from_curve, tag_events  # noqa: F401
 from .dialects import DIALECTS, dialect  # noqa: F401
 from .spec import GalvoSpec, SafetyError  # noqa: F401
-from .transport import RecordingTransport, VisaTransport, simulated  # noqa: F401
+from .simulator import SimulatedGenerator  # noqa: F401
+from .transport import VisaTransport, open_transport, simulated, simulated_visa  # noqa: F401

@@ -1,20 +1,39 @@
 """Drive a two-axis galvo from a scan curve, through a function generator, safely.
 
 The curve comes from ``mitsuba_eventfield.scan`` (the same object the simulation renders): each axis of a
-circle, line or Lissajous scan is one sine, generator channel 1 = x mirror, channel 2 = y mirror. Everything is
-checked against the galvo's envelope (``spec.GalvoSpec``) before the first byte is sent. Starting ramps the
-amplitude up in steps after switching the load to high impedance and aligning the channels' phases; stopping
-ramps down and switches the outputs off. Any error, Ctrl-C or interpreter exit while outputs may be on
-switches them off.
+circle, line or Lissajous scan is one sine, generator channel 1 = x mirror, channel 2 = y mirror; an axis with
+zero amplitude (the idle axis of a line) is held at a DC level, because generators refuse a 0 Vpp sine and a
+refused command would leave the channel at whatever it held before.
+
+Three layers keep the galvo inside its envelope (``spec.GalvoSpec``):
+
+1. ``plan`` checks the whole request before a connection is used (every value finite and in range, amplitude
+   derated with frequency, travel, volts).
+2. A guard in ``_send`` decodes every command just before it is written and checks the channel settings it
+   would produce; only commands this controller composes get through, and "output on" only after step 3.
+3. The instrument must confirm: after configuring (outputs off), every setting and the error queue are read back
+   and must match what was sent; only then are the outputs switched on. A refused command therefore leaves the
+   outputs off. The error queue is read after every ramp step and the full read-back is repeated at the end.
+
+Switching off: ``stop`` ramps down; ``close`` (also the context-manager exit and an ``atexit`` hook) switches the
+outputs off *before* the connection closes, whenever this controller may have switched them on. While outputs
+may be on, SIGTERM is turned into an exception (when nothing else handles it) so that path runs too. SIGKILL
+cannot be caught: run ``eventfield device stop`` after one.
 """
 from __future__ import annotations
 
 import atexit
+import math
+import signal
+import threading
 import time
 from dataclasses import dataclass
 
 from .dialects import Dialect, dialect
-from .spec import GalvoSpec, SafetyError
+from .spec import GalvoSpec, SafetyError, finite_number
+
+# The circle adds 90 deg to the user's phase; a phase beyond +-720 deg is a mistake, not an intent.
+MAX_CURVE_PHASE_DEG = 720.0
 
 
 @dataclass
@@ -25,6 +44,10 @@ class AxisSine:
     phase_deg: float
     offset_deg: float
 
+    @property
+    def is_dc(self) -> bool:
+        return self.amplitude_deg == 0.0
+
 
 def sines_from_curve(curve) -> list:
     """The per-axis sines of a circle / line / Lissajous scan (``scan.Lissajous``); others are refused."""
@@ -32,130 +55,249 @@ def sines_from_curve(curve) -> list:
         raise SafetyError(f"the {getattr(curve, 'name', curve)!r} scan is not a pair of sines: a function generator "
                           "drives circles, lines and Lissajous curves only (sine only)")
     out = []
-    for ch, (f, a, ph, off) in enumerate(((curve.freq_x, curve.amplitude_x, curve.phase_x, curve.offset_x),
-                                          (curve.freq_y, curve.amplitude_y, curve.phase_y, curve.offset_y)), start=1):
+    for ch, axis, (f, a, ph, off) in ((1, "x", (curve.freq_x, curve.amplitude_x, curve.phase_x, curve.offset_x)),
+                                      (2, "y", (curve.freq_y, curve.amplitude_y, curve.phase_y, curve.offset_y))):
+        ph = finite_number(ph, f"axis {axis}: phase")
+        if abs(ph) > MAX_CURVE_PHASE_DEG:
+            raise SafetyError(f"axis {axis}: phase {ph:g} deg: allowed range is +-{MAX_CURVE_PHASE_DEG:g} deg")
         out.append(AxisSine(ch, f, a, ph % 360.0, off))
     return out
 
 
 class GalvoController:
-    """``transport``: write/query/close (device.transport); ``dialect``: a Dialect or its name."""
+    """``transport``: write/query/close (device.transport, device.simulator); ``dialect``: a Dialect or its name.
+    Use as a context manager (or call ``close``) so the outputs are off before the connection closes."""
 
     def __init__(self, transport, dialect_or_name, spec: GalvoSpec | None = None, ramp_steps: int = 5,
                  ramp_time: float = 0.5, readback_tolerance: float = 1e-3):
         self.t = transport
         self.d: Dialect = dialect(dialect_or_name) if isinstance(dialect_or_name, str) else dialect_or_name
         self.spec = spec or GalvoSpec()
-        if ramp_steps < 1 or ramp_time < 0:
-            raise SafetyError(f"ramp_steps = {ramp_steps} must be >= 1 and ramp_time = {ramp_time} >= 0")
+        if isinstance(ramp_steps, bool) or not isinstance(ramp_steps, int) or not 1 <= ramp_steps <= 1000:
+            raise SafetyError(f"ramp_steps = {ramp_steps!r}: allowed range is 1 to 1000")
+        if not 0 <= finite_number(ramp_time, "ramp_time") <= 60:
+            raise SafetyError(f"ramp_time = {ramp_time!r}: allowed range is 0 to 60 s")
         self.ramp_steps, self.ramp_time, self.tol = ramp_steps, ramp_time, readback_tolerance
         self.sines = None
-        self.running = False
-        if transport is not None:              # planning-only controllers (no transport) never drive outputs
-            atexit.register(self._emergency_off)
+        self.running = False           # True from the first "output on" until the outputs are confirmed off
+        self._armed = False            # settings confirmed by the instrument: "output on" may be sent
+        self._commanded = {1: {}, 2: {}}
+        self._closed = False
+        self._previous_sigterm = None
+        if transport is not None:      # planning-only controllers (no transport) never drive outputs
+            atexit.register(self.close)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
 
     # ------------------------------------------------------------------ planning (no bytes sent)
     def plan(self, curve) -> list:
         """Check a curve against the envelope and return its per-axis sines (raises SafetyError; sends nothing)."""
         sines = sines_from_curve(curve)
         for s, axis in zip(sines, "xy"):
-            self.spec.check_axis(axis, s.frequency, s.amplitude_deg, s.offset_deg)
+            self.spec.check_axis(axis, s.frequency, s.amplitude_deg, s.offset_deg, s.phase_deg)
         return sines
 
     def _vpp(self, s: AxisSine, fraction: float = 1.0) -> float:
         return 2.0 * s.amplitude_deg * self.spec.volts_per_deg * fraction
 
-    # ------------------------------------------------------------------ commands
+    # ------------------------------------------------------------------ the guard: every byte passes here
     def _send(self, cmds):
         for c in cmds:
+            self._guard(c)
             self.t.write(c)
 
+    def _guard(self, cmd: str) -> None:
+        """Refuse ``cmd`` (SafetyError, nothing written) unless the channel settings it leads to are safe."""
+        if self._closed:
+            raise SafetyError(f"refusing {cmd!r}: the controller is closed")
+        pending = {ch: dict(state) for ch, state in self._commanded.items()}
+        for ch, key, value in self.d.decode(cmd):
+            if ch is None or key in ("unit", "high_z"):
+                continue
+            pending[ch][key] = value
+            if key == "output" and not value:
+                continue                                   # switching off is always allowed
+            if key == "output" and not self._armed:
+                raise SafetyError(f"refusing {cmd!r}: channel {ch}'s settings are not confirmed by the instrument")
+            if key == "phase":
+                finite_number(value, f"channel {ch}: phase")
+            self._check_state(ch, pending[ch], need_all=pending[ch].get("output", False))
+        self._commanded = pending          # only once the whole command passed
+
+    def _check_state(self, ch, state, need_all):
+        """Check the known part of a channel's commanded state (all of it when its output is on)."""
+        fn, f, vpp, off = (state.get(k) for k in ("function", "frequency", "vpp", "offset"))
+        if need_all and (fn is None or off is None or (fn == "SIN" and (f is None or vpp is None))):
+            raise SafetyError(f"refusing to switch channel {ch} on: its settings are not all known")
+        if f is not None and not 0 < finite_number(f, f"channel {ch}: frequency") <= self.spec.max_frequency:
+            raise SafetyError(f"channel {ch}: {f:g} Hz is outside 0 to {self.spec.max_frequency:g} Hz")
+        self.spec.check_channel(ch, fn or "SIN", f if f is not None else 1e-9, vpp or 0.0, off or 0.0)
+
+    # ------------------------------------------------------------------ commands
     def outputs_off(self):
         for ch in (1, 2):
             self._send(self.d.output(ch, False))
+        self.running = False
 
-    def _emergency_off(self):
-        if self.running:
-            try:
-                self.outputs_off()
-            finally:
-                self.running = False
+    def _configure(self, s: AxisSine, fraction: float):
+        if s.is_dc:
+            return self.d.dc(s.channel, s.offset_deg * self.spec.volts_per_deg)
+        return self.d.configure(s.channel, s.frequency, self._vpp(s, fraction),
+                                s.offset_deg * self.spec.volts_per_deg, s.phase_deg)
 
     def start(self, curve, sleep=time.sleep) -> dict:
-        """Check, configure, ramp up, align phases, verify. Returns the read-back report."""
+        """Check, configure (outputs off), verify, align phases, switch on, ramp up, verify. Returns the
+        read-back report; raises SafetyError (outputs off) when the instrument does not confirm."""
         sines = self.plan(curve)                          # raises before any byte
-        self.sines = sines
+        self.sines, self._armed = sines, False
+        first = 1.0 / self.ramp_steps
         try:
+            self.outputs_off()                            # first bytes: whatever the generator held stays dark
             self._send(self.d.clear())
             for s in sines:
-                self._send(self.d.output(s.channel, False) + self.d.high_z(s.channel))
-            first = 1.0 / self.ramp_steps
+                self._send(self.d.high_z(s.channel))
             for s in sines:
-                self._send(self.d.configure(s.channel, s.frequency, self._vpp(s, first),
-                                            s.offset_deg * self.spec.volts_per_deg, s.phase_deg))
+                self._send(self._configure(s, first))
+            self._verify(first, outputs_on=False)         # a refused command stops us here, outputs off
             self._send(self.d.align_phases())
+            self._check_errors("aligning the phases")
+            self._armed = True
+            self._hold_sigterm()
             self.running = True
             for s in sines:
                 self._send(self.d.output(s.channel, True))
             for k in range(2, self.ramp_steps + 1):
                 sleep(self.ramp_time / self.ramp_steps)
                 for s in sines:
-                    self._send(self.d.amplitude(s.channel, self._vpp(s, k / self.ramp_steps)))
-            report = self.read_back()
-            errors = self.errors()
-            if errors:
-                raise SafetyError("the generator reported errors: " + "; ".join(f"{c}: {m}" for c, m in errors))
-            report["errors"] = errors
-            return report
+                    if not s.is_dc:
+                        self._send(self.d.amplitude(s.channel, self._vpp(s, k / self.ramp_steps)))
+                self._check_errors(f"ramp step {k} of {self.ramp_steps}")
+            return self._verify(1.0, outputs_on=True)
         except BaseException:
-            # outputs off whatever went wrong (instrument error, timeout, Ctrl-C); a dead link may refuse this too
-            self.running = False
-            try:
-                self.outputs_off()
-            except Exception:  # noqa: BLE001
-                pass
+            # outputs off whatever went wrong (refusal, timeout, Ctrl-C); a dead link may refuse this too
+            self._switch_off_quietly()
             raise
+
+    def _verify(self, fraction: float, outputs_on: bool) -> dict:
+        report = self.read_back(fraction, outputs_on)
+        errors = self.errors()
+        report["errors"] = errors
+        problems = [f"{c}: {m}" for c, m in errors] + report["mismatches"]
+        if problems:
+            raise SafetyError("the generator did not confirm the settings (outputs off): " + "; ".join(problems))
+        return report
+
+    def _check_errors(self, when: str):
+        errors = self.errors()
+        if errors:
+            raise SafetyError(f"the generator reported errors at {when} (outputs off): "
+                              + "; ".join(f"{c}: {m}" for c, m in errors))
 
     def stop(self, sleep=time.sleep) -> None:
         """Ramp the amplitude down, then switch the outputs off (also when the ramp fails)."""
         try:
-            if self.sines:
+            if self.sines and self.running:
                 for k in range(self.ramp_steps - 1, 0, -1):
                     for s in self.sines:
-                        self._send(self.d.amplitude(s.channel, self._vpp(s, k / self.ramp_steps)))
+                        if not s.is_dc:
+                            self._send(self.d.amplitude(s.channel, self._vpp(s, k / self.ramp_steps)))
                     sleep(self.ramp_time / self.ramp_steps)
         finally:
-            self.running = False
+            self._armed = False
             self.outputs_off()
+            self._release_sigterm()
+
+    def _switch_off_quietly(self):
+        """Outputs off on an error path: each channel on its own, each tried twice (a flaky link may drop one
+        command); a link that refuses both tries leaves nothing more we can send."""
+        self._armed = False
+        for ch in (1, 2):
+            for _ in range(2):
+                try:
+                    self._send(self.d.output(ch, False))
+                    break
+                except Exception:  # noqa: BLE001
+                    continue
+        self.running = False
+        self._release_sigterm()
+
+    def close(self) -> None:
+        """Outputs off (if this controller may have switched them on), then close the connection. Idempotent."""
+        if self._closed or self.t is None:
+            return
+        try:
+            if self.running or self._armed:
+                self._switch_off_quietly()
+        finally:
+            self._closed = True
+            atexit.unregister(self.close)
+            self.t.close()
+
+    # ------------------------------------------------------------------ SIGTERM while scanning
+    def _hold_sigterm(self):
+        """Make SIGTERM raise SystemExit while outputs may be on (so ``close`` runs), unless the program already
+        handles SIGTERM itself (the CLI does) or this is not the main thread (Python allows handlers there only)."""
+        if threading.current_thread() is not threading.main_thread():
+            return
+        if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+            def terminated(signum, frame):
+                raise SystemExit(128 + signum)
+            self._previous_sigterm = signal.SIG_DFL
+            signal.signal(signal.SIGTERM, terminated)
+
+    def _release_sigterm(self):
+        if self._previous_sigterm is not None and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, self._previous_sigterm)
+            self._previous_sigterm = None
 
     # ------------------------------------------------------------------ reading
     def errors(self, limit: int = 32) -> list:
         """Drain the error queue: [(code, message)] (empty when the instrument reports none)."""
         out = []
         for _ in range(limit):
-            code, msg = self.d.parse_error(self.t.query(self.d.error_query()))
+            try:
+                code, msg = self.d.parse_error(self.t.query(self.d.error_query()))
+            except ValueError as e:
+                return out + [(-1, f"unreadable error queue: {e}")]
             if code == 0:
                 break
             out.append((code, msg))
         return out
 
-    def read_back(self) -> dict:
-        """Settings per channel as the instrument reports them, and mismatches against the request."""
+    def read_channel(self, ch: int) -> dict:
+        got = {}
+        for name, (q, parse) in self.d.readback(ch).items():
+            try:
+                got[name] = parse(self.t.query(q))
+            except (ValueError, KeyError, IndexError) as e:
+                got[name] = f"unreadable: {e}"
+        return got
+
+    def read_back(self, fraction: float = 1.0, outputs_on: bool | None = None) -> dict:
+        """Settings per channel as the instrument reports them, and mismatches against the request (at
+        ``fraction`` of the amplitude; output state checked when ``outputs_on`` is given)."""
         report = {"channels": {}, "mismatches": []}
         for s in self.sines or []:
-            got = {}
-            for name, (q, parse) in self.d.readback(s.channel).items():
-                try:
-                    got[name] = parse(self.t.query(q))
-                except (ValueError, KeyError, IndexError) as e:
-                    got[name] = f"unreadable: {e}"
+            got = self.read_channel(s.channel)
             report["channels"][s.channel] = got
-            want = {"frequency": s.frequency, "vpp": self._vpp(s), "offset": s.offset_deg * self.spec.volts_per_deg,
-                    "phase": s.phase_deg}
+            want = {"function": "DC" if s.is_dc else "SIN", "offset": s.offset_deg * self.spec.volts_per_deg,
+                    "high_z": True}
+            if not s.is_dc:
+                want.update(frequency=s.frequency, vpp=self._vpp(s, fraction), phase=s.phase_deg)
+            if outputs_on is not None:
+                want["output"] = outputs_on
             for name, w in want.items():
                 g = got.get(name)
-                if not isinstance(g, float) or abs(g - w) > self.tol * max(1.0, abs(w)):
-                    report["mismatches"].append(f"channel {s.channel} {name}: requested {w:g}, instrument reports {g}")
+                if isinstance(w, (bool, str)) or isinstance(g, (bool, str)):
+                    ok = g == w
+                else:
+                    ok = isinstance(g, float) and math.isfinite(g) and abs(g - w) <= self.tol * max(1.0, abs(w))
+                if not ok:
+                    report["mismatches"].append(f"channel {s.channel} {name}: requested {w}, instrument reports {g}")
         return report
 
     def identity(self) -> str:

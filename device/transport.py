@@ -1,4 +1,5 @@
-"""How commands reach the generator: PyVISA (pyvisa-py, or pyvisa-sim YAML instruments), or a recorder.
+"""How commands reach the generator: PyVISA (pyvisa-py, or pyvisa-sim YAML instruments), the in-memory
+simulated generator of every dialect (``device.simulator``), or a recorder.
 
 Every transport has ``write(cmd)``, ``query(cmd) -> str`` and ``close()``. ``RecordingTransport`` keeps the
 exact byte sequence (tests compare it per dialect) and answers queries from a dict or a callable.
@@ -40,38 +41,26 @@ class VisaTransport:
             self.rm.close()
 
 
-def simulated(dialect_name: str) -> VisaTransport:
-    """A pyvisa-sim instrument speaking ``dialect_name`` (device/sim/<dialect>.yaml)."""
+def simulated(dialect_name: str, **kw):
+    """An in-memory generator speaking ``dialect_name`` (every dialect; ``device.simulator``)."""
+    from .dialects import dialect
+    from .simulator import SimulatedGenerator
+    dialect(dialect_name)                  # the one "unknown dialect" message
+    return SimulatedGenerator(dialect_name, **kw)
+
+
+def open_transport(dialect_name: str, resource: str | None = None, simulate: bool = False):
+    """What the CLI connects to: the simulated generator, or a VISA resource."""
+    if simulate:
+        return simulated(dialect_name)
+    if not resource:
+        raise SafetyError("give --resource (a VISA address) or --simulate")
+    return VisaTransport(resource)
+
+
+def simulated_visa(dialect_name: str) -> VisaTransport:
+    """A pyvisa-sim instrument speaking ``dialect_name`` (device/sim/<dialect>.yaml): exercises the PyVISA path."""
     if dialect_name not in SIM_RESOURCES:
         raise SafetyError(f"no simulated instrument for dialect {dialect_name!r}; available: "
                           + ", ".join(SIM_RESOURCES))
     return VisaTransport(SIM_RESOURCES[dialect_name], f"{os.path.join(SIM_DIR, dialect_name + '.yaml')}@sim")
-
-
-class RecordingTransport:
-    """Records every command; answers queries from ``answers`` (dict or callable). ``fail_on``: raise the given
-    exception when a command starting with that prefix is sent (to test faults mid-sequence)."""
-
-    def __init__(self, answers=None, fail_on: str | None = None, error=TimeoutError("simulated timeout")):
-        self.sent = []
-        self.answers = answers or {}
-        self.fail_on, self.error = fail_on, error
-
-    def _check(self, cmd):
-        if self.fail_on and cmd.startswith(self.fail_on):
-            self.fail_on = None
-            raise self.error
-
-    def write(self, cmd: str) -> None:
-        self._check(cmd)
-        self.sent.append(cmd)
-
-    def query(self, cmd: str) -> str:
-        self._check(cmd)
-        self.sent.append(cmd)
-        if callable(self.answers):
-            return self.answers(cmd)
-        return self.answers.get(cmd, "+0,\"No error\"" if cmd.upper().endswith("ERR?") else "0")
-
-    def close(self) -> None:
-        pass

@@ -9,8 +9,40 @@ import sys
 import numpy as np
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (the usage is one ``--help`` away); subcommands inherit the class."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _num(lo=None, hi=None, integer=False, lo_open=False):
+    """An argparse type: a finite number in [lo, hi] (``lo_open``: lo excluded); the error names the range."""
+    import math
+
+    def parse(text):
+        try:
+            value = float(text)
+            if integer:
+                if not value.is_integer():
+                    raise ValueError
+                value = int(value)
+        except (ValueError, OverflowError):
+            raise argparse.ArgumentTypeError(f"{text!r} is not {'a whole number' if integer else 'a number'}")
+        too_low = lo is not None and (value <= lo if lo_open else value < lo)
+        if not math.isfinite(value) or too_low or (hi is not None and value > hi):
+            left = "(" if lo_open else "["
+            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {left}{'-inf' if lo is None else lo:g}, "
+                                             f"{'inf' if hi is None else hi:g}]")
+        return value
+    return parse
+
+
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="eventfield", description="Render and inspect event fields.")
+    from ._version import __version__
+    from .device.spec import MAX_DURATION_S, PHASE_RANGE_DEG, VOLTS_PER_DEG_RANGE
+    ap = _Parser(prog="eventfield", description="Render and inspect event fields.")
+    ap.add_argument("--version", action="version", version=f"mitsuba-eventfield {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("render", help="render the event stream of a Mitsuba scene")
@@ -189,18 +221,21 @@ def _parser() -> argparse.ArgumentParser:
     dsub = dev.add_subparsers(dest="action", required=True)
     conn = argparse.ArgumentParser(add_help=False)
     conn.add_argument("--resource", help="VISA resource, e.g. TCPIP0::192.0.2.7::inst0::INSTR")
-    conn.add_argument("--dialect", required=True, help="keysight, rigol or siglent")
-    conn.add_argument("--simulate", action="store_true", help="a simulated instrument (pyvisa-sim), no hardware")
-    conn.add_argument("--volts-per-deg", type=float, default=0.8, help="galvo driver scaling (default 0.8 V/deg)")
+    conn.add_argument("--dialect", required=True, choices=("keysight", "rigol", "siglent"), help="generator dialect")
+    conn.add_argument("--simulate", action="store_true", help="a simulated instrument (in memory), no hardware")
+    conn.add_argument("--volts-per-deg", type=_num(*VOLTS_PER_DEG_RANGE), default=0.8,
+                      help="galvo driver scaling, V per mechanical degree (default 0.8)")
     ds = dsub.add_parser("scan", parents=[conn], help="start a scan (ramped), keep it running, stop on exit")
-    ds.add_argument("--curve", default="circle", help="circle, line or lissajous (sine only)")
-    ds.add_argument("--freq", type=float, required=True, help="Hz (x axis for lissajous)")
-    ds.add_argument("--freq-y", type=float, help="lissajous: y frequency")
-    ds.add_argument("--amplitude-deg", type=float, required=True, help="mechanical degrees (x for lissajous)")
-    ds.add_argument("--amplitude-y-deg", type=float, help="lissajous: y amplitude")
-    ds.add_argument("--phase", type=float, default=0.0, help="degrees")
-    ds.add_argument("--axis", default="x", help="line: x or y")
-    ds.add_argument("--duration", type=float, default=0.0, help="seconds to scan, then stop (0: until Ctrl-C)")
+    ds.add_argument("--curve", default="circle", choices=("circle", "line", "lissajous"), help="sine scans only")
+    # frequency and amplitude limits are the galvo envelope's (device/spec.py), checked with the whole request
+    ds.add_argument("--freq", type=_num(0, lo_open=True), required=True, help="Hz (x axis for lissajous)")
+    ds.add_argument("--freq-y", type=_num(0, lo_open=True), help="lissajous: y frequency")
+    ds.add_argument("--amplitude-deg", type=_num(0), required=True, help="mechanical degrees (x for lissajous)")
+    ds.add_argument("--amplitude-y-deg", type=_num(0), help="lissajous: y amplitude")
+    ds.add_argument("--phase", type=_num(*PHASE_RANGE_DEG), default=0.0, help="degrees")
+    ds.add_argument("--axis", default="x", choices=("x", "y"), help="line: x or y")
+    ds.add_argument("--duration", type=_num(0, MAX_DURATION_S), default=0.0,
+                    help="seconds to scan, then stop (default 0: until Ctrl-C or SIGTERM)")
     ds.add_argument("--metadata", help="write the capture metadata (instrument, read-back, scan) to this JSON")
     dsub.add_parser("stop", parents=[conn], help="switch both outputs off")
     dsub.add_parser("status", parents=[conn], help="identity, settings read back, error queue")
@@ -366,58 +401,59 @@ def _regression(a) -> int:
     return 1 if problems else 0
 
 
+def _device_curve(a, spec):
+    """The scan curve a ``device scan`` request names (validated by the scan module)."""
+    import mitsuba_eventfield as ef
+    common = {"phase": a.phase} if a.curve != "lissajous" else {}
+    if a.curve == "lissajous":
+        return ef.make_curve("lissajous", freq_x=a.freq, freq_y=a.freq_y or a.freq, amplitude_x=a.amplitude_deg,
+                             amplitude_y=a.amplitude_y_deg if a.amplitude_y_deg is not None else a.amplitude_deg,
+                             phase_x=a.phase, max_angle_deg=spec.max_mech_deg, where="device scan")
+    if a.curve == "line":
+        return ef.make_curve("line", frequency=a.freq, amplitude=a.amplitude_deg, axis=a.axis,
+                             max_angle_deg=spec.max_mech_deg, where="device scan", **common)
+    return ef.make_curve(a.curve, frequency=a.freq, amplitude=a.amplitude_deg, max_angle_deg=spec.max_mech_deg,
+                         where="device scan", **common)
+
+
 def _device(a) -> int:
     import time
 
-    import mitsuba_eventfield as ef
-    from .device import GalvoController, GalvoSpec, VisaTransport, simulated
-    if not a.simulate and not a.resource:
-        raise ef.EventFieldError("give --resource (a VISA address) or --simulate")
+    from .atomic import check_writable, write_json
+    from .device import GalvoController, GalvoSpec, dialect, open_transport
+    from .device.spec import check_duration
     spec = GalvoSpec(volts_per_deg=a.volts_per_deg)
+    dialect(a.dialect)
+    curve = duration = None
     if a.action == "scan":      # every check happens before a connection is even opened
-        if a.curve == "lissajous":
-            curve = ef.make_curve("lissajous", freq_x=a.freq, freq_y=a.freq_y or a.freq, amplitude_x=a.amplitude_deg,
-                                  amplitude_y=a.amplitude_y_deg if a.amplitude_y_deg is not None else a.amplitude_deg,
-                                  phase_x=a.phase, max_angle_deg=spec.max_mech_deg)
-        elif a.curve == "line":
-            curve = ef.make_curve("line", frequency=a.freq, amplitude=a.amplitude_deg, phase=a.phase, axis=a.axis,
-                                  max_angle_deg=spec.max_mech_deg)
-        else:
-            curve = ef.make_curve(a.curve, frequency=a.freq, amplitude=a.amplitude_deg, phase=a.phase,
-                                  max_angle_deg=spec.max_mech_deg)
+        curve = _device_curve(a, spec)
+        duration = check_duration(a.duration)
         GalvoController(None, a.dialect, spec).plan(curve)
-    transport = simulated(a.dialect) if a.simulate else VisaTransport(a.resource)
-    ctl = GalvoController(transport, a.dialect, spec)
-    try:
+        if a.metadata:
+            check_writable(a.metadata, "metadata")
+    # The context manager switches the outputs off before the connection closes, on every way out of this
+    # block: a refusal, a failed metadata write, Ctrl-C, SIGTERM (main turns it into an exception).
+    with GalvoController(open_transport(a.dialect, a.resource, a.simulate), a.dialect, spec) as ctl:
         if a.action == "status":
             print(f"instrument: {ctl.identity()}")
             for ch in (1, 2):
-                got = {n: parse(transport.query(q)) for n, (q, parse) in ctl.d.readback(ch).items()}
-                print(f"channel {ch}: " + ", ".join(f"{k} {v}" for k, v in got.items()))
+                print(f"channel {ch}: " + ", ".join(f"{k} {v}" for k, v in ctl.read_channel(ch).items()))
             errs = ctl.errors()
             print("error queue: " + ("; ".join(f"{c}: {m}" for c, m in errs) if errs else "empty"))
         elif a.action == "stop":
             ctl.outputs_off()
             print("outputs off")
         else:
-            report = ctl.start(curve)
+            ctl.start(curve)
             print(f"scanning {curve.name} at {a.freq:g} Hz, {a.amplitude_deg:g} deg on {ctl.identity()}; read-back "
-                  + ("matches" if not report["mismatches"] else "MISMATCH: " + "; ".join(report["mismatches"])))
+                  "matches")
             if a.metadata:
-                from .atomic import atomic_output
-                with atomic_output(a.metadata, "metadata") as tmp, open(tmp, "w") as f:
-                    json.dump(ctl.metadata(curve), f, indent=2, default=str)
-            try:
-                if a.duration > 0:
-                    time.sleep(a.duration)
-                else:
-                    while True:
-                        time.sleep(1.0)
-            finally:
-                ctl.stop()
-                print("stopped: outputs off")
-    finally:
-        transport.close()
+                write_json(a.metadata, ctl.metadata(curve), "metadata")
+            end = time.monotonic() + duration if duration > 0 else float("inf")
+            while time.monotonic() < end:
+                time.sleep(max(0.0, min(0.2, end - time.monotonic())))
+            ctl.stop()
+            print("stopped: outputs off")
     return 0
 
 
@@ -737,24 +773,75 @@ def _preview(a) -> int:
     return 0
 
 
+COMMANDS = {"render": _render, "info": _info, "preview": _preview, "frame": _frame, "reconstruct": _reconstruct,
+            "refocus": _refocus, "depth": _depth, "calibrate": _calibrate, "device": _device,
+            "regression": _regression, "bench": _bench, "hdr": _hdr, "highspeed": _highspeed,
+            "track-focus": _track_focus, "slomorf": _slomorf, "scanrate-depth": _scanrate_depth}
+
+
+def _signals_as_interrupts():
+    """SIGINT and SIGTERM raise KeyboardInterrupt, so every ``finally`` runs (outputs off, temporary files
+    removed); the signal is remembered because a library between us and the handler (Dr.Jit calling a Python
+    plugin) may hand it back wrapped in another exception. Returns the previous handlers, or {} off the main
+    thread (where Python allows no handlers)."""
+    import signal
+    import threading
+    received.clear()
+
+    def on_signal(signum, frame):
+        received.append(signum)
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+received: list = []
+
+
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
 def main(argv=None) -> int:
+    import errno
+    import signal
     args = _parser().parse_args(argv)
     from .errors import EventFieldError
+    previous = _signals_as_interrupts()
     try:
-        return {"render": _render, "info": _info, "preview": _preview, "frame": _frame, "reconstruct": _reconstruct,
-                "refocus": _refocus, "depth": _depth, "calibrate": _calibrate,
-                "device": _device, "regression": _regression, "bench": _bench, "hdr": _hdr,
-                "highspeed": _highspeed, "track-focus": _track_focus,
-                "slomorf": _slomorf, "scanrate-depth": _scanrate_depth}[args.command](args)
+        return COMMANDS[args.command](args)
     except EventFieldError as e:
-        print(f"eventfield: error: {e}", file=sys.stderr)
+        print(f"eventfield: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("eventfield: interrupted (no partial output kept)", file=sys.stderr)
-        return 130
+        pass                                  # reported below, with the signal's exit status
     except BrokenPipeError:          # e.g. `eventfield info f.h5 | head`: the reader left; not an error of ours
         sys.stderr.close()
         return 0
+    except OSError as e:
+        if e.errno != errno.ENOSPC and not received:
+            print(f"eventfield: error: {e.filename or ''}{': ' if e.filename else ''}{e.strerror or _one_line(e)}",
+                  file=sys.stderr)
+            return 2
+        if e.errno == errno.ENOSPC:
+            print(f"eventfield: error: disk full while writing {e.filename or 'the output'} (nothing was kept)",
+                  file=sys.stderr)
+            return 2
+    except Exception as e:  # noqa: BLE001  (no traceback reaches the user; EVENTFIELD_DEBUG=1 shows it)
+        if not received:
+            if os.environ.get("EVENTFIELD_DEBUG"):
+                raise
+            print(f"eventfield: error: unexpected {type(e).__name__}: {_one_line(e)[:300]} "
+                  "(EVENTFIELD_DEBUG=1 shows the traceback)", file=sys.stderr)
+            return 3
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    signum = received[0] if received else signal.SIGINT
+    print(f"eventfield: {'terminated' if signum == signal.SIGTERM else 'interrupted'} (no partial output kept)",
+          file=sys.stderr)
+    return 128 + int(signum)
 
 
 if __name__ == "__main__":
