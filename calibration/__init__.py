@@ -3,9 +3,13 @@
 * ``galvo``: where each frame sits on the scan curve (phase) and the curve's size, from patch or LED tracks;
 * ``depth``: curve size against known depths, the paper's linear model and the geometric inverse-depth model;
 * ``kaleidoscope``: tile seams, flips, sub-pixel view registration, flat-field;
+* ``optics``: the optics a calibration was made for, and the check that refuses one made for other optics;
 * ``store``: save / load calibration files (JSON) and apply them to light fields.
 """
 from .depth import DepthCalibration, fit_depth  # noqa: F401
-from .galvo import CalibrationError, GalvoCalibration, PatchTrack, fit_galvo, fit_tracks, track_patch, track_point  # noqa: F401
+from .galvo import (CalibrationError, GalvoCalibration, PatchTrack, fit_galvo, fit_tracks,  # noqa: F401
+                    galvo_scale_limit, track_patch, track_point)
 from .kaleidoscope import KaleidoscopeCalibration, find_tiles, flat_field, register  # noqa: F401,E402
-from .store import apply_to_lightfield, load_calibration, save_calibration  # noqa: F401,E402
+from .optics import (check_optics, kaleidoscope_record, optics_difference, optics_record,  # noqa: F401,E402
+                     same_optics)
+from .store import CalibrationFile, apply_to_lightfield, load_calibration, save_calibration  # noqa: F401,E402

@@ -14,6 +14,7 @@ when the data cannot determine it: too few frames, a textureless patch, weak mat
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -85,6 +86,15 @@ class GalvoCalibration:
     rms_px: float = 0.0
     frames_used: int = 0
     patches: list = field(default_factory=list)
+    optics: dict = field(default_factory=dict)   # what it was made for (optics.optics_record), set when saved
+
+    @property
+    def quality(self) -> dict:
+        """How well the fit is determined: residual, parameter uncertainty, matches used."""
+        sx, sy = self.scale_px_per_rad
+        rel = max(self.std.get("scale_x", math.inf) / sx, self.std.get("scale_y", math.inf) / sy)
+        return {"rms_px": self.rms_px, "phase_std_deg": self.std.get("phase_deg"), "scale_rel_std": rel,
+                "samples": self.frames_used}
 
     def radius_px(self) -> tuple:
         """Curve size in pixels along x and y (scale x the curve's peak angle per axis)."""
@@ -108,7 +118,7 @@ class GalvoCalibration:
         return curve_from_dict(self.curve).angles(self.tau0 + np.asarray(times, dtype=np.float64) - self.t_first)
 
     def as_dict(self) -> dict:
-        return {"kind": "galvo", **asdict(self)}
+        return {"kind": "galvo", **asdict(self), "quality": self.quality}
 
 
 def _model(params, curve: ScanCurve, dt):
@@ -135,13 +145,27 @@ def track_point(frames, threshold: float = 0.02) -> PatchTrack:
     return PatchTrack(tuple(c[0]), c - c[0], np.array(score))
 
 
+def galvo_scale_limit(optics: dict, margin: float = 1.25) -> float:
+    """The largest curve scale (px per mechanical radian) a galvo with these optics (an ``optics_record``: fov
+    and film size) can show: 2 f at infinity (optical angles are twice the mechanical ones; the pivot factor
+    1 - pivot / z is below 1 in front of the mirrors), times the keystone 1 + t^2 at the film's corner, times
+    ``margin`` for the cross terms. A fit beyond it has locked onto something that is not the scan."""
+    width, height = optics["width"], optics["height"]
+    f = (width / 2) / math.tan(math.radians(optics["fov_x_deg"]) / 2)
+    corner = math.hypot(width, height) / 2 / f
+    return margin * 2 * f * (1 + corner ** 2)
+
+
 def fit_galvo(frames, times, curve: ScanCurve, patches, half: int = 12, search: int = 16,
-              max_phase_std_deg: float = 5.0, max_scale_rel_std: float = 0.05) -> GalvoCalibration:
+              max_phase_std_deg: float = 5.0, max_scale_rel_std: float = 0.05,
+              scale_limit: float | None = None) -> GalvoCalibration:
     """Calibrate the galvo views from reconstructed frames (log intensity, (K, H, W)) at ``times`` (s).
 
     ``patches``: centres (x, y) of textured patches at one depth (their displacements are fitted jointly).
-    Refuses (CalibrationError) with the reason when frames are too few, a patch is textureless, matches are
-    weak, or the result is too uncertain (phase std > ``max_phase_std_deg`` or scale std > 5%).
+    Refuses (CalibrationError) with the reason when frames are too few or not finite, a patch is textureless,
+    matches are weak, the result is too uncertain (phase std > ``max_phase_std_deg`` or scale std > 5%) or
+    physically impossible (a curve radius beyond half the frame diagonal, or a scale beyond ``scale_limit``,
+    see ``galvo_scale_limit``).
     """
     frames = np.asarray(frames)
     times = np.asarray(times, dtype=np.float64)
@@ -150,13 +174,61 @@ def fit_galvo(frames, times, curve: ScanCurve, patches, half: int = 12, search: 
     if len(frames) < 4:
         raise CalibrationError(f"{len(frames)} frames: at least 4 are needed (3 unknowns, tau0 and two scales, "
                                "from the displacements of frames 1..K-1)")
+    if not np.all(np.isfinite(frames)):
+        raise CalibrationError("the frames contain NaN or infinite values")
     tracks = [track_patch(frames, c, half, search) for c in patches]
-    return fit_tracks(tracks, times, curve, max_phase_std_deg, max_scale_rel_std)
+    result = fit_tracks(tracks, times, curve, max_phase_std_deg, max_scale_rel_std, scale_limit)
+    # the views of one scan must overlap: a radius beyond half the diagonal moves them off the film
+    diagonal = math.hypot(frames.shape[1], frames.shape[2])
+    if max(result.radius_px()) > diagonal / 2:
+        raise CalibrationError(f"absurd curve radius {max(result.radius_px()):.1f} px: beyond half the "
+                               f"{frames.shape[2]}x{frames.shape[1]} frame's diagonal ({diagonal / 2:.1f} px)")
+    return result
+
+
+def _initial_guess(residuals, curve: ScanCurve, sel_t, obs):
+    """Best tau0 on a grid (the curve is periodic: avoid local minima), scales by a linear fit at each."""
+    best = None
+    o_all = np.concatenate(obs)
+    for tau in np.linspace(0, curve.period, 72, endpoint=False):
+        a = np.concatenate([_model((tau, 1.0, 1.0), curve, t) for t in sel_t])
+        sx = float(a[:, 0] @ o_all[:, 0] / max(a[:, 0] @ a[:, 0], 1e-30))
+        sy = float(a[:, 1] @ o_all[:, 1] / max(a[:, 1] @ a[:, 1], 1e-30))
+        if sx <= 0 or sy <= 0:       # a circle fits (tau + T/2, -S) as well: the physical scales are positive
+            continue
+        cost = float(np.sum(residuals((tau, sx, sy)) ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, tau, sx, sy)
+    if best is None:
+        raise CalibrationError("no phase gives positive curve scales: the displacements do not follow the scan curve "
+                               "(wrong curve, or the patch does not move with the scan)")
+    return best[1:]
+
+
+def _check_fit(result: GalvoCalibration, max_phase_std_deg, max_scale_rel_std, scale_limit) -> GalvoCalibration:
+    """Refuse an uncertain or physically impossible fit, with the numbers."""
+    sx, sy = result.scale_px_per_rad
+    std = result.std
+    phase_std = std["phase_deg"]
+    if not (np.isfinite(sx) and np.isfinite(sy) and np.isfinite(result.tau0) and np.isfinite(result.rms_px)):
+        raise CalibrationError(f"the fit gave non-finite values: tau0 {result.tau0}, scales ({sx}, {sy}) px/rad")
+    if not np.isfinite(phase_std) or phase_std > max_phase_std_deg or \
+            max(std["scale_x"] / max(abs(sx), 1e-9), std["scale_y"] / max(abs(sy), 1e-9)) > max_scale_rel_std:
+        raise CalibrationError(f"the fit is too uncertain: phase {result.phase_deg:.2f} +- {phase_std:.2f} deg, "
+                               f"scales {sx:.1f} +- {std['scale_x']:.1f}, {sy:.1f} +- {std['scale_y']:.1f} px/rad "
+                               f"(rms residual {result.rms_px:.2f} px): more frames, more patches or less noise are "
+                               "needed")
+    if scale_limit is not None and max(sx, sy) > scale_limit:
+        raise CalibrationError(f"absurd curve size: scales ({sx:.1f}, {sy:.1f}) px/rad, but these optics show at "
+                               f"most {scale_limit:.1f} (2 f with keystone at the film's corner): the tracks do not "
+                               "follow the scan")
+    return result
 
 
 def fit_tracks(tracks, times, curve: ScanCurve, max_phase_std_deg: float = 5.0,
-               max_scale_rel_std: float = 0.05) -> GalvoCalibration:
-    """The fit shared by patch tracks (scenes) and point tracks (LED): tau0, Sx, Sy with standard errors."""
+               max_scale_rel_std: float = 0.05, scale_limit: float | None = None) -> GalvoCalibration:
+    """The fit shared by patch tracks (scenes) and point tracks (LED): tau0, Sx, Sy with standard errors.
+    Refusals as ``fit_galvo``'s (``scale_limit``: ``galvo_scale_limit`` of the optics, when known)."""
     from scipy.optimize import least_squares
     times = np.asarray(times, dtype=np.float64)
     period = curve.period
@@ -164,6 +236,8 @@ def fit_tracks(tracks, times, curve: ScanCurve, max_phase_std_deg: float = 5.0,
         raise CalibrationError("the scan curve is not periodic")
     if len(times) < 4:
         raise CalibrationError(f"{len(times)} frames: at least 4 are needed (3 unknowns)")
+    if not np.all(np.isfinite(times)) or not all(np.all(np.isfinite(tr.delta)) for tr in tracks):
+        raise CalibrationError("the frame times or the tracked displacements contain NaN or infinite values")
     dt = times - times[0]
     obs, sel_t = [], []
     for tr in tracks:
@@ -179,47 +253,25 @@ def fit_tracks(tracks, times, curve: ScanCurve, max_phase_std_deg: float = 5.0,
     def residuals(p):
         return np.concatenate([(_model(p, curve, t) - o).ravel() for t, o in zip(sel_t, obs)])
 
-    # initial guess: best tau0 on a grid (the curve is periodic: avoid local minima), scales by linear fit
-    best = None
-    o_all = np.concatenate(obs)
-    for tau in np.linspace(0, period, 72, endpoint=False):
-        a = np.concatenate([_model((tau, 1.0, 1.0), curve, t) for t in sel_t])
-        sx = float(a[:, 0] @ o_all[:, 0] / max(a[:, 0] @ a[:, 0], 1e-30))
-        sy = float(a[:, 1] @ o_all[:, 1] / max(a[:, 1] @ a[:, 1], 1e-30))
-        if sx <= 0 or sy <= 0:       # a circle fits (tau + T/2, -S) as well: the physical scales are positive
-            continue
-        cost = float(np.sum(residuals((tau, sx, sy)) ** 2))
-        if best is None or cost < best[0]:
-            best = (cost, tau, sx, sy)
-    if best is None:
-        raise CalibrationError("no phase gives positive curve scales: the displacements do not follow the scan curve "
-                               "(wrong curve, or the patch does not move with the scan)")
-    _, tau, sx, sy = best
+    tau, sx, sy = _initial_guess(residuals, curve, sel_t, obs)
     fit = least_squares(residuals, x0=[tau, sx, sy], loss="soft_l1", f_scale=0.5, method="trf",
                         bounds=([-np.inf, 1e-9, 1e-9], [np.inf, np.inf, np.inf]),
                         x_scale=[period / 20, abs(sx) + 1, abs(sy) + 1])
     r = residuals(fit.x)
-    dof = max(len(r) - 3, 1)
-    sigma2 = float(r @ r) / dof
+    sigma2 = float(r @ r) / max(len(r) - 3, 1)
     try:
-        cov = np.linalg.inv(fit.jac.T @ fit.jac) * sigma2
-        std = np.sqrt(np.maximum(np.diag(cov), 0))
+        std = np.sqrt(np.maximum(np.diag(np.linalg.inv(fit.jac.T @ fit.jac) * sigma2), 0))
     except np.linalg.LinAlgError:
         std = np.full(3, np.inf)
     tau0, sx, sy = fit.x
     tau0 %= period
-    phase_std = std[0] / period * 360
     result = GalvoCalibration(curve=_curve_dict(curve), t_first=float(times[0]), tau0=float(tau0),
                               phase_deg=float(tau0 / period * 360), scale_px_per_rad=(float(sx), float(sy)),
-                              std={"phase_deg": float(phase_std), "scale_x": float(std[1]), "scale_y": float(std[2])},
+                              std={"phase_deg": float(std[0] / period * 360), "scale_x": float(std[1]),
+                                   "scale_y": float(std[2])},
                               rms_px=float(np.sqrt(np.mean(r ** 2))), frames_used=n_good,
                               patches=[list(map(float, t.centre)) for t in tracks])
-    if not np.isfinite(phase_std) or phase_std > max_phase_std_deg or \
-            max(std[1] / max(abs(sx), 1e-9), std[2] / max(abs(sy), 1e-9)) > max_scale_rel_std:
-        raise CalibrationError(f"the fit is too uncertain: phase {result.phase_deg:.2f} +- {phase_std:.2f} deg, "
-                               f"scales {sx:.1f} +- {std[1]:.1f}, {sy:.1f} +- {std[2]:.1f} px/rad (rms residual "
-                               f"{result.rms_px:.2f} px): more frames, more patches or less noise are needed")
-    return result
+    return _check_fit(result, max_phase_std_deg, max_scale_rel_std, scale_limit)
 
 
 def _curve_dict(curve: ScanCurve) -> dict:

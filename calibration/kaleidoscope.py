@@ -8,6 +8,8 @@
   to 1/100 px.
   For a target at the focus plane the offsets measure the residual misalignment of the optics; for one at
   another depth they are its disparities.
+* Refusal: registered views that do not show one scene (a galvo frame, blank or noise, whose seams are
+  symmetric only by chance) stop the calibration (``MIN_VIEW_CONSISTENCY``).
 * Flat-field: a capture of a uniform white target gives each view's gain map (vignetting at the seams).
 """
 from __future__ import annotations
@@ -69,11 +71,21 @@ def find_tiles(frame: np.ndarray, candidates=(3, 5, 7, 9), half: int = 4) -> dic
 class KaleidoscopeCalibration:
     n: int
     tile: tuple                            # (width, height) in pixels
-    views: list = field(default_factory=list)   # per view: i, j, tile rect, flips, offset (dx, dy), response
+    views: list = field(default_factory=list)   # per view: i, j, tile rect, flips, offset (dx, dy), consistency
     flat_gain: list | None = None          # per view: mean gain (the maps themselves are not stored in JSON)
+    seam_scores: dict = field(default_factory=dict)   # mirror symmetry at the seams, per axis (find_tiles)
+    optics: dict = field(default_factory=dict)        # what it was made for (optics.optics_record), set when saved
+
+    @property
+    def quality(self) -> dict:
+        """How well the views agree once registered (``MIN_VIEW_CONSISTENCY``), the seams' symmetry, views used."""
+        c = [v["consistency"] for v in self.views if "consistency" in v and (v["i"], v["j"]) != (0, 0)]
+        return {"min_view_consistency": min(c) if c else None,
+                "median_view_consistency": float(np.median(c)) if c else None,
+                "seam_scores": self.seam_scores, "samples": len(self.views)}
 
     def as_dict(self) -> dict:
-        return {"kind": "kaleidoscope", **asdict(self)}
+        return {"kind": "kaleidoscope", **asdict(self), "quality": self.quality}
 
     def optics_views(self) -> list:
         """View list in the layout of the sensor metadata (for views.extract_views)."""
@@ -96,10 +108,43 @@ def _unflipped(frame, n, tw, th):
     return out
 
 
+# Every tile of a kaleidoscope images the same scene (through another sub-aperture of the main lens), so once
+# unflipped and registered, each view agrees with the centre view up to the parallax of other depths. The tiles of
+# an ordinary image show different parts of the scene and do not. Measured: normalised correlation of each
+# registered log view with the centre one, inside a border of a fifth of the tile; the worst view of each frame:
+#   kaleidoscope renders, 48-192 px films: target at the focus distance 0.99-1.00; two planes (0.6 and 1.5 m,
+#   focus 1 m) 0.71-0.80, and 0.70-0.80 with a 2 mm relay aperture vignetting every seam; scenes/moving_grid
+#   (96-192 px) 0.82-0.99; scenes/falling 0.63-0.87;
+#   galvo frames cut into 3x3 tiles (galvo_static, fan, runner, hdr_leds, demo, moving_grid, dart; 48x36 to
+#   240x180): -0.14 at most (often -1: registration moved a view by most of a tile); white noise -0.06.
+# 0.4 leaves 0.3 on the kaleidoscope side and more on the other. Without the border, the vignetting at the seams
+# brought the worst kaleidoscope view down to 0.38.
+MIN_VIEW_CONSISTENCY = 0.4
+CONSISTENCY_BORDER = 5          # the border left out: a fifth of the tile (vignetting at the seams)
+
+
+def _consistency(centre: np.ndarray, view: np.ndarray, offset) -> float:
+    """Normalised correlation of ``view`` moved by -offset with ``centre``, inside the border."""
+    from scipy.ndimage import shift
+    h, w = centre.shape
+    b = max(int(np.ceil(np.max(np.abs(offset)))) + 2, min(h, w) // CONSISTENCY_BORDER)
+    if min(h, w) - 2 * b < 4:
+        return -1.0                 # registration moved the view by most of a tile: nothing left in common
+    moved = shift(view, (-offset[1], -offset[0]), order=1, mode="nearest")
+    a, c = centre[b:h - b, b:w - b], moved[b:h - b, b:w - b]
+    a, c = a - a.mean(), c - c.mean()
+    den = np.sqrt((a * a).sum() * (c * c).sum())
+    return float((a * c).sum() / den) if den > 1e-12 else -1.0
+
+
 def register(frame: np.ndarray, tiles: dict | None = None, margin: int = 2) -> KaleidoscopeCalibration:
-    """Find the tiles (unless given), undo the flips and register every view to the centre one, sub-pixel."""
+    """Find the tiles (unless given), undo the flips and register every view to the centre one, sub-pixel.
+    Refuses (CalibrationError) a frame whose registered views do not show one scene (``MIN_VIEW_CONSISTENCY``):
+    a galvo frame, a blank or a noise frame has seams only by chance."""
     from skimage.registration import phase_cross_correlation
     frame = np.asarray(frame, dtype=np.float64)
+    if not np.all(np.isfinite(frame)):
+        raise CalibrationError("the frame contains NaN or infinite values")
     tiles = tiles or find_tiles(frame)
     n = tiles["x"]["n"]
     h, w = frame.shape
@@ -115,9 +160,16 @@ def register(frame: np.ndarray, tiles: dict | None = None, margin: int = 2) -> K
         v = img[margin:th - margin, margin:tw - margin]
         # the shift that registers v onto the centre, to 1/100 px (upsampled cross-correlation)
         (sy, sx), error, _ = phase_cross_correlation(prep(centre), prep(v), upsample_factor=100, normalization=None)
-        views.append({"i": i, "j": j, "tile": rect, "flip_x": fx, "flip_y": fy, "offset": [float(-sx), float(-sy)],
-                      "error": float(error)})
-    return KaleidoscopeCalibration(n=n, tile=(tw, th), views=views)
+        offset = [float(-sx), float(-sy)]
+        views.append({"i": i, "j": j, "tile": rect, "flip_x": fx, "flip_y": fy, "offset": offset,
+                      "error": float(error), "consistency": _consistency(centre, v, offset)})
+    worst = min((v for v in views if (v["i"], v["j"]) != (0, 0)), key=lambda v: v["consistency"])
+    if worst["consistency"] < MIN_VIEW_CONSISTENCY:
+        raise CalibrationError(f"not a kaleidoscope frame: registered view ({worst['i']}, {worst['j']}) agrees with "
+                               f"the centre view to {worst['consistency']:.2f} (< {MIN_VIEW_CONSISTENCY}): its "
+                               f"{n}x{n} tiles do not show one scene (a galvo, blank or noise frame?)")
+    seams = {axis: tiles[axis]["score"] for axis in ("x", "y") if "score" in tiles[axis]}
+    return KaleidoscopeCalibration(n=n, tile=(tw, th), views=views, seam_scores=seams)
 
 
 def flat_field(calibration: KaleidoscopeCalibration, flat_frame: np.ndarray) -> np.ndarray:

@@ -1,11 +1,16 @@
 """Calibration files: JSON with a kind and a format version; written atomically; applied to light fields.
 
-    {"format": "mitsuba-eventfield calibration", "version": 1, "galvo": {...}, "depth": {...},
-     "kaleidoscope": {...}}
+    {"format": "mitsuba-eventfield calibration", "version": 2,
+     "galvo": {..., "optics": {...}, "quality": {...}}, "depth": {...}, "kaleidoscope": {...}}
+
+Each part records the optics it was made for (``optics.optics_record``) and how well its fit is determined
+(``quality``: residual, uncertainty, samples used). Version 1 files recorded no optics and are refused: nothing
+could tell whether they belong to the data they are applied to.
 
 ``apply_to_lightfield`` makes refocus and depth from focus use the calibration instead of the nominal optics in
-the event metadata: the galvo calibration places each view on the scan curve (its phase), the depth
-calibration replaces the disparity model (its inverse-depth fit, halved for optical angles).
+the event metadata, after ``optics.check_optics`` has compared the optics: the galvo calibration places each
+view on the scan curve (its phase), the depth calibration replaces the disparity model (its inverse-depth fit,
+halved for optical angles).
 """
 from __future__ import annotations
 
@@ -20,17 +25,53 @@ from mitsuba_eventfield.errors import EventFieldError
 from .depth import DepthCalibration
 from .galvo import GalvoCalibration
 from .kaleidoscope import KaleidoscopeCalibration
+from .optics import KINDS_FOR_DESIGN, _plain, check_optics, optics_difference
 
-FORMAT, VERSION = "mitsuba-eventfield calibration", 1
+FORMAT, VERSION = "mitsuba-eventfield calibration", 2
 _KINDS = {"galvo": GalvoCalibration, "depth": DepthCalibration, "kaleidoscope": KaleidoscopeCalibration}
 
 
-def save_calibration(path: str, **parts) -> str:
-    """Write (or extend) a calibration file with ``galvo=``, ``depth=``, ``kaleidoscope=`` results."""
+class CalibrationFile(dict):
+    """{kind: calibration object} as loaded from ``path`` (named in every refusal)."""
+
+    def __init__(self, parts: dict, path: str):
+        super().__init__(parts)
+        self.path = path
+
+
+def _group(design: str) -> tuple:
+    return KINDS_FOR_DESIGN.get(design, ())
+
+
+def _check_same_setup(path: str, data: dict, kind: str, optics: dict) -> None:
+    """One file may hold a galvo and a kaleidoscope calibration, but the parts acting on one design must come
+    from one set-up: a depth model and a galvo phase of two set-ups would be refused together anyway, later."""
+    for other in _group(optics["design"]):
+        if other == kind or other not in data:
+            continue
+        diff = optics_difference(data[other].get("optics") or {}, optics)
+        if diff:
+            raise EventFieldError(f"{path}: already holds a {other} calibration made for other optics ({diff}, file vs "
+                                  f"new): write this {kind} calibration to another file")
+
+
+def save_calibration(path: str, optics: dict | None = None, **parts) -> str:
+    """Write (or extend) a calibration file with ``galvo=``, ``depth=``, ``kaleidoscope=`` results, each made for
+    ``optics`` (an ``optics_record``; default: the result's own ``optics``). Refuses a result with no optics."""
     data = load_calibration_dict(path) if os.path.exists(path) else {"format": FORMAT, "version": VERSION}
     for kind, obj in parts.items():
         if kind not in _KINDS:
             raise EventFieldError(f"{path}: unknown calibration kind {kind!r}; allowed: {', '.join(_KINDS)}")
+        made_for = _plain(optics) if optics is not None else obj.optics
+        diff = optics_difference(obj.optics, made_for) if obj.optics and made_for else None
+        if diff:
+            raise EventFieldError(f"{path}: the {kind} calibration was made for other optics than those it is saved "
+                                  f"with ({diff})")
+        if not made_for or kind not in _group(made_for.get("design")):
+            raise EventFieldError(f"{path}: the {kind} calibration records no optics it was made for (got "
+                                  f"{made_for or 'none'}): pass optics=optics_record(...) of its data")
+        _check_same_setup(path, data, kind, made_for)
+        obj.optics = made_for
         d = obj.as_dict()
         d.pop("kind", None)
         data[kind] = d
@@ -45,35 +86,54 @@ def load_calibration_dict(path: str) -> dict:
             data = json.load(f)
     except FileNotFoundError:
         raise EventFieldError(f"{path}: calibration file not found") from None
-    except json.JSONDecodeError as e:
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise EventFieldError(f"{path}: not a calibration file (invalid JSON: {e})") from None
-    if data.get("format") != FORMAT or data.get("version") != VERSION:
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise EventFieldError(f"{path}: not a version {VERSION} {FORMAT!r} file")
+    if data.get("version") == 1:
+        raise EventFieldError(f"{path}: a version 1 calibration file, which records no optics, so it cannot be "
+                              "checked against the data: re-run eventfield calibrate into a new file")
+    if data.get("version") != VERSION:
+        raise EventFieldError(f"{path}: not a version {VERSION} {FORMAT!r} file (version {data.get('version')!r})")
     return data
 
 
-def load_calibration(path: str) -> dict:
-    """{kind: calibration object} for every kind in the file."""
+def load_calibration(path: str) -> CalibrationFile:
+    """{kind: calibration object} for every kind in the file; each part must record its optics."""
     data = load_calibration_dict(path)
     out = {}
     for kind, cls in _KINDS.items():
-        if kind in data:
-            fields = dict(data[kind])
-            for key in ("scale_px_per_rad", "tile", "inverse", "linear", "inverse_y"):
-                if key in fields and isinstance(fields[key], list):
-                    fields[key] = tuple(fields[key])
+        if kind not in data:
+            continue
+        fields = dict(data[kind]) if isinstance(data[kind], dict) else {}
+        fields.pop("quality", None)                       # derived from the other fields, for readers
+        if not isinstance(fields.get("optics"), dict) or not fields["optics"].get("design"):
+            raise EventFieldError(f"{path}: the {kind} calibration records no optics, so it cannot be checked "
+                                  "against the data: re-run eventfield calibrate")
+        for key in ("scale_px_per_rad", "tile", "inverse", "linear", "inverse_y"):
+            if key in fields and isinstance(fields[key], list):
+                fields[key] = tuple(fields[key])
+        try:
             out[kind] = cls(**fields)
-    return out
+        except TypeError as e:
+            raise EventFieldError(f"{path}: the {kind} calibration is not readable ({e}): re-run eventfield "
+                                  "calibrate") from None
+    return CalibrationFile(out, path)
 
 
-def apply_to_lightfield(lf, calibration: dict):
+def apply_to_lightfield(lf, calibration: dict, optics: dict):
     """A copy of ``lf`` placed and scaled by the calibration (galvo: view positions from the fitted phase;
-    depth: the disparity model from the inverse-depth fit)."""
+    depth: the disparity model from the inverse-depth fit). ``optics``: the ``optics_record`` of the data ``lf``
+    was made from; a calibration made for other optics is refused (``optics.check_optics``)."""
     from mitsuba_eventfield.lightfield import LightField
+    if not isinstance(optics, dict) or "design" not in optics:
+        raise EventFieldError("apply_to_lightfield needs the optics record of the light field's data "
+                              "(calibration.optics_record(events.meta['optics'], width, height))")
+    kinds = check_optics(calibration, optics)
     positions, A, B = lf.positions.copy(), lf.A, lf.B
-    if "galvo" in calibration and lf.kind == "galvo":
+    if "galvo" in kinds and lf.kind == "galvo":
         ax, ay = calibration["galvo"].view_angles(lf.times)
         positions = np.stack([2 * np.asarray(ax), 2 * np.asarray(ay)], axis=-1)
-    if "depth" in calibration:
+    if "depth" in kinds:
         A, B = calibration["depth"].disparity_model()
-    return LightField(lf.views, positions, lf.times, A, B, lf.kind, dict(lf.meta, calibrated=sorted(calibration)))
+    return LightField(lf.views, positions, lf.times, A, B, lf.kind, dict(lf.meta, calibrated=sorted(kinds)))

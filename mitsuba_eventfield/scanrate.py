@@ -9,7 +9,7 @@ at 100 Hz, 100 depth maps per second. Two corrections turn "sharpest refocus pla
   y scales by the local edge orientation (``lightfield.galvo_orientation_weight``);
 * ``calibration``: optionally, a galvo/depth calibration from the data (``calibration.apply_to_lightfield``;
   ``calibrate_depth`` makes the depth one from LED captures through the same galvo) instead of the nominal
-  optics.
+  optics. One made for other optics (scan, film, lens, mirror pivots) is refused before anything is rendered.
 
 Ground truth is Mitsuba's own depth (``truth.truth_depth``) at the middle of each period. Errors are relative
 depth errors on *textured* pixels (log-gradient of the rendered centre view, which the depth maps are aligned
@@ -73,9 +73,10 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
     """The paper's one calibration step for depth from a galvo (its supplement): an LED at known depths, seen
     through the same galvo as ``scene_path`` (fov, pivots, scan and film copied from its sensor), one scan period
     of events each; the LED's track over views integrated from the events gives the curve scale at each depth,
-    and ``calibration.fit_depth`` the disparity model. Returns {"depth": DepthCalibration} for ``run``."""
+    and ``calibration.fit_depth`` the disparity model. Returns {"depth": DepthCalibration} for ``run``, made for
+    the optics of ``scene_path`` (its ``optics`` record), which ``run`` checks against the scene it is used on."""
     import mitsuba_eventfield as ef
-    from .calibration import fit_depth, fit_tracks, track_point
+    from .calibration import fit_depth, fit_tracks, galvo_scale_limit, optics_record, track_point
     from .scan import curve_from_dict
     target = ef.load_scene(scene_path, **(defines or {}))
     optics = target.sensor.optics_metadata()
@@ -86,6 +87,8 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
         raise ValueError(f"{scene_path}: the LED calibration here expects a circular scan (got {scan['curve']!r})")
     w, h = (int(v) for v in target.sensor.film().size())
     curve = curve_from_dict(scan)
+    record = optics_record(optics, w, h, where=scene_path)
+    limit = galvo_scale_limit(record)
     scales, scales_y = [], []
     for z in depths:
         led = ef.load_scene(LED_SCENE, width=w, height=h, depth=float(z), radius=0.006 * float(z),
@@ -95,10 +98,28 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
         events = ef.render_events(led, curve.period, steps=4 * views, progress=progress)
         times = (np.arange(views) + 0.5) / views * curve.period
         frames = np.exp(ef.reconstruct.direct(events, times, ef.render_frames(led, [0.0])[0], 0.0))
-        fit = fit_tracks([track_point(frames)], times, curve)
+        fit = fit_tracks([track_point(frames)], times, curve, scale_limit=limit)
         scales.append(fit.scale_px_per_rad[0])
         scales_y.append(fit.scale_px_per_rad[1])
-    return {"depth": fit_depth(list(depths), scales, scales_y)}
+    depth = fit_depth(list(depths), scales, scales_y)
+    depth.optics = record
+    return {"depth": depth}
+
+
+def _check_calibration(calibration: dict, scene_path: str, defines, captured):
+    """The optics record of the data the calibration will act on, after refusing a calibration made for other
+    optics: before rendering anything (from the scene's sensor), or from a given capture's events."""
+    import mitsuba_eventfield as ef
+    from .calibration import check_optics, optics_record
+    if captured is not None:
+        ev = captured.events
+        record = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=scene_path)
+    else:
+        sensor = ef.load_scene(scene_path, **(defines or {})).sensor
+        w, h = (int(v) for v in sensor.film().size())
+        record = optics_record(sensor.optics_metadata(), w, h, where=scene_path)
+    check_optics(calibration, record)
+    return record
 
 
 def _sharp_centre_image(lf, dm) -> np.ndarray:
@@ -150,13 +171,14 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
         raise ValueError(f"split_depth = {split_depth}: must be > 0 (scene units)")
     if field_correction not in FIELD_CORRECTIONS:
         raise ValueError(f"field_correction = {field_correction!r}: allowed {', '.join(FIELD_CORRECTIONS)}")
+    record = _check_calibration(calibration, scene_path, defines, captured) if calibration else None
     cap = captured or capture(scene_path, defines, periods, views, start, progress=progress)
     t0 = time.perf_counter()
     maps = []
     for lf in cap.lightfields:
         if calibration:
             from .calibration import apply_to_lightfield
-            lf = apply_to_lightfield(lf, calibration)
+            lf = apply_to_lightfield(lf, calibration, record)
         dm = ef.depth_from_focus(lf, near, far, planes, measure)
         if field_correction != "off":
             rows, cols = np.mgrid[0:dm.depth.shape[0], 0:dm.depth.shape[1]]

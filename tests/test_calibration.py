@@ -174,10 +174,12 @@ def test_kaleidoscope_tiles_found_on_a_render_and_flat_field():
 
 def test_depth_calibration_keeps_each_axis_pivot(tmp_path):
     """The y mirror sits further from the lens than the x mirror: each axis gets its own disparity model."""
-    from mitsuba_eventfield.calibration import load_calibration, save_calibration
+    from mitsuba_eventfield.calibration import load_calibration, optics_record, save_calibration
     f, z = 100.0, np.array([0.4, 0.7, 1.0, 1.6, 2.5])
     dc = fit_depth(z, 2 * f * (1 - 0.10 / z), scales_y=2 * f * (1 - 0.11 / z))
-    save_calibration(str(tmp_path / "c.json"), depth=dc)
+    optics = {"design": "galvo", "fov_x_deg": 40.0, "mirror_distance": 0.1, "mirror_separation": 0.01,
+              "scan": {"curve": "circle", "frequency": FREQ, "amplitude": 0.5, "phase": 0.0}}
+    save_calibration(str(tmp_path / "c.json"), optics_record(optics, W, H), depth=dc)
     (ax, ay), (bx, by) = load_calibration(str(tmp_path / "c.json"))["depth"].disparity_model()
     assert np.allclose([ax, ay, bx, by], [f, f, -0.10 * f, -0.11 * f])   # alpha = f - f d / z, per axis
     (ax1, ay1), (bx1, by1) = fit_depth(z, 2 * f * (1 - 0.10 / z)).disparity_model()
@@ -189,7 +191,7 @@ def test_depth_calibration_keeps_each_axis_pivot(tmp_path):
 def test_calibration_file_round_trip_and_use_in_refocus(tmp_path):
     """Galvo + depth calibration saved, loaded and applied: a light field whose metadata optics are wrong
     (mirror distance off by 2x) gets back the right depth from depth from focus."""
-    from mitsuba_eventfield.calibration import apply_to_lightfield, load_calibration, save_calibration
+    from mitsuba_eventfield.calibration import apply_to_lightfield, load_calibration, optics_record, save_calibration
     from mitsuba_eventfield.calibration.depth import fit_depth
     # depth calibration from exact geometry of the LED scene's galvo (the test above checks the LED fit)
     f = go.focal_length_px(W, 40.0)
@@ -199,21 +201,22 @@ def test_calibration_file_round_trip_and_use_in_refocus(tmp_path):
     times = np.arange(24) / 24 / FREQ
     frames = ef.render_frames(scene, times)
     gc = fit_galvo(frames, times, ef.make_curve("circle", frequency=FREQ, amplitude=0.5), [(30, 40), (30, 90)])
-    path = str(tmp_path / "cal.json")
-    save_calibration(path, galvo=gc, depth=dc)
-    cal = load_calibration(path)
-    assert abs(cal["galvo"].phase_deg - gc.phase_deg) < 1e-9 and cal["depth"].best == dc.best
     optics = dict(scene.sensor.optics_metadata(), mirror_distance=0.2)          # wrong nominal geometry
     optics["scan"] = dict(optics["scan"], phase=0.0)                            # and unknown phase
+    record = optics_record(optics, W, H)        # the calibration is made for (and checked against) these optics
+    path = str(tmp_path / "cal.json")
+    save_calibration(path, record, galvo=gc, depth=dc)
+    cal = load_calibration(path)
+    assert abs(cal["galvo"].phase_deg - gc.phase_deg) < 1e-9 and cal["depth"].best == dc.best
     lf = ef.from_galvo(frames, times, optics)
     wrong = ef.depth_from_focus(lf, 0.3, 5.0, 32, "tenengrad")
-    right = ef.depth_from_focus(apply_to_lightfield(lf, cal), 0.3, 5.0, 32, "tenengrad")
+    right = ef.depth_from_focus(apply_to_lightfield(lf, cal, record), 0.3, 5.0, 32, "tenengrad")
     card, wall = np.s_[50:80, 95:140], np.s_[20:110, 10:40]
     good = right.confidence > 0.3
     assert abs(np.median(right.depth[card][good[card]]) - 0.5) < 0.05
     # at 173 px a 10 cm pivot separates 2.5 m from 5 m by 0.1 px of disparity: the wall is only "far"
     assert np.median(right.depth[wall][good[wall]]) > 1.0
     assert abs(np.median(wrong.depth[card][(wrong.confidence > 0.3)[card]]) - 0.5) > 0.1
-    with pytest.raises(ef.EventFieldError, match="not a version 1"):
+    with pytest.raises(ef.EventFieldError, match="not a version 2"):
         (tmp_path / "bad.json").write_text('{"format": "x"}')
         load_calibration(str(tmp_path / "bad.json"))
