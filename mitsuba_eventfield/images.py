@@ -11,13 +11,36 @@ from .atomic import atomic_output
 from .errors import EventFieldError
 
 
+# OpenCV decodes only the channels named Y, R, G, B (and A) of an EXR; a file with none of them is unreadable to
+# cv2.imread. So the primary channel of a file without one is stored as Y, and its own name (depth, log, ...)
+# kept in this header attribute, from which read_exr restores it. (OpenCV also needs OPENCV_IO_ENABLE_OPENEXR=1
+# and a build with OpenEXR; docs/design.md "EXR files and OpenCV".)
+CV2_CHANNELS = ("Y", "R", "G", "B")
+PRIMARY_ATTRIBUTE = "eventfield_primary"
+
+
 def write_exr(path: str, channels: dict, meta: dict | None = None) -> str:
-    """``channels``: name -> (H, W) float array (e.g. {"Y": image} or {"depth": d, "confidence": c})."""
+    """``channels``: name -> (H, W) float array, e.g. {"Y": image}, {"R": r, "G": g, "B": b} (or {"RGB": (H, W, 3)})
+    or {"depth": d, "confidence": c}. Float32, ZIP-compressed scanlines: what OpenEXR and OpenCV both read. When
+    no channel is one OpenCV reads, the first is stored as Y (see PRIMARY_ATTRIBUTE); read_exr gives the names
+    back as they were given."""
     import OpenEXR
     if not path.lower().endswith(".exr"):
         raise EventFieldError(f"{path}: expected a .exr path")
-    data = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in channels.items()}
+    data = {}
+    for name, value in channels.items():
+        a = np.asarray(value, dtype=np.float32)
+        if name == "RGB" and a.ndim == 3 and a.shape[2] == 3:
+            data.update({c: np.ascontiguousarray(a[..., i]) for i, c in enumerate("RGB")})
+        elif a.ndim == 2:
+            data[name] = np.ascontiguousarray(a)
+        else:
+            raise EventFieldError(f"{path}: channel {name!r} must be a 2-D (height, width) array, got shape {a.shape}")
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    if data and not any(c in data for c in CV2_CHANNELS):
+        primary = next(iter(data))
+        header[PRIMARY_ATTRIBUTE] = primary
+        data = {("Y" if k == primary else k): v for k, v in data.items()}
     if meta:
         header["eventfield_meta"] = json.dumps(meta, default=str)
     with atomic_output(path, "image") as tmp:
@@ -27,10 +50,15 @@ def write_exr(path: str, channels: dict, meta: dict | None = None) -> str:
 
 
 def read_exr(path: str) -> tuple[dict, dict]:
+    """(channels, meta): name -> (H, W) float array under the names given to write_exr (R, G, B separately for
+    a colour image), and our metadata from the header."""
     import OpenEXR
-    with OpenEXR.File(path) as f:
-        meta = f.header().get("eventfield_meta")
-        return ({k: np.array(c.pixels) for k, c in f.channels().items()}, json.loads(meta) if meta else {})
+    with OpenEXR.File(path, separate_channels=True) as f:   # (closing it empties its header: read all inside)
+        primary, meta = f.header().get(PRIMARY_ATTRIBUTE), f.header().get("eventfield_meta")
+        channels = {k: np.array(c.pixels) for k, c in f.channels().items()}
+    if primary and "Y" in channels and primary not in channels:
+        channels = {(primary if k == "Y" else k): v for k, v in channels.items()}
+    return channels, json.loads(meta) if meta else {}
 
 
 def to_uint8(img: np.ndarray, log: bool = False, percentile: float = 99.5) -> np.ndarray:

@@ -1,0 +1,294 @@
+"""Files other programs can read (HDF5 with built-in filters, EXR that OpenCV decodes), and files that fail
+well: a damaged input or a full disk is one line naming the file, never a stack trace, a crash or a
+half-written output."""
+import collections
+import errno
+import json
+import os
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import OpenEXR
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield import eventio
+from mitsuba_eventfield.images import read_exr, write_exr
+
+FORMATS = [".h5", ".npz", ".txt", ".aedat4"]
+
+
+@pytest.fixture(scope="module")
+def stream():
+    rng = np.random.default_rng(3)
+    n = 20_000
+    t = np.sort(rng.integers(0, 50_000, n))
+    return ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), t, rng.choice([-1, 1], n), 64, 48,
+                          {"seed": 3, "duration_us": 50_000})
+
+
+# --- HDF5: deflate + shuffle, which every HDF5 reader has built in -------------------------------------------
+
+def test_h5_event_datasets_use_gzip(tmp_path, stream):
+    whole, streamed = str(tmp_path / "whole.h5"), str(tmp_path / "streamed.h5")
+    ef.write_events(whole, stream)
+    with ef.H5EventWriter(streamed, 64, 48, chunk=4096) as w:
+        for k in range(0, len(stream), 3000):
+            w.append(stream.x[k:k + 3000], stream.y[k:k + 3000], stream.t[k:k + 3000], stream.p[k:k + 3000])
+        w.close()
+    for path in (whole, streamed):
+        with h5py.File(path, "r") as f:
+            for k in "xytp":
+                ds = f["events"][k]
+                assert (ds.compression, ds.compression_opts, ds.shuffle) == ("gzip", eventio.H5_GZIP_LEVEL, True)
+        assert ef.read_events(path).equals(stream)
+
+
+def test_old_lzf_files_still_read(tmp_path, stream):
+    """Files written before the switch (LZF, an h5py-only filter) keep reading."""
+    path = str(tmp_path / "old.h5")
+    with h5py.File(path, "w") as f:
+        g = f.create_group("events")
+        for k, v in (("x", stream.x), ("y", stream.y), ("t", stream.t), ("p", (stream.p > 0).astype(np.uint8))):
+            g.create_dataset(k, data=v, chunks=(4096,), maxshape=(None,), compression="lzf")
+        f.create_dataset("t_offset", data=np.int64(0))
+        e = f.create_group("eventfield")
+        e.attrs["width"], e.attrs["height"], e.attrs["meta_json"] = 64, 48, json.dumps({"seed": 3})
+    back = ef.read_events(path)
+    assert back.equals(stream) and back.meta == {"seed": 3}
+
+
+# --- EXR: every kind the package writes opens in OpenCV ------------------------------------------------------
+
+def _image(seed, shape=(12, 17)):
+    return np.random.default_rng(seed).random(shape).astype(np.float32) * 10
+
+
+def _exr_kinds():
+    depth = _image(1)
+    depth[0, :3] = np.nan                                            # "no depth" pixels stay NaN
+    return {
+        "image": {"Y": _image(0)},                                     # frame, refocus, reconstruct, regression
+        "depth": {"depth": depth, "confidence": _image(2)},          # eventfield depth
+        "scanrate": {"depth": depth, "confidence": _image(2), "truth": _image(3)},
+        "rgb": {"R": _image(4), "G": _image(5), "B": _image(6)},
+        "log": {"log": np.log(_image(7) + 1e-3)},                    # eventfield hdr
+        "planes": {"events_p0": _image(8), "truth_p0": _image(9), "events_p1": _image(10)},   # highspeed
+    }
+
+
+@pytest.fixture(scope="module")
+def exr_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("exr")
+    files = {}
+    for kind, channels in _exr_kinds().items():
+        files[kind] = write_exr(str(d / f"{kind}.exr"), channels, {"kind": kind})
+    return files
+
+
+@pytest.mark.parametrize("kind", list(_exr_kinds()))
+def test_exr_round_trip_keeps_names_and_values(exr_files, kind):
+    channels, meta = read_exr(exr_files[kind])
+    expected = _exr_kinds()[kind]
+    assert meta == {"kind": kind} and set(channels) == set(expected)
+    for name, value in expected.items():
+        np.testing.assert_array_equal(channels[name], value)
+
+
+@pytest.mark.parametrize("kind", list(_exr_kinds()))
+def test_exr_layout_is_one_opencv_decodes(exr_files, kind):
+    """Without running OpenCV: a Y or R/G/B channel, 32-bit float pixels, ZIP compression (OpenCV 4.x's
+    OpenEXR 2.3 decodes it; the HTJ2K codecs of OpenEXR 3.4 it does not)."""
+    with OpenEXR.File(exr_files[kind], separate_channels=True) as f:
+        names = set(f.channels())
+        assert names & {"Y", "R", "G", "B"}
+        assert all(c.pixels.dtype == np.float32 for c in f.channels().values())
+        assert f.header()["compression"] == OpenEXR.ZIP_COMPRESSION
+
+
+def _opencv_with_exr():
+    """A PYTHONPATH under which ``import cv2`` decodes EXR, or None. The project's OpenCV (5.0 wheels) is built
+    without OpenEXR; an OpenCV 4 wheel installed aside (EVENTFIELD_CV2_EXR, or <venv>/cv2-exr) is used then."""
+    probe = "import cv2, re, sys; sys.exit(0 if re.search(r'OpenEXR:\\s+(?!NO)\\S', cv2.getBuildInformation()) else 1)"
+    for extra in (os.environ.get("EVENTFIELD_CV2_EXR"), os.path.join(sys.prefix, "cv2-exr"), ""):
+        if extra is None or (extra and not os.path.isdir(extra)):
+            continue
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (extra, os.environ.get("PYTHONPATH")) if p))
+        if subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True).returncode == 0:
+            return env["PYTHONPATH"]
+    return None
+
+
+CV2_READ = """
+import json, sys
+import cv2, numpy as np
+out = {}
+for kind, path in json.loads(sys.argv[1]).items():
+    img = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+    out[kind] = None if img is None else [img.dtype.str, list(img.shape), img.astype(np.float64).tolist()]
+print(json.dumps(out))
+"""
+
+
+def test_every_exr_kind_reads_in_opencv(exr_files):
+    pythonpath = _opencv_with_exr()
+    if pythonpath is None:
+        pytest.skip("no OpenCV with OpenEXR here (pip install --target .venv/cv2-exr 'opencv-python-headless<5')")
+    env = dict(os.environ, PYTHONPATH=pythonpath, OPENCV_IO_ENABLE_OPENEXR="1")
+    r = subprocess.run([sys.executable, "-c", CV2_READ, json.dumps(exr_files)], env=env, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    read = json.loads(r.stdout)
+    for kind, channels in _exr_kinds().items():
+        assert read[kind] is not None, f"{kind}: OpenCV could not read it"
+        dtype, shape, values = read[kind]
+        if kind == "rgb":      # OpenCV gives B, G, R
+            expected = np.dstack([channels["B"], channels["G"], channels["R"]])
+        else:                  # the primary image: Y, or the first channel stored as Y
+            expected = channels.get("Y", next(iter(channels.values())))
+        assert dtype == "<f4" and shape == list(expected.shape), kind
+        np.testing.assert_array_equal(np.array(values, dtype=np.float64), expected.astype(np.float64))
+
+
+def test_cli_luminance_reader_on_each_kind(exr_files):
+    from mitsuba_eventfield.cli import _luminance_channel
+    np.testing.assert_array_equal(_luminance_channel(exr_files["image"]), _exr_kinds()["image"]["Y"])
+    np.testing.assert_array_equal(_luminance_channel(exr_files["rgb"]), _exr_kinds()["rgb"]["R"])
+    with pytest.raises(ef.EventFieldError, match="needs a Y .* it has confidence, depth"):
+        _luminance_channel(exr_files["depth"])       # a depth map is not a frame, Y on disk or not
+
+
+# --- damaged event files: one line, naming the file ----------------------------------------------------------
+
+def _damaged(tmp_path, stream, ext, damage):
+    good = str(tmp_path / f"good{ext}")
+    ef.write_events(good, stream)
+    data = open(good, "rb").read()
+    os.remove(good)
+    content = {"empty": b"", "truncated_half": data[: len(data) // 2], "truncated_tenth": data[: len(data) // 10],
+               "truncated_16_bytes": data[:16], "garbage": np.random.default_rng(0).bytes(3000),
+               "text": b"hello world\nthis is not an event file\n"}[damage]
+    path = tmp_path / f"{damage}{ext}"
+    path.write_bytes(content)
+    return str(path)
+
+
+@pytest.mark.parametrize("ext", FORMATS)
+@pytest.mark.parametrize("damage", ["empty", "truncated_half", "truncated_tenth", "truncated_16_bytes", "garbage",
+                                    "text"])
+def test_damaged_event_file_is_one_line(tmp_path, stream, ext, damage, capfd):
+    path = _damaged(tmp_path, stream, ext, damage)
+    capfd.readouterr()
+    with pytest.raises(ef.EventFieldError) as err:
+        ef.read_events(path)
+    message = str(err.value)
+    assert message.startswith(path + ": ") and "\n" not in message and len(message) < 300, message
+    assert "Stacktrace" not in message and ".hpp(" not in message and "Traceback" not in message
+    out, errs = capfd.readouterr()
+    assert out == "" and errs == ""             # nothing printed on the side (C++ traces, HDF5 error stacks)
+
+
+def test_damaged_file_on_the_command_line(tmp_path):
+    empty = tmp_path / "empty.aedat4"
+    empty.write_bytes(b"")
+    r = subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "info", str(empty)], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "empty file (0 bytes)" in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("ext", FORMATS)
+def test_stream_without_events_round_trips(tmp_path, ext):
+    path = str(tmp_path / f"none{ext}")
+    ef.write_events(path, ef.EventStream.empty(8, 6, {"duration_us": 1000}))
+    back = ef.read_events(path)
+    assert len(back) == 0 and (back.width, back.height) == (8, 6)
+
+
+# --- full disk: one line, nothing left behind ----------------------------------------------------------------
+
+Usage = collections.namedtuple("Usage", "total used free")
+
+
+def _disk(monkeypatch, free_after, calls_with_room=0):
+    """shutil.disk_usage as the writers see it: room for ``calls_with_room`` calls, then ``free_after`` bytes."""
+    calls = {"n": 0}
+
+    def disk_usage(path):
+        calls["n"] += 1
+        free = 1 << 40 if calls["n"] <= calls_with_room else free_after
+        return Usage(1 << 41, (1 << 41) - free, free)
+
+    monkeypatch.setattr(eventio.shutil, "disk_usage", disk_usage)
+    return calls
+
+
+@pytest.mark.parametrize("ext", FORMATS)
+def test_full_disk_refused_before_writing(tmp_path, stream, ext, monkeypatch):
+    _disk(monkeypatch, free_after=10_000)
+    with pytest.raises(ef.EventFieldError, match=r"disk full: 9.77 KiB free, need about [\d.]+ [KM]iB$") as err:
+        ef.write_events(str(tmp_path / f"ev{ext}"), stream)
+    assert str(err.value).startswith(str(tmp_path / f"ev{ext}"))
+    assert os.listdir(tmp_path) == []
+
+
+def test_disk_fills_while_streaming(tmp_path, stream, monkeypatch):
+    """The streaming writer checks before every chunk: the disk fills after a few, the file is discarded."""
+    calls = _disk(monkeypatch, free_after=50_000, calls_with_room=3)
+    with pytest.raises(ef.EventFieldError, match="disk full"):
+        with ef.H5EventWriter(str(tmp_path / "s.h5"), 64, 48, chunk=2048) as w:
+            for k in range(0, len(stream), 1000):
+                w.append(stream.x[k:k + 1000], stream.y[k:k + 1000], stream.t[k:k + 1000], stream.p[k:k + 1000])
+    assert calls["n"] == 4 and os.listdir(tmp_path) == []
+
+
+def test_disk_fills_during_render(tmp_path, demo_small, monkeypatch):
+    _disk(monkeypatch, free_after=0, calls_with_room=1)        # room to create the file, none to finish it
+    with pytest.raises(ef.EventFieldError, match="out.h5: disk full"):
+        ef.render_events(demo_small, 0.004, steps=4, output=str(tmp_path / "out.h5"))
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("ext, writer", [(".npz", "savez"), (".txt", "savetxt")])
+def test_enospc_from_a_write_is_one_line(tmp_path, stream, ext, writer, monkeypatch):
+    """The disk fills between the check and the write (another program): the OSError becomes the same error."""
+    def no_space(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(eventio.np, writer, no_space)
+    with pytest.raises(ef.EventFieldError, match="disk full"):
+        ef.write_events(str(tmp_path / f"ev{ext}"), stream)
+    assert os.listdir(tmp_path) == []
+
+
+HDF5_ENOSPC = """
+import errno, io, os, sys
+import numpy as np
+import mitsuba_eventfield as ef
+from mitsuba_eventfield import eventio
+written = [0]
+def write_some(self, view):              # the disk is full after 40 kB
+    if written[0] > 40_000:
+        raise OSError(errno.ENOSPC, "No space left on device")
+    written[0] += len(view)
+    return io.FileIO.write(self, view)
+eventio._GuardedFile._write_some = write_some
+rng = np.random.default_rng(0)
+n = 200_000
+ev = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 10**6, n)),
+                    rng.choice([-1, 1], n), 64, 48)
+try:
+    ef.write_events(sys.argv[1], ev)
+except ef.EventFieldError as e:
+    print(e)
+"""
+
+
+def test_enospc_inside_hdf5_does_not_crash(tmp_path):
+    """HDF5 crashes (segfault) on closing a file whose write failed, so it must never see the failure: run in a
+    process of its own, where a crash shows as the exit status."""
+    path = str(tmp_path / "ev.h5")
+    r = subprocess.run([sys.executable, "-c", HDF5_ENOSPC, path], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
+    assert r.stdout.startswith(f"{path}: disk full") and r.stdout.count("\n") == 1, r.stdout
+    assert os.listdir(tmp_path) == []
