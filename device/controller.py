@@ -139,9 +139,31 @@ class GalvoController:
 
     # ------------------------------------------------------------------ commands
     def outputs_off(self):
+        """Both outputs off, confirmed by reading them back (a refused "off" is sent again once); raises
+        SafetyError if the instrument still reports an output on."""
         for ch in (1, 2):
             self._send(self.d.output(ch, False))
+        still_on = self._outputs_on()
+        for ch in still_on:
+            self._send(self.d.output(ch, False))
+        still_on = self._outputs_on()
+        if still_on:
+            raise SafetyError(f"the generator still reports output {', '.join(map(str, still_on))} on after being "
+                              "told to switch off twice: switch it off by hand")
         self.running = False
+
+    def _outputs_on(self) -> list:
+        """Channels whose output the instrument reports on (or does not report clearly off)."""
+        out = []
+        for ch in (1, 2):
+            query, parse = self.d.readback(ch)["output"]
+            try:
+                on = parse(self.t.query(query))
+            except (ValueError, KeyError, IndexError):
+                on = True
+            if on:
+                out.append(ch)
+        return out
 
     def _configure(self, s: AxisSine, fraction: float):
         if s.is_dc:
@@ -212,8 +234,8 @@ class GalvoController:
             self._release_sigterm()
 
     def _switch_off_quietly(self):
-        """Outputs off on an error path: each channel on its own, each tried twice (a flaky link may drop one
-        command); a link that refuses both tries leaves nothing more we can send."""
+        """Outputs off on an error path, whatever the link does: each channel on its own, each tried twice (a
+        flaky link may drop one command), then confirmed by ``outputs_off`` where the link still answers."""
         self._armed = False
         for ch in (1, 2):
             for _ in range(2):
@@ -222,6 +244,10 @@ class GalvoController:
                     break
                 except Exception:  # noqa: BLE001
                     continue
+        try:
+            self.outputs_off()
+        except Exception:  # noqa: BLE001  (a dead link: nothing more we can send)
+            pass
         self.running = False
         self._release_sigterm()
 

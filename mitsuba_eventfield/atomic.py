@@ -8,29 +8,93 @@ import uuid
 from .errors import EventFieldError
 
 
+def _nearest_existing(path: str) -> str:
+    parent = path
+    while not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    return parent
+
+
 def check_writable(path: str, what: str = "output") -> str:
-    """Fail early (before any rendering) if ``path`` cannot be created; return its absolute path."""
+    """Fail early (before any rendering) if the file ``path`` cannot be created; return its absolute path."""
     path = os.path.abspath(path)
     parent = os.path.dirname(path)
     if os.path.isdir(path):
         raise EventFieldError(f"{what} path {path}: is a directory")
     if not os.path.isdir(parent):
-        raise EventFieldError(f"{what} path {path}: directory {parent} does not exist")
+        existing = _nearest_existing(parent)
+        why = "is not a directory" if os.path.isfile(existing) else "does not exist"
+        raise EventFieldError(f"{what} path {path}: directory {parent} does not exist ({existing} {why})"
+                              if existing != parent else f"{what} path {path}: {parent} {why}")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise EventFieldError(f"{what} path {path}: directory {parent} is not writable")
     return path
 
 
+def check_output_dir(path: str, what: str = "output directory") -> str:
+    """Before any work: ``path`` is a directory or can be made one (nearest existing parent a writable
+    directory). Returns the absolute path."""
+    path = os.path.abspath(path)
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise EventFieldError(f"{what} {path}: exists and is not a directory")
+    parent = _nearest_existing(path)
+    if not (os.path.isdir(parent) and os.access(parent, os.W_OK | os.X_OK)):
+        raise EventFieldError(f"{what} {path}: {parent} is not a writable directory")
+    return path
+
+
+PARTIAL_TAG = ".partial-"
+
+
 def temporary_name(path: str) -> str:
+    """``out.h5`` -> ``out.partial-<pid>-<random>.h5``: visible (a user sees what a killed run left), named as
+    partial, owned by a process id (so a later run can tell a dead writer's leftover from a live one), with the
+    extension kept (some writers, OpenCV, choose the format by it)."""
     head, tail = os.path.split(os.path.abspath(path))
-    ext = os.path.splitext(tail)[1]  # keep the extension: some writers (OpenCV) choose the format by it
-    return os.path.join(head, f".{tail}.{uuid.uuid4().hex[:8]}.part{ext}")
+    root, ext = os.path.splitext(tail)
+    return os.path.join(head, f"{root}{PARTIAL_TAG}{os.getpid()}-{uuid.uuid4().hex[:6]}{ext}")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:       # someone else's live process
+        return True
+    return True
+
+
+def remove_stale_partials(path: str) -> list:
+    """Delete the partial files of ``path`` whose writing process no longer exists (SIGKILL, power loss: no
+    ``finally`` ran); each one is reported on stderr. Returns the removed paths."""
+    import re
+    import sys
+    head, tail = os.path.split(os.path.abspath(path))
+    root, ext = os.path.splitext(tail)
+    pattern = re.compile(re.escape(root + PARTIAL_TAG) + r"(\d+)-[0-9a-f]+" + re.escape(ext) + "$")
+    removed = []
+    try:
+        names = os.listdir(head)
+    except OSError:
+        return removed
+    for name in names:
+        m = pattern.match(name)
+        if m and not _pid_alive(int(m.group(1))):
+            with contextlib.suppress(OSError):
+                os.remove(os.path.join(head, name))
+                removed.append(os.path.join(head, name))
+                print(f"eventfield: removed {os.path.join(head, name)}, left by an interrupted run (process "
+                      f"{m.group(1)} no longer exists)", file=sys.stderr)
+    return removed
 
 
 @contextlib.contextmanager
 def atomic_output(path: str, what: str = "output"):
-    """Yield a temporary path; on normal exit rename it to ``path``, on error delete it."""
+    """Yield a temporary path; on normal exit rename it to ``path``, on error delete it. Leftovers of killed
+    earlier runs for the same ``path`` are removed first."""
     path = check_writable(path, what)
+    remove_stale_partials(path)
     tmp = temporary_name(path)
     try:
         yield tmp
@@ -67,3 +131,49 @@ def write_json(path: str, payload, what: str = "metrics") -> str:
     with atomic_output(path, what) as tmp, open(tmp, "w") as f:
         json.dump(json_safe(payload), f, indent=2, allow_nan=False)
     return path
+
+
+MANIFEST = ".eventfield-outputs.json"
+
+
+@contextlib.contextmanager
+def output_dir_run(path: str, command: str):
+    """An application writing into the folder ``path``. A second run into the same folder used to leave the first
+    run's extra files beside the new ones (e.g. 40 frames then 24: 16 stale frames mixed in). Now: a warning when
+    the folder is reused; after a successful run, the files an earlier run listed in the folder's manifest and
+    this run did not rewrite are removed, and the manifest lists this run's files. Files eventfield did not write
+    are never touched (only mentioned)."""
+    import json
+    import sys
+    import time
+    path = os.path.abspath(path)
+    manifest = os.path.join(path, MANIFEST)
+    previous = []
+    if os.path.isfile(manifest):
+        with contextlib.suppress(OSError, ValueError):
+            with open(manifest) as f:
+                previous = [os.path.join(path, p) for p in json.load(f).get("files", [])]
+    if os.path.isdir(path) and os.listdir(path):
+        foreign = [n for n in _files_below(path) if os.path.join(path, n) not in previous and n != MANIFEST]
+        print(f"eventfield: warning: output folder {path} is reused: "
+              + (f"{len(previous)} files of an earlier run are replaced or removed" if previous else "")
+              + ("; " if previous and foreign else "")
+              + (f"{len(foreign)} other files stay beside the new ones" if foreign else ""), file=sys.stderr)
+    start = time.time() - 1.0          # file systems with coarse timestamps
+    yield path
+    if not os.path.isdir(path):
+        return
+    written = sorted(n for n in _files_below(path) if n != MANIFEST
+                     and os.path.getmtime(os.path.join(path, n)) >= start)
+    for old in previous:
+        if os.path.relpath(old, path) not in written:
+            with contextlib.suppress(OSError):
+                os.remove(old)
+    write_json(manifest, {"command": command, "files": written}, "output manifest")
+
+
+def _files_below(path: str) -> list:
+    out = []
+    for root, _, names in os.walk(path):
+        out += [os.path.relpath(os.path.join(root, n), path) for n in names]
+    return out

@@ -8,39 +8,35 @@ import sys
 
 import numpy as np
 
+from .validate import number_list
+
 
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (the usage is one ``--help`` away); subcommands inherit the class."""
 
     def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"eventfield: error: {message} (see {self.prog} --help)\n")
 
 
 def _num(lo=None, hi=None, integer=False, lo_open=False):
-    """An argparse type: a finite number in [lo, hi] (``lo_open``: lo excluded); the error names the range."""
-    import math
+    """An argparse type: a finite number in [lo, hi] (``lo_open``: lo excluded), checked by ``validate.number``
+    so the command line and the library use one rule and one message."""
+    from .errors import ConfigError
+    from .validate import number
 
     def parse(text):
         try:
-            value = float(text)
-            if integer:
-                if not value.is_integer():
-                    raise ValueError
-                value = int(value)
-        except (ValueError, OverflowError):
-            raise argparse.ArgumentTypeError(f"{text!r} is not {'a whole number' if integer else 'a number'}")
-        too_low = lo is not None and (value <= lo if lo_open else value < lo)
-        if not math.isfinite(value) or too_low or (hi is not None and value > hi):
-            left = "(" if lo_open else "["
-            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range {left}{'-inf' if lo is None else lo:g}, "
-                                             f"{'inf' if hi is None else hi:g}]")
-        return value
+            return number(text, "value", lo, hi, integer=integer, lo_open=lo_open)
+        except ConfigError as e:
+            raise argparse.ArgumentTypeError(str(e).replace("value = ", "", 1)) from None
     return parse
 
 
 def _parser() -> argparse.ArgumentParser:
     from ._version import __version__
-    from .device.spec import MAX_DURATION_S, PHASE_RANGE_DEG, VOLTS_PER_DEG_RANGE
+    from .device.spec import MAX_DURATION_S as MAX_SCAN_S
+    from .device.spec import PHASE_RANGE_DEG, VOLTS_PER_DEG_RANGE
+    from .validate import MAX_DURATION_S, MAX_PLANES, MAX_SPP, MAX_STEPS, MAX_VIEWS
     ap = _Parser(prog="eventfield", description="Render and inspect event fields.")
     ap.add_argument("--version", action="version", version=f"mitsuba-eventfield {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -50,22 +46,22 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", required=True, help="event file: .h5 (DSEC layout, streamed), .npz, .txt, .aedat4")
     r.add_argument("--motion", help="motion TOML (default: <scene>.motion.toml if it exists)")
     r.add_argument("--no-motion", action="store_true", help="ignore any motion file (static scene)")
-    r.add_argument("--duration", type=float, help="simulated seconds (default: `duration` of the motion file)")
+    r.add_argument("--duration", type=_num(0, MAX_DURATION_S, lo_open=True), help="simulated seconds (default: `duration` of the motion file)")
     g = r.add_mutually_exclusive_group()
-    g.add_argument("--steps", type=int, help="uniform time steps over the duration (default 100)")
+    g.add_argument("--steps", type=_num(1, MAX_STEPS, integer=True), help="uniform time steps over the duration (default 100)")
     g.add_argument("--adaptive", action="store_true", help="adaptive steps bounded by --max-log-change")
-    r.add_argument("--max-log-change", type=float, default=0.5,
+    r.add_argument("--max-log-change", type=_num(0, 100, lo_open=True), default=0.5,
                    help="adaptive: largest per-pixel log change per step, as a fraction of C (default 0.5)")
-    r.add_argument("--min-step", type=float, help="adaptive: shortest step in seconds (default 1e-6)")
-    r.add_argument("--max-step", type=float, help="adaptive: longest step in seconds (default duration/20)")
-    r.add_argument("--spp", type=int, default=4, help="samples per pixel per step (default 4)")
-    r.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
+    r.add_argument("--min-step", type=_num(0, MAX_DURATION_S, lo_open=True), help="adaptive: shortest step in seconds (default 1e-6)")
+    r.add_argument("--max-step", type=_num(0, MAX_DURATION_S, lo_open=True), help="adaptive: longest step in seconds (default duration/20)")
+    r.add_argument("--spp", type=_num(1, MAX_SPP, integer=True), default=4, help="samples per pixel per step (default 4)")
+    r.add_argument("--seed", type=_num(0, 2**31 - 1, integer=True), default=0, help="sampler seed (default 0)")
     r.add_argument("--independent-seeds", action="store_true",
                    help="new seed every step (Monte-Carlo noise then fires events; for comparisons only)")
-    r.add_argument("--threshold", type=float, help="contrast threshold C for ON and OFF (default: scene's or 0.2)")
-    r.add_argument("--threshold-on", type=float, help="ON threshold (overrides --threshold)")
-    r.add_argument("--threshold-off", type=float, help="OFF threshold (overrides --threshold)")
-    r.add_argument("--linlog-threshold", type=float, help="radiance below which the response is linear (1e-3)")
+    r.add_argument("--threshold", type=_num(0, 10, lo_open=True), help="contrast threshold C for ON and OFF (default: scene's or 0.2)")
+    r.add_argument("--threshold-on", type=_num(0, 10, lo_open=True), help="ON threshold (overrides --threshold)")
+    r.add_argument("--threshold-off", type=_num(0, 10, lo_open=True), help="OFF threshold (overrides --threshold)")
+    r.add_argument("--linlog-threshold", type=_num(0, 1e6, lo_open=True), help="radiance below which the response is linear (1e-3)")
     r.add_argument("--preset", help="event pixel preset: ideal (default), davis346, prophesee_gen4")
     r.add_argument("--pixel", action="append", default=[], metavar="NAME=VALUE",
                    help="pixel-model parameter, e.g. --pixel refractory_s=1e-4 --pixel shot_noise_hz=2 (repeatable; "
@@ -75,7 +71,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE",
                    help="value of an XML <default name=...> parameter, e.g. -D width=64 (repeatable)")
     r.add_argument("--preview", help="also write an event-frame PNG of the last --preview-window ms")
-    r.add_argument("--preview-window", type=float, default=10.0, help="preview window in ms (default 10)")
+    r.add_argument("--preview-window", type=_num(0, 1e9, lo_open=True), default=10.0, help="preview window in ms (default 10)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--auto", action="store_true",
                    help="choose colour, spp and steps from cheap probes (ef.auto), print and record why")
@@ -87,14 +83,14 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("preview", help="event frame PNG (ON red, OFF blue) over a time window")
     p.add_argument("file")
     p.add_argument("-o", "--output", required=True, help="PNG path")
-    p.add_argument("--t0", type=float, help="window start, ms (default: first event)")
-    p.add_argument("--t1", type=float, help="window end, ms (default: last event)")
-    p.add_argument("--scale", type=int, default=1, help="integer upscaling of the image")
+    p.add_argument("--t0", type=_num(0), help="window start, ms (default: first event)")
+    p.add_argument("--t1", type=_num(0), help="window end, ms (default: last event)")
+    p.add_argument("--scale", type=_num(1, 64, integer=True), default=1, help="integer upscaling of the image")
     f = sub.add_parser("frame", help="render frames (linear radiance) of a scene at given times: EXR + PNG")
     f.add_argument("scene")
     f.add_argument("-o", "--output", required=True, help="EXR path (PNG alongside); several times: _0000 suffixes")
     f.add_argument("--times", default="0", help="comma-separated times in ms (default 0)")
-    f.add_argument("--spp", type=int, default=16)
+    f.add_argument("--spp", type=_num(1, MAX_SPP, integer=True), default=16)
     f.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
 
     lf_args = argparse.ArgumentParser(add_help=False)
@@ -102,9 +98,9 @@ def _parser() -> argparse.ArgumentParser:
     lf_args.add_argument("--method", help="reconstruction: direct, highpass, complementary, galvo (default: "
                                           "direct with --start-frame, else galvo / highpass)")
     lf_args.add_argument("--start-frame", help="EXR of the linear frame at the stream start (eventfield frame)")
-    lf_args.add_argument("--period", type=int, default=0, help="galvo: scan period index (default 0)")
-    lf_args.add_argument("--views", type=int, default=32, help="galvo: views per scan period (default 32)")
-    lf_args.add_argument("--time", type=float, help="kaleidoscope: time in ms (default: stream end)")
+    lf_args.add_argument("--period", type=_num(0, integer=True), default=0, help="galvo: scan period index (default 0)")
+    lf_args.add_argument("--views", type=_num(2, MAX_VIEWS, integer=True), default=32, help="galvo: views per scan period (default 32)")
+    lf_args.add_argument("--time", type=_num(0), help="kaleidoscope: time in ms (default: stream end)")
     lf_args.add_argument("--calibration", help="calibration JSON (eventfield calibrate): view phase, depth model")
 
     rc = sub.add_parser("reconstruct", help="log-intensity frames from events: EXR + PNG per frame")
@@ -113,9 +109,9 @@ def _parser() -> argparse.ArgumentParser:
     rc.add_argument("--method", default="direct", help="direct, highpass, complementary, galvo (default direct)")
     g = rc.add_mutually_exclusive_group()
     g.add_argument("--times", help="comma-separated times in ms")
-    g.add_argument("--fps", type=float, help="frames per second over the whole stream")
+    g.add_argument("--fps", type=_num(0, 1e6, lo_open=True), help="frames per second over the whole stream")
     rc.add_argument("--start-frame", help="EXR of the linear frame at the stream start")
-    rc.add_argument("--cutoff", type=float, default=5.0, help="filter cutoff in Hz (highpass, complementary)")
+    rc.add_argument("--cutoff", type=_num(0, 1e6, lo_open=True), default=5.0, help="filter cutoff in Hz (highpass, complementary)")
 
     rf = sub.add_parser("refocus", parents=[lf_args], help="refocus the light field at one or more depths")
     rf.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside; _<depth> suffix for several)")
@@ -123,23 +119,23 @@ def _parser() -> argparse.ArgumentParser:
 
     dp = sub.add_parser("depth", parents=[lf_args], help="depth from focus: EXR (depth, confidence) + colour PNG")
     dp.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside)")
-    dp.add_argument("--near", type=float, required=True, help="nearest depth searched")
-    dp.add_argument("--far", type=float, required=True, help="farthest depth searched")
-    dp.add_argument("--planes", type=int, default=32)
+    dp.add_argument("--near", type=_num(0, lo_open=True), required=True, help="nearest depth searched")
+    dp.add_argument("--far", type=_num(0, lo_open=True), required=True, help="farthest depth searched")
+    dp.add_argument("--planes", type=_num(2, MAX_PLANES, integer=True), default=32)
     dp.add_argument("--measure", default="variance", help="sml, tenengrad or variance (default)")
-    dp.add_argument("--min-confidence", type=float, default=0.2, help="greyed out below this in the PNG")
+    dp.add_argument("--min-confidence", type=_num(0, 1), default=0.2, help="greyed out below this in the PNG")
     cal = sub.add_parser("calibrate", help="calibration from the data itself: galvo | depth | kaleidoscope")
     csub = cal.add_subparsers(dest="kind", required=True)
     cg = csub.add_parser("galvo", help="phase and curve size of the scan from a capture of a static scene")
     cg.add_argument("file", help="event file (galvo)")
     cg.add_argument("--patch", action="append", required=True, metavar="X,Y", help="textured patch centre (repeatable)")
-    cg.add_argument("--views", type=int, default=24, help="frames reconstructed over the scan period (default 24)")
-    cg.add_argument("--period", type=int, default=0, help="scan period index (default 0)")
+    cg.add_argument("--views", type=_num(3, MAX_VIEWS, integer=True), default=24, help="frames reconstructed over the scan period (default 24)")
+    cg.add_argument("--period", type=_num(0, integer=True), default=0, help="scan period index (default 0)")
     cg.add_argument("--start-frame", help="EXR of the linear frame at the stream start (else: galvo solver)")
     cg.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
     cd = csub.add_parser("depth", help="curve size against known depths from LED captures")
     cd.add_argument("captures", nargs="+", metavar="FILE:DEPTH", help="event file of the LED at DEPTH (scene units)")
-    cd.add_argument("--views", type=int, default=24)
+    cd.add_argument("--views", type=_num(3, MAX_VIEWS, integer=True), default=24)
     cd.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
     ck = csub.add_parser("kaleidoscope", help="tile seams, flips, view registration, flat-field from frames")
     ck.add_argument("frame", help="EXR (linear) of a textured target at the focus distance")
@@ -149,18 +145,18 @@ def _parser() -> argparse.ArgumentParser:
     bn.add_argument("scene", nargs="?", default=os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                                                              "scenes", "fan", "fan.xml"))
     bn.add_argument("-o", "--output", default="out/bench", help="output directory (chart, CSV)")
-    bn.add_argument("--duration", type=float, default=0.008, help="simulated seconds (default 0.008: two periods)")
-    bn.add_argument("--steps", type=int, default=64, help="steps of the default setting")
+    bn.add_argument("--duration", type=_num(0, MAX_DURATION_S, lo_open=True), default=0.008, help="simulated seconds (default 0.008: two periods)")
+    bn.add_argument("--steps", type=_num(1, MAX_STEPS, integer=True), default=64, help="steps of the default setting")
     bn.add_argument("-D", "--define", action="append", default=["width=96", "height=72"], metavar="NAME=VALUE")
-    bn.add_argument("--refocus-depth", type=float, default=0.6, help="depth of the downstream refocus (fan: 0.6)")
+    bn.add_argument("--refocus-depth", type=_num(0, lo_open=True), default=0.6, help="depth of the downstream refocus (fan: 0.6)")
     hd = sub.add_parser("hdr", help="HDR light field of a static galvo scene: events vs 8-bit exposures")
     hd.add_argument("scene", nargs="?", default=os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                                                              "scenes", "hdr_leds", "hdr_leds.xml"))
     hd.add_argument("-o", "--output", default="out/hdr", help="output directory (EXRs, figure, metrics JSON)")
     hd.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
-    hd.add_argument("--depth", type=float, default=1.45, help="scene distance for the scan shifts (hdr_leds: 1.45)")
-    hd.add_argument("--steps", type=int, default=64, help="render steps over the scan period")
-    hd.add_argument("--spp", type=int, default=4)
+    hd.add_argument("--depth", type=_num(0, lo_open=True), default=1.45, help="scene distance for the scan shifts (hdr_leds: 1.45)")
+    hd.add_argument("--steps", type=_num(1, MAX_STEPS, integer=True), default=64, help="render steps over the scan period")
+    hd.add_argument("--spp", type=_num(1, MAX_SPP, integer=True), default=4)
     _scenes = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
     hs = sub.add_parser("highspeed", help="galvo refocus of every scan period on named depth planes, vs truth")
     hs.add_argument("scene", nargs="?", default=os.path.join(_scenes, "fan", "fan.xml"))
@@ -169,44 +165,44 @@ def _parser() -> argparse.ArgumentParser:
                     help="XML parameters (for the fan, on top of width=240 height=180 amplitude=2 mirror_distance=0.2)")
     hs.add_argument("--plane", action="append", default=None, metavar="NAME=DEPTH",
                     help="refocus plane (repeatable; default for the fan: fan=0.6 wall=1.5)")
-    hs.add_argument("--periods", type=int, help="scan periods (default: the motion file's duration)")
-    hs.add_argument("--views", type=int, default=40, help="views per scan period (default 40)")
+    hs.add_argument("--periods", type=_num(1, 1e6, integer=True), help="scan periods (default: the motion file's duration)")
+    hs.add_argument("--views", type=_num(2, MAX_VIEWS, integer=True), default=40, help="views per scan period (default 40)")
     hs.add_argument("--start", choices=("frame", "events"), default="frame",
                     help="start frame the views integrate onto: one rendered frame, or the galvo solver")
     tf = sub.add_parser("track-focus", help="galvo focus tracking of an object moving in depth, vs Mitsuba depth")
     tf.add_argument("scene", nargs="?", default=os.path.join(_scenes, "dart", "galvo.xml"))
     tf.add_argument("-o", "--output", default="out/track", help="output directory (PNGs, EXR, figure, metrics)")
     tf.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
-    tf.add_argument("--roi", type=float, nargs=4, default=[0.58, 0.44, 0.78, 0.56], metavar=("X0", "Y0", "X1", "Y1"),
+    tf.add_argument("--roi", type=_num(0, 1), nargs=4, default=[0.58, 0.44, 0.78, 0.56], metavar=("X0", "Y0", "X1", "Y1"),
                     help="object region in the first period, fractions of the image (default: the dart)")
-    tf.add_argument("--near", type=float, default=0.6, help="nearest depth searched (default 0.6)")
-    tf.add_argument("--far", type=float, default=1.5, help="farthest depth searched (default 1.5)")
-    tf.add_argument("--object-far", type=float, default=1.6,
+    tf.add_argument("--near", type=_num(0, lo_open=True), default=0.6, help="nearest depth searched (default 0.6)")
+    tf.add_argument("--far", type=_num(0, lo_open=True), default=1.5, help="farthest depth searched (default 1.5)")
+    tf.add_argument("--object-far", type=_num(0, lo_open=True), default=1.6,
                     help="ground truth: object pixels are nearer than this (default 1.6; the dart's wall is at 1.8)")
-    tf.add_argument("--background", type=float, default=1.8, help="background depth for comparison (default 1.8)")
-    tf.add_argument("--planes", type=int, default=24, help="depth planes searched (default 24)")
-    tf.add_argument("--periods", type=int, help="scan periods (default: the motion file's duration)")
-    tf.add_argument("--views", type=int, default=40, help="views per scan period (default 40)")
+    tf.add_argument("--background", type=_num(0, lo_open=True), default=1.8, help="background depth for comparison (default 1.8)")
+    tf.add_argument("--planes", type=_num(2, MAX_PLANES, integer=True), default=24, help="depth planes searched (default 24)")
+    tf.add_argument("--periods", type=_num(1, 1e6, integer=True), help="scan periods (default: the motion file's duration)")
+    tf.add_argument("--views", type=_num(2, MAX_VIEWS, integer=True), default=40, help="views per scan period (default 40)")
     sm = sub.add_parser("slomorf", help="slow-motion refocus: kaleidoscope events + 120 fps RGB frames, scored")
     sm.add_argument("scene", nargs="?", help="kaleidoscope scene (default: the bundled scenes/falling)")
     sm.add_argument("-o", "--output", default="out/slomorf", help="output directory (frames, video, metrics)")
     sm.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE", help="XML default")
-    sm.add_argument("--fps", type=float, default=120.0, help="RGB camera frame rate (default 120)")
-    sm.add_argument("--factor", type=int, default=8, help="frames per RGB frame interval (default 8)")
+    sm.add_argument("--fps", type=_num(0, 1e4, lo_open=True), default=120.0, help="RGB camera frame rate (default 120)")
+    sm.add_argument("--factor", type=_num(2, 64, integer=True), default=8, help="frames per RGB frame interval (default 8)")
     sm.add_argument("--depths", default="0.55,0.8,1.4", help="refocus depths (default: falling's post, block, wall)")
-    sm.add_argument("--duration", type=float, help="seconds (default: the motion file's)")
-    sm.add_argument("--spp", type=int, default=4)
+    sm.add_argument("--duration", type=_num(0, MAX_DURATION_S, lo_open=True), help="seconds (default: the motion file's)")
+    sm.add_argument("--spp", type=_num(1, MAX_SPP, integer=True), default=4)
     sd = sub.add_parser("scanrate-depth", help="a metric depth map per galvo scan period, vs Mitsuba's depth")
     sd.add_argument("scene", nargs="?", default=os.path.join(_scenes, "runner", "runner.xml"))
     sd.add_argument("-o", "--output", default="out/scanrate", help="output directory (EXRs, PNGs, figure, metrics)")
     sd.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
-    sd.add_argument("--periods", type=int, help="scan periods (default: the motion file's duration)")
-    sd.add_argument("--views", type=int, default=40, help="views per scan period (default 40)")
-    sd.add_argument("--near", type=float, default=0.4, help="nearest depth plane (default 0.4)")
-    sd.add_argument("--far", type=float, default=4.0, help="farthest depth plane (default 4)")
-    sd.add_argument("--planes", type=int, default=32, help="depth planes, uniform in inverse depth (default 32)")
-    sd.add_argument("--min-confidence", type=float, default=0.6, help="pixels scored and shown (default 0.6)")
-    sd.add_argument("--split-depth", type=float, default=1.2,
+    sd.add_argument("--periods", type=_num(1, 1e6, integer=True), help="scan periods (default: the motion file's duration)")
+    sd.add_argument("--views", type=_num(2, MAX_VIEWS, integer=True), default=40, help="views per scan period (default 40)")
+    sd.add_argument("--near", type=_num(0, lo_open=True), default=0.4, help="nearest depth plane (default 0.4)")
+    sd.add_argument("--far", type=_num(0, lo_open=True), default=4.0, help="farthest depth plane (default 4)")
+    sd.add_argument("--planes", type=_num(2, MAX_PLANES, integer=True), default=32, help="depth planes, uniform in inverse depth (default 32)")
+    sd.add_argument("--min-confidence", type=_num(0, 1), default=0.6, help="pixels scored and shown (default 0.6)")
+    sd.add_argument("--split-depth", type=_num(0, lo_open=True), default=1.2,
                     help="errors reported for pixels nearer / farther than this (default 1.2: runner / wall)")
     cg_ = sd.add_mutually_exclusive_group()
     cg_.add_argument("--calibration", help="calibration JSON (eventfield calibrate) instead of the nominal optics")
@@ -234,7 +230,7 @@ def _parser() -> argparse.ArgumentParser:
     ds.add_argument("--amplitude-y-deg", type=_num(0), help="lissajous: y amplitude")
     ds.add_argument("--phase", type=_num(*PHASE_RANGE_DEG), default=0.0, help="degrees")
     ds.add_argument("--axis", default="x", choices=("x", "y"), help="line: x or y")
-    ds.add_argument("--duration", type=_num(0, MAX_DURATION_S), default=0.0,
+    ds.add_argument("--duration", type=_num(0, MAX_SCAN_S), default=0.0,
                     help="seconds to scan, then stop (default 0: until Ctrl-C or SIGTERM)")
     ds.add_argument("--metadata", help="write the capture metadata (instrument, read-back, scan) to this JSON")
     dsub.add_parser("stop", parents=[conn], help="switch both outputs off")
@@ -249,7 +245,6 @@ def _hdr(a) -> int:
     from .images import write_exr
     if not a.depth > 0:
         raise ef.EventFieldError(f"--depth = {a.depth}: must be > 0")
-    _check_output_dir(a.output)
     try:
         r = hdr.compare(a.scene, _pairs(a.define, "-D"), a.depth, a.steps, spp=a.spp, progress=True)
     except ValueError as e:
@@ -281,23 +276,9 @@ def _pairs(items, what):
     return out
 
 
-def _check_output_dir(path: str) -> None:
-    """Before any rendering: ``path`` is a directory or can be made one (nearest existing parent writable)."""
-    from .errors import EventFieldError
-    path = os.path.abspath(path)
-    if os.path.exists(path) and not os.path.isdir(path):
-        raise EventFieldError(f"output directory {path}: exists and is not a directory")
-    parent = path
-    while not os.path.exists(parent):
-        parent = os.path.dirname(parent)
-    if not (os.path.isdir(parent) and os.access(parent, os.W_OK | os.X_OK)):
-        raise EventFieldError(f"output directory {path}: {parent} is not a writable directory")
-
-
 def _application(run, write, wrote, output: str) -> int:
     """Run an application, write its outputs, print its report: bad input is one line, no traceback."""
     from .errors import EventFieldError
-    _check_output_dir(output)
     try:
         result = run()
         paths = write(result)
@@ -335,7 +316,6 @@ def _scanrate_depth(a) -> int:
     from .errors import EventFieldError
     calibration = load_calibration(a.calibration) if a.calibration else None
     if a.calibrate:
-        _check_output_dir(a.output)
         try:
             calibration = scanrate.calibrate_depth(a.scene, _pairs(a.define, "-D"), progress=True)
         except ValueError as e:
@@ -355,11 +335,7 @@ def _scanrate_depth(a) -> int:
 def _slomorf(a) -> int:
     import mitsuba_eventfield as ef
     from . import slomorf
-    try:
-        depths = [float(v) for v in a.depths.split(",") if v.strip()]
-    except ValueError:
-        raise ef.EventFieldError(f"--depths {a.depths!r}: expected comma-separated numbers > 0") from None
-    _check_output_dir(a.output)
+    depths = number_list(a.depths, "--depths", lo=0, lo_open=True)
     try:
         r = slomorf.slomorf(a.scene or slomorf.DEFAULT_SCENE, _pairs(a.define, "-D"), a.fps, a.factor, a.duration,
                             depths, a.spp, progress=True)
@@ -419,7 +395,7 @@ def _device_curve(a, spec):
 def _device(a) -> int:
     import time
 
-    from .atomic import check_writable, write_json
+    from .atomic import write_json
     from .device import GalvoController, GalvoSpec, dialect, open_transport
     from .device.spec import check_duration
     spec = GalvoSpec(volts_per_deg=a.volts_per_deg)
@@ -429,8 +405,6 @@ def _device(a) -> int:
         curve = _device_curve(a, spec)
         duration = check_duration(a.duration)
         GalvoController(None, a.dialect, spec).plan(curve)
-        if a.metadata:
-            check_writable(a.metadata, "metadata")
     # The context manager switches the outputs off before the connection closes, on every way out of this
     # block: a refusal, a failed metadata write, Ctrl-C, SIGTERM (main turns it into an exception).
     with GalvoController(open_transport(a.dialect, a.resource, a.simulate), a.dialect, spec) as ctl:
@@ -458,11 +432,8 @@ def _device(a) -> int:
 
 
 def _times_ms(text, what="--times"):
-    try:
-        vals = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise __import__("mitsuba_eventfield").EventFieldError(f"{what} {text!r}: expected comma-separated numbers")
-    return vals
+    from .validate import number_list
+    return number_list(text, what, lo=0, hi=1e9)
 
 
 def _start_log(path, events):
@@ -505,8 +476,6 @@ def _save_image(png_path, linear, meta, suffix=""):
 
 def _frame(a) -> int:
     import mitsuba_eventfield as ef
-    from .atomic import check_writable
-    check_writable(a.output, "frame")
     defines = dict(item.partition("=")[::2] for item in a.define)
     scene = ef.load_scene(a.scene, **defines)
     times = [t * 1e-3 for t in _times_ms(a.times)]
@@ -554,16 +523,19 @@ def _reconstruct(a) -> int:
 
 def _lightfield(a, ev):
     import mitsuba_eventfield as ef
+    calibration = optics = None
+    if a.calibration:          # refused before any reconstruction when made for other optics than this stream's
+        from .calibration import apply_to_lightfield, check_optics, load_calibration, optics_record
+        calibration = load_calibration(a.calibration)
+        optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
+        check_optics(calibration, optics)
     try:
         lf = ef.lightfield.from_events(ev, period=a.period, views=a.views,
                                        time=None if a.time is None else a.time * 1e-3, method=a.method,
                                        log_start=_start_log(a.start_frame, ev))
     except (ValueError, KeyError, StopIteration) as e:
         raise ef.EventFieldError(f"{a.file}: {e}") from None
-    if a.calibration:
-        from .calibration import apply_to_lightfield, load_calibration
-        lf = apply_to_lightfield(lf, load_calibration(a.calibration))
-    return lf
+    return apply_to_lightfield(lf, calibration, optics) if calibration is not None else lf
 
 
 def _galvo_frames(ev, period, views, start_frame_log=None):
@@ -587,27 +559,25 @@ def _galvo_frames(ev, period, views, start_frame_log=None):
 def _calibrate(a) -> int:
     import mitsuba_eventfield as ef
     from . import calibration as cal
-    from .atomic import check_writable
-    check_writable(a.output, "calibration file")
     try:
         if a.kind == "galvo":
             ev = ef.read_events(a.file)
             patches = []
             for p in a.patch:
-                try:
-                    x, y = (float(v) for v in p.split(","))
-                except ValueError:
-                    raise ef.EventFieldError(f"--patch {p!r}: expected X,Y") from None
-                patches.append((x, y))
+                xy = number_list(p, "--patch", lo=0)
+                if len(xy) != 2 or xy[0] >= ev.width or xy[1] >= ev.height:
+                    raise ef.EventFieldError(f"--patch {p!r}: expected X,Y inside the {ev.width}x{ev.height} frame")
+                patches.append(tuple(xy))
             frames, times, curve = _galvo_frames(ev, a.period, a.views, _start_log(a.start_frame, ev))
-            result = cal.fit_galvo(frames, times, curve, patches)
-            cal.save_calibration(a.output, galvo=result)
+            optics = cal.optics_record(ev.meta["optics"], ev.width, ev.height, where=a.file)
+            result = cal.fit_galvo(frames, times, curve, patches, scale_limit=cal.galvo_scale_limit(optics))
+            cal.save_calibration(a.output, optics, galvo=result)
             print(f"galvo: phase {result.phase_deg:.2f} +- {result.std['phase_deg']:.2f} deg at the first frame "
                   f"({result.clock_phase_deg:.2f} deg at t = 0), curve radius "
                   f"{result.radius_px()[0]:.3f} x {result.radius_px()[1]:.3f} px, rms {result.rms_px:.3f} px "
                   f"({result.frames_used} matches) -> {a.output}")
         elif a.kind == "depth":
-            depths, scales, scales_y = [], [], []
+            depths, scales, scales_y, records = [], [], [], {}
             for item in a.captures:
                 path, _, depth = item.rpartition(":")
                 try:
@@ -616,24 +586,30 @@ def _calibrate(a) -> int:
                     raise ef.EventFieldError(f"{item!r}: expected FILE:DEPTH") from None
                 ev = ef.read_events(path)
                 frames, times, curve = _galvo_frames(ev, 0, a.views)
-                fit = cal.fit_tracks([cal.track_point(np.exp(frames))], times, curve)
+                records[path] = cal.optics_record(ev.meta["optics"], ev.width, ev.height, where=path)
+                fit = cal.fit_tracks([cal.track_point(np.exp(frames))], times, curve,
+                                     scale_limit=cal.galvo_scale_limit(records[path]))
                 depths.append(depth)
                 scales.append(fit.scale_px_per_rad[0])
                 scales_y.append(fit.scale_px_per_rad[1])
+            optics = cal.same_optics(records)          # one set-up for all the captures
             result = cal.fit_depth(depths, scales, scales_y)
-            cal.save_calibration(a.output, depth=result)
+            cal.save_calibration(a.output, optics, depth=result)
             print(f"depth: inverse model rms {result.rms_inverse:.3f} px/rad (pivot {result.pivot:.4g}), linear "
                   f"model rms {result.rms_linear:.3f} px/rad; best: {result.best} -> {a.output}")
         else:
+            from .images import read_exr
             frame = _luminance_channel(a.frame)
             result = cal.register(np.log(np.maximum(frame, 1e-6)))
+            optics = cal.kaleidoscope_record(frame.shape[1], frame.shape[0], result.n,
+                                             read_exr(a.frame)[1].get("optics"), where=a.frame)
             if a.flat:
                 flat = _luminance_channel(a.flat)
                 if flat.shape != frame.shape:
                     raise ef.EventFieldError(f"{a.flat}: flat frame is {flat.shape[1]}x{flat.shape[0]}, the frame "
                                              f"{a.frame} is {frame.shape[1]}x{frame.shape[0]}: they must match")
                 cal.flat_field(result, flat)
-            cal.save_calibration(a.output, kaleidoscope=result)
+            cal.save_calibration(a.output, optics, kaleidoscope=result)
             worst = max(abs(c) for v in result.views for c in v["offset"])
             print(f"kaleidoscope: {result.n}x{result.n} views of {result.tile[0]}x{result.tile[1]} px, largest "
                   f"offset {worst:.3f} px -> {a.output}")
@@ -647,10 +623,7 @@ def _refocus(a) -> int:
 
     import mitsuba_eventfield as ef
     ev = ef.read_events(a.file)
-    depths = [math.inf if v.strip() == "inf" else float(v) for v in a.depth.split(",")]
-    for z in depths:
-        if not z > 0:
-            raise ef.EventFieldError(f"--depth {z}: depths must be > 0 (inf allowed)")
+    depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
     lf = _lightfield(a, ev)
     for z in depths:
         root = _save_image(a.output, ef.refocus(lf, z), _out_meta(a, ev, depth=z, views=len(lf.views)),
@@ -696,10 +669,6 @@ def _render(a) -> int:
     import os
 
     import mitsuba_eventfield as ef
-    from .atomic import check_writable
-    check_writable(a.output, "event file")          # fail before the (slow) Mitsuba import and render
-    if a.preview:
-        check_writable(a.preview, "preview")
     ef.set_variant(a.variant, a.color)
     motion = None if a.no_motion else (a.motion or "auto")
     defines = {}
@@ -762,8 +731,6 @@ def _info(a) -> int:
 
 def _preview(a) -> int:
     import mitsuba_eventfield as ef
-    from .atomic import check_writable
-    check_writable(a.output, "preview")
     ev = ef.read_events(a.file)
     t0 = None if a.t0 is None else int(round(a.t0 * 1e3))
     t1 = None if a.t1 is None else int(round(a.t1 * 1e3))
@@ -777,6 +744,24 @@ COMMANDS = {"render": _render, "info": _info, "preview": _preview, "frame": _fra
             "refocus": _refocus, "depth": _depth, "calibrate": _calibrate, "device": _device,
             "regression": _regression, "bench": _bench, "hdr": _hdr, "highspeed": _highspeed,
             "track-focus": _track_focus, "slomorf": _slomorf, "scanrate-depth": _scanrate_depth}
+
+
+# Every output a subcommand writes, checked in one place before any work starts (a render must not run for
+# minutes and then fail on its output path). Files: (argument, what); directories: the -o of the applications.
+OUTPUT_FILES = {"render": (("output", "event file"), ("preview", "preview")), "preview": (("output", "preview"),),
+                "frame": (("output", "frame"),), "refocus": (("output", "refocused image"),),
+                "depth": (("output", "depth map"),), "calibrate": (("output", "calibration file"),),
+                "device": (("metadata", "metadata"),)}
+OUTPUT_DIRS = ("reconstruct", "bench", "hdr", "highspeed", "track-focus", "slomorf", "scanrate-depth")
+
+
+def _check_outputs(args) -> None:
+    from .atomic import check_output_dir, check_writable
+    for name, what in OUTPUT_FILES.get(args.command, ()):
+        if getattr(args, name, None):
+            check_writable(getattr(args, name), what)
+    if args.command in OUTPUT_DIRS:
+        check_output_dir(args.output)
 
 
 def _signals_as_interrupts():
@@ -810,6 +795,11 @@ def main(argv=None) -> int:
     from .errors import EventFieldError
     previous = _signals_as_interrupts()
     try:
+        _check_outputs(args)
+        if args.command in OUTPUT_DIRS:
+            from .atomic import output_dir_run
+            with output_dir_run(args.output, args.command):
+                return COMMANDS[args.command](args)
         return COMMANDS[args.command](args)
     except EventFieldError as e:
         print(f"eventfield: error: {_one_line(e)}", file=sys.stderr)

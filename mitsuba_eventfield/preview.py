@@ -33,8 +33,8 @@ def write_preview(path: str, events: EventStream, t0_us=None, t1_us=None, scale:
     import cv2
     if not path.lower().endswith(".png"):
         raise EventFieldError(f"{path}: preview must be a .png file")
-    if scale < 1:
-        raise EventFieldError(f"scale = {scale}: must be an integer >= 1")
+    from .validate import number
+    scale = number(scale, "scale", 1, 64, integer=True)
     if events.width == 0 or events.height == 0:
         raise EventFieldError("cannot preview a 0x0 sensor")
     img = event_frame_rgb(events, t0_us, t1_us)

@@ -209,8 +209,14 @@ def galvo(events: EventStream, times, t_start: float | None = None, samples: int
 
 
 def reconstruct(events: EventStream, times, method: str = "direct", **kw):
+    """Log-intensity frames of ``events`` at ``times`` (seconds) by a registered method."""
+    from .validate import check_allocation
     if method not in _METHODS:
         raise ValueError(f"unknown reconstruction method {method!r}; available: {', '.join(methods())}")
+    n = np.size(times)
+    # a few float64 frames per requested time (the result plus the methods' working copies)
+    check_allocation(3 * 8.0 * n * events.width * events.height,
+                     f"{n} reconstructed frames of {events.width}x{events.height}")
     return _METHODS[method](events, times, **kw)
 
 

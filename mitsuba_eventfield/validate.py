@@ -1,0 +1,80 @@
+"""Checks of user-supplied numbers and sizes, with one message shape: what, the value, the allowed range.
+
+Used by the command line (as argparse types, so a bad number is refused before any work starts) and by
+library functions whose inputs decide how much memory or time a call takes (so ``--fps 1e9`` or
+``--views 1e8`` get a range error naming the limit instead of a MemoryError minutes later).
+"""
+from __future__ import annotations
+
+import math
+import os
+
+from .errors import ConfigError, EventFieldError
+
+# Limits that are not physics but budgets: past them a call runs for hours or cannot fit in memory.
+MAX_DURATION_S = 3600.0        # simulated seconds per render: the file's ms index and hours of rendering per second
+MAX_STEPS = 10_000_000         # time steps per render (each costs a render of the whole film)
+MAX_VIEWS = 4096               # views per scan period / frames per light field
+MAX_PLANES = 1000              # depth planes searched
+MAX_SPP = 65536
+
+
+def number(value, name: str, lo=None, hi=None, *, integer: bool = False, lo_open: bool = False):
+    """``value`` as a float (or int) if finite and in [lo, hi] (``lo_open``: lo excluded); else ConfigError
+    naming ``name``, the value and the range."""
+    try:
+        if isinstance(value, bool):
+            raise TypeError
+        v = float(value)
+        if integer:
+            if not v.is_integer():
+                raise ValueError
+            v = int(v)
+    except (TypeError, ValueError, OverflowError):
+        raise ConfigError(f"{name} = {value!r}: must be {'a whole number' if integer else 'a number'} "
+                          f"{describe_range(lo, hi, lo_open)}") from None
+    too_low = lo is not None and (v <= lo if lo_open else v < lo)
+    if not math.isfinite(v) or too_low or (hi is not None and v > hi):
+        raise ConfigError(f"{name} = {value!r}: allowed range is {describe_range(lo, hi, lo_open)}")
+    return v
+
+
+def describe_range(lo, hi, lo_open=False) -> str:
+    left = "(" if lo_open else "["
+    return f"{left}{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
+
+
+def number_list(text: str, name: str, lo=None, hi=None, lo_open=False, allow_inf=False) -> list:
+    """Comma-separated numbers (e.g. ``--times 0,1.5,3``), each checked as ``number``; "inf" where allowed."""
+    out = []
+    for item in str(text).split(","):
+        item = item.strip()
+        if not item:
+            continue
+        if allow_inf and item.lower() == "inf":
+            out.append(math.inf)
+            continue
+        out.append(number(item, name, lo, hi, lo_open=lo_open))
+    if not out:
+        raise ConfigError(f"{name} = {text!r}: expected one or more comma-separated numbers")
+    return out
+
+
+def available_memory() -> int:
+    """Bytes the system can still hand out (MemAvailable), or the physical memory where that is unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def check_allocation(nbytes: float, what: str, fraction: float = 0.5) -> None:
+    """Refuse an array of ``nbytes`` when it would take more than ``fraction`` of the available memory."""
+    avail = available_memory()
+    if nbytes > fraction * avail:
+        raise EventFieldError(f"{what} needs about {nbytes / 2**30:.3g} GiB, more than {fraction:.0%} of the "
+                              f"{avail / 2**30:.1f} GiB available; ask for fewer")

@@ -1,0 +1,177 @@
+"""Bad input on every subcommand: one line naming the field and the allowed range, a non-zero exit, no traceback,
+no output file, and nothing rendered first. Interrupts and leftovers of killed runs."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from conftest import ROOT
+from mitsuba_eventfield import cli
+
+GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
+SMALL = ["-D", "width=32", "-D", "height=24"]
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    """A tiny galvo capture and its start frame."""
+    d = tmp_path_factory.mktemp("capture")
+    h5 = str(d / "g.h5")
+    assert cli.main(["render", GALVO, "-o", h5, *SMALL, "--duration", "0.004", "--steps", "32", "--quiet"]) == 0
+    return h5
+
+
+def _cases(g, blocked):
+    """(argv, text the one-line error must contain). ``blocked``: a path under a regular file (as root, a
+    read-only directory is still writable, so the unwritable case is a parent that is not a directory)."""
+    out = os.path.dirname(g)
+    return [
+        # numbers out of range or not numbers (were: accepted, silently replaced, or a traceback)
+        (["render", GALVO, "-o", f"{out}/a.h5", "--duration", "1e9"], "--duration"),
+        (["render", GALVO, "-o", f"{out}/a.h5", "--duration", "nan"], "--duration"),
+        (["render", GALVO, "-o", f"{out}/a.h5", "--steps", "1000000000000"], "--steps"),
+        (["render", GALVO, "-o", f"{out}/a.h5", "--spp", "0"], "--spp"),
+        (["render", GALVO, "-o", f"{out}/a.h5", "--threshold", "-1"], "--threshold"),
+        (["render", GALVO, "-o", f"{out}/a.h5", "--preview-window", "-1"], "--preview-window"),
+        (["render", GALVO, "-o", f"{out}/a.h5", "--adaptive", "--max-log-change", "nan"], "--max-log-change"),
+        (["preview", g, "-o", f"{out}/p.png", "--scale", "100000"], "--scale"),
+        (["preview", g, "-o", f"{out}/p.png", "--t0", "nan"], "--t0"),
+        (["frame", GALVO, "-o", f"{out}/f.exr", "--times", "nan"], "--times"),
+        (["reconstruct", g, "-o", f"{out}/rc", "--fps", "0"], "--fps"),
+        (["reconstruct", g, "-o", f"{out}/rc", "--fps", "1e9"], "--fps"),
+        (["reconstruct", g, "-o", f"{out}/rc", "--method", "highpass", "--cutoff", "-1"], "--cutoff"),
+        (["refocus", g, "-o", f"{out}/r.png", "--depth", "1", "--views", "100000000"], "--views"),
+        (["refocus", g, "-o", f"{out}/r.png", "--depth", "1,abc"], "--depth"),
+        (["depth", g, "-o", f"{out}/d.png", "--near", "0.5", "--far", "2", "--planes", "10000000"], "--planes"),
+        (["depth", g, "-o", f"{out}/d.png", "--near", "0.5", "--far", "2", "--min-confidence", "nan"],
+         "--min-confidence"),
+        (["calibrate", "galvo", g, "--patch", "nan,10", "-o", f"{out}/c.json"], "--patch"),
+        (["scanrate-depth", "-o", f"{out}/sd", "--planes", "10000000"], "--planes"),
+        (["track-focus", "-o", f"{out}/tf", "--planes", "1e7"], "--planes"),
+        (["slomorf", "-o", f"{out}/sm", "--fps", "0"], "--fps"),
+        # output paths that cannot be written: refused before any work (were: tracebacks after rendering)
+        (["render", GALVO, "-o", f"{blocked}/a.h5"], "not a directory"),
+        (["render", GALVO, "-o", f"{out}/a.h5", "--preview", f"{blocked}/p.png"], "not a directory"),
+        (["preview", g, "-o", f"{blocked}/p.png"], "not a directory"),
+        (["frame", GALVO, "-o", f"{blocked}/f.exr"], "not a directory"),
+        (["refocus", g, "-o", f"{blocked}/r.png", "--depth", "1"], "not a directory"),
+        (["depth", g, "-o", f"{blocked}/d.png", "--near", "0.5", "--far", "2"], "not a directory"),
+        (["calibrate", "galvo", g, "--patch", "10,10", "-o", f"{blocked}/c.json"], "not a directory"),
+    ] + [([cmd, "-o", f"{blocked}/x"] + ([GALVO] if cmd == "bench" else []), "not a writable directory")
+         for cmd in ("hdr", "highspeed", "track-focus", "slomorf", "scanrate-depth", "bench")] + [
+        (["reconstruct", g, "-o", f"{blocked}/x"], "not a writable directory"),
+        (["device", "scan", "--simulate", "--dialect", "rigol", "--freq", "100", "--amplitude-deg", "1",
+          "--metadata", f"{blocked}/m.json"], "not a directory"),
+    ]
+
+
+def test_every_bad_input_is_one_line_and_writes_nothing(capture, tmp_path, capsys):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    before = set(os.listdir(os.path.dirname(capture)))
+    failures = []
+    for argv, must_say in _cases(capture, str(blocker)):
+        t = time.perf_counter()
+        try:
+            rc = cli.main(argv)
+        except SystemExit as e:          # argparse: the number never reaches the command
+            rc = e.code
+        err = capsys.readouterr().err.strip().splitlines()
+        elapsed = time.perf_counter() - t
+        if rc != 2 or len(err) != 1 or must_say not in err[0] or "Traceback" in err[0] or elapsed > 5:
+            failures.append((argv, rc, err, round(elapsed, 1)))
+    assert failures == []
+    assert set(os.listdir(os.path.dirname(capture))) == before      # no output, no partial file
+
+
+def test_unexpected_errors_are_one_line_too(monkeypatch, capsys, capture):
+    def broken(*a, **k):
+        raise ZeroDivisionError("a bug somewhere")
+    monkeypatch.setattr("mitsuba_eventfield.read_events", broken)
+    monkeypatch.delenv("EVENTFIELD_DEBUG", raising=False)
+    assert cli.main(["info", capture]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "ZeroDivisionError: a bug somewhere" in err[0] and "EVENTFIELD_DEBUG" in err[0]
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.startswith("mitsuba-eventfield ")
+
+
+def test_coarse_scan_steps_are_flagged(tmp_path, capsys):
+    """4 steps per 4 ms scan period miss events: the summary and the file's metadata say so."""
+    import mitsuba_eventfield as ef
+    out = str(tmp_path / "coarse.h5")
+    assert cli.main(["render", GALVO, "-o", out, *SMALL, "--duration", "0.008", "--steps", "8", "--quiet"]) == 0
+    assert "only 4 steps per 4 ms scan period" in capsys.readouterr().err
+    notes = ef.read_events(out).meta["render"]["notes"]
+    assert any("use --steps 32 or more" in n for n in notes)
+    assert cli.main(["render", GALVO, "-o", out, *SMALL, "--duration", "0.008", "--steps", "32", "--quiet"]) == 0
+    assert "steps per" not in capsys.readouterr().err
+
+
+def _render_process(out, *extra):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-c", "import signal, sys; signal.signal(signal.SIGINT, "
+                             "signal.default_int_handler); from mitsuba_eventfield.cli import main; "
+                             "sys.exit(main(sys.argv[1:]))", "render", os.path.join(ROOT, "scenes", "fan", "fan.xml"),
+                             "-o", out, "-D", "width=64", "-D", "height=48", "--duration", "0.02", "--steps", "2000",
+                             *extra], stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+
+
+def _wait_for_rendering(proc):
+    """Until the progress bar shows (the render loop runs), so the signal lands inside Dr.Jit/Mitsuba."""
+    buf = ""
+    while "rendering" not in buf:
+        ch = proc.stderr.read(1)
+        assert ch, "the render ended before it started"
+        buf += ch
+
+
+@pytest.mark.parametrize("sig, rc, word", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")])
+def test_interrupt_mid_render_is_one_line_and_leaves_nothing(tmp_path, sig, rc, word):
+    out = tmp_path / "fan.h5"
+    proc = _render_process(str(out))
+    _wait_for_rendering(proc)
+    time.sleep(0.5)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    lines = [line for line in err.replace("\r", "\n").splitlines() if line.strip() and "rendering" not in line
+             and "winding down" not in line]        # Mitsuba's own log line when its render loop sees SIGINT
+    assert proc.returncode == rc and lines == [f"eventfield: {word} (no partial output kept)"], err[-2000:]
+    assert os.listdir(tmp_path) == []
+
+
+def test_sigkill_leftover_is_named_and_removed_by_the_next_run(tmp_path):
+    out = tmp_path / "fan.h5"
+    proc = _render_process(str(out))
+    _wait_for_rendering(proc)
+    time.sleep(0.5)
+    proc.kill()
+    proc.communicate(timeout=60)
+    left = os.listdir(tmp_path)
+    assert len(left) == 1 and left[0].startswith("fan.partial-") and left[0].endswith(".h5")   # visible, named
+    r = subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "render", GALVO, "-o", str(out), *SMALL,
+                        "--duration", "0.004", "--steps", "32", "--quiet"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and f"removed {tmp_path / left[0]}" in r.stderr
+    assert os.listdir(tmp_path) == ["fan.h5"]
+
+
+def test_reused_output_folder_warns_and_keeps_no_stale_files(capture, tmp_path, capsys):
+    out = tmp_path / "frames"
+    assert cli.main(["reconstruct", capture, "-o", str(out), "--fps", "2500", "--method", "galvo"]) == 0
+    first = sorted(os.listdir(out))
+    (out / "mine.txt").write_text("a file of the user's")
+    capsys.readouterr()
+    assert cli.main(["reconstruct", capture, "-o", str(out), "--fps", "1000", "--method", "galvo"]) == 0
+    err = capsys.readouterr().err
+    assert "is reused" in err and "1 other files stay" in err
+    frames = sorted(n for n in os.listdir(out) if n.startswith("frame_"))
+    assert len(first) > len(frames) > 0 and frames == [f"frame_{k:04d}.{e}" for k in range(len(frames) // 2)
+                                                       for e in ("exr", "png")]
+    assert (out / "mine.txt").exists()
