@@ -619,8 +619,6 @@ def _calibrate(a) -> int:
 
 
 def _refocus(a) -> int:
-    import math
-
     import mitsuba_eventfield as ef
     ev = ef.read_events(a.file)
     depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
