@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from collections import deque
 
-from .dialects import DIALECTS, SafetyError, dialect
+from .dialects import SafetyError, dialect
 
 # The instrument's own limits (a 33500-class generator into high-Z), not the galvo's: it accepts much more than
 # the galvo can take, which is exactly why the controller must not rely on it.
@@ -131,7 +131,3 @@ class SimulatedGenerator:
         return (f"C{ch}:BSWV WVTP,SINE,FRQ,{s['frequency']:.10g}HZ,PERI,{1 / s['frequency']:.10g}S,AMP,{s['vpp']:.10g}V,"
                 f"OFST,{s['offset']:.10g}V,HLEV,{s['offset'] + s['vpp'] / 2:.10g}V,LLEV,{s['offset'] - s['vpp'] / 2:.10g}V,"
                 f"PHSE,{s['phase']:.10g}")
-
-
-def available() -> list:
-    return sorted(DIALECTS)
