@@ -5,18 +5,24 @@ A point source (LED) at known depths z_i gives the scan curve's scale S_i (pixel
 quantity, the scale (px/rad), where the measurement noise is uniform; depth residuals are reported too, but
 they are dominated by the far points, where dS/dz ~ pivot / z^2 is smallest:
 
-* ``linear`` (the paper's): z = c0 + c1 * S;
-* ``inverse`` (what the mirror geometry predicts): S = p + q / z, i.e. S = S_inf (1 - pivot / z) to first
-  order, so pivot = -q / p. Its p and q are exactly a LightField's disparity model (A, B) once divided by 2
-  (light-field positions are optical angles, twice the mechanical ones).
+* ``inverse`` (what the mirror geometry predicts, ``optics.galvo``): an on-axis point at depth z moves by
+  2 f g (1 - pivot / z) pixels per mechanical radian, so S = p + q / z with p = 2 f g (g: the mirror's angle
+  gain, 1 when it turns as commanded) and pivot = -q / p. It is used everywhere: ``geometry`` turns it into the
+  exact two-mirror geometry (pivots and gains per axis) that refocus and depth from focus map views with.
+* ``linear`` (the paper's): z = c0 + c1 * S. Size is linear in 1/z, not in z, so this model cannot follow the
+  physics; it is kept for comparison, and using it (``depth(..., model="linear")``) warns with the depth range
+  outside which it is more than 5 % off the inverse fit.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from .galvo import CalibrationError
+
+LINEAR_MODEL_TOLERANCE = 0.05     # relative depth error at which the linear model is said to break
 
 
 @dataclass
@@ -46,21 +52,41 @@ class DepthCalibration:
         p, q = self.inverse
         return -q / p
 
-    def depth(self, scale, model: str | None = None):
-        """Depth of a curve scale S (px per rad), with the best (or given) model."""
+    def depth(self, scale, model: str = "inverse"):
+        """Depth of a curve scale S (px per rad): the inverse (physical) model, or the paper's ``linear`` one,
+        which warns where it breaks (``linear_valid_range``)."""
         s = np.asarray(scale, dtype=np.float64)
-        if (model or self.best) == "linear":
+        if model == "linear":
+            lo, hi = self.linear_valid_range()
+            warnings.warn(f"the linear size-vs-depth model cannot follow the mirror geometry (size is linear in "
+                          f"1/z): it is within {LINEAR_MODEL_TOLERANCE:.0%} of the inverse fit only for depths "
+                          f"{lo:.3g} to {hi:.3g} (calibrated {min(self.depths):.3g} to {max(self.depths):.3g})",
+                          stacklevel=2)
             return self.linear[0] + self.linear[1] * s
+        if model != "inverse":
+            raise ValueError(f"model = {model!r}: allowed inverse, linear")
         p, q = self.inverse
         with np.errstate(divide="ignore"):
             return np.where(s < p, q / (s - p), np.inf)
 
-    def disparity_model(self):
-        """((A_x, A_y), (B_x, B_y)) of LightField.alpha(z) = A + B / z, pixels per optical radian. Without y
-        scales the x fit is used for both axes (exact only for mirrors at one pivot)."""
+    def linear_valid_range(self) -> tuple:
+        """(nearest, farthest) depth over which the linear model stays within LINEAR_MODEL_TOLERANCE of the
+        inverse fit, searched from a tenth of the nearest to ten times the farthest calibration depth."""
+        p, q = self.inverse
+        z = np.geomspace(min(self.depths) / 10, max(self.depths) * 10, 4000)
+        z = z[z > -q / p * 1.01]                                    # in front of the pivot only
+        ok = np.abs(self.linear[0] + self.linear[1] * (p + q / z) - z) <= LINEAR_MODEL_TOLERANCE * z
+        inside = z[ok]
+        return (float(inside.min()), float(inside.max())) if inside.size else (float("nan"), float("nan"))
+
+    def geometry(self, nominal):
+        """The exact galvo geometry (``optics.galvo.GalvoGeometry``) with the calibrated pivots and angle gains
+        per axis (from S = 2 f g (1 - pivot / z)); the film and focal length of ``nominal``. Without y scales
+        the x fit serves both axes (exact only for mirrors at one pivot)."""
         px, qx = self.inverse
         py, qy = self.inverse_y or self.inverse
-        return (px / 2, py / 2), (qx / 2, qy / 2)
+        two_f = 2.0 * nominal.focal_px
+        return nominal.with_pivots(-qx / px, -qy / py, px / two_f, py / two_f)
 
     def as_dict(self) -> dict:
         return {"kind": "depth", **asdict(self), "quality": self.quality}

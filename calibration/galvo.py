@@ -20,6 +20,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from mitsuba_eventfield.errors import EventFieldError
+from mitsuba_eventfield.focus import parabola_offset
+from mitsuba_eventfield.optics.galvo import focal_length_px
 from mitsuba_eventfield.scan import ScanCurve
 
 
@@ -41,12 +43,9 @@ class PatchTrack:
 
 def _subpixel_peak(corr, x, y):
     """Parabola through the peak and its neighbours, per axis."""
-    def off(c_m, c_0, c_p):
-        den = c_m - 2 * c_0 + c_p
-        return 0.0 if den >= 0 else float(np.clip(0.5 * (c_m - c_p) / den, -0.5, 0.5))
     h, w = corr.shape
-    dx = off(corr[y, x - 1], corr[y, x], corr[y, x + 1]) if 0 < x < w - 1 else 0.0
-    dy = off(corr[y - 1, x], corr[y, x], corr[y + 1, x]) if 0 < y < h - 1 else 0.0
+    dx = parabola_offset(corr[y, x - 1], corr[y, x], corr[y, x + 1]) if 0 < x < w - 1 else 0.0
+    dy = parabola_offset(corr[y - 1, x], corr[y, x], corr[y + 1, x]) if 0 < y < h - 1 else 0.0
     return x + dx, y + dy
 
 
@@ -151,7 +150,7 @@ def galvo_scale_limit(optics: dict, margin: float = 1.25) -> float:
     1 - pivot / z is below 1 in front of the mirrors), times the keystone 1 + t^2 at the film's corner, times
     ``margin`` for the cross terms. A fit beyond it has locked onto something that is not the scan."""
     width, height = optics["width"], optics["height"]
-    f = (width / 2) / math.tan(math.radians(optics["fov_x_deg"]) / 2)
+    f = focal_length_px(width, optics["fov_x_deg"])
     corner = math.hypot(width, height) / 2 / f
     return margin * 2 * f * (1 + corner ** 2)
 

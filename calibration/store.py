@@ -125,15 +125,17 @@ def apply_to_lightfield(lf, calibration: dict, optics: dict):
     """A copy of ``lf`` placed and scaled by the calibration (galvo: view positions from the fitted phase;
     depth: the disparity model from the inverse-depth fit). ``optics``: the ``optics_record`` of the data ``lf``
     was made from; a calibration made for other optics is refused (``optics.check_optics``)."""
-    from mitsuba_eventfield.lightfield import LightField
+    from mitsuba_eventfield.lightfield import LightField, galvo_paraxial_disparity
     if not isinstance(optics, dict) or "design" not in optics:
         raise EventFieldError("apply_to_lightfield needs the optics record of the light field's data "
                               "(calibration.optics_record(events.meta['optics'], width, height))")
     kinds = check_optics(calibration, optics)
-    positions, A, B = lf.positions.copy(), lf.A, lf.B
+    positions, disparity, geometry = lf.positions.copy(), lf.disparity, lf.galvo
     if "galvo" in kinds and lf.kind == "galvo":
         ax, ay = calibration["galvo"].view_angles(lf.times)
         positions = np.stack([2 * np.asarray(ax), 2 * np.asarray(ay)], axis=-1)
-    if "depth" in kinds:
-        A, B = calibration["depth"].disparity_model()
-    return LightField(lf.views, positions, lf.times, A, B, lf.kind, dict(lf.meta, calibrated=sorted(kinds)))
+    if "depth" in kinds and geometry is not None:
+        geometry = calibration["depth"].geometry(geometry)
+        disparity = galvo_paraxial_disparity(geometry)
+    return LightField(lf.views, positions, lf.times, disparity, lf.kind, dict(lf.meta, calibrated=sorted(kinds)),
+                      geometry)

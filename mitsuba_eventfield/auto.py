@@ -24,6 +24,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .backend import set_variant
+from .render import render_frames
+from .scene import load_scene
+
 
 @dataclass
 class Plan:
@@ -48,14 +52,13 @@ class Plan:
 def _grey(scene_path, defines, size=24) -> bool:
     import mitsuba as mi
 
-    import mitsuba_eventfield as ef
     previous = mi.variant()
-    ef.set_variant(color=True)
+    set_variant(color=True)
     try:
-        timed = ef.load_scene(scene_path, **dict(defines, **_tiny(scene_path, size)))
+        timed = load_scene(scene_path, **dict(defines, **_tiny(scene_path, size)))
         img = np.array(mi.render(timed.scene, spp=4, seed=0))
     finally:
-        ef.set_variant(previous)
+        set_variant(previous)
     rgb = img[..., :3]
     return bool(np.abs(rgb - rgb.mean(-1, keepdims=True)).max() <= 1e-6 * max(float(rgb.max()), 1e-12))
 
@@ -73,22 +76,20 @@ def _tiny(scene_path, size):
 
 def noise_std(timed, spp: int, seeds=(0, 1, 2, 3), t: float = 0.0) -> float:
     """Median over pixels of the spread of log brightness across seeds (Monte-Carlo noise), in log units."""
-    import mitsuba_eventfield as ef
-    frames = np.stack([ef.render_frames(timed, [t], spp=spp, seed=s)[0] for s in seeds])
+    frames = np.stack([render_frames(timed, [t], spp=spp, seed=s)[0] for s in seeds])
     return float(np.median(frames.std(axis=0)))
 
 
 def plan(scene_path: str, duration: float, threshold: float = 0.2, noise_fraction: float = 0.5,
          change_fraction: float = 1.0, probe_spp: int = 4, probe_dt: float | None = None, defines=None,
          max_spp: int = 256, max_steps: int = 100_000) -> Plan:
-    import mitsuba_eventfield as ef
     defines = dict(defines or {})
     reasons = {}
     grey = _grey(scene_path, defines)
     reasons["colour"] = ("mono: every pixel of an RGB probe is grey, so the luminance the pixel sees equals the mono "
                          "render" if grey else "rgb: the scene has colour, and luminance needs all three channels")
-    ef.set_variant(color=not grey)
-    timed = ef.load_scene(scene_path, **defines)
+    set_variant(color=not grey)
+    timed = load_scene(scene_path, **defines)
     sigma = noise_std(timed, probe_spp)
     target = noise_fraction * threshold
     need = probe_spp * (sigma / target) ** 2 if sigma > 0 else 1
@@ -99,7 +100,7 @@ def plan(scene_path: str, duration: float, threshold: float = 0.2, noise_fractio
                       + (f" <= {target:.4f} ({noise_fraction} x C)" if reached <= target * (1 + 1e-9) else
                          f", still above the target {target:.4f}: capped at max_spp = {max_spp}"))
     dt = probe_dt or duration / 200
-    f0, f1 = ef.render_frames(timed, [0.0, dt], spp=spp)
+    f0, f1 = render_frames(timed, [0.0, dt], spp=spp)
     rate = float(np.percentile(np.abs(f1 - f0), 99)) / dt
     steps = int(min(max_steps, max(1, math.ceil(duration * rate / (change_fraction * threshold)))))
     reasons["steps"] = (f"{steps}: the 99th-percentile log change is {rate:.3g} per second; {steps} steps keep it "

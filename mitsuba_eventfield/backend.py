@@ -1,7 +1,7 @@
 """Mitsuba variant selection: CUDA when a GPU is usable, else LLVM; mono unless colour is requested.
 
 Our plugins are Python classes. Under a ``scalar_*`` variant Mitsuba calls them once per sample (about 90x
-slower than the vectorised variants, DESIGN.md section 3), so scalar variants are refused with an explanation
+slower than the vectorised variants, docs/design.md, "Measured facts and pitfalls"), so scalar variants are refused with an explanation
 rather than used silently.
 """
 from __future__ import annotations

@@ -17,6 +17,13 @@ import time
 
 import numpy as np
 
+from .backend import set_variant
+from .lightfield import from_events
+from .reconstruct import direct
+from .refocus import refocus
+from .render import render_events, render_frames
+from .scene import load_scene
+
 DEFAULT = {"name": "default (4 spp, uniform)", "spp": 4, "steps_factor": 1}
 SETTINGS = [
     {"name": "1 spp", "spp": 1, "steps_factor": 1},
@@ -41,36 +48,34 @@ def _net_frames(ev, duration, window_s):
 
 
 def _product(ev, scene, refocus_depth, views=16):
-    import mitsuba_eventfield as ef
     optics = ev.meta.get("optics", {})
     if optics.get("design") == "galvo":
-        start = ef.render_frames(scene, [0.0], spp=64)[0]
-        lf = ef.lightfield.from_events(ev, period=0, views=views, log_start=start)
-        return np.log(np.maximum(ef.refocus(lf, refocus_depth), 1e-6))
-    return ef.reconstruct.direct(ev, [ev.duration_us * 1e-6], ef.render_frames(scene, [0.0], spp=64)[0], 0.0)[0]
+        start = render_frames(scene, [0.0], spp=64)[0]
+        lf = from_events(ev, period=0, views=views, log_start=start)
+        return np.log(np.maximum(refocus(lf, refocus_depth), 1e-6))
+    return direct(ev, [ev.duration_us * 1e-6], render_frames(scene, [0.0], spp=64)[0], 0.0)[0]
 
 
 def run(scene_path: str, duration: float, steps: int, defines: dict | None = None, refocus_depth: float = 0.6,
         window_s: float = 2.5e-4, settings=None) -> list:
     """One row per setting (and the reference): wall time, errors. Colour settings run in the rgb variant."""
-    import mitsuba_eventfield as ef
     defines = defines or {}
     rows, outputs = [], {}
     for cfg in [REFERENCE] + list(settings or SETTINGS):
         color = cfg.get("color", False)
-        ef.set_variant(color=color)
-        scene = ef.load_scene(scene_path, **defines)
+        set_variant(color=color)
+        scene = load_scene(scene_path, **defines)
         kw = dict(spp=cfg["spp"], seed_mode=cfg.get("seed_mode", "fixed"))
         if cfg.get("adaptive"):
             kw.update(adaptive=True, max_log_change=0.5, max_step=duration / steps)
         else:
             kw.update(steps=max(1, int(round(steps * cfg["steps_factor"]))))
-        ef.render_events(scene, duration / 8, **dict(kw, steps=2) if not cfg.get("adaptive") else kw)  # compile
+        render_events(scene, duration / 8, **dict(kw, steps=2) if not cfg.get("adaptive") else kw)  # compile
         t0 = time.perf_counter()
-        ev = ef.render_events(scene, duration, reuse=False, **kw)
+        ev = render_events(scene, duration, reuse=False, **kw)
         wall = time.perf_counter() - t0
-        ef.set_variant(color=False)
-        mono_scene = ef.load_scene(scene_path, **defines)
+        set_variant(color=False)
+        mono_scene = load_scene(scene_path, **defines)
         outputs[cfg["name"]] = (ev, _net_frames(ev, duration, window_s), _product(ev, mono_scene, refocus_depth))
         rows.append({"setting": cfg["name"], "wall_s": wall, "events": len(ev),
                      "steps": ev.meta["render"]["steps"], "spp": cfg["spp"]})

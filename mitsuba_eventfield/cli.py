@@ -209,8 +209,6 @@ def _parser() -> argparse.ArgumentParser:
     cg_.add_argument("--calibrate", action="store_true",
                      help="calibrate depth first from LED captures through the same galvo (scenes/led_depth), save "
                           "it as OUTPUT/calibration.json and use it")
-    sd.add_argument("--field-correction", choices=("oriented", "mean", "off"), default="oriented",
-                    help="undo the galvo's field-dependent scan scale (default: oriented; see scanrate.run)")
     rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with tests/regression/")
     rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
     dev = sub.add_parser("device", help="drive the galvo through a function generator (SCPI/VISA)")
@@ -327,7 +325,7 @@ def _scanrate_depth(a) -> int:
     return _application(
         lambda: scanrate.run(a.scene, _pairs(a.define, "-D"), a.periods, a.views, a.near, a.far, a.planes,
                              min_confidence=a.min_confidence, split_depth=a.split_depth, calibration=calibration,
-                             field_correction=a.field_correction, progress=True),
+                             progress=True),
         lambda r: scanrate.write_outputs(r, a.output),
         lambda p: f"{p['figure']}, {len(p['exr'])} depth EXRs and PNGs, {p['metrics']}", a.output)
 

@@ -1,8 +1,8 @@
 """Depth from focus on light fields: focus measures over a focal stack, sub-step peak refinement, confidence.
 
-Measures (``focus_measure``): ``sml`` (sum-modified-Laplacian), ``tenengrad`` (Sobel gradient energy), both
-summed over a window; and ``variance`` (angular consistency: the spread of the aligned views at a pixel is
-smallest at the right depth), which uses the views themselves rather than the refocused image. ``variance``
+Measures: ``sml`` and ``tenengrad`` on the refocused image (``focus.focus_measure``), and ``variance``
+(angular consistency: the spread of the aligned views at a pixel is smallest at the right depth), which uses
+the views themselves rather than the refocused image. ``variance``
 is the most robust on views reconstructed from events but resamples every view per plane (Lanczos): about
 8x the cost of the others. (Summing shifted squared views in the Fourier domain instead was 4x faster but
 10x less accurate: squaring doubles the bandwidth and the shift aliases.)
@@ -18,35 +18,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .focus import IMAGE_MEASURES, focus_measure, parabola_offset, refine_peak  # noqa: F401  (focus_measure, refine_peak: re-exported)
 from .lightfield import LightField
-from .refocus import depth_planes, refocus, shifted_views
+from .refocus import aligned_views, depth_planes, refocus
 
-MEASURES = ("sml", "tenengrad", "variance")
-
-
-def focus_measure(img: np.ndarray, measure: str = "sml", window: int = 7) -> np.ndarray:
-    """Per-pixel focus of one image (H, W), aggregated over a ``window`` x ``window`` box."""
-    img = np.asarray(img, dtype=np.float32)
-    if measure == "sml":
-        kx = np.array([[0, 0, 0], [-1, 2, -1], [0, 0, 0]], np.float32)
-        m = np.abs(cv2.filter2D(img, -1, kx)) + np.abs(cv2.filter2D(img, -1, kx.T))
-    elif measure == "tenengrad":
-        gx, gy = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3)
-        m = gx * gx + gy * gy
-    else:
-        raise ValueError(f"unknown focus measure {measure!r}; allowed: {', '.join(MEASURES)}")
-    return cv2.boxFilter(m, -1, (window, window), normalize=True, borderType=cv2.BORDER_REFLECT)
-
-
-def refine_peak(x, scores, k):
-    """Parabola through the peak and its neighbours: sub-step position of the maximum (in x units)."""
-    if k <= 0 or k >= len(scores) - 1:
-        return x[k]
-    f0, f1, f2 = scores[k - 1], scores[k], scores[k + 1]
-    den = f0 - 2 * f1 + f2
-    off = 0.0 if den >= 0 else np.clip(0.5 * (f0 - f2) / den, -0.5, 0.5)
-    step = x[k + 1] - x[k] if off > 0 else x[k] - x[k - 1]
-    return x[k] + off * step
+MEASURES = IMAGE_MEASURES + ("variance",)
 
 
 @dataclass
@@ -62,7 +38,7 @@ def _volume(lf: LightField, planes, measure, window):
     for z in planes:
         if measure == "variance":
             s1 = s2 = cov = None
-            for v, c in shifted_views(lf, float(z)):
+            for v, c in aligned_views(lf, float(z)):
                 g = v if v.ndim == 2 else v.mean(-1)
                 g = np.log(np.maximum(g, 1e-6)) * c          # log: variance independent of brightness
                 s1 = g if s1 is None else s1 + g
@@ -90,10 +66,7 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
     h, w = k.shape
     kk = np.clip(k, 1, len(zs) - 2)
     rows, cols = np.mgrid[0:h, 0:w]
-    f0, f1, f2 = vol[kk - 1, rows, cols], vol[kk, rows, cols], vol[kk + 1, rows, cols]
-    den = f0 - 2 * f1 + f2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        off = np.where(den < 0, np.clip(0.5 * (f0 - f2) / den, -0.5, 0.5), 0.0)
+    off = parabola_offset(vol[kk - 1, rows, cols], vol[kk, rows, cols], vol[kk + 1, rows, cols])
     off = np.where((k == kk), off, 0.0)                        # no refinement at the ends of the range
     step = inv[1] - inv[0]                                     # uniform in inverse depth
     inv_depth = inv[k] + off * step

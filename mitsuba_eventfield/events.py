@@ -1,6 +1,6 @@
 """EventStream: the in-memory event container every module exchanges.
 
-Conventions (DESIGN.md section 2): ``x``, ``y`` uint16 pixel coordinates (x to the right, y down, origin at
+Conventions (docs/design.md, "Conventions"): ``x``, ``y`` uint16 pixel coordinates (x to the right, y down, origin at
 the top-left pixel), ``t`` int64 microseconds, ``p`` int8 +1 (ON, brighter) / -1 (OFF), sorted by time;
 ``meta`` carries everything needed to interpret the stream without its scene (optics, pixel model, seed, ...).
 """

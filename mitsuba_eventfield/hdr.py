@@ -20,6 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .render import render_events, render_frames
+from .scene import load_scene
+
 LDR_BITS = 8
 WELL_EXPOSED = (10, 245)        # codes a frame records with < 10% quantisation error and no clipping
 
@@ -64,20 +67,19 @@ def compare(scene_path: str, defines: dict | None = None, depth: float = math.in
     """Render one scan period of events of a static galvo scene, reconstruct its HDR log image and score it and
     two 8-bit exposures against the ground truth. ``depth``: distance of the scene (the scan shift scales with
     1 - pivot / depth); ``samples``: views the galvo solver uses."""
-    import mitsuba_eventfield as ef
     from .plugins.pixel_model import linlog_np
     from .reconstruct import galvo_start_image
-    timed = ef.load_scene(scene_path, **(defines or {}))
+    timed = load_scene(scene_path, **(defines or {}))
     if not timed.is_static:
         raise ValueError(f"{scene_path}: HDR reconstruction from the scan alone needs a static scene")
     period = timed.scan_period
     if not period:
         raise ValueError(f"{scene_path}: needs a galvo sensor with a periodic scan")
     t0 = time.perf_counter()
-    events = ef.render_events(timed, period, steps=steps_per_period, spp=spp, progress=progress)
+    events = render_events(timed, period, steps=steps_per_period, spp=spp, progress=progress)
     t1 = time.perf_counter()
     linlog = events.meta["pixel_model"]["linlog_threshold"]
-    truth_lin = ef.render_frames(timed, [0.0], spp=spp, log=False)[0]
+    truth_lin = render_frames(timed, [0.0], spp=spp, log=False)[0]
     truth = linlog_np(truth_lin, linlog)
     t2 = time.perf_counter()
     est = galvo_start_image(events, 0.0, samples=samples, depth=depth)

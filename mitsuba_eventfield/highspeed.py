@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import EventFieldError
+from .render import render_events, render_frames
+from .scene import load_scene
 
 START_METHODS = ("frame", "events")
 
@@ -53,14 +55,13 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
             start: str = "frame", px_per_step: float = 1.0, spp: int = 4, progress: bool = False) -> Capture:
     """Events of ``periods`` whole scan periods (default: all of the motion file's duration) and, per period,
     the light field from the events and the ground-truth light field of the same views."""
-    import mitsuba_eventfield as ef
     from .lightfield import from_galvo, galvo_lightfields, galvo_steps_per_period
     from .reconstruct import galvo_start_image
     if start not in START_METHODS:
         raise ValueError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
     _check_positive("views", views, integer=True, low=1)
     _check_positive("px_per_step", px_per_step)
-    timed = ef.load_scene(scene_path, **(defines or {}))
+    timed = load_scene(scene_path, **(defines or {}))
     period = timed.scan_period
     if not period:
         raise ValueError(f"{scene_path}: needs a galvo sensor with a periodic scan")
@@ -71,18 +72,18 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
         periods = max(1, int(math.floor(duration / period + 1e-9)))
     _check_positive("periods", periods, integer=True)
     optics = timed.sensor.optics_metadata()
-    width = int(timed.sensor.film().size()[0])
-    steps = periods * max(2 * views, galvo_steps_per_period(optics, width, px_per_step))
+    width, height = (int(v) for v in timed.sensor.film().size())
+    steps = periods * max(2 * views, galvo_steps_per_period(optics, width, height, px_per_step))
     t0 = time.perf_counter()
-    events = ef.render_events(timed, periods * period, steps=steps, spp=spp, progress=progress)
+    events = render_events(timed, periods * period, steps=steps, spp=spp, progress=progress)
     t1 = time.perf_counter()
     if start == "frame":
-        log_start = ef.render_frames(timed, [0.0], spp=spp)[0]
+        log_start = render_frames(timed, [0.0], spp=spp)[0]
     else:
         log_start = galvo_start_image(events, 0.0)
     lfs = list(galvo_lightfields(events, views, "direct", log_start=log_start, t_start=0.0))
     t2 = time.perf_counter()
-    truth = [from_galvo(ef.render_frames(timed, lf.times, spp=spp), lf.times, events.meta["optics"],
+    truth = [from_galvo(render_frames(timed, lf.times, spp=spp), lf.times, events.meta["optics"],
                         {"period_index": k}) for k, lf in enumerate(lfs)]
     t3 = time.perf_counter()
     return Capture(timed, events, lfs, truth, period,
@@ -153,7 +154,7 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
     conventional camera at that frame rate records around the middle period (``truth.conventional_frame``; the
     paper's 60 Hz comparison) and how far it is from the instant it is centred on, per plane's region (motion
     blur; a pinhole has no defocus to compare); None: skip."""
-    from .depth import focus_measure
+    from .focus import focus_measure
     from .quality import scores as quality_scores
     from .refocus import refocus
     from .truth import centre_frame, textured, truth_depth
@@ -209,7 +210,7 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
 
 @dataclass
 class FocusTrack:
-    depths: np.ndarray           # (P,) metric depth per period (sharpest refocus, field-corrected)
+    depths: np.ndarray           # (P,) metric depth per period (sharpest exact refocus)
     truth: np.ndarray            # (P,) median true depth of the object inside its region, mid-period
     rois: np.ndarray             # (P, 4) x0, y0, x1, y1 followed per period (pixels)
     images: np.ndarray           # (P, H, W) refocused where the object is sharpest
@@ -262,11 +263,10 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     """Follow an object moving in depth: per scan period, the depth in [near, far] at which the object's region
     is sharpest; the region starts at ``roi`` (fractions of the image) and follows the object by template
     matching; with ``compensate_motion`` the object's image velocity is taken out of the views
-    (``refocus.track_focus``). The sharpest refocus depth is turned into metric depth at the region's centre
-    (``lightfield.galvo_field_depth``, the mean of the x and y scales). ``captured``: a ``capture`` of the
+    (``refocus.track_focus``); refocus maps every view exactly (``optics.galvo``), so the sharpest depth is
+    metric across the field. ``captured``: a ``capture`` of the
     scene to reuse. Truth: the median Mitsuba depth of the region's pixels nearer than ``object_far`` (the
     object's pixels, the background being farther), with their 25th-75th percentiles (``truth_spread``)."""
-    from .lightfield import galvo_field_depth
     from .refocus import depth_planes, refocus, track_focus
     from .truth import truth_depth
     if not (0 < near < far and object_far > near):
@@ -280,10 +280,6 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     t0 = time.perf_counter()
     depths, images, rois, velocities = track_focus(cap.lightfields, depth_planes(near, far, planes), roi_px,
                                                    smooth=smooth, follow=True, compensate_motion=compensate_motion)
-    # metric depth: undo the field-dependent scan scale at the object's position (lightfield.galvo_field_depth)
-    sharpest = depths
-    depths = np.array([galvo_field_depth(lf, z, (r[0] + r[2] - 1) / 2, (r[1] + r[3] - 1) / 2)
-                       for lf, z, r in zip(cap.lightfields, sharpest, rois)])
     bg = far if background_depth is None else background_depth
     background = np.stack([refocus(lf, bg) for lf in cap.lightfields])
     t1 = time.perf_counter()
@@ -305,7 +301,6 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
         cap, scene_path, defines, roi=list(map(float, roi)), near=near, far=far, planes=planes,
         compensate_motion=compensate_motion,
         object_far=object_far, background_depth=bg, start=start, smooth=smooth,
-        sharpest_refocus_depths=sharpest.tolist(),
         time_split_s={**cap.seconds, "focus_tracking": t1 - t0, "ground_truth_depth": t2 - t1}))
 
 

@@ -5,7 +5,7 @@ log-brightness change is predicted to stay under ``max_log_change`` x C; a step 
 that is rendered again, shorter (only the render is repeated, the pixel state is untouched).
 
 Every step renders with the same sampler seed by default: the Monte-Carlo noise pattern is then frozen, so a
-static pixel never fires (independent seeds make noise fire events: DESIGN.md section 3).
+static pixel never fires (independent seeds make noise fire events: docs/design.md, "Measured facts and pitfalls").
 """
 from __future__ import annotations
 

@@ -411,3 +411,13 @@ def event_angles(events, actual: bool = True):
         d.pop("bandwidth_hz", None), d.pop("damping", None)
     curve = curve_from_dict(d, where="event metadata")
     return curve.angles(np.asarray(events.t, dtype=np.float64) * 1e-6)
+
+
+def scan_period(scan: dict, where: str = "event metadata") -> float:
+    """The period (s) of the scan a metadata record describes; ConfigError when the scan is not periodic
+    (view times and scan periods then have to be chosen explicitly)."""
+    period = curve_from_dict(scan, where=where).period
+    if period is None:
+        raise ConfigError(f"{where}: the scan ({scan.get('curve')!r}) is not periodic: choose view times "
+                          "explicitly")
+    return period

@@ -2,11 +2,10 @@
 
 Each scan period of events gives one light field (``highspeed.capture``: views integrated from the events onto
 a start frame and placed at their scan angles) and so one depth map from focus (``depth.depth_from_focus``):
-at 100 Hz, 100 depth maps per second. Two corrections turn "sharpest refocus plane" into metric depth:
+at 100 Hz, 100 depth maps per second. Refocus maps each view with the exact two-mirror geometry
+(``optics.galvo``), so "sharpest refocus plane" is metric depth across the whole field (off-axis pixels move
+(1 + t^2) times more per mirror turn than on-axis ones; one shift per view read them too far).
 
-* the field-dependent scan scale (``lightfield.galvo_field_depth``): off-axis pixels move (1 + t^2) times more
-  per mirror turn, so a constant-shift focal stack reads them too far; corrected per pixel, weighting the x and
-  y scales by the local edge orientation (``lightfield.galvo_orientation_weight``);
 * ``calibration``: optionally, a galvo/depth calibration from the data (``calibration.apply_to_lightfield``;
   ``calibrate_depth`` makes the depth one from LED captures through the same galvo) instead of the nominal
   optics. One made for other optics (scan, film, lens, mirror pivots) is refused before anything is rendered.
@@ -58,9 +57,6 @@ class ScanRateDepth:
         ts = self.meta["time_split_s"]
         lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in ts.items()))
         return "\n".join(lines)
-
-
-FIELD_CORRECTIONS = ("oriented", "mean", "off")
 
 
 LED_SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes", "led_depth",
@@ -122,44 +118,17 @@ def _check_calibration(calibration: dict, scene_path: str, defines, captured):
     return record
 
 
-def _sharp_centre_image(lf, dm) -> np.ndarray:
-    """One view (a pinhole image: sharp at every depth) moved onto the centre alignment at the map's median
-    depth: what the edge orientation is measured on (the mean of the views is blurred by the whole scan)."""
-    from .refocus import refocus
-    finite = dm.depth[np.isfinite(dm.depth)]
-    z = float(np.median(finite)) if finite.size else float("inf")
-    return refocus(lf.subset([0]), z)
-
-
 def run(scene_path: str, defines: dict | None = None, periods: int | None = None, views: int = 40,
         near: float = 0.4, far: float = 4.0, planes: int = 32, measure: str = "tenengrad",
         min_confidence: float = 0.6, split_depth: float = 1.2, texture_threshold: float = 0.1,
-        calibration: dict | None = None, start: str = "frame", field_correction: str = "oriented",
-        progress: bool = False, captured=None) -> ScanRateDepth:
+        calibration: dict | None = None, start: str = "frame", progress: bool = False, captured=None) -> ScanRateDepth:
     """Render the scene's scan periods of events, one metric depth map per period (planes uniform in inverse
     depth over [near, far]), each scored against Mitsuba's depth at the period's middle.
 
-    ``field_correction`` (``lightfield.galvo_field_depth``): ``oriented`` (per pixel, the x and y scales
-    weighted by the local edge orientation, measured on one view moved to the centre alignment), ``mean`` (their
-    mean) or ``off``. ``captured``: a ``highspeed.capture`` of the scene to reuse. Measured on scenes/runner
-    (2 periods, tenengrad, confidence >= 0.6: 86-89% of textured pixels): |relative error| near (runner) / far
-    (wall at 1.6 m), the per-period median averaged over periods, and the 90th percentile (the tail: pixels whose
-    window straddles the runner's outline take the wall's depth, or the other way round):
-
-    ========  ============================  ============================  ============================
-    width     off: median (p90)             mean: median (p90)            oriented: median (p90)
-    ========  ============================  ============================  ============================
-    96        0.042 / 0.207 (1.11 / 0.58)   0.022 / 0.072 (0.82 / 0.27)   0.024 / 0.060 (0.91 / 0.24)
-    128       0.042 / 0.271 (0.81 / 0.76)   0.019 / 0.078 (0.65 / 0.28)   0.020 / 0.042 (0.69 / 0.21)
-    160       0.031 / 0.259 (0.56 / 0.78)   0.016 / 0.095 (0.42 / 0.29)   0.018 / 0.037 (0.45 / 0.22)
-    240       0.031 / 0.288 (0.43 / 0.95)   0.020 / 0.106 (0.33 / 0.33)   0.019 / 0.027 (0.34 / 0.23)
-    ========  ============================  ============================  ============================
-
-    The wall is where the correction matters (pivot / z = 0.13 there, so a 1% scale error is 8% of depth);
-    ``oriented`` is the default. sml instead of tenengrad was 1 point worse near and 1-4 points worse far."""
+    Views are mapped onto the reference with the exact galvo geometry (``optics.galvo``), so the sharpest
+    plane is metric depth across the field. ``captured``: a ``highspeed.capture`` of the scene to reuse."""
     import mitsuba_eventfield as ef
     from .highspeed import capture
-    from .lightfield import galvo_field_depth, galvo_orientation_weight
     from .truth import centre_frame, textured, truth_depth
     if not (0 < near < far):
         raise ValueError(f"near = {near}, far = {far}: need 0 < near < far (scene units)")
@@ -169,8 +138,6 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
         raise ValueError(f"planes = {planes!r}: must be an integer >= 2")
     if not split_depth > 0:
         raise ValueError(f"split_depth = {split_depth}: must be > 0 (scene units)")
-    if field_correction not in FIELD_CORRECTIONS:
-        raise ValueError(f"field_correction = {field_correction!r}: allowed {', '.join(FIELD_CORRECTIONS)}")
     record = _check_calibration(calibration, scene_path, defines, captured) if calibration else None
     cap = captured or capture(scene_path, defines, periods, views, start, progress=progress)
     t0 = time.perf_counter()
@@ -179,12 +146,7 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
         if calibration:
             from .calibration import apply_to_lightfield
             lf = apply_to_lightfield(lf, calibration, record)
-        dm = ef.depth_from_focus(lf, near, far, planes, measure)
-        if field_correction != "off":
-            rows, cols = np.mgrid[0:dm.depth.shape[0], 0:dm.depth.shape[1]]
-            wx = galvo_orientation_weight(_sharp_centre_image(lf, dm)) if field_correction == "oriented" else 0.5
-            dm = type(dm)(galvo_field_depth(lf, dm.depth, cols, rows, wx), dm.confidence, dm.planes, dm.measure)
-        maps.append(dm)
+        maps.append(ef.depth_from_focus(lf, near, far, planes, measure))
     t1 = time.perf_counter()
     times = np.array([float(lf.times.mean()) for lf in cap.lightfields])
     truths, texs, errors = [], [], []
@@ -209,7 +171,7 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
     meta = {"scene": scene_path, "defines": dict(defines or {}), "views": len(cap.lightfields[0].views),
             "planes": planes, "measure": measure, "near": near, "far": far, "split_depth": split_depth,
             "min_confidence": min_confidence, "texture_threshold": texture_threshold, "start": start,
-            "field_correction": field_correction, "calibrated": sorted(calibration) if calibration else [],
+            "calibrated": sorted(calibration) if calibration else [],
             "events": len(cap.events), "depth_maps_per_second": 1 / cap.period_s,
             "pixel_model": cap.events.meta["pixel_model"], "optics": cap.events.meta["optics"],
             "time_split_s": {**cap.seconds, "depth_from_focus": t1 - t0, "ground_truth_depth": t2 - t1}}

@@ -59,6 +59,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ConfigError
+from .render import render_events, render_frames
+from .scene import load_scene
 
 DEFAULT_SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes", "falling",
                              "falling.xml")
@@ -186,7 +188,7 @@ def _aggregate(rows):
 def _focus_check(refocused, depth_views, depths, is_key):
     """For each refocus depth: over the interpolated instants, the pixels whose true depth is within
     FOCUS_BAND (inverse depth) of it, and their Tenengrad focus in the image refocused at every depth."""
-    from .depth import focus_measure
+    from .focus import focus_measure
     inv = 1.0 / np.asarray(depths)
     regions = []
     for i, z in enumerate(depths):
@@ -218,7 +220,6 @@ def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, fa
     ``duration``: seconds (default: the motion file's), cut to whole RGB frame intervals; ``steps_per_frame``:
     event-render steps per RGB frame interval (default 4 x factor); ``spp``/``seed``: for events and frames.
     """
-    import mitsuba_eventfield as ef
     from . import reconstruct
     from .events import EventStream
     from .lightfield import from_spatial
@@ -234,7 +235,7 @@ def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, fa
     try:
         t0 = time.perf_counter()
         _variant_for(color=False)
-        timed = ef.load_scene(scene_path, **defines)
+        timed = load_scene(scene_path, **defines)
         if duration is None:
             duration = timed.motion.duration if timed.motion and timed.motion.duration else None
             if duration is None:
@@ -246,21 +247,21 @@ def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, fa
         if optics.get("design") not in ("kaleidoscope", "microlens"):
             raise ConfigError(f"{scene_path}: SloMoRF needs a kaleidoscope (or microlens) sensor; the scene's "
                               f"sensor is {type(timed.sensor).__name__}")
-        events = ef.render_events(timed, duration, steps=intervals * steps_per_frame, spp=spp, seed=seed,
+        events = render_events(timed, duration, steps=intervals * steps_per_frame, spp=spp, seed=seed,
                                   progress=progress)
         t1 = time.perf_counter()
         split["render_events"] = t1 - t0
 
         _variant_for(color=True)
-        timed_rgb = ef.load_scene(scene_path, **defines)
+        timed_rgb = load_scene(scene_path, **defines)
         times = np.arange(intervals * factor + 1) / (fps * factor)
         is_key = np.arange(len(times)) % factor == 0
-        keys = ef.render_frames(timed_rgb, times[is_key], spp=spp, seed=seed, log=False, rgb=True)
+        keys = render_frames(timed_rgb, times[is_key], spp=spp, seed=seed, log=False, rgb=True)
         t2 = time.perf_counter()
         split["render_rgb_frames"] = t2 - t1
         truth = np.empty((len(times),) + keys.shape[1:], np.float32)
         truth[is_key] = keys
-        truth[~is_key] = ef.render_frames(timed_rgb, times[~is_key], spp=spp, seed=seed, log=False, rgb=True)
+        truth[~is_key] = render_frames(timed_rgb, times[~is_key], spp=spp, seed=seed, log=False, rgb=True)
         depth_views = _depth_views(timed_rgb, times, optics)
         t3 = time.perf_counter()
         split["render_truth_for_scoring"] = t3 - t2

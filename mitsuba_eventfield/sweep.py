@@ -22,6 +22,8 @@ import time
 from dataclasses import dataclass, field
 
 from .errors import EventFieldError
+from .render import render_events
+from .scene import load_scene
 
 METRICS = ("events", "rate_ev_s", "on_fraction", "dropped_readout", "wall_s", "render_s")
 _PREFIXES = ("xml.", "render.", "pixel.")
@@ -80,16 +82,15 @@ def point_key(scene: str, point: dict) -> str:
 
 def run_point(scene: str, point: dict, out_dir: str | None = None, keep_events: bool = False) -> dict:
     """Render one point (in whatever process this runs) and return its row: parameters, metrics, outputs."""
-    import mitsuba_eventfield as ef
     xml = {k[4:]: v for k, v in point.items() if k.startswith("xml.")}
     render = {k[7:]: v for k, v in point.items() if k.startswith("render.")}
     pixel = {k[6:]: v for k, v in point.items() if k.startswith("pixel.")}
     t0 = time.perf_counter()
-    timed = ef.load_scene(scene, **xml)
+    timed = load_scene(scene, **xml)
     key = point_key(scene, point)
     out = os.path.join(out_dir, f"point-{key}.h5") if (out_dir and keep_events) else None
     duration = render.pop("duration", None)
-    result = ef.render_events(timed, duration, pixel=pixel or None, output=out, **render)
+    result = render_events(timed, duration, pixel=pixel or None, output=out, **render)
     r = result.meta["render"] if hasattr(result, "meta") else result.as_dict()
     row = dict(point, key=key, events=r["events"], rate_ev_s=r["rate_ev_per_s"],
                on_fraction=r["on"] / r["events"] if r["events"] else 0.0, dropped_readout=r["dropped_readout"],

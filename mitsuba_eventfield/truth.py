@@ -6,9 +6,10 @@ zero mirror angles), converted from ray distance to z.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from .optics.galvo import pixel_ray_slopes
+from .render import render_frames
 
 
 def centre_pinhole(timed, spp: int = 1):
@@ -38,10 +39,7 @@ def truth_depth(timed, t: float, spp: int = 1) -> np.ndarray:
     w, h = (int(v) for v in pinhole.film().size())
     aov = mi.load_dict({"type": "aov", "aovs": "dd:depth"})
     dist = np.array(mi.render(timed.scene, sensor=pinhole, integrator=aov))[..., 0].astype(np.float64)
-    tan_half = math.tan(math.radians(timed.sensor.optics_metadata()["fov_x_deg"]) / 2)
-    x = ((np.arange(w) + 0.5) / w * 2 - 1) * tan_half
-    y = ((np.arange(h) + 0.5) / h * 2 - 1) * tan_half * h / w
-    xx, yy = np.meshgrid(x, y)
+    xx, yy = pixel_ray_slopes(w, h, timed.sensor.optics_metadata()["fov_x_deg"])
     z = dist / np.sqrt(1 + xx * xx + yy * yy)
     return np.where(dist > 0, z, np.inf)
 
@@ -49,21 +47,19 @@ def truth_depth(timed, t: float, spp: int = 1) -> np.ndarray:
 def centre_frame(timed, t: float, log: bool = True, spp: int = 4) -> np.ndarray:
     """The centre view at time ``t``: the pixel's log brightness (``log``) or linear radiance; where textured
     pixels are found for scoring depth maps and refocus aligned to the centre."""
-    import mitsuba_eventfield as ef
     timed.set_time(t)
-    return ef.render_frames(timed, [t], spp=spp, log=log, sensor=centre_pinhole(timed))[0]
+    return render_frames(timed, [t], spp=spp, log=log, sensor=centre_pinhole(timed))[0]
 
 
 def conventional_frame(timed, t_mid: float, fps: float = 60.0, samples: int = 16, spp: int = 4) -> np.ndarray:
     """What a conventional camera in the event camera's place records: the centre view's linear radiance
     averaged over one exposure of 1 / ``fps`` seconds centred on ``t_mid`` (``samples`` instants): motion blurs.
     The camera itself stays at its pose at ``t_mid``."""
-    import mitsuba_eventfield as ef
     if not (fps > 0 and samples >= 1):
         raise ValueError(f"fps = {fps}, samples = {samples}: need fps > 0 and samples >= 1")
     times = t_mid + ((np.arange(samples) + 0.5) / samples - 0.5) / fps
     timed.set_time(t_mid)
-    return ef.render_frames(timed, times, spp=spp, log=False, sensor=centre_pinhole(timed)).mean(axis=0)
+    return render_frames(timed, times, spp=spp, log=False, sensor=centre_pinhole(timed)).mean(axis=0)
 
 
 def textured(log_image: np.ndarray, threshold: float = 0.1) -> np.ndarray:

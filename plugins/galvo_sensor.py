@@ -30,7 +30,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from . import galvo_optics as go
+from mitsuba_eventfield.optics import galvo as go
 from ._per_variant import per_variant
 
 _FLOAT_PARAMS = ("frequency", "amplitude", "phase", "offset_x", "offset_y", "freq_x", "freq_y", "amplitude_x",
@@ -101,7 +101,7 @@ def _define_class():
                     "aperture_radius": self.aperture_radius, "focus_distance": self.focus_distance,
                     "mirror_distance": self.mirror_distance, "mirror_separation": self.mirror_separation,
                     "angle_convention": "mechanical radians; optical deflection = 2x; +x pans the view to camera "
-                                        "+x, +y tilts it to camera +y (plugins/galvo_optics.py)"}
+                                        "+x, +y tilts it to camera +y (mitsuba_eventfield/optics/galvo.py)"}
 
         # ------------------------------------------------------------ rays
         def _camera_ray(self, sample2, sample3):

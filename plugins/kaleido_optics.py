@@ -21,7 +21,7 @@ Kaleidoscope (after Manakov et al. 2013), sensor-local frame, light travelling t
 
 ``tube_only`` mode stops at the entrance: the ray leaves the real entrance point with the folded direction.
 A scene with four real mirror rectangles, fired at by the plain relay ray, must give the same image; that is
-the test oracle (DESIGN.md section 3).
+the test oracle (docs/design.md, "Measured facts and pitfalls").
 
 Microlens array (plenoptic 1.0, the paper's x_s = x // n): pixel (x, y) sits under lenslet (x // n, y // n)
 and sees sub-aperture cell (x % n, y % n) of the main lens.

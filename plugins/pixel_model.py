@@ -155,11 +155,11 @@ class PixelConfig:
         return asdict(self)
 
 
-# Presets. Sources (see docs/pixel_presets.md): v2e (Hu et al., CVPRW 2021) defaults for a DVS: thresholds
+# Presets. Sources (docs/pixel_model.md): v2e (Hu et al., CVPRW 2021) defaults for a DVS: thresholds
 # 0.2, mismatch 0.03, leak 0.1 Hz with 10% spread; its "noisy" setting: 5 Hz shot noise, 30 Hz cutoff.
 # Lichtsteiner et al. (JSSC 2008): 2.1% threshold mismatch. iniVation DAVIS346: 12 MEvt/s readout.
 # Finateu et al. (ISSCC 2020, the Sony/Prophesee IMX636): 1280x720, 1.066 GEPS readout. IEBCS (Joubert et
-# al. 2021): ~100 us refractory for a Prophesee sensor. DESIGN.md section 4 gathers these.
+# al. 2021): ~100 us refractory for a Prophesee sensor. docs/design.md, "Physics", sums them up.
 PRESETS = {
     "ideal": {},
     "davis346": dict(threshold_sigma=0.03, refractory_s=5e-4, leak_rate_hz=0.1, leak_jitter=0.1,

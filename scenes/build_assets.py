@@ -6,6 +6,8 @@
 * scenes/*/text.png, letters.png: 8-bit grey textures with large text and a grid (OpenCV), so edges of every
   orientation exist; scenes/falling/text.png is the same in colour (blue-grey paper, red grid, dark green text),
   so that its RGB frames carry colour the luminance events do not.
+* scenes/offaxis_cards/near.png, far.png: band-limited random texture (blurred noise), so depth from focus has
+  texture at every pixel of the cards.
 * scenes/moving_grid/grid.png: dark lines on white, both orientations (the paper's grid experiment).
 * scenes/dart/dart_foam.ply, dart_band.ply: a foam dart (2x a real one: 14 cm long) split into its light foam
   segments and its dark bands + tip, so each gets its own BSDF; axis along the flight direction.
@@ -82,6 +84,14 @@ def grid_texture(path, size=256, pitch=32, width=4):
     cv2.imwrite(path, img)
 
 
+def noise_texture(path, seed, size=128, blob=3.0):
+    """Blurred uniform noise stretched to grey levels 40-230: texture at every scale above ``blob`` texels."""
+    rng = np.random.default_rng(seed)
+    t = cv2.GaussianBlur(rng.random((size, size)).astype(np.float32), (0, 0), blob)
+    t = (t - t.min()) / (t.max() - t.min())
+    cv2.imwrite(path, (40 + 190 * t).astype(np.uint8))
+
+
 if __name__ == "__main__":
     fan_mesh().export(os.path.join(HERE, "fan", "fan.ply"))
     text_texture(os.path.join(HERE, "fan", "text.png"), ["EVENT", "FIELDS"])
@@ -98,4 +108,7 @@ if __name__ == "__main__":
     text_texture(os.path.join(HERE, "runner", "wall.png"), ["TRACK", "FIELD"])
     # a low-contrast wall: the dart, not the wall, should dominate a focus measure around it
     text_texture(os.path.join(HERE, "dart", "text.png"), ["NERF", "DART"], colors=(170, 130, 95))
+    os.makedirs(os.path.join(HERE, "offaxis_cards"), exist_ok=True)
+    noise_texture(os.path.join(HERE, "offaxis_cards", "near.png"), seed=14)
+    noise_texture(os.path.join(HERE, "offaxis_cards", "far.png"), seed=15)
     print("assets written")

@@ -8,7 +8,7 @@ import pytest
 import mitsuba_eventfield as ef
 from conftest import ROOT
 from mitsuba_eventfield.calibration import CalibrationError, fit_depth, fit_galvo, fit_tracks, track_point
-from mitsuba_eventfield.plugins import galvo_optics as go
+from mitsuba_eventfield.optics import galvo as go
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
 LED = os.path.join(ROOT, "scenes", "led_depth", "led.xml")
@@ -19,7 +19,7 @@ FREQ = 250.0
 def _exact_radius(optics, pixel, depth, amplitude_deg, phase_deg, width=W, height=H):
     """Radius (px, along x) of the circle traced by the scene point seen at ``pixel`` of the first view, at
     ``depth``: ray through the pixel at the first view's mirror angles, onto the plane z = depth, then projected
-    through the mirrors at every angle of the scan (plugins/galvo_optics.py)."""
+    through the mirrors at every angle of the scan (mitsuba_eventfield/optics/galvo.py)."""
     f = go.focal_length_px(width, optics["fov_x_deg"])
     d1, s = optics["mirror_distance"], optics["mirror_separation"]
     curve = ef.make_curve("circle", frequency=FREQ, amplitude=amplitude_deg, phase=phase_deg)
@@ -180,10 +180,14 @@ def test_depth_calibration_keeps_each_axis_pivot(tmp_path):
     optics = {"design": "galvo", "fov_x_deg": 40.0, "mirror_distance": 0.1, "mirror_separation": 0.01,
               "scan": {"curve": "circle", "frequency": FREQ, "amplitude": 0.5, "phase": 0.0}}
     save_calibration(str(tmp_path / "c.json"), optics_record(optics, W, H), depth=dc)
-    (ax, ay), (bx, by) = load_calibration(str(tmp_path / "c.json"))["depth"].disparity_model()
-    assert np.allclose([ax, ay, bx, by], [f, f, -0.10 * f, -0.11 * f])   # alpha = f - f d / z, per axis
-    (ax1, ay1), (bx1, by1) = fit_depth(z, 2 * f * (1 - 0.10 / z)).disparity_model()
-    assert ay1 == ax1 and by1 == bx1                                     # x only: both axes share it
+    nominal = go.GalvoGeometry(W, H, f, 0.3, 0.5)                       # pivots that the calibration replaces
+    g = load_calibration(str(tmp_path / "c.json"))["depth"].geometry(nominal)
+    assert np.allclose([g.pivot_x, g.pivot_y, g.gain_x, g.gain_y], [0.10, 0.11, 1.0, 1.0])
+    g1 = fit_depth(z, 2 * f * (1 - 0.10 / z)).geometry(nominal)
+    assert g1.pivot_y == g1.pivot_x                                      # x only: both axes share it
+    # a mirror that turns 3 % less than commanded: the scale at infinity is 3 % smaller, the gain says so
+    g2 = fit_depth(z, 0.97 * 2 * f * (1 - 0.10 / z)).geometry(nominal)
+    assert g2.gain_x == pytest.approx(0.97) and g2.pivot_x == pytest.approx(0.10)
     with pytest.raises(CalibrationError, match="scales_y: 2 values for 5 depths"):
         fit_depth(z, 2 * f * (1 - 0.10 / z), scales_y=[1.0, 2.0])
 
@@ -220,3 +224,21 @@ def test_calibration_file_round_trip_and_use_in_refocus(tmp_path):
     with pytest.raises(ef.EventFieldError, match="not a version 2"):
         (tmp_path / "bad.json").write_text('{"format": "x"}')
         load_calibration(str(tmp_path / "bad.json"))
+
+
+def test_linear_depth_model_is_kept_only_with_a_warning_saying_where_it_breaks():
+    f, z = 100.0, np.array([0.4, 0.7, 1.0, 1.6, 2.5])
+    scale = lambda d: 2 * f * (1 - 0.10 / np.asarray(d))                # noqa: E731  exact geometry
+    dc = fit_depth(z, scale(z))
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                                 # the physical model does not warn
+        assert dc.depth(scale(z)) == pytest.approx(z, rel=1e-9)
+    lo, hi = dc.linear_valid_range()
+    assert 0.1 < lo < hi < 10
+    with pytest.warns(UserWarning, match=r"linear size-vs-depth model .* within 5% .* only for depths"):
+        outside = dc.depth(scale([0.8 * lo, 1.3 * hi]), model="linear")
+    assert np.all(np.abs(outside / [0.8 * lo, 1.3 * hi] - 1) > 0.05)   # it really is off there
+    with pytest.warns(UserWarning):
+        inside = dc.depth(scale([lo * 1.01, hi * 0.99]), model="linear")
+    assert np.all(np.abs(inside / [lo * 1.01, hi * 0.99] - 1) <= 0.05)

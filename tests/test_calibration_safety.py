@@ -13,7 +13,7 @@ from mitsuba_eventfield.calibration import (CalibrationError, PatchTrack, check_
                                             galvo_scale_limit, load_calibration, optics_difference, optics_record,
                                             register, same_optics, save_calibration)
 from mitsuba_eventfield.images import write_exr
-from mitsuba_eventfield.plugins import galvo_optics as go
+from mitsuba_eventfield.optics import galvo as go
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
 RUNNER = os.path.join(ROOT, "scenes", "runner", "runner.xml")

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield.plugins import galvo_optics as go
+from mitsuba_eventfield.optics import galvo as go
 
 
 def _mi():
@@ -88,7 +88,7 @@ def test_point_traces_ellipse_sized_by_mirror_geometry(capsys):
     measured = {}
     for z in (0.4, 0.8, 1.6):
         rx, ry = _semi_axes(times, _centroids(_point_scene(z), times))
-        # first-order geometry (DESIGN.md section 4): r = 2 f A (1 - pivot / z), pivot d1 for x, d1 + s for y
+        # first-order geometry (docs/design.md, "Physics"): r = 2 f A (1 - pivot / z), pivot d1 for x, d1 + s for y
         px = 2 * f * math.radians(A_DEG) * (1 - D1 / z)
         py = 2 * f * math.radians(A_DEG) * (1 - (D1 + SEP) / z)
         # exact geometry: project the point through the rotated mirrors

@@ -12,7 +12,7 @@ import pytest
 from conftest import ROOT
 from mitsuba_eventfield import highspeed as hs
 from mitsuba_eventfield.images import read_exr
-from mitsuba_eventfield.lightfield import LightField, galvo_field_depth
+from mitsuba_eventfield.lightfield import Disparity, LightField
 from mitsuba_eventfield.quality import psnr
 from mitsuba_eventfield.refocus import depth_planes, refocus, track_focus
 
@@ -68,16 +68,17 @@ def test_dart_focus_tracking_follows_mitsuba_depth(dart_capture, capsys):
     assert np.median(plain.relative_errors) > np.median(e)
 
 
-def test_field_correction_recovers_an_off_axis_wall(dart_capture):
-    # the wall (1.8 m) in a corner: a constant-shift refocus reads it 21% too far (2.17 m); corrected 1.72 m
-    # (the x and y scales differ there; their mean is used, see lightfield.galvo_field_depth)
+def test_exact_refocus_finds_an_off_axis_wall(dart_capture):
+    # the wall (1.8 m) in a corner: the exact per-view homographies refocus it at its depth; one constant shift
+    # per view (the same light field without its galvo geometry) reads it much too far (measured 2.17 m)
     w, h = 120, 90
     roi = hs.roi_pixels((0.03, 0.05, 0.3, 0.3), w, h)
-    z, _, _, _ = track_focus(dart_capture.lightfields[:1], depth_planes(1.0, 3.0, 40), roi)
-    corrected = galvo_field_depth(dart_capture.lightfields[0], z[0], (roi[0] + roi[2] - 1) / 2,
-                                  (roi[1] + roi[3] - 1) / 2)
-    assert z[0] > 1.8 * 1.12
-    assert abs(corrected - 1.8) / 1.8 < 0.06
+    lf = dart_capture.lightfields[0]
+    z, _, _, _ = track_focus([lf], depth_planes(1.0, 3.0, 40), roi)
+    shift_only = LightField(lf.views, lf.positions, lf.times, lf.disparity, lf.kind)
+    z_shift, _, _, _ = track_focus([shift_only], depth_planes(1.0, 3.0, 40), roi)
+    assert abs(z[0] - 1.8) / 1.8 < 0.04
+    assert z_shift[0] > 1.8 * 1.12
 
 
 def test_motion_compensated_refocus_on_a_synthetic_light_field():
@@ -95,7 +96,7 @@ def test_motion_compensated_refocus_on_a_synthetic_light_field():
         d = 6.0 * p + v * (t - times.mean())
         m = np.float32([[1, 0, d[0]], [0, 1, d[1]]])          # view(x) = tex(x - d): content displaced by d
         views.append(cv2.warpAffine(tex, m, (96, 64), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT))
-    lf = LightField(np.array(views), pos, times, (6.0, 6.0), (0.0, 0.0), "galvo")
+    lf = LightField(np.array(views), pos, times, Disparity((6.0, 6.0), (0.0, 0.0)), "galvo")
     inner = (slice(12, -12), slice(12, -12))
     sharp = refocus(lf, alpha=6.0, motion=v)[inner]
     smeared = refocus(lf, alpha=6.0)[inner]

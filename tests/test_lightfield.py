@@ -228,7 +228,7 @@ def test_subset_does_not_reuse_the_parent_refocus_cache(kaleido_lf):
     lf, _ = kaleido_lf
     ef.refocus(lf, NEAR)                                  # fills the parent's spectrum cache
     idx = [0, 4, 8]
-    fresh = ef.LightField(lf.views[idx], lf.positions[idx], lf.times[idx], lf.A, lf.B, lf.kind, dict(lf.meta))
+    fresh = ef.LightField(lf.views[idx], lf.positions[idx], lf.times[idx], lf.disparity, lf.kind, dict(lf.meta))
     sub = lf.subset(idx)
     assert np.allclose(ef.refocus(sub, NEAR), ef.refocus(fresh, NEAR))
     assert not np.allclose(ef.refocus(sub, NEAR), ef.refocus(lf, NEAR), atol=1e-3)

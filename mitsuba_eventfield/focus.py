@@ -1,0 +1,47 @@
+"""Focus measures and sub-step peak refinement: the leaf every focus-based method (depth from focus, focus
+tracking, refocus scoring, calibration peak finding) calls. NumPy and OpenCV only.
+
+Measures (``focus_measure``): ``sml`` (sum-modified-Laplacian) and ``tenengrad`` (Sobel gradient energy), both
+averaged over a window. ``depth.depth_from_focus`` adds ``variance`` (angular consistency of the aligned
+views), which needs the views rather than one image.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+IMAGE_MEASURES = ("sml", "tenengrad")
+
+
+def focus_measure(img: np.ndarray, measure: str = "sml", window: int = 7) -> np.ndarray:
+    """Per-pixel focus of one image (H, W), aggregated over a ``window`` x ``window`` box."""
+    img = np.asarray(img, dtype=np.float32)
+    if measure == "sml":
+        kx = np.array([[0, 0, 0], [-1, 2, -1], [0, 0, 0]], np.float32)
+        m = np.abs(cv2.filter2D(img, -1, kx)) + np.abs(cv2.filter2D(img, -1, kx.T))
+    elif measure == "tenengrad":
+        gx, gy = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3)
+        m = gx * gx + gy * gy
+    else:
+        raise ValueError(f"unknown focus measure {measure!r}; allowed: {', '.join(IMAGE_MEASURES)}")
+    return cv2.boxFilter(m, -1, (window, window), normalize=True, borderType=cv2.BORDER_REFLECT)
+
+
+def parabola_offset(before, peak, after):
+    """Offset in [-0.5, 0.5] steps of the vertex of the parabola through three samples around a maximum
+    (0 where they do not curve downwards). Numbers or arrays that broadcast."""
+    before, peak, after = (np.asarray(v, np.float64) for v in (before, peak, after))
+    den = before - 2 * peak + after
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.where(den < 0, np.clip(0.5 * (before - after) / den, -0.5, 0.5), 0.0)
+    return float(off) if off.ndim == 0 else off
+
+
+def refine_peak(x, scores, k):
+    """Sub-step position (in x units) of the maximum of ``scores`` at index ``k`` (the parabola through it and
+    its neighbours; the end samples are not refined)."""
+    if k <= 0 or k >= len(scores) - 1:
+        return x[k]
+    off = parabola_offset(scores[k - 1], scores[k], scores[k + 1])
+    step = x[k + 1] - x[k] if off > 0 else x[k] - x[k - 1]
+    return x[k] + off * step

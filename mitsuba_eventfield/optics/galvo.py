@@ -1,0 +1,185 @@
+"""The two-mirror galvo: ray optics of a camera behind a two-axis scanning mirror, and the exact mapping between
+its views. The one home of this geometry: the ``galvo`` sensor plugin traces rays with it, and view extraction,
+reconstruction, refocus, focal stacks, depth from focus, focus tracking, calibration and ground truth map
+views with it.
+
+Geometry, in the *unfolded* camera frame (the fixed rest-position reflections of both mirrors removed, so at
+rest the camera looks straight down +z):
+
+* camera centre at the origin; the X mirror pivots at (0, 0, d1) about the y axis (it pans the view), the Y
+  mirror at (0, 0, d1 + s) about the x axis (it tilts the view);
+* a mirror turned by a mechanical angle theta from rest reflects like the rest mirror followed by a rotation of
+  2 theta about its pivot axis. Unfolded, each mirror is therefore a rigid rotation of the ray line (origin and
+  direction) by the optical angle 2 theta about its pivot axis. This is exact, with no small-angle step.
+
+Sign convention: a positive x angle turns the view towards camera +x, a positive y angle towards camera +y.
+Pixel coordinates: continuous, from the film's top-left corner, so pixel (i, j) of an array covers
+[i, i + 1) x [j, j + 1) and its centre is at (i + 0.5, j + 0.5). Mitsuba's image x runs towards camera -x and
+image y towards camera -y.
+
+Views of a plane. Seen through the mirrors at angles theta, the scene is the rest scene moved by a rigid
+transform (the inverse mirror rotations), so a plane at depth z maps from the reference view (both angles 0:
+what a pinhole camera in the camera's place sees) to any view by a 3 x 3 homography (``GalvoGeometry.homography``).
+Refocusing at depth z warps every view onto the reference with its homography: exact across the whole field,
+where one constant shift per view is right only on the optical axis. To first order a point at depth z moves by
+2 f theta (1 - pivot / z) pixels on axis, and by (1 + t^2) times that at normalised field position t along the
+same axis (``paraxial_disparity`` keeps the on-axis part, for step-size estimates and ``alpha`` refocus).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+# ------------------------------------------------------------------ ray optics (NumPy or Dr.Jit through ``xp``)
+def focal_length_px(width: int, fov_x_deg: float) -> float:
+    """Focal length in pixels of a pinhole ``width`` pixels wide with a horizontal field of view in degrees."""
+    return width / 2 / math.tan(math.radians(fov_x_deg) / 2)
+
+
+def pinhole_direction(xp, u, v, tan_half_fov_x, aspect):
+    """Unit direction in camera space through film point (u, v) in [0,1]^2 of the full film."""
+    x = (1.0 - 2.0 * u) * tan_half_fov_x
+    y = (1.0 - 2.0 * v) * tan_half_fov_x / aspect
+    n = xp.sqrt(x * x + y * y + 1.0)
+    return x / n, y / n, 1.0 / n
+
+
+def pixel_ray_slopes(width: int, height: int, fov_x_deg: float):
+    """(x/z, y/z) of the pinhole ray through every pixel centre, (H, W) each, in camera space."""
+    f = focal_length_px(width, fov_x_deg)
+    xs = (width / 2 - (np.arange(width) + 0.5)) / f
+    ys = (height / 2 - (np.arange(height) + 0.5)) / f
+    return np.meshgrid(xs, ys)
+
+
+def rotate_about_y(xp, x, y, z, angle, cz):
+    """Rotate points/vectors about the axis through (0, 0, cz) along +y (cz = 0 for directions)."""
+    c, s = xp.cos(angle), xp.sin(angle)
+    zr = z - cz
+    return x * c + zr * s, y, -x * s + zr * c + cz
+
+
+def rotate_about_x(xp, x, y, z, angle, cz):
+    """Rotate about the axis through (0, 0, cz) along +x, with positive angle turning +z towards +y."""
+    c, s = xp.cos(angle), xp.sin(angle)
+    zr = z - cz
+    return x, y * c + zr * s, -y * s + zr * c + cz
+
+
+def galvo_transform(xp, o, d, theta_x, theta_y, d1, s):
+    """Apply both mirrors (mechanical angles in radians) to a camera ray (o, d), each a tuple of 3 arrays.
+
+    Returns the outgoing ray; its origin is moved onto the exit pivot plane z = d1 + s, so nothing between
+    the camera and the galvo (inside the device) can be hit.
+    """
+    ox, oy, oz = rotate_about_y(xp, *o, 2.0 * theta_x, d1)
+    dx, dy, dz = rotate_about_y(xp, *d, 2.0 * theta_x, 0.0)
+    ox, oy, oz = rotate_about_x(xp, ox, oy, oz, 2.0 * theta_y, d1 + s)
+    dx, dy, dz = rotate_about_x(xp, dx, dy, dz, 2.0 * theta_y, 0.0)
+    t = (d1 + s - oz) / dz
+    return (ox + t * dx, oy + t * dy, oz + t * dz), (dx, dy, dz)
+
+
+def project_point(xp, p, theta_x, theta_y, d1, s, focal_px, width, height):
+    """Image position (continuous pixels from the top-left corner) of a camera-frame point p seen through the
+    galvo at the given mechanical angles: the inverse of ``galvo_transform``, by ray geometry alone."""
+    x, y, z = p
+    x, y, z = rotate_about_x(xp, x, y, z, -2.0 * theta_y, d1 + s)
+    x, y, z = rotate_about_y(xp, x, y, z, -2.0 * theta_x, d1)
+    return width / 2 - focal_px * x / z, height / 2 - focal_px * y / z
+
+
+# ------------------------------------------------------------------ views of a plane: homographies
+def _rotation_about(axis: str, angle: float, pivot_z: float) -> np.ndarray:
+    """4 x 4 rigid rotation about the axis through (0, 0, pivot_z) along x or y (``rotate_about_x``/``_y``)."""
+    c, s = math.cos(angle), math.sin(angle)
+    m = np.eye(4)
+    if axis == "y":
+        m[0, 0], m[0, 2], m[2, 0], m[2, 2] = c, s, -s, c
+    else:
+        m[1, 1], m[1, 2], m[2, 1], m[2, 2] = c, s, -s, c
+    shift, back = np.eye(4), np.eye(4)
+    shift[2, 3], back[2, 3] = -pivot_z, pivot_z
+    return back @ m @ shift
+
+
+@dataclass(frozen=True)
+class GalvoGeometry:
+    """A camera behind a two-axis galvo, in pixels: what maps any view onto any other.
+
+    ``pivot_x``/``pivot_y``: distances from the camera centre to the X and Y mirror pivots (scene units);
+    ``gain_x``/``gain_y``: mechanical angle turned per unit of the angle a view records (1 for the nominal
+    optics; a depth calibration sets them from the measured scan scale).
+    """
+    width: int
+    height: int
+    focal_px: float
+    pivot_x: float
+    pivot_y: float
+    gain_x: float = 1.0
+    gain_y: float = 1.0
+
+    @classmethod
+    def from_optics(cls, optics: dict, width: int, height: int) -> "GalvoGeometry":
+        """From a galvo sensor's optics metadata (``fov_x_deg``, ``mirror_distance``, ``mirror_separation``)."""
+        d1, s = float(optics["mirror_distance"]), float(optics["mirror_separation"])
+        return cls(int(width), int(height), focal_length_px(width, float(optics["fov_x_deg"])), d1, d1 + s)
+
+    def with_pivots(self, pivot_x: float, pivot_y: float, gain_x: float = 1.0, gain_y: float = 1.0):
+        return GalvoGeometry(self.width, self.height, self.focal_px, pivot_x, pivot_y, gain_x, gain_y)
+
+    # ---------------------------------------------------------- the exact model
+    def _scene_to_view(self, theta_x: float, theta_y: float) -> np.ndarray:
+        """4 x 4 rigid transform taking a camera-frame point to where the rest camera sees it in this view."""
+        return (_rotation_about("y", -2.0 * self.gain_x * theta_x, self.pivot_x)
+                @ _rotation_about("x", -2.0 * self.gain_y * theta_y, self.pivot_y))
+
+    def homography(self, theta_x: float, theta_y: float, depth: float) -> np.ndarray:
+        """3 x 3 map from reference-view pixels (continuous, top-left origin) to the pixels of the view at
+        mechanical angles (theta_x, theta_y), for points on the plane z = ``depth`` (math.inf allowed)."""
+        f, w, h = self.focal_px, self.width, self.height
+        if math.isinf(depth):          # directions: the plane at infinity
+            lift = np.array([[-1 / f, 0, w / (2 * f)], [0, -1 / f, h / (2 * f)], [0, 0, 1], [0, 0, 0]])
+        else:                           # pixel -> point on the plane z = depth
+            z = float(depth)
+            lift = np.array([[-z / f, 0, z * w / (2 * f)], [0, -z / f, z * h / (2 * f)], [0, 0, z], [0, 0, 1]])
+        project = np.array([[-f, 0, w / 2, 0], [0, -f, h / 2, 0], [0, 0, 1, 0]])
+        m = project @ self._scene_to_view(theta_x, theta_y) @ lift
+        return m / m[2, 2]
+
+    def array_homography(self, theta_x: float, theta_y: float, depth: float) -> np.ndarray:
+        """``homography`` in array indices (pixel centres at integers), as OpenCV's warps expect."""
+        to_continuous = np.array([[1, 0, 0.5], [0, 1, 0.5], [0, 0, 1.0]])
+        to_index = np.array([[1, 0, -0.5], [0, 1, -0.5], [0, 0, 1.0]])
+        m = to_index @ self.homography(theta_x, theta_y, depth) @ to_continuous
+        return m / m[2, 2]
+
+    def view_to_view(self, angles_from, angles_to, depth: float) -> np.ndarray:
+        """3 x 3 map (array indices) from the pixels of one view to another's, for points at ``depth``."""
+        h_from = self.array_homography(*angles_from, depth)
+        h_to = self.array_homography(*angles_to, depth)
+        m = h_to @ np.linalg.inv(h_from)
+        return m / m[2, 2]
+
+    def image_shift(self, theta_x, theta_y, depth: float = math.inf, x=None, y=None) -> np.ndarray:
+        """Exact displacement (pixels, x right / y down) from the reference view of a point at ``depth`` seen
+        at reference pixel (x, y) (default: the image centre), for each pair of angles: (N, 2)."""
+        tx, ty = np.atleast_1d(np.asarray(theta_x, np.float64)), np.atleast_1d(np.asarray(theta_y, np.float64))
+        px = self.width / 2 if x is None else float(x)
+        py = self.height / 2 if y is None else float(y)
+        out = np.empty((len(tx), 2))
+        for k, (a, b) in enumerate(zip(tx, ty)):
+            q = self.homography(float(a), float(b), depth) @ (px, py, 1.0)
+            out[k] = q[0] / q[2] - px, q[1] / q[2] - py
+        return out
+
+    # ---------------------------------------------------------- first order
+    def paraxial_disparity(self):
+        """((alpha_x at infinity, alpha_y at infinity), (per inverse depth x, y)): on-axis image displacement
+        per unit of *optical* angle, alpha(z) = at_infinity + per_inverse_depth / z = f g (1 - pivot / z)."""
+        f = self.focal_px
+        return ((f * self.gain_x, f * self.gain_y),
+                (-f * self.gain_x * self.pivot_x, -f * self.gain_y * self.pivot_y))
