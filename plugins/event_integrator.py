@@ -1,14 +1,38 @@
 """Mitsuba integrator plugin ``eventfield``: a nested radiance integrator plus per-pixel event-camera state.
 
-XML::
+Parameters (XML ``<integrator type="eventfield">``; every pixel-model field overrides the preset's value):
+
+=============================  =========  =========  ======================================================
+Parameter                      Type       Default    Description
+=============================  =========  =========  ======================================================
+preset                         string     ideal      ideal | davis346 | prophesee_gen4 (``pixel_model``)
+threshold                      float      0.2        contrast threshold C (log units), ON and OFF
+threshold_on                   float      0.2        ON threshold, when it differs from OFF
+threshold_off                  float      0.2        OFF threshold
+threshold_sigma                float      0          per-pixel threshold mismatch (log units)
+threshold_jitter               float      0          per-crossing threshold noise (log units)
+refractory_s                   float      0          shortest time between two events of a pixel (s)
+leak_rate_hz                   float      0          spontaneous ON events per pixel per second
+leak_jitter                    float      0          relative per-pixel spread of the leak rate
+shot_noise_hz                  float      0          noise events per pixel per second in the dark
+shot_noise_bright_factor       float      0.25       noise rate when bright, relative to the dark rate
+cutoff_hz                      float      0          photoreceptor low-pass cutoff when bright (0: none)
+cutoff_min_fraction            float      0.01       dim pixels: cutoff never below this fraction
+bright_intensity               float      1          radiance treated as bright (low-pass, shot noise)
+linlog_threshold               float      0.001      radiance below which the response is linear
+timestamp_resolution_us        float      0          timestamp clock (0: exact)
+readout_cap                    float      0          events per second the readout passes (0: unlimited)
+readout_cap_native_pixels      integer    0          > 0: readout_cap is for this many pixels, scaled to the film
+seed                           integer    0          seeds the mismatch and every noise draw
+(nested integrator)            integrator path       the radiance integrator, e.g. ``<integrator type="direct"/>``
+=============================  =========  =========  ======================================================
+
+Example::
 
     <integrator type="eventfield">
-        <float name="threshold" value="0.2"/>          <!-- contrast threshold C (log units), ON and OFF -->
-        <float name="threshold_on" value="0.25"/>      <!-- optional: separate ON / OFF thresholds -->
-        <float name="linlog_threshold" value="1e-3"/>  <!-- radiance below which the response is linear -->
-        <string name="preset" value="ideal"/>          <!-- ideal | davis346 | prophesee_gen4 -->
-        <float name="refractory_s" value="5e-4"/>      <!-- any PixelConfig field overrides the preset -->
-        <integrator type="path"><integer name="max_depth" value="4"/></integrator>   <!-- default: path -->
+        <float name="threshold" value="0.2"/>
+        <string name="preset" value="davis346"/>
+        <integrator type="path"><integer name="max_depth" value="4"/></integrator>
     </integrator>
 
 ``mi.render(scene)`` with this integrator renders the radiance (returned unchanged, so it still looks like a
@@ -31,7 +55,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import pixel_model
-from ._per_variant import per_variant
+from ._per_variant import per_variant, subclass
 
 DEFAULT_THRESHOLD = 0.2
 DEFAULT_LINLOG = 1e-3
@@ -41,251 +65,274 @@ def is_event_integrator(obj) -> bool:
     return any(isinstance(obj, cls) for cls in integrator_class.classes.values())
 
 
+class _EventIntegratorMethods:
+    """The ``eventfield`` integrator's methods, bound to the active variant's ``mi.SamplingIntegrator`` by
+    ``integrator_class`` (``_per_variant.subclass``)."""
+
+    def __init__(self, props: mi.Properties):
+        mi.SamplingIntegrator.__init__(self, props)
+        self.inner = None
+        overrides = {}
+        names = {f.name for f in fields(pixel_model.PixelConfig)} - {"preset"}
+        for name in props.keys():
+            value = props.get(name)
+            if isinstance(value, mi.Integrator):
+                if self.inner is not None:
+                    raise ValueError("integrator 'eventfield': give at most one nested radiance integrator")
+                self.inner = value
+            elif name in names:
+                overrides[name] = int(value) if name in ("seed", "readout_cap_native_pixels") else float(value)
+            elif name == "threshold":
+                overrides.setdefault("threshold_on", float(value))
+                overrides.setdefault("threshold_off", float(value))
+            elif name != "preset":
+                raise ValueError(f"integrator 'eventfield': unknown parameter {name!r}; allowed: preset, "
+                                 f"threshold, {', '.join(sorted(names))}")
+        if self.inner is None:
+            self.inner = mi.load_dict({"type": "path"})
+        self.scene_preset = props.get("preset", "ideal")
+        self.scene_overrides = overrides
+        self.configure(pixel_model.pixel_config(self.scene_preset, "integrator 'eventfield'", **overrides))
+
+    # ---------------------------------------------------------------- configuration
+    def configure(self, config):
+        """Set the pixel model (a PixelConfig) and forget all pixel state."""
+        self.config = config.validate("integrator 'eventfield'")
+        self.threshold_on, self.threshold_off = config.threshold_on, config.threshold_off
+        self.linlog_threshold = config.linlog_threshold
+        self.reset()
+
+    def reset(self):
+        self.size = None           # (width, height) once the first frame is seen
+        self.log_prev = None       # (filtered) log brightness at the last committed instant
+        self.anchor = None         # log brightness at the first commit; reference = anchor + counts * C
+        self.k_on = self.k_off = None  # ON / OFF events fired so far by each pixel (Int32)
+        self.offset = None         # reference drift from leak and jitter (None when neither is on)
+        self.c_on = self.c_off = None
+        self.staged = self.staged_intensity = None
+        self.rng = self.leak_rate = self.last_emit = self.limiter = None
+        self.refractory_dropped = 0
+        self.noise_events = 0
+
+    def pixel_model_metadata(self) -> dict:
+        d = {"model": "ideal" if not (self.config.stochastic or self.config.threshold_sigma) else "realistic",
+             "timestamps": "linear interpolation of log brightness between rendered instants"}
+        d.update(self.config.as_dict())
+        return d
+
+    @property
+    def deterministic(self) -> bool:
+        return not self.config.stochastic
+
+    # ---------------------------------------------------------------- Mitsuba entry point
+    def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
+        if isinstance(sensor, int):
+            sensor = scene.sensors()[sensor]
+        image = self.inner.render(scene, sensor, seed, spp, develop, evaluate)
+        self.stage(image)
+        return image
+
+    def stage(self, image):
+        """Compute and keep the log brightness of a rendered (H, W, C) radiance tensor."""
+        height, width, channels = image.shape
+        flat = image.array
+        if channels == 1:
+            intensity = flat
+        else:  # rgb(a): photometric luminance of the first three channels
+            idx = dr.arange(mi.UInt32, width * height) * channels
+            intensity = mi.luminance(mi.Color3f(dr.gather(mi.Float, flat, idx), dr.gather(mi.Float, flat, idx + 1),
+                                                dr.gather(mi.Float, flat, idx + 2)))
+        # left unevaluated: commit() fuses it with the crossing count into one kernel
+        self.stage_log(pixel_model.linlog(dr, intensity, self.linlog_threshold), (width, height))
+        self.staged_intensity = intensity
+
+    def stage_log(self, log_brightness, size):
+        """Stage a log-brightness frame directly (period reuse feeds cached frames through here)."""
+        if self.size is not None and self.size != tuple(size):
+            raise ValueError(f"film size changed from {self.size} to {tuple(size)} between steps")
+        self.staged, self.staged_size = log_brightness, tuple(size)
+        self.staged_intensity = None
+
+    def staged_max_change(self) -> float:
+        """Largest |Delta L| of the staged frame against the last committed one (0 before the first commit)."""
+        if self.log_prev is None:
+            return 0.0
+        dr.eval(self.staged)     # keep the frame: commit() must not re-run its (possibly heavy) expression
+        return float(dr.max(dr.abs(self.staged - self.log_prev)).array[0])
+
+    # ---------------------------------------------------------------- events
+    def _init_state(self, log_now, width, height):
+        cfg, n_pix = self.config, width * height
+        rng = np.random.default_rng(cfg.seed)
+        self.size = (width, height)
+        self.log_prev = mi.Float(log_now)
+        self.anchor = mi.Float(log_now)
+        self.k_on, self.k_off = dr.zeros(mi.Int32, n_pix), dr.zeros(mi.Int32, n_pix)
+        self.c_on = mi.Float(pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_on, cfg.threshold_sigma))
+        self.c_off = mi.Float(pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_off, cfg.threshold_sigma))
+        if cfg.leak_rate_hz or cfg.threshold_jitter:
+            self.offset = dr.zeros(mi.Float, n_pix)
+        if cfg.leak_rate_hz:
+            rates = cfg.leak_rate_hz * np.maximum(1 + cfg.leak_jitter * rng.standard_normal(n_pix), 0)
+            self.leak_rate = mi.Float(rates.astype(np.float32))
+            # a sensor in steady state has its pixels at random phases of their leak cycle
+            self.offset = -mi.Float(rng.random(n_pix).astype(np.float32)) * self.c_on
+        if cfg.shot_noise_hz or cfg.threshold_jitter:
+            self.rng = mi.PCG32(size=n_pix, initstate=mi.UInt64((cfg.seed * 2654435761 + 12345) % 2**64),
+                                initseq=dr.arange(mi.UInt64, n_pix))
+        if cfg.refractory_s:
+            self.last_emit = np.full(n_pix, -np.inf)
+        if cfg.readout_cap:
+            cap = cfg.readout_cap * (n_pix / cfg.readout_cap_native_pixels if cfg.readout_cap_native_pixels else 1)
+            self.limiter = pixel_model.ReadoutLimiter(cap, cfg.seed)
+        state = [self.log_prev, self.anchor, self.k_on, self.k_off, self.c_on, self.c_off]
+        state += [v for v in (self.offset, self.leak_rate) if v is not None]
+        dr.make_opaque(*state)
+
+    def commit(self, t0: float, t1: float):
+        """Accept the staged frame as the brightness at time t1 (seconds) and return the events of (t0, t1].
+
+        Returns numpy arrays (x uint16, y uint16, t float64 seconds, p int8 +1/-1), unsorted. The first commit
+        only initialises the pixels (reference = current brightness) and fires nothing.
+        """
+        if self.staged is None:
+            raise RuntimeError("commit() without a staged frame: render first")
+        width, height = self.staged_size
+        log_in, intensity = self.staged, self.staged_intensity
+        self.staged = self.staged_intensity = None
+        if self.log_prev is None:
+            self._init_state(log_in, width, height)
+            dr.eval(self.log_prev, self.anchor)
+            return _no_events()
+        step = self._pixel_step(log_in, intensity, t1 - t0)
+        pix, t, p = self._step_events(step, t0, t1)
+        self.log_prev, self.k_on, self.k_off, self.offset = step["log_now"], step["k_on"], step["k_off"], \
+            step["offset"]
+        return (pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p
+
+    def _pixel_step(self, log_in, intensity, duration: float) -> dict:
+        """One step of every pixel, evaluated in one Dr.Jit kernel: photoreceptor low-pass, leak, threshold
+        jitter, crossing counts and shot noise. Returns the step's arrays by name."""
+        cfg = self.config
+        if intensity is None and (cfg.cutoff_hz or cfg.shot_noise_hz):
+            intensity = pixel_model.linlog_inverse(dr, log_in, self.linlog_threshold)
+        dt = None
+        if cfg.cutoff_hz or cfg.leak_rate_hz or cfg.shot_noise_hz:
+            dt = mi.Float(duration)
+            dr.make_opaque(dt)                  # a new literal per step would recompile the kernel
+        log_now = log_in
+        if cfg.cutoff_hz:
+            alpha = pixel_model.lowpass_alpha(dr, intensity, dt, cfg.cutoff_hz, cfg.bright_intensity,
+                                              cfg.cutoff_min_fraction)
+            log_now = self.log_prev + alpha * (log_in - self.log_prev)
+        offset = self.offset
+        if cfg.leak_rate_hz:
+            offset = offset - self.leak_rate * self.c_on * dt      # the reference sinks: ON events
+        c_on, c_off = self.c_on, self.c_off
+        if cfg.threshold_jitter:
+            g = mi.warp.square_to_std_normal(mi.Point2f(self.rng.next_float32(), self.rng.next_float32()))
+            c_on = dr.maximum(c_on + cfg.threshold_jitter * g.x, self.c_on * 0.1)
+            c_off = dr.maximum(c_off + cfg.threshold_jitter * g.y, self.c_off * 0.1)
+        log_ref = pixel_model.reference_level(dr, mi.Float, self.anchor, self.k_on, self.k_off, self.c_on,
+                                              self.c_off)
+        if offset is not None:
+            log_ref = log_ref + offset
+        n = pixel_model.count_crossings(dr, mi.Int32, log_now, log_ref, c_on, c_off)
+        n_on, n_off = dr.maximum(n, 0), dr.maximum(-n, 0)
+        k_on, k_off = self.k_on + n_on, self.k_off + n_off
+        if cfg.threshold_jitter:                # the reference moved by the jittered thresholds
+            offset = offset + mi.Float(n_on) * (c_on - self.c_on) - mi.Float(n_off) * (c_off - self.c_off)
+        todo = [n, k_on, k_off, log_now, log_ref]
+        if cfg.threshold_jitter:                # gathered below: evaluate here, in the one kernel
+            todo += [c_on, c_off]
+        noise = None
+        if cfg.shot_noise_hz:
+            prob = pixel_model.shot_noise_probability(dr, intensity, dt, cfg.shot_noise_hz, cfg.bright_intensity,
+                                                      cfg.shot_noise_bright_factor)
+            u, u_pol, u_t = self.rng.next_float32(), self.rng.next_float32(), self.rng.next_float32()
+            noise = (u < prob, u_pol, u_t, mi.Int32(dr.select(u < prob, 1, 0)))
+            todo += list(noise)
+        todo += [v for v in (offset, getattr(self.rng, "state", None)) if v is not None]
+        dr.eval(*todo)
+        return {"n": n, "k_on": k_on, "k_off": k_off, "log_now": log_now, "log_ref": log_ref, "c_on": c_on,
+                "c_off": c_off, "offset": offset, "noise": noise}
+
+    def _step_events(self, step: dict, t0: float, t1: float):
+        """The step's events on the host: (pixel index, time s, polarity) of every crossing, linearly
+        interpolated in time, then the refractory period and shot-noise events."""
+        n, noise = step["n"], step["noise"]
+        # one compress over every pixel that produced anything (crossings or noise), one gather kernel
+        fired = dr.compress((n != 0) | noise[0]) if noise is not None else dr.compress(n != 0)
+        if dr.width(fired) == 0:
+            return np.empty(0, np.int64), np.empty(0), np.empty(0, np.int8)
+        cols = [n, self.log_prev, step["log_now"], step["log_ref"], step["c_on"], step["c_off"]]
+        if noise is not None:
+            cols += [noise[3], noise[1], noise[2]]
+        sparse = [dr.gather(type(a), a, fired) for a in cols]
+        dr.eval(*sparse)
+        arr = [a.numpy() for a in sparse]
+        fpix = fired.numpy().astype(np.int64)
+        sig = arr[0] != 0
+        pix, t, p = pixel_model.expand_crossings(fpix[sig], *(a[sig] for a in arr[:6]), t0, t1)
+        hit = arr[6] != 0 if noise is not None else None
+        before = self.last_emit[fpix[hit]] if (noise is not None and self.config.refractory_s) else None
+        crossings = None
+        if self.config.refractory_s:
+            keep, crossings = pixel_model.refractory_crossings(pix, t, self.last_emit, self.config.refractory_s)
+            self.refractory_dropped += int(len(t) - keep.sum())
+            pix, t, p = pix[keep], t[keep], p[keep]
+        if noise is None:
+            return pix, t, p
+        npix, nt, pol = self._noise_events(fpix[hit], arr[7][hit], arr[8][hit], before, crossings, t0, t1)
+        return np.concatenate([pix, npix]), np.concatenate([t, nt]), np.concatenate([p, pol])
+
+    def _noise_events(self, npix, u_pol, u_t, before, crossings, t0: float, t1: float):
+        """Shot-noise events of the pixels ``npix`` (uniform polarity and time within the step), subject to the
+        refractory period like the signal's."""
+        pol = np.where(u_pol < 0.5, 1, -1).astype(np.int8)
+        nt = t0 + u_t.astype(np.float64) * (t1 - t0)
+        if self.config.refractory_s:
+            keep = pixel_model.refractory_extra(npix, nt, before, crossings, self.last_emit,
+                                                self.config.refractory_s)
+            self.refractory_dropped += int(len(nt) - keep.sum())
+            npix, nt, pol = npix[keep], nt[keep], pol[keep]
+        self.noise_events += len(npix)
+        return npix, nt, pol
+
+    def readout(self, x, y, t_us, p):
+        """The sensor's output stage on one step's time-sorted events: clock quantisation, readout cap."""
+        cfg = self.config
+        if cfg.timestamp_resolution_us:
+            res = cfg.timestamp_resolution_us
+            t_us = (np.floor(t_us / res) * res).astype(np.int64)
+        if self.limiter is not None and len(t_us):
+            keep = self.limiter.filter(t_us)
+            x, y, t_us, p = x[keep], y[keep], t_us[keep], p[keep]
+        return x, y, t_us, p
+
+    def readout_dropped(self) -> int:
+        return 0 if self.limiter is None else self.limiter.dropped
+
+    def periodic_key(self):
+        """Integer array that, with the previous log brightness, fixes every future event of the ideal pixel
+        (net event count per pixel), or None when no such exact key exists (unequal ON/OFF thresholds, or a
+        pixel model whose state drifts or draws noise).
+        Equal keys one scan period apart, with identical input frames, mean the events repeat exactly."""
+        if self.k_on is None or not self.deterministic or self.threshold_on != self.threshold_off \
+                or self.config.threshold_sigma:
+            return None
+        key = self.k_on - self.k_off
+        dr.eval(key)
+        return key
+
+    def traverse(self, callback):
+        self.inner.traverse(callback)
+
+    def to_string(self):
+        return f"EventIntegrator[preset={self.config.preset}, inner={self.inner}]"
+
 def _define_class():
-    class EventIntegrator(mi.SamplingIntegrator):
-        def __init__(self, props: mi.Properties):
-            super().__init__(props)
-            self.inner = None
-            overrides = {}
-            names = {f.name for f in fields(pixel_model.PixelConfig)} - {"preset"}
-            for name in props.keys():
-                value = props.get(name)
-                if isinstance(value, mi.Integrator):
-                    if self.inner is not None:
-                        raise ValueError("integrator 'eventfield': give at most one nested radiance integrator")
-                    self.inner = value
-                elif name in names:
-                    overrides[name] = int(value) if name in ("seed", "readout_cap_native_pixels") else float(value)
-                elif name == "threshold":
-                    overrides.setdefault("threshold_on", float(value))
-                    overrides.setdefault("threshold_off", float(value))
-                elif name != "preset":
-                    raise ValueError(f"integrator 'eventfield': unknown parameter {name!r}; allowed: preset, "
-                                     f"threshold, {', '.join(sorted(names))}")
-            if self.inner is None:
-                self.inner = mi.load_dict({"type": "path"})
-            self.scene_preset = props.get("preset", "ideal")
-            self.scene_overrides = overrides
-            self.configure(pixel_model.pixel_config(self.scene_preset, "integrator 'eventfield'", **overrides))
-
-        # ---------------------------------------------------------------- configuration
-        def configure(self, config):
-            """Set the pixel model (a PixelConfig) and forget all pixel state."""
-            self.config = config.validate("integrator 'eventfield'")
-            self.threshold_on, self.threshold_off = config.threshold_on, config.threshold_off
-            self.linlog_threshold = config.linlog_threshold
-            self.reset()
-
-        def reset(self):
-            self.size = None           # (width, height) once the first frame is seen
-            self.log_prev = None       # (filtered) log brightness at the last committed instant
-            self.anchor = None         # log brightness at the first commit; reference = anchor + counts * C
-            self.k_on = self.k_off = None  # ON / OFF events fired so far by each pixel (Int32)
-            self.offset = None         # reference drift from leak and jitter (None when neither is on)
-            self.c_on = self.c_off = None
-            self.staged = self.staged_intensity = None
-            self.rng = self.leak_rate = self.last_emit = self.limiter = None
-            self.refractory_dropped = 0
-            self.noise_events = 0
-
-        def pixel_model_metadata(self) -> dict:
-            d = {"model": "ideal" if not (self.config.stochastic or self.config.threshold_sigma) else "realistic",
-                 "timestamps": "linear interpolation of log brightness between rendered instants"}
-            d.update(self.config.as_dict())
-            return d
-
-        @property
-        def deterministic(self) -> bool:
-            return not self.config.stochastic
-
-        # ---------------------------------------------------------------- Mitsuba entry point
-        def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
-            if isinstance(sensor, int):
-                sensor = scene.sensors()[sensor]
-            image = self.inner.render(scene, sensor, seed, spp, develop, evaluate)
-            self.stage(image)
-            return image
-
-        def stage(self, image):
-            """Compute and keep the log brightness of a rendered (H, W, C) radiance tensor."""
-            height, width, channels = image.shape
-            flat = image.array
-            if channels == 1:
-                intensity = flat
-            else:  # rgb(a): photometric luminance of the first three channels
-                idx = dr.arange(mi.UInt32, width * height) * channels
-                intensity = mi.luminance(mi.Color3f(dr.gather(mi.Float, flat, idx), dr.gather(mi.Float, flat, idx + 1),
-                                                    dr.gather(mi.Float, flat, idx + 2)))
-            # left unevaluated: commit() fuses it with the crossing count into one kernel
-            self.stage_log(pixel_model.linlog(dr, intensity, self.linlog_threshold), (width, height))
-            self.staged_intensity = intensity
-
-        def stage_log(self, log_brightness, size):
-            """Stage a log-brightness frame directly (period reuse feeds cached frames through here)."""
-            if self.size is not None and self.size != tuple(size):
-                raise ValueError(f"film size changed from {self.size} to {tuple(size)} between steps")
-            self.staged, self.staged_size = log_brightness, tuple(size)
-            self.staged_intensity = None
-
-        def staged_max_change(self) -> float:
-            """Largest |Delta L| of the staged frame against the last committed one (0 before the first commit)."""
-            if self.log_prev is None:
-                return 0.0
-            dr.eval(self.staged)     # keep the frame: commit() must not re-run its (possibly heavy) expression
-            return float(dr.max(dr.abs(self.staged - self.log_prev)).array[0])
-
-        # ---------------------------------------------------------------- events
-        def _init_state(self, log_now, width, height):
-            cfg, n_pix = self.config, width * height
-            rng = np.random.default_rng(cfg.seed)
-            self.size = (width, height)
-            self.log_prev = mi.Float(log_now)
-            self.anchor = mi.Float(log_now)
-            self.k_on, self.k_off = dr.zeros(mi.Int32, n_pix), dr.zeros(mi.Int32, n_pix)
-            self.c_on = mi.Float(pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_on, cfg.threshold_sigma))
-            self.c_off = mi.Float(pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_off, cfg.threshold_sigma))
-            if cfg.leak_rate_hz or cfg.threshold_jitter:
-                self.offset = dr.zeros(mi.Float, n_pix)
-            if cfg.leak_rate_hz:
-                rates = cfg.leak_rate_hz * np.maximum(1 + cfg.leak_jitter * rng.standard_normal(n_pix), 0)
-                self.leak_rate = mi.Float(rates.astype(np.float32))
-                # a sensor in steady state has its pixels at random phases of their leak cycle
-                self.offset = -mi.Float(rng.random(n_pix).astype(np.float32)) * self.c_on
-            if cfg.shot_noise_hz or cfg.threshold_jitter:
-                self.rng = mi.PCG32(size=n_pix, initstate=mi.UInt64((cfg.seed * 2654435761 + 12345) % 2**64),
-                                    initseq=dr.arange(mi.UInt64, n_pix))
-            if cfg.refractory_s:
-                self.last_emit = np.full(n_pix, -np.inf)
-            if cfg.readout_cap:
-                cap = cfg.readout_cap * (n_pix / cfg.readout_cap_native_pixels if cfg.readout_cap_native_pixels else 1)
-                self.limiter = pixel_model.ReadoutLimiter(cap, cfg.seed)
-            state = [self.log_prev, self.anchor, self.k_on, self.k_off, self.c_on, self.c_off]
-            state += [v for v in (self.offset, self.leak_rate) if v is not None]
-            dr.make_opaque(*state)
-
-        def commit(self, t0: float, t1: float):
-            """Accept the staged frame as the brightness at time t1 (seconds) and return the events of (t0, t1].
-
-            Returns numpy arrays (x uint16, y uint16, t float64 seconds, p int8 +1/-1), unsorted. The first commit
-            only initialises the pixels (reference = current brightness) and fires nothing.
-            """
-            if self.staged is None:
-                raise RuntimeError("commit() without a staged frame: render first")
-            cfg = self.config
-            width, height = self.staged_size
-            log_in, intensity = self.staged, self.staged_intensity
-            self.staged = self.staged_intensity = None
-            if self.log_prev is None:
-                self._init_state(log_in, width, height)
-                dr.eval(self.log_prev, self.anchor)
-                return _no_events()
-            if intensity is None and (cfg.cutoff_hz or cfg.shot_noise_hz):
-                intensity = pixel_model.linlog_inverse(dr, log_in, self.linlog_threshold)
-            dt = None
-            if cfg.cutoff_hz or cfg.leak_rate_hz or cfg.shot_noise_hz:
-                dt = mi.Float(t1 - t0)
-                dr.make_opaque(dt)                  # a new literal per step would recompile the kernel
-            log_now = log_in
-            if cfg.cutoff_hz:
-                alpha = pixel_model.lowpass_alpha(dr, intensity, dt, cfg.cutoff_hz, cfg.bright_intensity,
-                                                  cfg.cutoff_min_fraction)
-                log_now = self.log_prev + alpha * (log_in - self.log_prev)
-            offset = self.offset
-            if cfg.leak_rate_hz:
-                offset = offset - self.leak_rate * self.c_on * dt      # the reference sinks: ON events
-            c_on, c_off = self.c_on, self.c_off
-            if cfg.threshold_jitter:
-                g = mi.warp.square_to_std_normal(mi.Point2f(self.rng.next_float32(), self.rng.next_float32()))
-                c_on = dr.maximum(c_on + cfg.threshold_jitter * g.x, self.c_on * 0.1)
-                c_off = dr.maximum(c_off + cfg.threshold_jitter * g.y, self.c_off * 0.1)
-            log_ref = pixel_model.reference_level(dr, mi.Float, self.anchor, self.k_on, self.k_off, self.c_on,
-                                                  self.c_off)
-            if offset is not None:
-                log_ref = log_ref + offset
-            n = pixel_model.count_crossings(dr, mi.Int32, log_now, log_ref, c_on, c_off)
-            n_on, n_off = dr.maximum(n, 0), dr.maximum(-n, 0)
-            k_on, k_off = self.k_on + n_on, self.k_off + n_off
-            if cfg.threshold_jitter:                # the reference moved by the jittered thresholds
-                offset = offset + mi.Float(n_on) * (c_on - self.c_on) - mi.Float(n_off) * (c_off - self.c_off)
-            todo = [n, k_on, k_off, log_now, log_ref]
-            if cfg.threshold_jitter:                # gathered below: evaluate here, in the one kernel
-                todo += [c_on, c_off]
-            noise = None
-            if cfg.shot_noise_hz:
-                prob = pixel_model.shot_noise_probability(dr, intensity, dt, cfg.shot_noise_hz, cfg.bright_intensity,
-                                                          cfg.shot_noise_bright_factor)
-                u, u_pol, u_t = self.rng.next_float32(), self.rng.next_float32(), self.rng.next_float32()
-                noise = (u < prob, u_pol, u_t, mi.Int32(dr.select(u < prob, 1, 0)))
-                todo += list(noise)
-            todo += [v for v in (offset, getattr(self.rng, "state", None)) if v is not None]
-            dr.eval(*todo)
-            # one compress over every pixel that produced anything (crossings or noise), one gather kernel
-            fired = dr.compress((n != 0) | noise[0]) if noise is not None else dr.compress(n != 0)
-            if dr.width(fired) == 0:
-                pix, t, p = np.empty(0, np.int64), np.empty(0), np.empty(0, np.int8)
-            else:
-                cols = [n, self.log_prev, log_now, log_ref, c_on, c_off]
-                if noise is not None:
-                    cols += [noise[3], noise[1], noise[2]]
-                sparse = [dr.gather(type(a), a, fired) for a in cols]
-                dr.eval(*sparse)
-                arr = [a.numpy() for a in sparse]
-                fpix = fired.numpy().astype(np.int64)
-                sig = arr[0] != 0
-                pix, t, p = pixel_model.expand_crossings(fpix[sig], *(a[sig] for a in arr[:6]), t0, t1)
-                hit = arr[6] != 0 if noise is not None else None
-                before = self.last_emit[fpix[hit]] if (noise is not None and cfg.refractory_s) else None
-                if cfg.refractory_s:
-                    keep, crossings = pixel_model.refractory_crossings(pix, t, self.last_emit, cfg.refractory_s)
-                    self.refractory_dropped += int(len(t) - keep.sum())
-                    pix, t, p = pix[keep], t[keep], p[keep]
-                if noise is not None:
-                    npix = fpix[hit]
-                    pol = np.where(arr[7][hit] < 0.5, 1, -1).astype(np.int8)
-                    nt = t0 + arr[8][hit].astype(np.float64) * (t1 - t0)
-                    if cfg.refractory_s:
-                        keep = pixel_model.refractory_extra(npix, nt, before, crossings, self.last_emit,
-                                                            cfg.refractory_s)
-                        self.refractory_dropped += int(len(nt) - keep.sum())
-                        npix, nt, pol = npix[keep], nt[keep], pol[keep]
-                    self.noise_events += len(npix)
-                    pix, t, p = np.concatenate([pix, npix]), np.concatenate([t, nt]), np.concatenate([p, pol])
-            self.log_prev, self.k_on, self.k_off, self.offset = log_now, k_on, k_off, offset
-            return (pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p
-
-        def readout(self, x, y, t_us, p):
-            """The sensor's output stage on one step's time-sorted events: clock quantisation, readout cap."""
-            cfg = self.config
-            if cfg.timestamp_resolution_us:
-                res = cfg.timestamp_resolution_us
-                t_us = (np.floor(t_us / res) * res).astype(np.int64)
-            if self.limiter is not None and len(t_us):
-                keep = self.limiter.filter(t_us)
-                x, y, t_us, p = x[keep], y[keep], t_us[keep], p[keep]
-            return x, y, t_us, p
-
-        def readout_dropped(self) -> int:
-            return 0 if self.limiter is None else self.limiter.dropped
-
-        def periodic_key(self):
-            """Integer array that, with the previous log brightness, fixes every future event of the ideal pixel
-            (net event count per pixel), or None when no such exact key exists (unequal ON/OFF thresholds, or a
-            pixel model whose state drifts or draws noise).
-            Equal keys one scan period apart, with identical input frames, mean the events repeat exactly."""
-            if self.k_on is None or not self.deterministic or self.threshold_on != self.threshold_off \
-                    or self.config.threshold_sigma:
-                return None
-            key = self.k_on - self.k_off
-            dr.eval(key)
-            return key
-
-        def traverse(self, callback):
-            self.inner.traverse(callback)
-
-        def to_string(self):
-            return f"EventIntegrator[preset={self.config.preset}, inner={self.inner}]"
-
-    return EventIntegrator
+    return subclass(mi.SamplingIntegrator, _EventIntegratorMethods, "EventIntegrator")
 
 
 integrator_class = per_variant(_define_class)   # the EventIntegrator class of the active variant

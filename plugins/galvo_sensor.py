@@ -31,7 +31,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_eventfield.optics import galvo as go
-from ._per_variant import per_variant
+from ._per_variant import per_variant, subclass
 
 _FLOAT_PARAMS = ("frequency", "amplitude", "phase", "offset_x", "offset_y", "freq_x", "freq_y", "amplitude_x",
                  "amplitude_y", "phase_x", "phase_y")
@@ -52,97 +52,99 @@ def curve_from_props(props) -> tuple:
         name, max_angle_deg=float(props.get("max_angle", 10.0)), where="sensor 'galvo'", **params), bandwidth, damping)
 
 
+class _GalvoSensorMethods:
+    """The ``galvo`` sensor's methods, bound to the active variant's ``mi.Sensor`` by ``sensor_class``."""
+
+    def __init__(self, props):
+        mi.Sensor.__init__(self, props)
+        self.curve, self.scan_description = curve_from_props(props)
+        size = self.film().size()
+        self.aspect = size.x / size.y
+        self.fov_x = float(mi.parse_fov(props, self.aspect))
+        self.tan_half = math.tan(math.radians(self.fov_x) / 2)
+        self.aperture_radius = float(props.get("aperture_radius", 0.0))
+        self.focus_distance = float(props.get("focus_distance", 1.0))
+        self.mirror_distance = float(props.get("mirror_distance", 0.03))
+        self.mirror_separation = float(props.get("mirror_separation", 0.01))
+        self.far_clip = float(props.get("far_clip", 1e4))
+        for name, v, ok, allowed in (
+                ("fov", self.fov_x, 0 < self.fov_x < 180, "0 < fov < 180 degrees"),
+                ("aperture_radius", self.aperture_radius, self.aperture_radius >= 0, ">= 0 (0: pinhole)"),
+                ("focus_distance", self.focus_distance, self.focus_distance > 0, "> 0"),
+                ("mirror_distance", self.mirror_distance, self.mirror_distance >= 0, ">= 0"),
+                ("mirror_separation", self.mirror_separation, self.mirror_separation >= 0, ">= 0"),
+                ("far_clip", self.far_clip, self.far_clip > 0, "> 0")):
+            if not (math.isfinite(v) and ok):
+                raise ValueError(f"sensor 'galvo': {name} = {v!r} is out of range; allowed: {allowed}")
+        self.m_needs_sample_3 = self.aperture_radius > 0
+        self.scan_time = mi.Float(0.0)
+        dr.make_opaque(self.scan_time)
+
+    # ------------------------------------------------------------ parameters
+    def traverse(self, callback):
+        mi.Sensor.traverse(self, callback)
+        callback.put("time", self.scan_time, mi.ParamFlags.NonDifferentiable)
+        callback.put("to_world", self.m_to_world, mi.ParamFlags.NonDifferentiable)   # camera motion
+
+    def parameters_changed(self, keys=[]):
+        dr.make_opaque(self.scan_time)
+        mi.Sensor.parameters_changed(self, keys)
+
+    @property
+    def period(self):
+        return self.curve.period
+
+    def phase_time(self, t: float) -> float:
+        return self.curve.phase_time(t)
+
+    def optics_metadata(self) -> dict:
+        return {"design": "galvo", "scan": self.scan_description, "fov_x_deg": self.fov_x,
+                "aperture_radius": self.aperture_radius, "focus_distance": self.focus_distance,
+                "mirror_distance": self.mirror_distance, "mirror_separation": self.mirror_separation,
+                "angle_convention": "mechanical radians; optical deflection = 2x; +x pans the view to camera "
+                                    "+x, +y tilts it to camera +y (mitsuba_eventfield/optics/galvo.py)"}
+
+    # ------------------------------------------------------------ rays
+    def _camera_ray(self, sample2, sample3):
+        film = self.film()
+        size, crop, offset = film.size(), film.crop_size(), film.crop_offset()
+        u = (offset.x + sample2.x * crop.x) / size.x
+        v = (offset.y + sample2.y * crop.y) / size.y
+        dx, dy, dz = go.pinhole_direction(dr, u, v, self.tan_half, self.aspect)
+        if self.aperture_radius <= 0:
+            return (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)), (dx, dy, dz)
+        lens = mi.warp.square_to_uniform_disk_concentric(sample3) * self.aperture_radius
+        k = self.focus_distance / dz                       # focus plane z = focus_distance
+        fx, fy, fz = dx * k - lens.x, dy * k - lens.y, dz * k
+        n = dr.sqrt(fx * fx + fy * fy + fz * fz)
+        return (lens.x, lens.y, mi.Float(0.0)), (fx / n, fy / n, fz / n)
+
+    def sample_ray(self, time, sample1, sample2, sample3, active=True):
+        wavelengths, weight = self.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f), sample1, active)
+        o, d = self._camera_ray(sample2, sample3)
+        theta_x, theta_y = self.curve.angles(self.scan_time + (time - self.shutter_open()))
+        o, d = go.galvo_transform(dr, o, d, theta_x, theta_y, self.mirror_distance, self.mirror_separation)
+        to_world = self.world_transform()
+        ray = mi.Ray3f(to_world @ mi.Point3f(*o), dr.normalize(to_world @ mi.Vector3f(*d)), time, wavelengths)
+        ray.maxt = self.far_clip
+        return ray, weight
+
+    def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
+        ray, weight = self.sample_ray(time, sample1, sample2, sample3, active)
+        rd = mi.RayDifferential3f(ray)
+        rd.has_differentials = False
+        return rd, weight
+
+    def bbox(self):
+        p = self.world_transform() @ mi.ScalarPoint3f(0, 0, 0)
+        return mi.ScalarBoundingBox3f(p, p)
+
+    def to_string(self):
+        return (f"GalvoSensor[fov_x={self.fov_x}, curve={self.scan_description}, "
+                f"mirrors=({self.mirror_distance}, {self.mirror_separation}), aperture={self.aperture_radius}]")
+
 def _define_class():
-    class GalvoSensor(mi.Sensor):
-        def __init__(self, props):
-            super().__init__(props)
-            self.curve, self.scan_description = curve_from_props(props)
-            size = self.film().size()
-            self.aspect = size.x / size.y
-            self.fov_x = float(mi.parse_fov(props, self.aspect))
-            self.tan_half = math.tan(math.radians(self.fov_x) / 2)
-            self.aperture_radius = float(props.get("aperture_radius", 0.0))
-            self.focus_distance = float(props.get("focus_distance", 1.0))
-            self.mirror_distance = float(props.get("mirror_distance", 0.03))
-            self.mirror_separation = float(props.get("mirror_separation", 0.01))
-            self.far_clip = float(props.get("far_clip", 1e4))
-            for name, v, ok, allowed in (
-                    ("fov", self.fov_x, 0 < self.fov_x < 180, "0 < fov < 180 degrees"),
-                    ("aperture_radius", self.aperture_radius, self.aperture_radius >= 0, ">= 0 (0: pinhole)"),
-                    ("focus_distance", self.focus_distance, self.focus_distance > 0, "> 0"),
-                    ("mirror_distance", self.mirror_distance, self.mirror_distance >= 0, ">= 0"),
-                    ("mirror_separation", self.mirror_separation, self.mirror_separation >= 0, ">= 0"),
-                    ("far_clip", self.far_clip, self.far_clip > 0, "> 0")):
-                if not (math.isfinite(v) and ok):
-                    raise ValueError(f"sensor 'galvo': {name} = {v!r} is out of range; allowed: {allowed}")
-            self.m_needs_sample_3 = self.aperture_radius > 0
-            self.scan_time = mi.Float(0.0)
-            dr.make_opaque(self.scan_time)
-
-        # ------------------------------------------------------------ parameters
-        def traverse(self, callback):
-            super().traverse(callback)
-            callback.put("time", self.scan_time, mi.ParamFlags.NonDifferentiable)
-            callback.put("to_world", self.m_to_world, mi.ParamFlags.NonDifferentiable)   # camera motion
-
-        def parameters_changed(self, keys=[]):
-            dr.make_opaque(self.scan_time)
-            super().parameters_changed(keys)
-
-        @property
-        def period(self):
-            return self.curve.period
-
-        def phase_time(self, t: float) -> float:
-            return self.curve.phase_time(t)
-
-        def optics_metadata(self) -> dict:
-            return {"design": "galvo", "scan": self.scan_description, "fov_x_deg": self.fov_x,
-                    "aperture_radius": self.aperture_radius, "focus_distance": self.focus_distance,
-                    "mirror_distance": self.mirror_distance, "mirror_separation": self.mirror_separation,
-                    "angle_convention": "mechanical radians; optical deflection = 2x; +x pans the view to camera "
-                                        "+x, +y tilts it to camera +y (mitsuba_eventfield/optics/galvo.py)"}
-
-        # ------------------------------------------------------------ rays
-        def _camera_ray(self, sample2, sample3):
-            film = self.film()
-            size, crop, offset = film.size(), film.crop_size(), film.crop_offset()
-            u = (offset.x + sample2.x * crop.x) / size.x
-            v = (offset.y + sample2.y * crop.y) / size.y
-            dx, dy, dz = go.pinhole_direction(dr, u, v, self.tan_half, self.aspect)
-            if self.aperture_radius <= 0:
-                return (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)), (dx, dy, dz)
-            lens = mi.warp.square_to_uniform_disk_concentric(sample3) * self.aperture_radius
-            k = self.focus_distance / dz                       # focus plane z = focus_distance
-            fx, fy, fz = dx * k - lens.x, dy * k - lens.y, dz * k
-            n = dr.sqrt(fx * fx + fy * fy + fz * fz)
-            return (lens.x, lens.y, mi.Float(0.0)), (fx / n, fy / n, fz / n)
-
-        def sample_ray(self, time, sample1, sample2, sample3, active=True):
-            wavelengths, weight = self.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f), sample1, active)
-            o, d = self._camera_ray(sample2, sample3)
-            theta_x, theta_y = self.curve.angles(self.scan_time + (time - self.shutter_open()))
-            o, d = go.galvo_transform(dr, o, d, theta_x, theta_y, self.mirror_distance, self.mirror_separation)
-            to_world = self.world_transform()
-            ray = mi.Ray3f(to_world @ mi.Point3f(*o), dr.normalize(to_world @ mi.Vector3f(*d)), time, wavelengths)
-            ray.maxt = self.far_clip
-            return ray, weight
-
-        def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
-            ray, weight = self.sample_ray(time, sample1, sample2, sample3, active)
-            rd = mi.RayDifferential3f(ray)
-            rd.has_differentials = False
-            return rd, weight
-
-        def bbox(self):
-            p = self.world_transform() @ mi.ScalarPoint3f(0, 0, 0)
-            return mi.ScalarBoundingBox3f(p, p)
-
-        def to_string(self):
-            return (f"GalvoSensor[fov_x={self.fov_x}, curve={self.scan_description}, "
-                    f"mirrors=({self.mirror_distance}, {self.mirror_separation}), aperture={self.aperture_radius}]")
-
-    return GalvoSensor
+    return subclass(mi.Sensor, _GalvoSensorMethods, "GalvoSensor")
 
 
 sensor_class = per_variant(_define_class)   # the GalvoSensor class of the active variant

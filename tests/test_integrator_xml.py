@@ -83,3 +83,20 @@ def test_render_frames_use_the_scene_linlog_threshold(tmp_path):
     log = ef.render_frames(timed, [0.0])[0]
     assert np.allclose(log, ef.plugins.pixel_model.linlog_np(lin, 5.0))
     assert not np.allclose(log, ef.plugins.pixel_model.linlog_np(lin, 1e-3))
+
+
+def test_the_documented_parameter_table_matches_the_pixel_model():
+    """Every pixel-model field is in the integrator's parameter table, with its real default."""
+    from dataclasses import fields
+
+    from mitsuba_eventfield.plugins import event_integrator, pixel_model
+    rows = {}
+    for line in event_integrator.__doc__.splitlines():
+        parts = line.split()
+        if len(parts) >= 3 and parts[1] in ("float", "integer", "string"):
+            rows[parts[0]] = parts[2]
+    for f in fields(pixel_model.PixelConfig):
+        assert f.name in rows, f.name
+        documented = rows[f.name]
+        assert (documented == f.default if isinstance(f.default, str) else float(documented) == f.default), f.name
+    assert rows["threshold"] == "0.2"
