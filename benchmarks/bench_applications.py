@@ -25,7 +25,7 @@ RENDER_STAGES = {"render_events", "render", "render_rgb_frames"}
 
 
 def _applications():
-    from mitsuba_eventfield import hdr, highspeed, scanrate, slomorf
+    from mitsuba_eventfield.apps import hdr, highspeed, scanrate, slomorf
     from mitsuba_eventfield.cli import FAN_DEFAULTS
     fan_defines = dict(item.split("=") for item in FAN_DEFAULTS["define"])
     return {

@@ -18,6 +18,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from _report import write_results  # noqa: E402
+
 ROOT = os.path.dirname(HERE)
 DEMO = os.path.join(ROOT, "scenes", "demo", "demo.xml")
 STEP = 0.5e-3   # seconds per step in every run

@@ -7,13 +7,14 @@
 Writes benchmarks/results/galvo.json and galvo.md.  Usage: ./run bench galvo
 """
 import os
-import sys
 import statistics
+import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from _report import write_results  # noqa: E402
+
 SCENE = os.path.join(os.path.dirname(HERE), "scenes", "galvo_static", "galvo_static.xml")
 
 

@@ -8,14 +8,15 @@
 Writes benchmarks/results/kaleidoscope.json and .md.  Usage: ./run bench kaleidoscope
 """
 import os
-import sys
 import re
 import statistics
+import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from _report import write_results  # noqa: E402
+
 SCENE = os.path.join(os.path.dirname(HERE), "scenes", "falling", "falling.xml")
 
 

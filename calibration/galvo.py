@@ -20,9 +20,9 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from mitsuba_eventfield.errors import EventFieldError
-from mitsuba_eventfield.focus import parabola_offset
+from mitsuba_eventfield.focus.measures import parabola_offset
 from mitsuba_eventfield.optics.galvo import focal_length_px
-from mitsuba_eventfield.scan import ScanCurve
+from mitsuba_eventfield.optics.scan import ScanCurve
 
 
 class CalibrationError(EventFieldError):
@@ -97,7 +97,7 @@ class GalvoCalibration:
 
     def radius_px(self) -> tuple:
         """Curve size in pixels along x and y (scale x the curve's peak angle per axis)."""
-        from mitsuba_eventfield.scan import curve_from_dict
+        from mitsuba_eventfield.optics.scan import curve_from_dict
         c = curve_from_dict(self.curve)
         t = np.linspace(0, c.period or 1.0, 2001)
         ax, ay = c.angles(t)
@@ -107,13 +107,13 @@ class GalvoCalibration:
     def clock_phase_deg(self) -> float:
         """Phase of the scan at time 0 of the capture's clock, degrees: independent of which frames were fitted,
         so it compares directly with the phase commanded to the galvo (the mirror's lag shows up here)."""
-        from mitsuba_eventfield.scan import curve_from_dict
+        from mitsuba_eventfield.optics.scan import curve_from_dict
         period = curve_from_dict(self.curve).period
         return float((self.tau0 - self.t_first) % period / period * 360)
 
     def view_angles(self, times):
         """Mechanical angles of the views at capture times ``times`` (s)."""
-        from mitsuba_eventfield.scan import curve_from_dict
+        from mitsuba_eventfield.optics.scan import curve_from_dict
         return curve_from_dict(self.curve).angles(self.tau0 + np.asarray(times, dtype=np.float64) - self.t_first)
 
     def as_dict(self) -> dict:
@@ -274,5 +274,5 @@ def fit_tracks(tracks, times, curve: ScanCurve, max_phase_std_deg: float = 5.0,
 
 
 def _curve_dict(curve: ScanCurve) -> dict:
-    from mitsuba_eventfield.scan import curve_to_dict
+    from mitsuba_eventfield.optics.scan import curve_to_dict
     return curve_to_dict(curve)

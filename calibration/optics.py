@@ -66,7 +66,7 @@ def _lissajous_shape_differs(a: dict, b: dict) -> bool:
     """Whether the phases of two Lissajous scans differ by more than a common time shift tau, which moves
     phase_x by 360 fx tau and phase_y by 360 fy tau: tau from phase_x (one per x cycle of the figure's period),
     then what is left of phase_y."""
-    from mitsuba_eventfield.scan import curve_from_dict
+    from mitsuba_eventfield.optics.scan import curve_from_dict
     fx, fy = a["freq_x"], a["freq_y"]
     period = curve_from_dict(a).period
     cycles = np.arange(max(1, min(10_000, round(fx * period))) if period else 1)

@@ -20,12 +20,11 @@ import os
 import numpy as np
 
 from mitsuba_eventfield.atomic import atomic_output
+from mitsuba_eventfield.calibration.depth import DepthCalibration
+from mitsuba_eventfield.calibration.galvo import GalvoCalibration
+from mitsuba_eventfield.calibration.kaleidoscope import KaleidoscopeCalibration
+from mitsuba_eventfield.calibration.optics import KINDS_FOR_DESIGN, _plain, check_optics, optics_difference
 from mitsuba_eventfield.errors import EventFieldError
-
-from .depth import DepthCalibration
-from .galvo import GalvoCalibration
-from .kaleidoscope import KaleidoscopeCalibration
-from .optics import KINDS_FOR_DESIGN, _plain, check_optics, optics_difference
 
 FORMAT, VERSION = "mitsuba-eventfield calibration", 2
 _KINDS = {"galvo": GalvoCalibration, "depth": DepthCalibration, "kaleidoscope": KaleidoscopeCalibration}
@@ -125,7 +124,7 @@ def apply_to_lightfield(lf, calibration: dict, optics: dict):
     """A copy of ``lf`` placed and scaled by the calibration (galvo: view positions from the fitted phase;
     depth: the disparity model from the inverse-depth fit). ``optics``: the ``optics_record`` of the data ``lf``
     was made from; a calibration made for other optics is refused (``optics.check_optics``)."""
-    from mitsuba_eventfield.lightfield import LightField, galvo_paraxial_disparity
+    from mitsuba_eventfield.lightfield.model import LightField, galvo_paraxial_disparity
     if not isinstance(optics, dict) or "design" not in optics:
         raise EventFieldError("apply_to_lightfield needs the optics record of the light field's data "
                               "(calibration.optics_record(events.meta['optics'], width, height))")

@@ -29,8 +29,8 @@ import threading
 import time
 from dataclasses import dataclass
 
-from .dialects import Dialect, dialect
-from .spec import GalvoSpec, SafetyError, finite_number
+from mitsuba_eventfield.device.dialects import Dialect, dialect
+from mitsuba_eventfield.device.spec import GalvoSpec, SafetyError, finite_number
 
 # The circle adds 90 deg to the user's phase; a phase beyond +-720 deg is a mistake, not an intent.
 MAX_CURVE_PHASE_DEG = 720.0
@@ -331,7 +331,7 @@ class GalvoController:
 
     def metadata(self, curve) -> dict:
         """What to store with a capture: instrument, dialect, galvo spec, the curve, and the read-back."""
-        from mitsuba_eventfield.scan import curve_to_dict
+        from mitsuba_eventfield.optics.scan import curve_to_dict
         return {"instrument": self.identity(), "dialect": self.d.name, "galvo": self.spec.as_dict(),
                 "scan": curve_to_dict(curve), "read_back": self.read_back()}
 

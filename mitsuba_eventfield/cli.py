@@ -36,6 +36,7 @@ def _parser() -> argparse.ArgumentParser:
     from ._version import __version__
     from .device.spec import MAX_DURATION_S as MAX_SCAN_S
     from .device.spec import PHASE_RANGE_DEG, VOLTS_PER_DEG_RANGE
+    from .scene.bundled import bundled_scene
     from .validate import MAX_DURATION_S, MAX_PLANES, MAX_SPP, MAX_STEPS, MAX_VIEWS
     ap = _Parser(prog="eventfield", description="Render and inspect event fields.")
     ap.add_argument("--version", action="version", version=f"mitsuba-eventfield {__version__}")
@@ -142,24 +143,21 @@ def _parser() -> argparse.ArgumentParser:
     ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
     ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
     bn = sub.add_parser("bench", help="speed against accuracy of quality settings (chart + table)")
-    bn.add_argument("scene", nargs="?", default=os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                                             "scenes", "fan", "fan.xml"))
+    bn.add_argument("scene", nargs="?", default=bundled_scene("fan/fan.xml"))
     bn.add_argument("-o", "--output", default="out/bench", help="output directory (chart, CSV)")
     bn.add_argument("--duration", type=_num(0, MAX_DURATION_S, lo_open=True), default=0.008, help="simulated seconds (default 0.008: two periods)")
     bn.add_argument("--steps", type=_num(1, MAX_STEPS, integer=True), default=64, help="steps of the default setting")
     bn.add_argument("-D", "--define", action="append", default=["width=96", "height=72"], metavar="NAME=VALUE")
     bn.add_argument("--refocus-depth", type=_num(0, lo_open=True), default=0.6, help="depth of the downstream refocus (fan: 0.6)")
     hd = sub.add_parser("hdr", help="HDR light field of a static galvo scene: events vs 8-bit exposures")
-    hd.add_argument("scene", nargs="?", default=os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                                             "scenes", "hdr_leds", "hdr_leds.xml"))
+    hd.add_argument("scene", nargs="?", default=bundled_scene("hdr_leds/hdr_leds.xml"))
     hd.add_argument("-o", "--output", default="out/hdr", help="output directory (EXRs, figure, metrics JSON)")
     hd.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
     hd.add_argument("--depth", type=_num(0, lo_open=True), default=1.45, help="scene distance for the scan shifts (hdr_leds: 1.45)")
     hd.add_argument("--steps", type=_num(1, MAX_STEPS, integer=True), default=64, help="render steps over the scan period")
     hd.add_argument("--spp", type=_num(1, MAX_SPP, integer=True), default=4)
-    _scenes = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
     hs = sub.add_parser("highspeed", help="galvo refocus of every scan period on named depth planes, vs truth")
-    hs.add_argument("scene", nargs="?", default=os.path.join(_scenes, "fan", "fan.xml"))
+    hs.add_argument("scene", nargs="?", default=bundled_scene("fan/fan.xml"))
     hs.add_argument("-o", "--output", default="out/highspeed", help="output directory (EXRs, PNGs, figure, metrics)")
     hs.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE",
                     help="XML parameters (for the fan, on top of width=240 height=180 amplitude=2 mirror_distance=0.2)")
@@ -170,7 +168,7 @@ def _parser() -> argparse.ArgumentParser:
     hs.add_argument("--start", choices=("frame", "events"), default="frame",
                     help="start frame the views integrate onto: one rendered frame, or the galvo solver")
     tf = sub.add_parser("track-focus", help="galvo focus tracking of an object moving in depth, vs Mitsuba depth")
-    tf.add_argument("scene", nargs="?", default=os.path.join(_scenes, "dart", "galvo.xml"))
+    tf.add_argument("scene", nargs="?", default=bundled_scene("dart/galvo.xml"))
     tf.add_argument("-o", "--output", default="out/track", help="output directory (PNGs, EXR, figure, metrics)")
     tf.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
     tf.add_argument("--roi", type=_num(0, 1), nargs=4, default=[0.58, 0.44, 0.78, 0.56], metavar=("X0", "Y0", "X1", "Y1"),
@@ -193,7 +191,7 @@ def _parser() -> argparse.ArgumentParser:
     sm.add_argument("--duration", type=_num(0, MAX_DURATION_S, lo_open=True), help="seconds (default: the motion file's)")
     sm.add_argument("--spp", type=_num(1, MAX_SPP, integer=True), default=4)
     sd = sub.add_parser("scanrate-depth", help="a metric depth map per galvo scan period, vs Mitsuba's depth")
-    sd.add_argument("scene", nargs="?", default=os.path.join(_scenes, "runner", "runner.xml"))
+    sd.add_argument("scene", nargs="?", default=bundled_scene("runner/runner.xml"))
     sd.add_argument("-o", "--output", default="out/scanrate", help="output directory (EXRs, PNGs, figure, metrics)")
     sd.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE")
     sd.add_argument("--periods", type=_num(1, 1e6, integer=True), help="scan periods (default: the motion file's duration)")
@@ -209,8 +207,10 @@ def _parser() -> argparse.ArgumentParser:
     cg_.add_argument("--calibrate", action="store_true",
                      help="calibrate depth first from LED captures through the same galvo (scenes/led_depth), save "
                           "it as OUTPUT/calibration.json and use it")
-    rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with tests/regression/")
+    rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with reference images")
     rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
+    rg.add_argument("--references", default=os.path.join("tests", "regression"),
+                    help="folder of the reference images (default: tests/regression, the repository's)")
     dev = sub.add_parser("device", help="drive the galvo through a function generator (SCPI/VISA)")
     dsub = dev.add_subparsers(dest="action", required=True)
     conn = argparse.ArgumentParser(add_help=False)
@@ -238,7 +238,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def _hdr(a) -> int:
     import mitsuba_eventfield as ef
-    from . import hdr
+
+    from .apps import hdr
     from .atomic import write_json
     from .images import write_exr
     if not a.depth > 0:
@@ -288,7 +289,7 @@ def _application(run, write, wrote, output: str) -> int:
 
 
 def _highspeed(a) -> int:
-    from . import highspeed
+    from .apps import highspeed
     fan = os.path.basename(a.scene) == "fan.xml"
 
     def run():
@@ -300,7 +301,7 @@ def _highspeed(a) -> int:
 
 
 def _track_focus(a) -> int:
-    from . import highspeed
+    from .apps import highspeed
     return _application(
         lambda: highspeed.track_focus_depth(a.scene, a.roi, a.near, a.far, a.object_far, a.planes, a.background,
                                             _pairs(a.define, "-D"), a.periods, a.views, progress=True),
@@ -309,7 +310,7 @@ def _track_focus(a) -> int:
 
 
 def _scanrate_depth(a) -> int:
-    from . import scanrate
+    from .apps import scanrate
     from .calibration import load_calibration, save_calibration
     from .errors import EventFieldError
     calibration = load_calibration(a.calibration) if a.calibration else None
@@ -332,7 +333,8 @@ def _scanrate_depth(a) -> int:
 
 def _slomorf(a) -> int:
     import mitsuba_eventfield as ef
-    from . import slomorf
+
+    from .apps import slomorf
     depths = number_list(a.depths, "--depths", lo=0, lo_open=True)
     try:
         r = slomorf.slomorf(a.scene or slomorf.DEFAULT_SCENE, _pairs(a.define, "-D"), a.fps, a.factor, a.duration,
@@ -348,8 +350,8 @@ def _slomorf(a) -> int:
 
 
 def _bench(a) -> int:
-    from . import bench
-    from .sweep import SweepTable
+    from .evaluation import bench
+    from .evaluation.sweep import SweepTable
     os.makedirs(a.output, exist_ok=True)
     defines = dict(item.partition("=")[::2] for item in a.define)
     rows = bench.run(a.scene, a.duration, a.steps, defines, a.refocus_depth)
@@ -363,12 +365,16 @@ def _bench(a) -> int:
 
 
 def _regression(a) -> int:
-    from . import regression
+    from .errors import EventFieldError
+    from .evaluation import regression
     if a.bless:
-        for path in regression.bless():
+        for path in regression.bless(a.references):
             print(f"wrote {path}")
         return 0
-    problems = regression.check_all()
+    if not os.path.isdir(a.references):
+        raise EventFieldError(f"--references {a.references}: no such folder (run from the repository root, or "
+                              "name the folder of the reference images)")
+    problems = regression.check_all(a.references)
     for p in problems:
         print(p)
     print("regression images: " + ("all match" if not problems else f"{len(problems)} difference(s)"))
@@ -437,6 +443,7 @@ def _times_ms(text, what="--times"):
 def _start_log(path, events):
     """Log intensity (as the pixel sees it) of a linear EXR frame, checked against the stream's size."""
     import mitsuba_eventfield as ef
+
     from .plugins.pixel_model import linlog_np
     if path is None:
         return None
@@ -450,6 +457,7 @@ def _start_log(path, events):
 def _luminance_channel(path):
     """The Y (or else R) channel of an EXR frame, with a named error when it has neither."""
     import mitsuba_eventfield as ef
+
     from .images import read_exr
     channels, _ = read_exr(path)
     img = channels.get("Y", channels.get("R"))
@@ -539,7 +547,8 @@ def _lightfield(a, ev):
 def _galvo_frames(ev, period, views, start_frame_log=None):
     """Reconstructed log frames and their times over one scan period of a galvo stream."""
     import mitsuba_eventfield as ef
-    from .scan import curve_from_dict
+
+    from .optics.scan import curve_from_dict
     optics = ev.meta.get("optics", {})
     if optics.get("design") != "galvo":
         raise ef.EventFieldError("not a galvo event stream (optics.design != 'galvo')")
@@ -556,6 +565,7 @@ def _galvo_frames(ev, period, views, start_frame_log=None):
 
 def _calibrate(a) -> int:
     import mitsuba_eventfield as ef
+
     from . import calibration as cal
     try:
         if a.kind == "galvo":
@@ -630,6 +640,7 @@ def _refocus(a) -> int:
 
 def _depth(a) -> int:
     import mitsuba_eventfield as ef
+
     from .images import depth_png, write_exr, write_png
     ev = ef.read_events(a.file)
     if not (0 < a.near < a.far) or a.planes < 2:

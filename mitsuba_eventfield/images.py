@@ -10,7 +10,6 @@ import numpy as np
 from .atomic import atomic_output
 from .errors import EventFieldError
 
-
 # OpenCV decodes only the channels named Y, R, G, B (and A) of an EXR; a file with none of them is unreadable to
 # cv2.imread. So the primary channel of a file without one is stored as Y, and its own name (depth, log, ...)
 # kept in this header attribute, from which read_exr restores it. (OpenCV also needs OPENCV_IO_ENABLE_OPENEXR=1

@@ -54,8 +54,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import pixel_model
-from ._per_variant import per_variant, subclass
+from mitsuba_eventfield.plugins import pixel_model
+from mitsuba_eventfield.plugins._per_variant import per_variant, subclass
 
 DEFAULT_THRESHOLD = 0.2
 DEFAULT_LINLOG = 1e-3

@@ -31,14 +31,14 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_eventfield.optics import galvo as go
-from ._per_variant import per_variant, subclass
+from mitsuba_eventfield.plugins._per_variant import per_variant, subclass
 
 _FLOAT_PARAMS = ("frequency", "amplitude", "phase", "offset_x", "offset_y", "freq_x", "freq_y", "amplitude_x",
                  "amplitude_y", "phase_x", "phase_y")
 _INT_PARAMS = ("lines", "order", "samples_per_line", "samples_per_segment")
 def curve_from_props(props) -> tuple:
     """(scan curve as driven, description dict) from the plugin's properties."""
-    from mitsuba_eventfield.scan import curve_to_dict, make_curve
+    from mitsuba_eventfield.optics.scan import curve_to_dict, make_curve
     name = props.get("curve", "circle")
     params = {k: float(props.get(k)) for k in _FLOAT_PARAMS if k in props}
     params.update({k: int(props.get(k)) for k in _INT_PARAMS if k in props})

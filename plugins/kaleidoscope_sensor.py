@@ -29,11 +29,11 @@ from __future__ import annotations
 import math
 
 import drjit as dr
-import numpy as np
 import mitsuba as mi
+import numpy as np
 
-from . import kaleido_optics as ko
-from ._per_variant import per_variant, subclass
+from mitsuba_eventfield.plugins import kaleido_optics as ko
+from mitsuba_eventfield.plugins._per_variant import per_variant, subclass
 
 MODES = ("lenses", "tube_only", "physical_tube")
 LAYOUTS = ("kaleidoscope", "microlens")

@@ -1,8 +1,8 @@
 """The event integrator against the exact events of an analytic scene (tests/analytic.py)."""
+import analytic as an
 import numpy as np
 import pytest
 
-import analytic as an
 import mitsuba_eventfield as ef
 
 C = 0.1

@@ -1,9 +1,9 @@
 """Automatic modelling choices, each checked against the full computation."""
 import os
 
+from conftest import ROOT
 
 import mitsuba_eventfield as ef
-from conftest import ROOT
 
 FAN = os.path.join(ROOT, "scenes", "fan", "fan.xml")
 SMALL = {"width": 48, "height": 36}

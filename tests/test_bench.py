@@ -3,7 +3,8 @@ import math
 import os
 
 from conftest import ROOT
-from mitsuba_eventfield import bench
+
+from mitsuba_eventfield.evaluation import bench
 
 
 def test_pareto_front():

@@ -4,9 +4,9 @@ import os
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
 import mitsuba_eventfield as ef
-from conftest import ROOT
 from mitsuba_eventfield.calibration import CalibrationError, fit_depth, fit_galvo, fit_tracks, track_point
 from mitsuba_eventfield.optics import galvo as go
 
@@ -122,8 +122,8 @@ def test_refusals_with_reasons():
 def _mosaic(offsets, n=3, tile=64, seed=4):
     """A kaleidoscope-like mosaic: view (i, j) is a band-limited texture shifted by offsets[(i, j)], odd tiles
     mirrored, so neighbouring tiles are mirror images across their seam."""
-    from scipy.ndimage import fourier_shift
     from lf_scenes import texture
+    from scipy.ndimage import fourier_shift
     base = texture(seed, size=tile + 32, blob=2).astype(np.float64)
     half = (n - 1) // 2
     mosaic = np.zeros((n * tile, n * tile))
@@ -153,6 +153,7 @@ def test_kaleidoscope_registration_recovers_offsets(capsys):
 def test_kaleidoscope_tiles_found_on_a_render_and_flat_field():
     import mitsuba as mi
     from lf_scenes import kaleido_sensor, two_planes
+
     from mitsuba_eventfield.calibration.kaleidoscope import find_tiles, flat_field, register
     ef.set_variant("llvm_ad_mono")
     target = two_planes(mi, kaleido_sensor(film=240, spp=4), blank_strip=False)   # a calibration target ...
@@ -197,6 +198,7 @@ def test_calibration_file_round_trip_and_use_in_refocus(tmp_path):
     (mirror distance off by 2x) gets back the right depth from depth from focus."""
     from mitsuba_eventfield.calibration import apply_to_lightfield, load_calibration, optics_record, save_calibration
     from mitsuba_eventfield.calibration.depth import fit_depth
+
     # depth calibration from exact geometry of the LED scene's galvo (the test above checks the LED fit)
     f = go.focal_length_px(W, 40.0)
     z = np.array([0.4, 0.7, 1.0, 1.6, 2.5])

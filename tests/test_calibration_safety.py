@@ -5,10 +5,11 @@ import os
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
 import mitsuba_eventfield as ef
-from conftest import ROOT
-from mitsuba_eventfield import cli, scanrate
+from mitsuba_eventfield import cli
+from mitsuba_eventfield.apps import scanrate
 from mitsuba_eventfield.calibration import (CalibrationError, PatchTrack, check_optics, fit_depth, fit_tracks,
                                             galvo_scale_limit, load_calibration, optics_difference, optics_record,
                                             register, same_optics, save_calibration)

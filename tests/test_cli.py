@@ -5,7 +5,6 @@ import sys
 
 import h5py
 import pytest
-
 from conftest import DEMO, ROOT
 
 BROKEN_XML = '<scene version="3.0.0"><shape type="sphere"></scene>'

@@ -7,8 +7,8 @@ import sys
 import time
 
 import pytest
-
 from conftest import ROOT
+
 from mitsuba_eventfield import cli
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")

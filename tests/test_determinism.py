@@ -1,8 +1,8 @@
 """Fixed sampler seed: static scenes are silent at any spp; equal seeds give equal streams."""
 import pytest
+from conftest import DEMO
 
 import mitsuba_eventfield as ef
-from conftest import DEMO
 
 
 @pytest.mark.parametrize("spp", [1, 4, 16])

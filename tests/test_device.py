@@ -7,7 +7,7 @@ import pytest
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.device import GalvoController, GalvoSpec, SafetyError, simulated, simulated_visa
-from mitsuba_eventfield.scan import curve_to_dict
+from mitsuba_eventfield.optics.scan import curve_to_dict
 
 CIRCLE = ef.make_curve("circle", frequency=250.0, amplitude=0.5)     # x: phase 90, y: phase 0
 NO_SLEEP = lambda s: None  # noqa: E731
@@ -125,6 +125,7 @@ def test_envelope_derates_with_frequency():
 
 def test_captured_events_carry_the_same_scan_description(tmp_path):
     import numpy as np
+
     from mitsuba_eventfield.device import tag_events
     c = GalvoController(simulated_visa("keysight"), "keysight", ramp_steps=1, ramp_time=0)
     c.start(CIRCLE, sleep=NO_SLEEP)
@@ -144,6 +145,7 @@ def test_daqmx_output_calls_with_a_stand_in_module(monkeypatch):
     import types
 
     import numpy as np
+
     from mitsuba_eventfield.device.daq import DAQmxOutput
     calls = []
 

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 import mitsuba_eventfield as ef
 from mitsuba_eventfield import cli
 from mitsuba_eventfield.device import GalvoController, GalvoSpec, SafetyError, simulated
-from mitsuba_eventfield.scan import Lissajous
+from mitsuba_eventfield.optics.scan import Lissajous
 
 DIALECTS = ("keysight", "rigol", "siglent")
 NO_SLEEP = lambda s: None  # noqa: E731

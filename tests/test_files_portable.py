@@ -14,7 +14,7 @@ import OpenEXR
 import pytest
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield import eventio
+from mitsuba_eventfield.events import io as eventio
 from mitsuba_eventfield.images import read_exr, write_exr
 
 FORMATS = [".h5", ".npz", ".txt", ".aedat4"]
@@ -265,7 +265,7 @@ HDF5_ENOSPC = """
 import errno, io, os, sys
 import numpy as np
 import mitsuba_eventfield as ef
-from mitsuba_eventfield import eventio
+from mitsuba_eventfield.events import io as eventio
 written = [0]
 def write_some(self, view):              # the disk is full after 40 kB
     if written[0] > 40_000:

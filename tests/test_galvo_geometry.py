@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield.focus import focus_measure, refine_peak
-from mitsuba_eventfield.lightfield import Disparity, LightField
+from mitsuba_eventfield.focus.measures import focus_measure, refine_peak
+from mitsuba_eventfield.lightfield.model import Disparity, LightField
 from mitsuba_eventfield.optics import galvo as go
 
 W, H, FOV, D1, SEP = 96, 72, 40.0, 0.2, 0.01

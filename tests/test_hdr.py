@@ -4,9 +4,9 @@ import subprocess
 import sys
 
 import numpy as np
-
 from conftest import ROOT
-from mitsuba_eventfield import hdr
+
+from mitsuba_eventfield.apps import hdr
 from mitsuba_eventfield.atomic import MANIFEST
 
 SCENE = os.path.join(ROOT, "scenes", "hdr_leds", "hdr_leds.xml")

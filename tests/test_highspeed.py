@@ -8,13 +8,13 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
-from mitsuba_eventfield import highspeed as hs
+
+from mitsuba_eventfield.apps import highspeed as hs
+from mitsuba_eventfield.evaluation.quality import psnr
+from mitsuba_eventfield.focus.refocus import depth_planes, refocus, track_focus
 from mitsuba_eventfield.images import read_exr
-from mitsuba_eventfield.lightfield import Disparity, LightField
-from mitsuba_eventfield.quality import psnr
-from mitsuba_eventfield.refocus import depth_planes, refocus, track_focus
+from mitsuba_eventfield.lightfield.model import Disparity, LightField
 
 FAN = os.path.join(ROOT, "scenes", "fan", "fan.xml")
 DART = os.path.join(ROOT, "scenes", "dart", "galvo.xml")
@@ -36,7 +36,7 @@ def test_fan_refocus_every_period_matches_rendered_views_and_selects_its_plane(c
     # changes them (measured 4.7%)
     assert r.conventional.shape == (96, 128) and r.conventional_blur["fan"] > 0.15
     from mitsuba_eventfield import load_scene
-    from mitsuba_eventfield.truth import centre_frame, truth_depth
+    from mitsuba_eventfield.evaluation.truth import centre_frame, truth_depth
     timed = load_scene(FAN, width=128, height=96, amplitude=2, mirror_distance=0.2)
     t_mid, half = 0.006, 0.5 / 60
     steady = np.all([np.abs(truth_depth(timed, t) - 1.5) < 0.1 for t in (t_mid - half, t_mid, t_mid + half)], axis=0)

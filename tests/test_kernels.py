@@ -1,8 +1,8 @@
 """Motion updates and event generation reuse compiled kernels: no recompilation between time steps."""
 import drjit as dr
+from conftest import steady_state_kernels
 
 import mitsuba_eventfield as ef
-from conftest import steady_state_kernels
 
 
 def _misses(history):
@@ -36,8 +36,9 @@ def test_kernel_history_sees_a_real_recompilation(demo_small):
     dr.kernel_history()
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
-        import mitsuba as mi
         import random
+
+        import mitsuba as mi
         x = dr.arange(mi.Float, 1000)
         dr.eval(x * (1.0 + random.random()))   # a literal never seen before, not even in the disk cache
         _, misses = _misses(dr.kernel_history())

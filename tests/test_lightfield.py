@@ -3,11 +3,11 @@ import math
 
 import numpy as np
 import pytest
-
-import mitsuba_eventfield as ef
 from conftest import DEMO, ROOT
 from lf_scenes import FAR, NEAR, kaleido_sensor, two_planes, view_fov_deg
-from mitsuba_eventfield import reconstruct as rc
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.lightfield import reconstruct as rc
 
 
 def _mi():
@@ -67,7 +67,8 @@ NEAR_REGION, FAR_REGION, BLANK_REGION = np.s_[10:70, 5:35], np.s_[10:70, 42:54],
 
 
 def test_refocus_matches_thin_lens_and_is_sharpest_at_each_plane(kaleido_lf, capsys):
-    from skimage.metrics import peak_signal_noise_ratio as psnr, structural_similarity as ssim
+    from skimage.metrics import peak_signal_noise_ratio as psnr
+    from skimage.metrics import structural_similarity as ssim
     mi = _mi()
     lf, optics = kaleido_lf
     pitch = abs(optics["views"][1]["subaperture"][0] - optics["views"][0]["subaperture"][0])

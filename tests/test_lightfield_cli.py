@@ -5,8 +5,8 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
+
 from mitsuba_eventfield.atomic import MANIFEST
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")

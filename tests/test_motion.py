@@ -3,9 +3,9 @@ import math
 
 import numpy as np
 import pytest
+from conftest import DEMO
 
 import mitsuba_eventfield as ef
-from conftest import DEMO
 
 
 def test_velocity_and_spin_poses():

@@ -7,13 +7,13 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
 import mitsuba_eventfield as ef
-from conftest import ROOT
-from mitsuba_eventfield import truth
-from mitsuba_eventfield.focus import focus_measure, refine_peak
+from mitsuba_eventfield.evaluation import truth
+from mitsuba_eventfield.focus.measures import focus_measure, refine_peak
 from mitsuba_eventfield.images import read_exr
-from mitsuba_eventfield.lightfield import LightField
+from mitsuba_eventfield.lightfield.model import LightField
 
 CARDS = os.path.join(ROOT, "scenes", "offaxis_cards", "offaxis_cards.xml")
 SIZE = {"width": 96, "height": 72}

@@ -4,12 +4,12 @@ import os
 import subprocess
 import sys
 
+import analytic as an
 import numpy as np
 import pytest
-
-import analytic as an
-import mitsuba_eventfield as ef
 from conftest import DEMO
+
+import mitsuba_eventfield as ef
 from mitsuba_eventfield.plugins import pixel_model as pm
 
 

@@ -3,26 +3,30 @@ import os
 import shutil
 
 import pytest
+from conftest import ROOT
 
-from mitsuba_eventfield import regression as rg
+from mitsuba_eventfield.evaluation import regression as rg
+from mitsuba_eventfield.scene import bundled_scene
+
+REFERENCES = os.path.join(ROOT, "tests", "regression")
 
 
 @pytest.mark.parametrize("case", rg.CASES, ids=[c.name for c in rg.CASES])
 def test_matches_reference(case):
-    problems = rg.compare(case, *rg.render_case(case))
+    problems = rg.compare(case, *rg.render_case(case), REFERENCES)
     assert problems == [], problems
 
 
 def test_a_changed_sensor_parameter_is_caught(tmp_path):
     galvo = next(c for c in rg.CASES if c.name == "galvo_static")
     frame, net = rg.render_case(galvo, amplitude=0.55)                 # the scan 10% larger
-    assert any("events differ" in p for p in rg.compare(galvo, frame, net))
+    assert any("events differ" in p for p in rg.compare(galvo, frame, net, REFERENCES))
     # the demo camera's field of view one degree wider: a copy of the scene with one attribute changed
     demo = next(c for c in rg.CASES if c.name == "demo")
-    src = os.path.join(rg.ROOT, "scenes", "demo")
+    src = os.path.dirname(bundled_scene("demo/demo.xml"))
     for f in os.listdir(src):
         shutil.copy(os.path.join(src, f), tmp_path / f)
     xml = (tmp_path / "demo.xml").read_text().replace('<float name="fov" value="40"/>', '<float name="fov" value="41"/>')
     (tmp_path / "demo.xml").write_text(xml)
-    problems = rg.compare(demo, *rg.render_case(demo, scene_path=str(tmp_path / "demo.xml")))
+    problems = rg.compare(demo, *rg.render_case(demo, scene_path=str(tmp_path / "demo.xml")), REFERENCES)
     assert any("frame differs" in p for p in problems)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield import scan
+from mitsuba_eventfield.optics import scan
 
 CURVES = {
     "circle": dict(frequency=250.0, amplitude=2.0, phase=30.0),

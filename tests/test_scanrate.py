@@ -7,9 +7,9 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
-from mitsuba_eventfield import highspeed, scanrate
+
+from mitsuba_eventfield.apps import highspeed, scanrate
 from mitsuba_eventfield.images import read_exr
 
 RUNNER = os.path.join(ROOT, "scenes", "runner", "runner.xml")

@@ -11,9 +11,10 @@ import sys
 import cv2
 import numpy as np
 import pytest
-
 from conftest import ROOT
-from mitsuba_eventfield import backend, slomorf
+
+from mitsuba_eventfield import backend
+from mitsuba_eventfield.apps import slomorf
 from mitsuba_eventfield.atomic import MANIFEST
 
 SCENE = os.path.join(ROOT, "scenes", "falling", "falling.xml")

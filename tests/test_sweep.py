@@ -3,9 +3,9 @@ import csv
 import os
 
 import pytest
+from conftest import ROOT
 
 import mitsuba_eventfield as ef
-from conftest import ROOT
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
 OVER = {"xml.frequency": [250, 500], "render.threshold": [0.2, 0.3]}

@@ -13,21 +13,21 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 
 
 def hdr_figure():
-    from mitsuba_eventfield import hdr
+    from mitsuba_eventfield.apps import hdr
     r = hdr.compare(os.path.join(ROOT, "scenes", "hdr_leds", "hdr_leds.xml"), depth=1.45)
     print("[HDR light field]\n" + r.report())
     return hdr.figure(r, os.path.join(HERE, "hdr.png"))
 
 
 def slomorf_figure():
-    from mitsuba_eventfield import slomorf
+    from mitsuba_eventfield.apps import slomorf
     r = slomorf.slomorf(slomorf.DEFAULT_SCENE)
     print("[SloMoRF]\n" + r.report())
     return slomorf.figure(r, os.path.join(HERE, "slomorf.png"))
 
 
 def highspeed_figure():
-    from mitsuba_eventfield import highspeed
+    from mitsuba_eventfield.apps import highspeed
     from mitsuba_eventfield.cli import FAN_DEFAULTS
     defines = dict(item.split("=") for item in FAN_DEFAULTS["define"])
     r = highspeed.refocus_planes(os.path.join(ROOT, "scenes", "fan", "fan.xml"), {"fan": 0.6, "wall": 1.5}, defines)
@@ -36,7 +36,7 @@ def highspeed_figure():
 
 
 def track_figure():
-    from mitsuba_eventfield import highspeed
+    from mitsuba_eventfield.apps import highspeed
     r = highspeed.track_focus_depth(os.path.join(ROOT, "scenes", "dart", "galvo.xml"), (0.58, 0.44, 0.78, 0.56),
                                     0.6, 1.5, 1.6, background_depth=1.8)
     print("[focus tracking, dart]\n" + r.report())
@@ -44,7 +44,7 @@ def track_figure():
 
 
 def scanrate_figure():
-    from mitsuba_eventfield import scanrate
+    from mitsuba_eventfield.apps import scanrate
     r = scanrate.run(os.path.join(ROOT, "scenes", "runner", "runner.xml"))
     print("[depth at the scan rate, runner]\n" + r.report())
     return scanrate.figure(r, os.path.join(HERE, "scanrate_runner.png"))

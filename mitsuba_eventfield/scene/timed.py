@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import backend
-from .errors import EventFieldError
+from .. import backend
+from ..errors import EventFieldError
 from .motion import Motion, load_motion, motion_path_for, parse_motion
 
 mi, dr = backend.mi, backend.dr

@@ -21,9 +21,9 @@ import math
 
 import numpy as np
 
-from .events import EventStream
-from .optics.galvo import GalvoGeometry
-from .scan import curve_from_dict, scan_period
+from ..events.stream import EventStream
+from ..optics.galvo import GalvoGeometry
+from ..optics.scan import curve_from_dict, scan_period
 
 _METHODS = {}
 
@@ -208,7 +208,7 @@ def galvo(events: EventStream, times, t_start: float | None = None, samples: int
 
 def reconstruct(events: EventStream, times, method: str = "direct", **kw):
     """Log-intensity frames of ``events`` at ``times`` (seconds) by a registered method."""
-    from .validate import check_allocation
+    from ..validate import check_allocation
     if method not in _METHODS:
         raise ValueError(f"unknown reconstruction method {method!r}; available: {', '.join(methods())}")
     n = np.size(times)

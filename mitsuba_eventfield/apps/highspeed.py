@@ -26,9 +26,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import EventFieldError
-from .render import render_events, render_frames
-from .scene import load_scene
+from ..errors import EventFieldError
+from ..scene.timed import load_scene
+from ..simulate.render import render_events, render_frames
 
 START_METHODS = ("frame", "events")
 
@@ -55,8 +55,8 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
             start: str = "frame", px_per_step: float = 1.0, spp: int = 4, progress: bool = False) -> Capture:
     """Events of ``periods`` whole scan periods (default: all of the motion file's duration) and, per period,
     the light field from the events and the ground-truth light field of the same views."""
-    from .lightfield import from_galvo, galvo_lightfields, galvo_steps_per_period
-    from .reconstruct import galvo_start_image
+    from ..lightfield.model import from_galvo, galvo_lightfields, galvo_steps_per_period
+    from ..lightfield.reconstruct import galvo_start_image
     if start not in START_METHODS:
         raise ValueError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
     _check_positive("views", views, integer=True, low=1)
@@ -154,10 +154,10 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
     conventional camera at that frame rate records around the middle period (``truth.conventional_frame``; the
     paper's 60 Hz comparison) and how far it is from the instant it is centred on, per plane's region (motion
     blur; a pinhole has no defocus to compare); None: skip."""
-    from .focus import focus_measure
-    from .quality import scores as quality_scores
-    from .refocus import refocus
-    from .truth import centre_frame, textured, truth_depth
+    from ..evaluation.quality import scores as quality_scores
+    from ..evaluation.truth import centre_frame, textured, truth_depth
+    from ..focus.measures import focus_measure
+    from ..focus.refocus import refocus
     planes = _check_planes(planes)
     cap = capture(scene_path, defines, periods, views, start, spp=spp, progress=progress)
     t0 = time.perf_counter()
@@ -188,7 +188,7 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
     t2 = time.perf_counter()
     conventional, blur = None, {}
     if conventional_fps is not None:
-        from .truth import conventional_frame
+        from ..evaluation.truth import conventional_frame
         k = len(cap.lightfields) // 2
         t_mid = float(cap.lightfields[k].times.mean())
         conventional = conventional_frame(cap.timed, t_mid, conventional_fps, spp=spp)
@@ -267,8 +267,8 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     metric across the field. ``captured``: a ``capture`` of the
     scene to reuse. Truth: the median Mitsuba depth of the region's pixels nearer than ``object_far`` (the
     object's pixels, the background being farther), with their 25th-75th percentiles (``truth_spread``)."""
-    from .refocus import depth_planes, refocus, track_focus
-    from .truth import truth_depth
+    from ..evaluation.truth import truth_depth
+    from ..focus.refocus import depth_planes, refocus, track_focus
     if not (0 < near < far and object_far > near):
         raise ValueError(f"near = {near}, far = {far}, object_far = {object_far}: need 0 < near < far and "
                          "object_far > near (scene units)")
@@ -309,7 +309,7 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
 def _save_figure(fig, path):
     import matplotlib.pyplot as plt
 
-    from .atomic import atomic_output
+    from ..atomic import atomic_output
     with atomic_output(path, "figure") as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
@@ -395,8 +395,8 @@ def write_planes(result: PlaneRefocus, out_dir: str) -> dict:
     the figure and metrics.json (scores, selectivity, time split, scene and optics metadata)."""
     import os
 
-    from .atomic import write_json
-    from .images import to_uint8, write_exr, write_png
+    from ..atomic import write_json
+    from ..images import to_uint8, write_exr, write_png
     os.makedirs(out_dir, exist_ok=True)
     meta = {k: v for k, v in result.meta.items()}
     paths = {}
@@ -421,8 +421,8 @@ def write_track(result: FocusTrack, out_dir: str) -> dict:
     """PNG per period (refocused on the tracked depth), an EXR of them, the figure and metrics.json."""
     import os
 
-    from .atomic import write_json
-    from .images import to_uint8, write_exr, write_png
+    from ..atomic import write_json
+    from ..images import to_uint8, write_exr, write_png
     os.makedirs(out_dir, exist_ok=True)
     for k, img in enumerate(result.images):
         write_png(os.path.join(out_dir, f"tracked_p{k:03d}.png"), to_uint8(img))

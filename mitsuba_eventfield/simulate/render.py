@@ -18,14 +18,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import backend
-from ._version import __version__
-from .errors import EventFieldError
-from .events import EventStream
-from .eventio import H5EventWriter, format_of, write_events
-from .atomic import check_writable
-from .scene import TimedScene, load_scene
-from .validate import MAX_DURATION_S, MAX_STEPS, available_memory
+from .. import backend
+from .._version import __version__
+from ..atomic import check_writable
+from ..errors import EventFieldError
+from ..events.io import H5EventWriter, format_of, write_events
+from ..events.stream import EventStream
+from ..scene.timed import TimedScene, load_scene
+from ..validate import MAX_DURATION_S, MAX_STEPS, available_memory
 
 mi, dr = backend.mi, backend.dr
 
@@ -113,8 +113,8 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
                       pixel=None):
     """The scene's eventfield integrator (or one wrapping its radiance integrator), configured for this render:
     the scene's own pixel settings, then ``preset``, then explicit values (never an earlier render's)."""
-    from .plugins import pixel_model
-    from .plugins.event_integrator import integrator_class, is_event_integrator
+    from ..plugins import pixel_model
+    from ..plugins.event_integrator import integrator_class, is_event_integrator
     integ = timed.scene.integrator()
     if not is_event_integrator(integ):  # any scene: wrap its radiance integrator
         integ = integrator_class()(_props_with_inner(integ))
@@ -384,8 +384,8 @@ def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
     through (e.g. ``truth.centre_pinhole``: a conventional camera beside the event camera)."""
     if rgb and log:
         raise EventFieldError("render_frames: rgb=True needs log=False (the event pixel's log is of luminance)")
-    from .plugins import pixel_model
-    from .plugins.event_integrator import DEFAULT_LINLOG, is_event_integrator
+    from ..plugins import pixel_model
+    from ..plugins.event_integrator import DEFAULT_LINLOG, is_event_integrator
     timed = load_scene(scene)
     spp = _check_number("spp", spp, low=0, integer=True)
     integ = timed.scene.integrator()

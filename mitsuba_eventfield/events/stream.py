@@ -87,7 +87,7 @@ class EventStream:
 
     def scan_angles(self, actual: bool = True):
         """Galvo mirror angles (x, y), mechanical radians, of every event (see ``scan.event_angles``)."""
-        from .scan import event_angles
+        from ..optics.scan import event_angles
         return event_angles(self, actual)
 
     @staticmethod

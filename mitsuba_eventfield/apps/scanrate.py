@@ -24,10 +24,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..focus.depth import depth_from_focus
+from ..lightfield.reconstruct import direct
+from ..scene import bundled_scene, load_scene
+from ..simulate.render import render_events, render_frames
+
 
 @dataclass
 class ScanRateDepth:
-    depth_maps: list                    # DepthMap per scan period (metric, field-corrected)
+    depth_maps: list                    # DepthMap per scan period (metric)
     truth: list                         # z (H, W) per period, at its middle
     textured: list                      # bool (H, W) per period: where depth is measurable
     errors: list                        # per period: {"near", "far": median |rel err|, "near_p90", "far_p90",
@@ -59,8 +64,7 @@ class ScanRateDepth:
         return "\n".join(lines)
 
 
-LED_SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes", "led_depth",
-                         "led.xml")
+LED_SCENE = "led_depth/led.xml"                     # bundled (scene.bundled_scene)
 CALIBRATION_DEPTHS = (0.4, 0.55, 0.75, 1.0, 1.4, 2.0)     # spans the runner and its wall, densest where dS/dz is
 
 
@@ -71,10 +75,9 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
     of events each; the LED's track over views integrated from the events gives the curve scale at each depth,
     and ``calibration.fit_depth`` the disparity model. Returns {"depth": DepthCalibration} for ``run``, made for
     the optics of ``scene_path`` (its ``optics`` record), which ``run`` checks against the scene it is used on."""
-    import mitsuba_eventfield as ef
-    from .calibration import fit_depth, fit_tracks, galvo_scale_limit, optics_record, track_point
-    from .scan import curve_from_dict
-    target = ef.load_scene(scene_path, **(defines or {}))
+    from ..calibration import fit_depth, fit_tracks, galvo_scale_limit, optics_record, track_point
+    from ..optics.scan import curve_from_dict
+    target = load_scene(scene_path, **(defines or {}))
     optics = target.sensor.optics_metadata()
     if optics.get("design") != "galvo":
         raise ValueError(f"{scene_path}: depth calibration needs a galvo sensor (got {optics.get('design')!r})")
@@ -87,13 +90,13 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
     limit = galvo_scale_limit(record)
     scales, scales_y = [], []
     for z in depths:
-        led = ef.load_scene(LED_SCENE, width=w, height=h, depth=float(z), radius=0.006 * float(z),
+        led = load_scene(bundled_scene(LED_SCENE), width=w, height=h, depth=float(z), radius=0.006 * float(z),
                             fov=optics["fov_x_deg"], mirror_distance=optics["mirror_distance"],
                             mirror_separation=optics["mirror_separation"], frequency=scan["frequency"],
                             amplitude=scan["amplitude"], phase=scan["phase"])
-        events = ef.render_events(led, curve.period, steps=4 * views, progress=progress)
+        events = render_events(led, curve.period, steps=4 * views, progress=progress)
         times = (np.arange(views) + 0.5) / views * curve.period
-        frames = np.exp(ef.reconstruct.direct(events, times, ef.render_frames(led, [0.0])[0], 0.0))
+        frames = np.exp(direct(events, times, render_frames(led, [0.0])[0], 0.0))
         fit = fit_tracks([track_point(frames)], times, curve, scale_limit=limit)
         scales.append(fit.scale_px_per_rad[0])
         scales_y.append(fit.scale_px_per_rad[1])
@@ -105,13 +108,12 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
 def _check_calibration(calibration: dict, scene_path: str, defines, captured):
     """The optics record of the data the calibration will act on, after refusing a calibration made for other
     optics: before rendering anything (from the scene's sensor), or from a given capture's events."""
-    import mitsuba_eventfield as ef
-    from .calibration import check_optics, optics_record
+    from ..calibration import check_optics, optics_record
     if captured is not None:
         ev = captured.events
         record = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=scene_path)
     else:
-        sensor = ef.load_scene(scene_path, **(defines or {})).sensor
+        sensor = load_scene(scene_path, **(defines or {})).sensor
         w, h = (int(v) for v in sensor.film().size())
         record = optics_record(sensor.optics_metadata(), w, h, where=scene_path)
     check_optics(calibration, record)
@@ -127,9 +129,8 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
 
     Views are mapped onto the reference with the exact galvo geometry (``optics.galvo``), so the sharpest
     plane is metric depth across the field. ``captured``: a ``highspeed.capture`` of the scene to reuse."""
-    import mitsuba_eventfield as ef
+    from ..evaluation.truth import centre_frame, textured, truth_depth
     from .highspeed import capture
-    from .truth import centre_frame, textured, truth_depth
     if not (0 < near < far):
         raise ValueError(f"near = {near}, far = {far}: need 0 < near < far (scene units)")
     if not (0 <= min_confidence < 1):
@@ -144,9 +145,9 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
     maps = []
     for lf in cap.lightfields:
         if calibration:
-            from .calibration import apply_to_lightfield
+            from ..calibration import apply_to_lightfield
             lf = apply_to_lightfield(lf, calibration, record)
-        maps.append(ef.depth_from_focus(lf, near, far, planes, measure))
+        maps.append(depth_from_focus(lf, near, far, planes, measure))
     t1 = time.perf_counter()
     times = np.array([float(lf.times.mean()) for lf in cap.lightfields])
     truths, texs, errors = [], [], []
@@ -184,7 +185,7 @@ def figure(result: ScanRateDepth, path: str, columns: int = 4) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .atomic import atomic_output
+    from ..atomic import atomic_output
     n = len(result.depth_maps)
     pick = np.unique(np.linspace(0, n - 1, min(columns, n)).round().astype(int))
     lo, hi = result.meta["near"], float(np.nanmax([np.nanmax(np.where(np.isfinite(z), z, np.nan))
@@ -217,10 +218,8 @@ def figure(result: ScanRateDepth, path: str, columns: int = 4) -> str:
 
 def write_outputs(result: ScanRateDepth, out_dir: str) -> dict:
     """Per period an EXR (depth, confidence, truth) and a colour depth PNG; the figure; metrics.json."""
-    import os
-
-    from .atomic import write_json
-    from .images import depth_png, write_exr, write_png
+    from ..atomic import write_json
+    from ..images import depth_png, write_exr, write_png
     os.makedirs(out_dir, exist_ok=True)
     paths = {"exr": [], "png": []}
     near, far = result.meta["near"], result.meta["far"]

@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .render import render_events, render_frames
-from .scene import load_scene
+from ..scene.timed import load_scene
+from ..simulate.render import render_events, render_frames
 
 LDR_BITS = 8
 WELL_EXPOSED = (10, 245)        # codes a frame records with < 10% quantisation error and no clipping
@@ -67,8 +67,8 @@ def compare(scene_path: str, defines: dict | None = None, depth: float = math.in
     """Render one scan period of events of a static galvo scene, reconstruct its HDR log image and score it and
     two 8-bit exposures against the ground truth. ``depth``: distance of the scene (the scan shift scales with
     1 - pivot / depth); ``samples``: views the galvo solver uses."""
-    from .plugins.pixel_model import linlog_np
-    from .reconstruct import galvo_start_image
+    from ..lightfield.reconstruct import galvo_start_image
+    from ..plugins.pixel_model import linlog_np
     timed = load_scene(scene_path, **(defines or {}))
     if not timed.is_static:
         raise ValueError(f"{scene_path}: HDR reconstruction from the scan alone needs a static scene")
@@ -115,7 +115,7 @@ def figure(result: HDRComparison, path: str) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .atomic import atomic_output
+    from ..atomic import atomic_output
     lo, hi = float(result.truth_log.min()), float(result.truth_log.max())     # the full range: clipping shows
     panels = [("ground truth (log)", result.truth_log)] + [
         (f"{name}: |err| {result.errors[name]['all']:.2f} (worst region {result.errors[name]['worst_region']:.2f})",

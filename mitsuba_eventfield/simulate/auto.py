@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .backend import set_variant
+from ..backend import set_variant
+from ..scene.timed import load_scene
 from .render import render_frames
-from .scene import load_scene
 
 
 @dataclass

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .atomic import atomic_output
-from .errors import EventFieldError
-from .events import EventStream
+from ..atomic import atomic_output
+from ..errors import EventFieldError
+from .stream import EventStream
 
 
 def event_frame_rgb(events: EventStream, t0_us=None, t1_us=None, saturation: int | None = None) -> np.ndarray:
@@ -33,7 +33,7 @@ def write_preview(path: str, events: EventStream, t0_us=None, t1_us=None, scale:
     import cv2
     if not path.lower().endswith(".png"):
         raise EventFieldError(f"{path}: preview must be a .png file")
-    from .validate import number
+    from ..validate import number
     scale = number(scale, "scale", 1, 64, integer=True)
     if events.width == 0 or events.height == 0:
         raise EventFieldError("cannot preview a 0x0 sensor")

@@ -21,9 +21,9 @@ import os
 import time
 from dataclasses import dataclass, field
 
-from .errors import EventFieldError
-from .render import render_events
-from .scene import load_scene
+from ..errors import EventFieldError
+from ..scene.timed import load_scene
+from ..simulate.render import render_events
 
 METRICS = ("events", "rate_ev_s", "on_fraction", "dropped_readout", "wall_s", "render_s")
 _PREFIXES = ("xml.", "render.", "pixel.")
@@ -46,7 +46,7 @@ class SweepTable:
     def to_csv(self, path: str) -> str:
         import csv
 
-        from .atomic import atomic_output
+        from ..atomic import atomic_output
         with atomic_output(path, "sweep table") as tmp, open(tmp, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=self.columns)
             w.writeheader()
@@ -59,7 +59,7 @@ class SweepTable:
             import pyarrow.parquet as pq
         except ImportError:
             raise EventFieldError("Parquet export needs pyarrow (pip install pyarrow); CSV needs nothing") from None
-        from .atomic import atomic_output
+        from ..atomic import atomic_output
         with atomic_output(path, "sweep table") as tmp:
             pq.write_table(pa.Table.from_pylist(self.rows), tmp)
         return path
@@ -96,7 +96,7 @@ def run_point(scene: str, point: dict, out_dir: str | None = None, keep_events: 
                on_fraction=r["on"] / r["events"] if r["events"] else 0.0, dropped_readout=r["dropped_readout"],
                wall_s=time.perf_counter() - t0, render_s=r["render_s"], events_path=out)
     if out_dir:
-        from .atomic import atomic_output
+        from ..atomic import atomic_output
         with atomic_output(os.path.join(out_dir, f"point-{key}.json"), "sweep point") as tmp, open(tmp, "w") as f:
             json.dump(row, f, default=str)
     return row

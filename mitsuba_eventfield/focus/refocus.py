@@ -20,8 +20,8 @@ import math
 import cv2
 import numpy as np
 
-from .focus import focus_measure, refine_peak
-from .lightfield import LightField
+from ..lightfield.model import LightField
+from .measures import focus_measure, refine_peak
 
 
 def _warp(img, homography, border=cv2.BORDER_CONSTANT, interpolation=cv2.INTER_LANCZOS4):

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..optics.galvo import GalvoGeometry
+from ..optics.scan import curve_from_dict, scan_period
 from . import reconstruct as rc
-from .optics.galvo import GalvoGeometry
-from .scan import curve_from_dict, scan_period
 from .views import extract_views
 
 

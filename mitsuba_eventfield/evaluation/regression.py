@@ -8,6 +8,9 @@ beyond them (a test perturbs a sensor parameter on purpose and checks that the c
 
     eventfield regression            # compare with tests/regression/ (exit 1 on a difference)
     eventfield regression --bless    # re-render the references on purpose, after a deliberate change
+
+The references are a folder the caller names (the repository keeps them in tests/regression/); the scenes are
+the bundled ones (``scene.bundled_scene``), so this works from an installed package too.
 """
 from __future__ import annotations
 
@@ -16,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-REFERENCE_DIR = os.path.join(ROOT, "tests", "regression")
+from ..scene import bundled_scene, load_scene
+from ..simulate.render import render_events, render_frames
 
 # frame: mean relative difference and its 99th percentile; events: total count and per-pixel net count
 FRAME_MEAN_TOL, FRAME_P99_TOL = 0.005, 0.05
@@ -27,7 +30,7 @@ EVENT_TOTAL_TOL, EVENT_PIXEL_TOL = 0.03, 0.05
 @dataclass(frozen=True)
 class Case:
     name: str
-    scene: str                 # path relative to the repository
+    scene: str                 # bundled scene (scene.bundled_scene)
     defines: tuple             # XML <default> values
     frame_time: float
     duration: float
@@ -35,19 +38,18 @@ class Case:
 
 
 CASES = (
-    Case("demo", "scenes/demo/demo.xml", (("width", 48), ("height", 36)), 0.01, 0.01, 10),
-    Case("galvo_static", "scenes/galvo_static/galvo_static.xml", (("width", 48), ("height", 36)), 0.0, 0.004, 16),
-    Case("fan", "scenes/fan/fan.xml", (("width", 48), ("height", 36)), 0.002, 0.004, 16),
-    Case("kaleidoscope_grid", "scenes/moving_grid/kaleidoscope.xml", (("views_px", 60),), 0.0, 0.004, 8),
+    Case("demo", "demo/demo.xml", (("width", 48), ("height", 36)), 0.01, 0.01, 10),
+    Case("galvo_static", "galvo_static/galvo_static.xml", (("width", 48), ("height", 36)), 0.0, 0.004, 16),
+    Case("fan", "fan/fan.xml", (("width", 48), ("height", 36)), 0.002, 0.004, 16),
+    Case("kaleidoscope_grid", "moving_grid/kaleidoscope.xml", (("views_px", 60),), 0.0, 0.004, 8),
 )
 
 
 def render_case(case: Case, scene_path: str | None = None, **extra_defines):
     """(frame (H, W) linear radiance, net event counts (H, W)) of a case."""
-    import mitsuba_eventfield as ef
-    timed = ef.load_scene(scene_path or os.path.join(ROOT, case.scene), **dict(case.defines, **extra_defines))
-    frame = ef.render_frames(timed, [case.frame_time], log=False)[0]
-    events = ef.render_events(timed, case.duration, steps=case.steps)
+    timed = load_scene(scene_path or bundled_scene(case.scene), **dict(case.defines, **extra_defines))
+    frame = render_frames(timed, [case.frame_time], log=False)[0]
+    events = render_events(timed, case.duration, steps=case.steps)
     return frame.astype(np.float32), events.signed_counts()
 
 
@@ -55,9 +57,9 @@ def _paths(case: Case, directory: str):
     return os.path.join(directory, f"{case.name}_frame.exr"), os.path.join(directory, f"{case.name}_events.png")
 
 
-def bless(directory: str = REFERENCE_DIR, cases=CASES) -> list:
-    from ._version import __version__
-    from .images import write_exr, write_png
+def bless(directory: str, cases=CASES) -> list:
+    from .._version import __version__
+    from ..images import write_exr, write_png
     os.makedirs(directory, exist_ok=True)
     written = []
     for case in cases:
@@ -69,11 +71,11 @@ def bless(directory: str = REFERENCE_DIR, cases=CASES) -> list:
     return written
 
 
-def compare(case: Case, frame: np.ndarray, net: np.ndarray, directory: str = REFERENCE_DIR) -> list:
+def compare(case: Case, frame: np.ndarray, net: np.ndarray, directory: str) -> list:
     """Differences beyond tolerance, as readable strings (empty: matches the reference)."""
     import cv2
 
-    from .images import read_exr
+    from ..images import read_exr
     fpath, epath = _paths(case, directory)
     if not (os.path.exists(fpath) and os.path.exists(epath)):
         return [f"{case.name}: no reference in {directory} (run `eventfield regression --bless`)"]
@@ -95,7 +97,7 @@ def compare(case: Case, frame: np.ndarray, net: np.ndarray, directory: str = REF
     return problems
 
 
-def check_all(directory: str = REFERENCE_DIR, cases=CASES) -> list:
+def check_all(directory: str, cases=CASES) -> list:
     problems = []
     for case in cases:
         problems += compare(case, *render_case(case), directory=directory)

@@ -17,12 +17,12 @@ import time
 
 import numpy as np
 
-from .backend import set_variant
-from .lightfield import from_events
-from .reconstruct import direct
-from .refocus import refocus
-from .render import render_events, render_frames
-from .scene import load_scene
+from ..backend import set_variant
+from ..focus.refocus import refocus
+from ..lightfield.model import from_events
+from ..lightfield.reconstruct import direct
+from ..scene.timed import load_scene
+from ..simulate.render import render_events, render_frames
 
 DEFAULT = {"name": "default (4 spp, uniform)", "spp": 4, "steps_factor": 1}
 SETTINGS = [
@@ -108,7 +108,7 @@ def chart(rows, path: str, title: str = "") -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .atomic import atomic_output
+    from ..atomic import atomic_output
     pts = [r for r in rows if r["setting"] != REFERENCE["name"]]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, metric, label in ((axes[0], "product_error", "refocused light field: relative error"),

@@ -18,8 +18,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .focus import IMAGE_MEASURES, focus_measure, parabola_offset, refine_peak  # noqa: F401  (focus_measure, refine_peak: re-exported)
-from .lightfield import LightField
+from ..lightfield.model import LightField
+from .measures import (IMAGE_MEASURES, focus_measure,  # noqa: F401  (focus_measure, refine_peak: re-exported)
+                       parabola_offset, refine_peak)
 from .refocus import aligned_views, depth_planes, refocus
 
 MEASURES = IMAGE_MEASURES + ("variance",)

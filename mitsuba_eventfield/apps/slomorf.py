@@ -58,12 +58,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ConfigError
-from .render import render_events, render_frames
-from .scene import load_scene
+from ..errors import ConfigError
+from ..scene import bundled_scene, load_scene
+from ..simulate.render import render_events, render_frames
 
-DEFAULT_SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes", "falling",
-                             "falling.xml")
+DEFAULT_SCENE = bundled_scene("falling/falling.xml")
 FPS_RANGE = (1.0, 10000.0)          # RGB camera frame rate (Hz)
 FACTOR_RANGE = (2, 64)              # frames made per RGB frame interval
 FUSIONS = ("events", "time")
@@ -151,15 +150,15 @@ def interpolate(key_a, key_b, log_ab, log_tb, count_at=None, count_tb=None, w_b=
 
 def _variant_for(color: bool):
     """Our variant of the active backend (cuda/llvm) in mono or colour."""
-    from . import backend
+    from .. import backend
     current = backend.mi.variant() or ""
     return backend.set_variant(current.split("_")[0] if current.split("_")[0] in ("cuda", "llvm") else None, color)
 
 
 def _depth_views(timed, times, optics):
     """True depth (Mitsuba's depth AOV) of the reference (centre) view at each time: (T, h, w)."""
-    from . import backend
-    from .views import extract_views
+    from .. import backend
+    from ..lightfield.views import extract_views
     mi = backend.mi
     integ = mi.load_dict({"type": "aov", "aovs": "z:depth"})
     out = []
@@ -171,7 +170,7 @@ def _depth_views(timed, times, optics):
 
 
 def _frame_scores(est8, truth8, moving):
-    from .quality import psnr, ssim
+    from ..evaluation.quality import psnr, ssim
     est, truth = est8 / 255.0, truth8 / 255.0          # display codes, white = 1 (``quality``)
     moving_psnr = psnr(est[moving], truth[moving], 1.0) if moving.any() else float("nan")
     return psnr(est, truth, 1.0), ssim(est, truth, 1.0), moving_psnr
@@ -188,7 +187,7 @@ def _aggregate(rows):
 def _focus_check(refocused, depth_views, depths, is_key):
     """For each refocus depth: over the interpolated instants, the pixels whose true depth is within
     FOCUS_BAND (inverse depth) of it, and their Tenengrad focus in the image refocused at every depth."""
-    from .focus import focus_measure
+    from ..focus.measures import focus_measure
     inv = 1.0 / np.asarray(depths)
     regions = []
     for i, z in enumerate(depths):
@@ -220,16 +219,16 @@ def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, fa
     ``duration``: seconds (default: the motion file's), cut to whole RGB frame intervals; ``steps_per_frame``:
     event-render steps per RGB frame interval (default 4 x factor); ``spp``/``seed``: for events and frames.
     """
-    from . import reconstruct
-    from .events import EventStream
-    from .lightfield import from_spatial
-    from .refocus import refocus
+    from ..events.stream import EventStream
+    from ..focus.refocus import refocus
+    from ..lightfield import reconstruct
+    from ..lightfield.model import from_spatial
     fps, factor, depths = _check(fps, factor, depths, duration)
     steps_per_frame = 4 * factor if steps_per_frame is None else int(steps_per_frame)
     if steps_per_frame < 1:
         raise ConfigError(f"steps_per_frame = {steps_per_frame}: must be an integer >= 1")
     defines = dict(defines or {})
-    from . import backend
+    from .. import backend
     previous = backend.mi.variant()
     split = {}
     try:
@@ -353,7 +352,7 @@ def write_outputs(result: SloMoRFResult, out_dir: str, video_fps: float = 24.0, 
     from PIL import Image
     from PIL.PngImagePlugin import PngInfo
 
-    from .atomic import atomic_output, write_json
+    from ..atomic import atomic_output, write_json
     t0 = time.perf_counter()
     os.makedirs(os.path.join(out_dir, "frames"), exist_ok=True)
     os.makedirs(os.path.join(out_dir, "refocus"), exist_ok=True)
@@ -434,8 +433,8 @@ def _video_frame(rf8_t, depths, t, is_key):
 def figure(result: SloMoRFResult, path: str) -> str:
     """Summary: the two RGB keyframes around the middle of the clip, the middle interpolated instant (truth,
     events, linear blend; centre view) and its refocus at every depth (events vs truth)."""
-    from .atomic import atomic_output
-    from .views import extract_views
+    from ..atomic import atomic_output
+    from ..lightfield.views import extract_views
     factor = result.meta["factor"]
     key_idx = np.nonzero(result.is_key)[0]
     a = key_idx[max(0, len(key_idx) // 2 - 1)]

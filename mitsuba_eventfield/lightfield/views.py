@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .events import EventStream
+from ..events.stream import EventStream
 
 
 @dataclass

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .optics.galvo import pixel_ray_slopes
-from .render import render_frames
+from ..optics.galvo import pixel_ray_slopes
+from ..simulate.render import render_frames
 
 
 def centre_pinhole(timed, spp: int = 1):

@@ -25,7 +25,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 DEFAULT_MAX_ANGLE_DEG = 10.0   # mechanical; +-10 V at 1 V/deg on a GVS01x-class controller (DESIGN.md section 5)
 TWO_PI = 2.0 * math.pi
@@ -230,8 +230,8 @@ class TabulatedCurve(ScanCurve):
             ax, ay = np.asarray(tx), np.asarray(ty)
             g = lambda a, i: a[i]  # noqa: E731
         else:
-            import mitsuba as mi
             import drjit as dr
+            import mitsuba as mi
             i0 = mi.UInt32(dr.floor(u)) % n
             i1 = (i0 + 1) % n
             w = u - dr.floor(u)

@@ -30,10 +30,10 @@ import warnings
 
 import numpy as np
 
-from ._version import __version__
-from .atomic import atomic_output, check_writable, remove_stale_partials, temporary_name
-from .errors import EventFieldError
-from .events import EventStream
+from .._version import __version__
+from ..atomic import atomic_output, check_writable, remove_stale_partials, temporary_name
+from ..errors import EventFieldError
+from .stream import EventStream
 
 FORMATS = {".h5": "h5", ".hdf5": "h5", ".npz": "npz", ".txt": "txt", ".aedat4": "aedat4"}
 H5_FORMAT_VERSION = 1
