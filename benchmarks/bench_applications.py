@@ -26,7 +26,7 @@ RENDER_STAGES = {"render_events", "render", "render_rgb_frames"}
 
 def _applications():
     from mitsuba_eventfield.apps import hdr, highspeed, scanrate, slomorf
-    from mitsuba_eventfield.cli import FAN_DEFAULTS
+    from mitsuba_eventfield.apps.highspeed import FAN_DEFAULTS
     fan_defines = dict(item.split("=") for item in FAN_DEFAULTS["define"])
     return {
         "slomorf (falling, 360x360, 8x)": lambda: slomorf.slomorf(slomorf.DEFAULT_SCENE),

@@ -26,7 +26,7 @@ LAYERS = [
     {"apps"},
     {"cli"},
 ]
-FACADE_ALLOWED = {"mitsuba_eventfield", "mitsuba_eventfield.cli"}
+FACADE_ALLOWED = {"mitsuba_eventfield"}
 MAPPED = {"plugins", "calibration", "device", "scenes"}     # subpackages installed from top-level folders
 
 

@@ -28,7 +28,7 @@ def slomorf_figure():
 
 def highspeed_figure():
     from mitsuba_eventfield.apps import highspeed
-    from mitsuba_eventfield.cli import FAN_DEFAULTS
+    from mitsuba_eventfield.apps.highspeed import FAN_DEFAULTS
     defines = dict(item.split("=") for item in FAN_DEFAULTS["define"])
     r = highspeed.refocus_planes(os.path.join(ROOT, "scenes", "fan", "fan.xml"), {"fan": 0.6, "wall": 1.5}, defines)
     print("[high-speed refocus, fan]\n" + r.report())

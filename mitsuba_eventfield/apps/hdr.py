@@ -59,6 +59,8 @@ class HDRComparison:
                  "mean |log error|       all    bright    dark   worst region"]
         for name, e in self.errors.items():
             lines.append(f"  {name:<14} {e['all']:9.3f} {e['bright']:9.3f} {e['dark']:7.3f} {e['worst_region']:9.3f}")
+        if "time_split_s" in self.meta:
+            lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
         return "\n".join(lines)
 
 
@@ -131,3 +133,19 @@ def figure(result: HDRComparison, path: str) -> str:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     return path
+
+
+def write_outputs(result: HDRComparison, out_dir: str) -> dict:
+    """The truth and every estimate as log EXRs, the figure and metrics.json in ``out_dir``; their paths."""
+    import os
+
+    from ..atomic import write_json
+    from ..images import write_exr
+    os.makedirs(out_dir, exist_ok=True)
+    meta = {k: v for k, v in result.meta.items() if k != "time_split_s"}
+    exr = [write_exr(os.path.join(out_dir, "truth.exr"), {"log": result.truth_log}, meta)]
+    for name, img in result.estimates.items():
+        exr.append(write_exr(os.path.join(out_dir, f"{name}.exr"), {"log": img}, meta))
+    metrics = os.path.join(out_dir, "metrics.json")
+    write_json(metrics, {"errors": result.errors, "dynamic_range": result.dynamic_range, **result.meta})
+    return {"figure": figure(result, os.path.join(out_dir, "hdr.png")), "exr": exr, "metrics": metrics}

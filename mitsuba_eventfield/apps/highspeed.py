@@ -41,6 +41,10 @@ def _check_positive(name, value, integer=False, low=0.0):
     return value
 
 
+# The fan's documented set-up (docs/gallery): larger film and scan than the scene's own defaults, two planes.
+FAN_DEFAULTS = {"define": ["width=240", "height=180", "amplitude=2", "mirror_distance=0.2"],
+                "plane": ["fan=0.6", "wall=1.5"]}
+
 @dataclass
 class Capture:
     timed: object

@@ -1,0 +1,161 @@
+"""The paper's applications, one command each: ``hdr``, ``highspeed``, ``track-focus``, ``slomorf``,
+``scanrate-depth``. Each runs the application's Python function, writes its outputs and prints its report."""
+from __future__ import annotations
+
+import os
+
+from ..errors import EventFieldError
+from ..scene.bundled import bundled_scene
+from ..validate import MAX_DURATION_S, MAX_PLANES, MAX_SPP, MAX_STEPS, MAX_VIEWS, number_list
+from .args import add_defines, defines, num, pairs
+
+
+def add_parsers(sub) -> None:
+    hd = sub.add_parser("hdr", help="HDR light field of a static galvo scene: events vs 8-bit exposures")
+    hd.add_argument("scene", nargs="?", default=bundled_scene("hdr_leds/hdr_leds.xml"))
+    hd.add_argument("-o", "--output", default="out/hdr", help="output directory (EXRs, figure, metrics JSON)")
+    add_defines(hd)
+    hd.add_argument("--depth", type=num(0, lo_open=True), default=1.45,
+                    help="scene distance for the scan shifts (hdr_leds: 1.45)")
+    hd.add_argument("--steps", type=num(1, MAX_STEPS, integer=True), default=64, help="render steps over the scan period")
+    hd.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=4)
+    _add_galvo_apps(sub)
+    sm = sub.add_parser("slomorf", help="slow-motion refocus: kaleidoscope events + 120 fps RGB frames, scored")
+    sm.add_argument("scene", nargs="?", help="kaleidoscope scene (default: the bundled scenes/falling)")
+    sm.add_argument("-o", "--output", default="out/slomorf", help="output directory (frames, video, metrics)")
+    add_defines(sm)
+    sm.add_argument("--fps", type=num(0, 1e4, lo_open=True), default=120.0, help="RGB camera frame rate (default 120)")
+    sm.add_argument("--factor", type=num(2, 64, integer=True), default=8, help="frames per RGB frame interval (default 8)")
+    sm.add_argument("--depths", default="0.55,0.8,1.4", help="refocus depths (default: falling's post, block, wall)")
+    sm.add_argument("--duration", type=num(0, MAX_DURATION_S, lo_open=True), help="seconds (default: the motion file's)")
+    sm.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=4)
+
+
+def _periods_and_views(parser) -> None:
+    parser.add_argument("--periods", type=num(1, 1e6, integer=True),
+                        help="scan periods (default: the motion file's duration)")
+    parser.add_argument("--views", type=num(2, MAX_VIEWS, integer=True), default=40,
+                        help="views per scan period (default 40)")
+
+
+def _add_galvo_apps(sub) -> None:
+    hs = sub.add_parser("highspeed", help="galvo refocus of every scan period on named depth planes, vs truth")
+    hs.add_argument("scene", nargs="?", default=bundled_scene("fan/fan.xml"))
+    hs.add_argument("-o", "--output", default="out/highspeed", help="output directory (EXRs, PNGs, figure, metrics)")
+    add_defines(hs, help_text="XML parameters (for the fan, on top of width=240 height=180 amplitude=2 "
+                              "mirror_distance=0.2)")
+    hs.add_argument("--plane", action="append", default=None, metavar="NAME=DEPTH",
+                    help="refocus plane (repeatable; default for the fan: fan=0.6 wall=1.5)")
+    _periods_and_views(hs)
+    hs.add_argument("--start", choices=("frame", "events"), default="frame",
+                    help="start frame the views integrate onto: one rendered frame, or the galvo solver")
+    tf = sub.add_parser("track-focus", help="galvo focus tracking of an object moving in depth, vs Mitsuba depth")
+    tf.add_argument("scene", nargs="?", default=bundled_scene("dart/galvo.xml"))
+    tf.add_argument("-o", "--output", default="out/track", help="output directory (PNGs, EXR, figure, metrics)")
+    add_defines(tf)
+    tf.add_argument("--roi", type=num(0, 1), nargs=4, default=[0.58, 0.44, 0.78, 0.56],
+                    metavar=("X0", "Y0", "X1", "Y1"),
+                    help="object region in the first period, fractions of the image (default: the dart)")
+    tf.add_argument("--near", type=num(0, lo_open=True), default=0.6, help="nearest depth searched (default 0.6)")
+    tf.add_argument("--far", type=num(0, lo_open=True), default=1.5, help="farthest depth searched (default 1.5)")
+    tf.add_argument("--object-far", type=num(0, lo_open=True), default=1.6,
+                    help="ground truth: object pixels are nearer than this (default 1.6; the dart's wall is at 1.8)")
+    tf.add_argument("--background", type=num(0, lo_open=True), default=1.8,
+                    help="background depth for comparison (default 1.8)")
+    tf.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=24,
+                    help="depth planes searched (default 24)")
+    _periods_and_views(tf)
+    sd = sub.add_parser("scanrate-depth", help="a metric depth map per galvo scan period, vs Mitsuba's depth")
+    sd.add_argument("scene", nargs="?", default=bundled_scene("runner/runner.xml"))
+    sd.add_argument("-o", "--output", default="out/scanrate", help="output directory (EXRs, PNGs, figure, metrics)")
+    add_defines(sd)
+    _periods_and_views(sd)
+    sd.add_argument("--near", type=num(0, lo_open=True), default=0.4, help="nearest depth plane (default 0.4)")
+    sd.add_argument("--far", type=num(0, lo_open=True), default=4.0, help="farthest depth plane (default 4)")
+    sd.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=32,
+                    help="depth planes, uniform in inverse depth (default 32)")
+    sd.add_argument("--min-confidence", type=num(0, 1), default=0.6, help="pixels scored and shown (default 0.6)")
+    sd.add_argument("--split-depth", type=num(0, lo_open=True), default=1.2,
+                    help="errors reported for pixels nearer / farther than this (default 1.2: runner / wall)")
+    cal = sd.add_mutually_exclusive_group()
+    cal.add_argument("--calibration", help="calibration JSON (eventfield calibrate) instead of the nominal optics")
+    cal.add_argument("--calibrate", action="store_true",
+                     help="calibrate depth first from LED captures through the same galvo (scenes/led_depth), save "
+                          "it as OUTPUT/calibration.json and use it")
+
+
+def _application(run, write, wrote) -> int:
+    """Run an application, write its outputs, print its report: bad input is one line, no traceback."""
+    try:
+        result = run()
+        paths = write(result)
+    except ValueError as e:
+        raise EventFieldError(str(e)) from None
+    print(result.report())
+    print("wrote " + wrote(paths))
+    return 0
+
+
+def run_hdr(a) -> int:
+    from ..apps import hdr
+    return _application(lambda: hdr.compare(a.scene, defines(a), a.depth, a.steps, spp=a.spp, progress=True),
+                        lambda r: hdr.write_outputs(r, a.output),
+                        lambda p: f"{p['figure']}, EXRs (log) and {p['metrics']}")
+
+
+def run_highspeed(a) -> int:
+    from ..apps import highspeed
+    fan = os.path.basename(a.scene) == "fan.xml"
+
+    def run():
+        scene_defines = pairs((highspeed.FAN_DEFAULTS["define"] if fan else []) + a.define, "-D")
+        planes = pairs(a.plane if a.plane is not None else (highspeed.FAN_DEFAULTS["plane"] if fan else []),
+                       "--plane")
+        return highspeed.refocus_planes(a.scene, planes, scene_defines, a.periods, a.views, a.start, progress=True)
+    return _application(run, lambda r: highspeed.write_planes(r, a.output),
+                        lambda p: f"{p['figure']}, per-plane EXRs and PNGs, {p['metrics']}")
+
+
+def run_track_focus(a) -> int:
+    from ..apps import highspeed
+    return _application(
+        lambda: highspeed.track_focus_depth(a.scene, a.roi, a.near, a.far, a.object_far, a.planes, a.background,
+                                            defines(a), a.periods, a.views, progress=True),
+        lambda r: highspeed.write_track(r, a.output),
+        lambda p: f"{p['figure']}, per-period PNGs, {p['exr']}, {p['metrics']}")
+
+
+def run_scanrate_depth(a) -> int:
+    from ..apps import scanrate
+    from ..calibration import load_calibration, save_calibration
+    calibration = load_calibration(a.calibration) if a.calibration else None
+    if a.calibrate:
+        try:
+            calibration = scanrate.calibrate_depth(a.scene, defines(a), progress=True)
+        except ValueError as e:
+            raise EventFieldError(str(e)) from None
+        os.makedirs(a.output, exist_ok=True)
+        d = calibration["depth"]
+        print(f"depth calibration (LED at {len(d.depths)} depths): pivot {d.pivot:.4g}, rms {d.rms_inverse:.3f} "
+              f"px/rad -> " + save_calibration(os.path.join(a.output, "calibration.json"), **calibration))
+    return _application(
+        lambda: scanrate.run(a.scene, defines(a), a.periods, a.views, a.near, a.far, a.planes,
+                             min_confidence=a.min_confidence, split_depth=a.split_depth, calibration=calibration,
+                             progress=True),
+        lambda r: scanrate.write_outputs(r, a.output),
+        lambda p: f"{p['figure']}, {len(p['exr'])} depth EXRs and PNGs, {p['metrics']}")
+
+
+def run_slomorf(a) -> int:
+    from ..apps import slomorf
+    depths = number_list(a.depths, "--depths", lo=0, lo_open=True)
+    return _application(
+        lambda: slomorf.slomorf(a.scene or slomorf.DEFAULT_SCENE, defines(a), a.fps, a.factor, a.duration, depths,
+                                a.spp, progress=True),
+        lambda r: slomorf.write_outputs(r, a.output),
+        lambda p: f"{a.output}: {len(p['frames'])} frames, {len(p['refocus'])} refocused images, slomorf.mp4, "
+                  "slomorf.gif, slomorf.png, metrics.json")
+
+
+COMMANDS = {"hdr": run_hdr, "highspeed": run_highspeed, "track-focus": run_track_focus, "slomorf": run_slomorf,
+            "scanrate-depth": run_scanrate_depth}

@@ -1,0 +1,83 @@
+"""The argument layer every command shares: one-line parser errors, number types built on ``validate`` (one
+rule and one message for the command line and the library), one ``NAME=VALUE`` parser (``-D``, ``--plane``,
+``--pixel``), and one check of every output path before any work starts."""
+from __future__ import annotations
+
+import argparse
+import os
+
+from ..errors import ConfigError, EventFieldError
+from ..validate import number, number_list
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (the usage is one ``--help`` away); subcommands inherit the class."""
+
+    def error(self, message):
+        self.exit(2, f"eventfield: error: {message} (see {self.prog} --help)\n")
+
+
+def num(lo=None, hi=None, integer=False, lo_open=False):
+    """An argparse type: a finite number in [lo, hi] (``lo_open``: lo excluded), checked by ``validate.number``."""
+    def parse(text):
+        try:
+            return number(text, "value", lo, hi, integer=integer, lo_open=lo_open)
+        except ConfigError as e:
+            raise argparse.ArgumentTypeError(str(e).replace("value = ", "", 1)) from None
+    return parse
+
+
+def pairs(items, what: str) -> dict:
+    """{NAME: VALUE} of repeated ``NAME=VALUE`` arguments (values stay text; the scene or the caller converts)."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise EventFieldError(f"{what} {item!r}: expected NAME=VALUE")
+        out[key] = value
+    return out
+
+
+def add_defines(parser, default=None, help_text="value of an XML <default name=...> parameter, e.g. -D width=64 "
+                                                 "(repeatable)"):
+    parser.add_argument("-D", "--define", action="append", default=list(default or []), metavar="NAME=VALUE",
+                        help=help_text)
+
+
+def defines(args) -> dict:
+    return pairs(args.define, "-D")
+
+
+def times_ms(text, what="--times"):
+    return number_list(text, what, lo=0, hi=1e9)
+
+
+# Every output a subcommand writes, checked in one place before any work starts (a render must not run for
+# minutes and then fail on its output path). Files: (argument, what); directories: the -o of the applications.
+OUTPUT_FILES = {"render": (("output", "event file"), ("preview", "preview")), "preview": (("output", "preview"),),
+                "frame": (("output", "frame"),), "refocus": (("output", "refocused image"),),
+                "depth": (("output", "depth map"),), "calibrate": (("output", "calibration file"),),
+                "device": (("metadata", "metadata"),)}
+OUTPUT_DIRS = ("reconstruct", "bench", "hdr", "highspeed", "track-focus", "slomorf", "scanrate-depth")
+
+
+def check_outputs(args) -> None:
+    from ..atomic import check_output_dir, check_writable
+    for name, what in OUTPUT_FILES.get(args.command, ()):
+        if getattr(args, name, None):
+            check_writable(getattr(args, name), what)
+    if args.command in OUTPUT_DIRS:
+        check_output_dir(args.output)
+
+
+def one_line(e: BaseException) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
+def save_image(png_path, linear, meta, suffix=""):
+    """A linear image as EXR (values) and PNG (display) beside each other; returns their common root."""
+    from ..images import to_uint8, write_exr, write_png
+    root = os.path.splitext(png_path)[0] + suffix
+    write_exr(root + ".exr", {"Y": linear}, meta)
+    write_png(root + ".png", to_uint8(linear))
+    return root

@@ -1,0 +1,105 @@
+"""``calibrate galvo | depth | kaleidoscope``: calibrations from the data itself (``calibration/``)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import EventFieldError
+from ..validate import MAX_VIEWS, number_list
+from .args import num
+from .lightfield import galvo_frames, luminance_channel, start_log
+
+
+def add_parsers(sub) -> None:
+    cal = sub.add_parser("calibrate", help="calibration from the data itself: galvo | depth | kaleidoscope")
+    csub = cal.add_subparsers(dest="kind", required=True)
+    cg = csub.add_parser("galvo", help="phase and curve size of the scan from a capture of a static scene")
+    cg.add_argument("file", help="event file (galvo)")
+    cg.add_argument("--patch", action="append", required=True, metavar="X,Y", help="textured patch centre (repeatable)")
+    cg.add_argument("--views", type=num(3, MAX_VIEWS, integer=True), default=24,
+                    help="frames reconstructed over the scan period (default 24)")
+    cg.add_argument("--period", type=num(0, integer=True), default=0, help="scan period index (default 0)")
+    cg.add_argument("--start-frame", help="EXR of the linear frame at the stream start (else: galvo solver)")
+    cg.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
+    cd = csub.add_parser("depth", help="curve size against known depths from LED captures")
+    cd.add_argument("captures", nargs="+", metavar="FILE:DEPTH", help="event file of the LED at DEPTH (scene units)")
+    cd.add_argument("--views", type=num(3, MAX_VIEWS, integer=True), default=24)
+    cd.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
+    ck = csub.add_parser("kaleidoscope", help="tile seams, flips, view registration, flat-field from frames")
+    ck.add_argument("frame", help="EXR (linear) of a textured target at the focus distance")
+    ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
+    ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
+
+
+def _galvo(a) -> None:
+    from .. import calibration as cal
+    from ..events.io import read_events
+    ev = read_events(a.file)
+    patches = []
+    for p in a.patch:
+        xy = number_list(p, "--patch", lo=0)
+        if len(xy) != 2 or xy[0] >= ev.width or xy[1] >= ev.height:
+            raise EventFieldError(f"--patch {p!r}: expected X,Y inside the {ev.width}x{ev.height} frame")
+        patches.append(tuple(xy))
+    frames, times, curve = galvo_frames(ev, a.period, a.views, start_log(a.start_frame, ev))
+    optics = cal.optics_record(ev.meta["optics"], ev.width, ev.height, where=a.file)
+    result = cal.fit_galvo(frames, times, curve, patches, scale_limit=cal.galvo_scale_limit(optics))
+    cal.save_calibration(a.output, optics, galvo=result)
+    print(f"galvo: phase {result.phase_deg:.2f} +- {result.std['phase_deg']:.2f} deg at the first frame "
+          f"({result.clock_phase_deg:.2f} deg at t = 0), curve radius "
+          f"{result.radius_px()[0]:.3f} x {result.radius_px()[1]:.3f} px, rms {result.rms_px:.3f} px "
+          f"({result.frames_used} matches) -> {a.output}")
+
+
+def _depth(a) -> None:
+    from .. import calibration as cal
+    from ..events.io import read_events
+    depths, scales, scales_y, records = [], [], [], {}
+    for item in a.captures:
+        path, _, depth = item.rpartition(":")
+        try:
+            depth = float(depth)
+        except ValueError:
+            raise EventFieldError(f"{item!r}: expected FILE:DEPTH") from None
+        ev = read_events(path)
+        frames, times, curve = galvo_frames(ev, 0, a.views)
+        records[path] = cal.optics_record(ev.meta["optics"], ev.width, ev.height, where=path)
+        fit = cal.fit_tracks([cal.track_point(np.exp(frames))], times, curve,
+                             scale_limit=cal.galvo_scale_limit(records[path]))
+        depths.append(depth)
+        scales.append(fit.scale_px_per_rad[0])
+        scales_y.append(fit.scale_px_per_rad[1])
+    optics = cal.same_optics(records)          # one set-up for all the captures
+    result = cal.fit_depth(depths, scales, scales_y)
+    cal.save_calibration(a.output, optics, depth=result)
+    print(f"depth: inverse model rms {result.rms_inverse:.3f} px/rad (pivot {result.pivot:.4g}), linear "
+          f"model rms {result.rms_linear:.3f} px/rad; best: {result.best} -> {a.output}")
+
+
+def _kaleidoscope(a) -> None:
+    from .. import calibration as cal
+    from ..images import read_exr
+    frame = luminance_channel(a.frame)
+    result = cal.register(np.log(np.maximum(frame, 1e-6)))
+    optics = cal.kaleidoscope_record(frame.shape[1], frame.shape[0], result.n, read_exr(a.frame)[1].get("optics"),
+                                     where=a.frame)
+    if a.flat:
+        flat = luminance_channel(a.flat)
+        if flat.shape != frame.shape:
+            raise EventFieldError(f"{a.flat}: flat frame is {flat.shape[1]}x{flat.shape[0]}, the frame "
+                                  f"{a.frame} is {frame.shape[1]}x{frame.shape[0]}: they must match")
+        cal.flat_field(result, flat)
+    cal.save_calibration(a.output, optics, kaleidoscope=result)
+    worst = max(abs(c) for v in result.views for c in v["offset"])
+    print(f"kaleidoscope: {result.n}x{result.n} views of {result.tile[0]}x{result.tile[1]} px, largest "
+          f"offset {worst:.3f} px -> {a.output}")
+
+
+def run_calibrate(a) -> int:
+    try:
+        {"galvo": _galvo, "depth": _depth, "kaleidoscope": _kaleidoscope}[a.kind](a)
+    except ValueError as e:
+        raise EventFieldError(str(e)) from None
+    return 0
+
+
+COMMANDS = {"calibrate": run_calibrate}

@@ -1,0 +1,182 @@
+"""Commands that make and inspect event streams: ``render``, ``frame``, ``info``, ``preview``."""
+from __future__ import annotations
+
+import json
+import os
+
+from ..errors import EventFieldError
+from ..validate import MAX_DURATION_S, MAX_SPP, MAX_STEPS
+from .args import add_defines, defines, num, pairs, save_image, times_ms
+
+PIXEL_INTEGERS = ("seed", "readout_cap_native_pixels")
+
+
+def add_parsers(sub) -> None:
+    _add_render(sub)
+    i = sub.add_parser("info", help="resolution, duration, counts and metadata of an event file")
+    i.add_argument("file")
+    i.add_argument("--json", action="store_true", help="print everything as JSON")
+    p = sub.add_parser("preview", help="event frame PNG (ON red, OFF blue) over a time window")
+    p.add_argument("file")
+    p.add_argument("-o", "--output", required=True, help="PNG path")
+    p.add_argument("--t0", type=num(0), help="window start, ms (default: first event)")
+    p.add_argument("--t1", type=num(0), help="window end, ms (default: last event)")
+    p.add_argument("--scale", type=num(1, 64, integer=True), default=1, help="integer upscaling of the image")
+    f = sub.add_parser("frame", help="render frames (linear radiance) of a scene at given times: EXR + PNG")
+    f.add_argument("scene")
+    f.add_argument("-o", "--output", required=True, help="EXR path (PNG alongside); several times: _0000 suffixes")
+    f.add_argument("--times", default="0", help="comma-separated times in ms (default 0)")
+    f.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=16)
+    add_defines(f)
+
+
+def _add_render(sub) -> None:
+    r = sub.add_parser("render", help="render the event stream of a Mitsuba scene")
+    r.add_argument("scene", help="Mitsuba scene XML (motion from <scene>.motion.toml if present)")
+    r.add_argument("-o", "--output", required=True,
+                   help="event file: .h5 (DSEC layout, streamed), .npz, .txt, .aedat4")
+    r.add_argument("--motion", help="motion TOML (default: <scene>.motion.toml if it exists)")
+    r.add_argument("--no-motion", action="store_true", help="ignore any motion file (static scene)")
+    r.add_argument("--duration", type=num(0, MAX_DURATION_S, lo_open=True),
+                   help="simulated seconds (default: `duration` of the motion file)")
+    g = r.add_mutually_exclusive_group()
+    g.add_argument("--steps", type=num(1, MAX_STEPS, integer=True),
+                   help="uniform time steps over the duration (default 100)")
+    g.add_argument("--adaptive", action="store_true", help="adaptive steps bounded by --max-log-change")
+    r.add_argument("--max-log-change", type=num(0, 100, lo_open=True), default=0.5,
+                   help="adaptive: largest per-pixel log change per step, as a fraction of C (default 0.5)")
+    r.add_argument("--min-step", type=num(0, MAX_DURATION_S, lo_open=True),
+                   help="adaptive: shortest step in seconds (default 1e-6)")
+    r.add_argument("--max-step", type=num(0, MAX_DURATION_S, lo_open=True),
+                   help="adaptive: longest step in seconds (default duration/20)")
+    r.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=4,
+                   help="samples per pixel per step (default 4)")
+    r.add_argument("--seed", type=num(0, 2**31 - 1, integer=True), default=0, help="sampler seed (default 0)")
+    r.add_argument("--independent-seeds", action="store_true",
+                   help="new seed every step (Monte-Carlo noise then fires events; for comparisons only)")
+    r.add_argument("--threshold", type=num(0, 10, lo_open=True),
+                   help="contrast threshold C for ON and OFF (default: scene's or 0.2)")
+    r.add_argument("--threshold-on", type=num(0, 10, lo_open=True), help="ON threshold (overrides --threshold)")
+    r.add_argument("--threshold-off", type=num(0, 10, lo_open=True), help="OFF threshold (overrides --threshold)")
+    r.add_argument("--linlog-threshold", type=num(0, 1e6, lo_open=True),
+                   help="radiance below which the response is linear (1e-3)")
+    r.add_argument("--preset", help="event pixel preset: ideal (default), davis346, prophesee_gen4")
+    r.add_argument("--pixel", action="append", default=[], metavar="NAME=VALUE",
+                   help="pixel-model parameter, e.g. --pixel refractory_s=1e-4 --pixel shot_noise_hz=2 (repeatable; "
+                        "see docs/pixel_model.md)")
+    r.add_argument("--variant", help="Mitsuba variant or backend: cuda, llvm, llvm_ad_mono, ... (default: auto)")
+    r.add_argument("--color", action="store_true", help="render in colour (rgb variant); events use luminance")
+    add_defines(r)
+    r.add_argument("--preview", help="also write an event-frame PNG of the last --preview-window ms")
+    r.add_argument("--preview-window", type=num(0, 1e9, lo_open=True), default=10.0,
+                   help="preview window in ms (default 10)")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--auto", action="store_true",
+                   help="choose colour, spp and steps from cheap probes (ef.auto), print and record why")
+
+
+def pixel_overrides(items) -> dict:
+    """--pixel NAME=NUMBER values as numbers (integers for the integer fields)."""
+    out = {}
+    for name, value in pairs(items, "--pixel").items():
+        try:
+            out[name] = int(value) if name in PIXEL_INTEGERS else float(value)
+        except ValueError:
+            raise EventFieldError(f"--pixel {name}={value!r}: expected NAME=NUMBER") from None
+    return out
+
+
+def _auto_plan(a, motion, scene_defines):
+    """--auto: the plan's choices written into ``a``; returns the metadata that records them."""
+    from ..backend import set_variant
+    from ..scene import load_scene
+    from ..simulate import auto
+    duration = a.duration
+    if duration is None:
+        probe = load_scene(a.scene, motion=motion, **scene_defines)
+        duration = probe.motion.duration if probe.motion and probe.motion.duration else None
+        if duration is None:
+            raise EventFieldError("--auto needs --duration (or `duration` in the motion file)")
+    plan = auto.plan(a.scene, duration, threshold=a.threshold or 0.2, defines=scene_defines)
+    print("automatic choices:\n  " + plan.report().replace("\n", "\n  "))
+    set_variant(a.variant, plan.color)
+    a.spp, a.steps, a.duration = plan.spp, plan.steps, duration
+    return {"auto_plan": plan.as_dict()}
+
+
+def run_render(a) -> int:
+    from ..backend import set_variant
+    from ..scene import load_scene
+    from ..simulate.render import render_events
+    set_variant(a.variant, a.color)
+    motion = None if a.no_motion else (a.motion or "auto")
+    scene_defines = defines(a)
+    extra = _auto_plan(a, motion, scene_defines) if a.auto else None
+    scene = load_scene(a.scene, motion=motion, **scene_defines)
+    summary = render_events(
+        scene, a.duration, steps=a.steps, adaptive=a.adaptive, max_log_change=a.max_log_change,
+        min_step=a.min_step, max_step=a.max_step, spp=a.spp, seed=a.seed,
+        seed_mode="independent" if a.independent_seeds else "fixed", threshold=a.threshold,
+        threshold_on=a.threshold_on, threshold_off=a.threshold_off, linlog_threshold=a.linlog_threshold,
+        output=a.output, progress=not a.quiet, preset=a.preset, pixel=pixel_overrides(a.pixel), extra_meta=extra)
+    print(summary.format())
+    if a.preview and os.path.splitext(a.output)[1].lower() != ".txt":
+        _render_preview(a)
+    return 0
+
+
+def _render_preview(a) -> None:
+    from ..events.io import read_events
+    from ..events.preview import write_preview
+    ev = read_events(a.output)
+    end = int(ev.meta.get("t_start_us", 0)) + ev.duration_us
+    t0 = max(int(ev.meta.get("t_start_us", 0)), end - int(round(a.preview_window * 1e3)))
+    write_preview(a.preview, ev, t0, end + 1, scale=2 if max(ev.width, ev.height) < 400 else 1)
+    print(f"wrote {os.path.abspath(a.preview)} (events of {(end - t0) / 1e3:g} ms up to the end)")
+
+
+def run_info(a) -> int:
+    from ..events.io import read_events
+    ev = read_events(a.file)
+    s = ev.summary()
+    if a.json:
+        print(json.dumps({"summary": s, "meta": ev.meta}, indent=2, default=str))
+        return 0
+    m = ev.meta
+    print(f"{a.file}: {s['width']}x{s['height']}, {s['events']} events ({s['on']} ON, {s['off']} OFF), "
+          f"duration {s['duration_s'] * 1e3:.3f} ms, {s['rate_ev_per_s']:.4g} ev/s")
+    if len(ev):
+        print(f"timestamps {ev.t[0]} .. {ev.t[-1]} us")
+    for key in ("optics", "pixel_model", "spp", "seed", "seed_mode", "stepping", "variant", "package_version"):
+        if key in m:
+            print(f"  {key}: {json.dumps(m[key], default=str)}")
+    if "scene" in m:
+        print(f"  scene: {m['scene'].get('scene_path')}")
+    return 0
+
+
+def run_preview(a) -> int:
+    from ..events.io import read_events
+    from ..events.preview import write_preview
+    ev = read_events(a.file)
+    t0 = None if a.t0 is None else int(round(a.t0 * 1e3))
+    t1 = None if a.t1 is None else int(round(a.t1 * 1e3))
+    write_preview(a.output, ev, t0, t1, scale=a.scale)
+    print(f"wrote {a.output}: {len(ev.time_window(t0, t1))} events in the window")
+    return 0
+
+
+def run_frame(a) -> int:
+    from ..scene import load_scene
+    from ..simulate.render import render_frames
+    scene = load_scene(a.scene, **defines(a))
+    times = [t * 1e-3 for t in times_ms(a.times)]
+    frames = render_frames(scene, times, spp=a.spp, log=False)
+    for k, (t, img) in enumerate(zip(times, frames)):
+        meta = {"scene": os.path.abspath(a.scene), "time_s": t, "spp": a.spp}
+        root = save_image(a.output.replace(".exr", ".png"), img, meta, f"_{k:04d}" if len(times) > 1 else "")
+        print(f"wrote {root}.exr/.png (t = {t * 1e3:g} ms)")
+    return 0
+
+
+COMMANDS = {"render": run_render, "info": run_info, "preview": run_preview, "frame": run_frame}

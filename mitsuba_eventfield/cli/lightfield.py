@@ -1,0 +1,194 @@
+"""Commands that turn event files into images: ``reconstruct``, ``refocus``, ``depth``."""
+from __future__ import annotations
+
+import argparse
+import os
+
+import numpy as np
+
+from ..errors import EventFieldError
+from ..validate import MAX_PLANES, MAX_VIEWS, number_list
+from .args import num, save_image, times_ms
+
+
+def add_parsers(sub) -> None:
+    lf_args = argparse.ArgumentParser(add_help=False)
+    lf_args.add_argument("file", help="event file")
+    lf_args.add_argument("--method", help="reconstruction: direct, highpass, complementary, galvo (default: "
+                                          "direct with --start-frame, else galvo / highpass)")
+    lf_args.add_argument("--start-frame", help="EXR of the linear frame at the stream start (eventfield frame)")
+    lf_args.add_argument("--period", type=num(0, integer=True), default=0,
+                         help="galvo: scan period index (default 0)")
+    lf_args.add_argument("--views", type=num(2, MAX_VIEWS, integer=True), default=32,
+                         help="galvo: views per scan period (default 32)")
+    lf_args.add_argument("--time", type=num(0), help="kaleidoscope: time in ms (default: stream end)")
+    lf_args.add_argument("--calibration", help="calibration JSON (eventfield calibrate): view phase, depth model")
+
+    rc = sub.add_parser("reconstruct", help="log-intensity frames from events: EXR + PNG per frame")
+    rc.add_argument("file")
+    rc.add_argument("-o", "--output", required=True, help="output directory (created)")
+    rc.add_argument("--method", default="direct", help="direct, highpass, complementary, galvo (default direct)")
+    g = rc.add_mutually_exclusive_group()
+    g.add_argument("--times", help="comma-separated times in ms")
+    g.add_argument("--fps", type=num(0, 1e6, lo_open=True), help="frames per second over the whole stream")
+    rc.add_argument("--start-frame", help="EXR of the linear frame at the stream start")
+    rc.add_argument("--cutoff", type=num(0, 1e6, lo_open=True), default=5.0,
+                    help="filter cutoff in Hz (highpass, complementary)")
+
+    rf = sub.add_parser("refocus", parents=[lf_args], help="refocus the light field at one or more depths")
+    rf.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside; _<depth> suffix for several)")
+    rf.add_argument("--depth", required=True, help="comma-separated depths in scene units (inf allowed)")
+
+    dp = sub.add_parser("depth", parents=[lf_args], help="depth from focus: EXR (depth, confidence) + colour PNG")
+    dp.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside)")
+    dp.add_argument("--near", type=num(0, lo_open=True), required=True, help="nearest depth searched")
+    dp.add_argument("--far", type=num(0, lo_open=True), required=True, help="farthest depth searched")
+    dp.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=32)
+    dp.add_argument("--measure", default="variance", help="sml, tenengrad or variance (default)")
+    dp.add_argument("--min-confidence", type=num(0, 1), default=0.2, help="greyed out below this in the PNG")
+
+
+# ------------------------------------------------------------------ inputs shared with calibrate
+def luminance_channel(path):
+    """The Y (or else R) channel of an EXR frame, with a named error when it has neither."""
+    from ..images import read_exr
+    channels, _ = read_exr(path)
+    img = channels.get("Y", channels.get("R"))
+    if img is None:
+        raise EventFieldError(f"{path}: needs a Y (or R) channel; it has {', '.join(sorted(channels)) or 'none'}")
+    return img
+
+
+def start_log(path, events):
+    """Log intensity (as the pixel sees it) of a linear EXR frame, checked against the stream's size."""
+    from ..plugins.pixel_model import linlog_np
+    if path is None:
+        return None
+    img = luminance_channel(path)
+    if img.shape != (events.height, events.width):
+        raise EventFieldError(f"{path}: needs a Y (or R) channel of {events.width}x{events.height}, got "
+                              f"{img.shape[::-1]}")
+    return linlog_np(img, events.meta.get("pixel_model", {}).get("linlog_threshold", 1e-3))
+
+
+def galvo_frames(ev, period, views, start_frame_log=None):
+    """Reconstructed log frames and their times over one scan period of a galvo stream, and its scan curve."""
+    from ..lightfield.model import galvo_period_starts, galvo_view_times
+    from ..lightfield.reconstruct import reconstruct
+    from ..optics.scan import curve_from_dict
+    optics = ev.meta.get("optics", {})
+    if optics.get("design") != "galvo":
+        raise EventFieldError("not a galvo event stream (optics.design != 'galvo')")
+    curve = curve_from_dict(optics["scan"])
+    try:
+        t0 = galvo_period_starts(ev, [period])[period]
+    except ValueError as e:
+        raise EventFieldError(f"--period: {e}") from None
+    times = galvo_view_times(optics, t0, views)     # bin centres, as the light-field commands use
+    method = "direct" if start_frame_log is not None else "galvo"
+    kw = {"log_start": start_frame_log, "t_start": t0} if start_frame_log is not None else {"t_start": t0}
+    return reconstruct(ev, times, method, **kw), times, curve
+
+
+def _out_meta(a, events, **extra):
+    from .._version import __version__
+    return dict({"package_version": __version__, "command": a.command, "source": os.path.abspath(a.file),
+                 "optics": events.meta.get("optics"), "pixel_model": events.meta.get("pixel_model")}, **extra)
+
+
+def _lightfield(a, ev):
+    """The light field the light-field commands share, calibrated when asked (a calibration made for other
+    optics than this stream's is refused before any reconstruction)."""
+    from ..calibration import apply_to_lightfield, check_optics, load_calibration, optics_record
+    from ..lightfield.model import from_events
+    calibration = optics = None
+    if a.calibration:
+        calibration = load_calibration(a.calibration)
+        optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
+        check_optics(calibration, optics)
+    try:
+        lf = from_events(ev, period=a.period, views=a.views, time=None if a.time is None else a.time * 1e-3,
+                         method=a.method, log_start=start_log(a.start_frame, ev))
+    except (ValueError, KeyError, StopIteration) as e:
+        raise EventFieldError(f"{a.file}: {e}") from None
+    return apply_to_lightfield(lf, calibration, optics) if calibration is not None else lf
+
+
+# ------------------------------------------------------------------ commands
+def _reconstruct_times(a, ev):
+    t0 = ev.meta.get("t_start_us", 0) * 1e-6
+    if a.times:
+        return np.array(times_ms(a.times)) * 1e-3
+    fps = a.fps or 1000.0
+    n = max(1, int(round(ev.duration_us * 1e-6 * fps)))
+    return t0 + (np.arange(n) + 1) / fps
+
+
+def _method_arguments(a, ev) -> dict:
+    t0 = ev.meta.get("t_start_us", 0) * 1e-6
+    if a.method == "direct":
+        return {"log_start": start_log(a.start_frame, ev), "t_start": t0}
+    if a.method not in ("highpass", "complementary"):
+        return {}
+    kw = {"cutoff_hz": a.cutoff}
+    if a.method == "complementary":
+        start = start_log(a.start_frame, ev)
+        if start is None:
+            raise EventFieldError("--method complementary needs --start-frame (a frame to anchor to)")
+        kw.update(frames=start[None], frame_times=[t0])
+    return kw
+
+
+def run_reconstruct(a) -> int:
+    from ..events.io import read_events
+    from ..lightfield.reconstruct import reconstruct
+    ev = read_events(a.file)
+    times = _reconstruct_times(a, ev)
+    try:
+        frames = reconstruct(ev, times, a.method, **_method_arguments(a, ev))
+    except ValueError as e:
+        raise EventFieldError(f"{a.file}: {e}") from None
+    os.makedirs(a.output, exist_ok=True)
+    for k, (t, log_img) in enumerate(zip(times, frames)):
+        save_image(os.path.join(a.output, f"frame_{k:04d}.png"), np.exp(log_img),
+                   _out_meta(a, ev, method=a.method, time_s=float(t), domain="linear = exp(log intensity)"))
+    print(f"wrote {len(times)} frames ({a.method}) to {a.output}")
+    return 0
+
+
+def run_refocus(a) -> int:
+    from ..events.io import read_events
+    from ..focus.refocus import refocus
+    ev = read_events(a.file)
+    depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
+    lf = _lightfield(a, ev)
+    for z in depths:
+        root = save_image(a.output, refocus(lf, z), _out_meta(a, ev, depth=z, views=len(lf.views)),
+                          f"_{z:g}" if len(depths) > 1 else "")
+        print(f"wrote {root}.png/.exr (refocused at {z:g})")
+    return 0
+
+
+def run_depth(a) -> int:
+    from ..events.io import read_events
+    from ..focus.depth import MEASURES, depth_from_focus
+    from ..images import depth_png, write_exr, write_png
+    ev = read_events(a.file)
+    if not (0 < a.near < a.far) or a.planes < 2:
+        raise EventFieldError(f"--near {a.near} --far {a.far} --planes {a.planes}: need 0 < near < far, "
+                              "planes >= 2")
+    if a.measure not in MEASURES:
+        raise EventFieldError(f"--measure {a.measure!r}: allowed: {', '.join(MEASURES)}")
+    lf = _lightfield(a, ev)
+    dm = depth_from_focus(lf, a.near, a.far, a.planes, a.measure)
+    root = os.path.splitext(a.output)[0]
+    meta = _out_meta(a, ev, near=a.near, far=a.far, planes=a.planes, measure=a.measure, views=len(lf.views))
+    write_exr(root + ".exr", {"depth": dm.depth, "confidence": dm.confidence}, meta)
+    write_png(root + ".png", depth_png(dm.depth, dm.confidence, a.near, a.far, a.min_confidence))
+    confident = dm.confidence >= a.min_confidence
+    median = float(np.median(dm.depth[confident])) if confident.any() else float("nan")
+    print(f"wrote {root}.exr (depth, confidence) and {root}.png; median depth of confident pixels {median:.4g}")
+    return 0
+
+
+COMMANDS = {"reconstruct": run_reconstruct, "refocus": run_refocus, "depth": run_depth}

@@ -1,0 +1,100 @@
+"""``eventfield``: the parser built from the command modules, and one way out for every failure: a one-line
+error (exit 2), an unexpected error in one line (exit 3; EVENTFIELD_DEBUG=1 shows the traceback), or an
+interrupt (130 / 143) after every ``finally`` has run (outputs off, temporary files removed)."""
+from __future__ import annotations
+
+import errno
+import os
+import signal
+import sys
+import threading
+
+from . import apps, calibrate, device, evaluate, events, lightfield
+from .args import OUTPUT_DIRS, Parser, check_outputs, one_line
+
+MODULES = (events, lightfield, calibrate, evaluate, apps, device)
+COMMANDS = {name: run for module in MODULES for name, run in module.COMMANDS.items()}
+
+
+def build_parser() -> Parser:
+    from .._version import __version__
+    ap = Parser(prog="eventfield", description="Render and inspect event fields.")
+    ap.add_argument("--version", action="version", version=f"mitsuba-eventfield {__version__}")
+    sub = ap.add_subparsers(dest="command", required=True)
+    for module in MODULES:
+        module.add_parsers(sub)
+    return ap
+
+
+received: list = []
+
+
+def _signals_as_interrupts():
+    """SIGINT and SIGTERM raise KeyboardInterrupt, so every ``finally`` runs (outputs off, temporary files
+    removed); the signal is remembered because a library between us and the handler (Dr.Jit calling a Python
+    plugin) may hand it back wrapped in another exception. Returns the previous handlers, or {} off the main
+    thread (where Python allows no handlers)."""
+    received.clear()
+
+    def on_signal(signum, frame):
+        received.append(signum)
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _run(args) -> int:
+    check_outputs(args)
+    if args.command in OUTPUT_DIRS:
+        from ..atomic import output_dir_run
+        with output_dir_run(args.output, args.command):
+            return COMMANDS[args.command](args)
+    return COMMANDS[args.command](args)
+
+
+def _os_error(e: OSError) -> int | None:
+    """The exit status of an OSError, or None when it came from an interrupt."""
+    if e.errno == errno.ENOSPC:
+        print(f"eventfield: error: disk full while writing {e.filename or 'the output'} (nothing was kept)",
+              file=sys.stderr)
+        return 2
+    if received:
+        return None
+    print(f"eventfield: error: {e.filename or ''}{': ' if e.filename else ''}{e.strerror or one_line(e)}",
+          file=sys.stderr)
+    return 2
+
+
+def main(argv=None) -> int:
+    from ..errors import EventFieldError
+    args = build_parser().parse_args(argv)
+    previous = _signals_as_interrupts()
+    try:
+        return _run(args)
+    except EventFieldError as e:
+        print(f"eventfield: error: {one_line(e)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        pass                                  # reported below, with the signal's exit status
+    except BrokenPipeError:          # e.g. `eventfield info f.h5 | head`: the reader left; not an error of ours
+        sys.stderr.close()
+        return 0
+    except OSError as e:
+        status = _os_error(e)
+        if status is not None:
+            return status
+    except Exception as e:  # noqa: BLE001  (no traceback reaches the user; EVENTFIELD_DEBUG=1 shows it)
+        if not received:
+            if os.environ.get("EVENTFIELD_DEBUG"):
+                raise
+            print(f"eventfield: error: unexpected {type(e).__name__}: {one_line(e)[:300]} "
+                  "(EVENTFIELD_DEBUG=1 shows the traceback)", file=sys.stderr)
+            return 3
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    signum = received[0] if received else signal.SIGINT
+    print(f"eventfield: {'terminated' if signum == signal.SIGTERM else 'interrupted'} (no partial output kept)",
+          file=sys.stderr)
+    return 128 + int(signum)
