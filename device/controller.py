@@ -27,41 +27,18 @@ import math
 import signal
 import threading
 import time
-from dataclasses import dataclass
 
 from mitsuba_eventfield.device.dialects import Dialect, dialect
 from mitsuba_eventfield.device.spec import GalvoSpec, SafetyError, finite_number
-
-# The circle adds 90 deg to the user's phase; a phase beyond +-720 deg is a mistake, not an intent.
-MAX_CURVE_PHASE_DEG = 720.0
-
-
-@dataclass
-class AxisSine:
-    channel: int
-    frequency: float
-    amplitude_deg: float
-    phase_deg: float
-    offset_deg: float
-
-    @property
-    def is_dc(self) -> bool:
-        return self.amplitude_deg == 0.0
+from mitsuba_eventfield.optics.envelope import AxisSine, EnvelopeError, axis_sines  # noqa: F401  (AxisSine: API)
 
 
 def sines_from_curve(curve) -> list:
-    """The per-axis sines of a circle / line / Lissajous scan (``scan.Lissajous``); others are refused."""
-    if getattr(curve, "kind", None) not in ("circle", "line", "lissajous"):
-        raise SafetyError(f"the {getattr(curve, 'name', curve)!r} scan is not a pair of sines: a function generator "
-                          "drives circles, lines and Lissajous curves only (sine only)")
-    out = []
-    for ch, axis, (f, a, ph, off) in ((1, "x", (curve.freq_x, curve.amplitude_x, curve.phase_x, curve.offset_x)),
-                                      (2, "y", (curve.freq_y, curve.amplitude_y, curve.phase_y, curve.offset_y))):
-        ph = finite_number(ph, f"axis {axis}: phase")
-        if abs(ph) > MAX_CURVE_PHASE_DEG:
-            raise SafetyError(f"axis {axis}: phase {ph:g} deg: allowed range is +-{MAX_CURVE_PHASE_DEG:g} deg")
-        out.append(AxisSine(ch, f, a, ph % 360.0, off))
-    return out
+    """The per-axis sines of a circle / line / Lissajous scan (``optics.envelope.axis_sines``); others refused."""
+    try:
+        return axis_sines(curve)
+    except EnvelopeError as e:
+        raise SafetyError(str(e)) from None
 
 
 class GalvoController:

@@ -1,24 +1,32 @@
 """Mitsuba sensor plugin ``galvo``: a pinhole or thin-lens camera looking through a two-axis scanning mirror.
 
-XML (angles in mechanical degrees, lengths in scene units, frequencies in Hz)::
+Parameters (angles in mechanical degrees, lengths in scene units, frequencies in Hz; the ray optics are
+``mitsuba_eventfield.optics.galvo``, the limits ``mitsuba_eventfield.optics.envelope``):
 
-    <sensor type="galvo">
-        <float name="fov" value="40"/>                 <!-- horizontal field of view of the camera -->
-        <float name="aperture_radius" value="0"/>      <!-- > 0: thin lens focused at focus_distance -->
-        <float name="focus_distance" value="1"/>
-        <float name="mirror_distance" value="0.03"/>   <!-- camera centre to the X mirror pivot -->
-        <float name="mirror_separation" value="0.01"/> <!-- X mirror pivot to Y mirror pivot -->
-        <string name="curve" value="circle"/>          <!-- circle | lissajous | line | raster | moore -->
-        <float name="frequency" value="250"/>
-        <float name="amplitude" value="1"/>
-        <float name="max_angle" value="10"/>           <!-- the mirror's mechanical limit -->
-        <float name="bandwidth" value="0"/>            <!-- > 0: second-order mirror response, natural Hz -->
-        <float name="damping" value="0.7"/>
-        <transform name="to_world"> ... </transform>
-        <film type="hdrfilm"> ... </film>
-    </sensor>
+=================  =========  ==========  ===============================================================
+Parameter          Type       Default     Description
+=================  =========  ==========  ===============================================================
+fov                float      --          horizontal field of view of the camera (degrees)
+aperture_radius    float      0           > 0: thin lens focused at focus_distance
+focus_distance     float      1           thin-lens focus distance
+mirror_distance    float      0.03        camera centre to the X mirror pivot
+mirror_separation  float      0.01        X mirror pivot to Y mirror pivot
+curve              string     circle      circle | lissajous | line | raster | moore
+frequency          float      250         scan frequency (circle, line, raster, moore)
+amplitude          float      1           scan radius / half-width
+phase              float      0           start angle on the curve (degrees)
+galvo_model        string     gvs01x      the galvo simulated: gvs01x (the device layer's envelope) | ideal
+max_angle          float      (model's)   narrows a real galvo's travel, or sets an ideal mirror's
+bandwidth          float      0           > 0: second-order mirror response, natural frequency
+damping            float      0.7         damping of that response
+far_clip           float      1e4         longest ray
+to_world           transform  identity    camera pose (animated by the motion file)
+=================  =========  ==========  ===============================================================
 
-Curve parameters are those of ``mitsuba_eventfield.scan.make_curve`` (freq_x, amplitude_y, phase, lines,
+A scan outside the named model's envelope (travel, frequency derating, drive voltage) is refused when the
+scene loads, with the reason the device layer gives for the same scan.
+
+Other curve parameters are those of ``mitsuba_eventfield.optics.scan.make_curve`` (freq_x, amplitude_y, phase, lines,
 order, ...). The scan instant comes from the opaque parameter ``<id>.time`` (set by the time-stepping loop,
 reduced modulo the scan period on the host), plus the ray's own time within the shutter. Changing it never
 recompiles a kernel.
@@ -36,20 +44,24 @@ from mitsuba_eventfield.plugins._per_variant import per_variant, subclass
 _FLOAT_PARAMS = ("frequency", "amplitude", "phase", "offset_x", "offset_y", "freq_x", "freq_y", "amplitude_x",
                  "amplitude_y", "phase_x", "phase_y")
 _INT_PARAMS = ("lines", "order", "samples_per_line", "samples_per_segment")
+
+
 def curve_from_props(props) -> tuple:
-    """(scan curve as driven, description dict) from the plugin's properties."""
+    """(scan curve as the mirror moves, description dict) from the plugin's properties. The commanded curve
+    must fit the envelope of the named galvo model (``optics.envelope``), exactly as the device layer checks."""
     from mitsuba_eventfield.optics.scan import curve_to_dict, make_curve
     name = props.get("curve", "circle")
     params = {k: float(props.get(k)) for k in _FLOAT_PARAMS if k in props}
     params.update({k: int(props.get(k)) for k in _INT_PARAMS if k in props})
     if "axis" in props:
         params["axis"] = props.get("axis")
+    limits = {"max_angle_deg": float(props.get("max_angle")) if "max_angle" in props else None,
+              "galvo_model": props.get("galvo_model", "gvs01x"), "where": "sensor 'galvo'"}
     bandwidth = float(props.get("bandwidth", 0.0))
     damping = float(props.get("damping", 0.7))
-    curve = make_curve(name, max_angle_deg=float(props.get("max_angle", 10.0)), bandwidth_hz=bandwidth,
-                       damping=damping, where="sensor 'galvo'", **params)
-    return curve, curve_to_dict(curve if not bandwidth else make_curve(
-        name, max_angle_deg=float(props.get("max_angle", 10.0)), where="sensor 'galvo'", **params), bandwidth, damping)
+    commanded = make_curve(name, **limits, **params)
+    moving = make_curve(name, bandwidth_hz=bandwidth, damping=damping, **limits, **params) if bandwidth else commanded
+    return moving, curve_to_dict(commanded, bandwidth, damping)
 
 
 class _GalvoSensorMethods:

@@ -80,7 +80,7 @@ def test_refused_setting_never_reaches_an_output_pyvisa_sim(dialect):
     t = simulated_visa(dialect)
     wide = GalvoSpec(envelope=((35.0, 12.5), (1e6, 0.2)))      # lets 200 kHz through our check ...
     c = GalvoController(t, dialect, spec=wide, ramp_steps=1, ramp_time=0)
-    fast = ef.make_curve("circle", frequency=2e5, amplitude=0.1, max_angle_deg=12.5)
+    fast = ef.make_curve("circle", frequency=2e5, amplitude=0.1, max_angle_deg=12.5, galvo_model="ideal")
     with pytest.raises(SafetyError, match="did not confirm.*frequency"):  # ... the instrument refuses it
         c.start(fast, sleep=NO_SLEEP)
     out = c.d.readback(1)["output"][0]

@@ -197,8 +197,10 @@ def test_galvo_time_updates_do_not_recompile():
 
 
 @pytest.mark.parametrize("params, message", [
-    ({"amplitude": 15.0}, "beyond the mirror's limit of +-10 degrees"),
-    ({"amplitude": 3.0, "max_angle": 2.0}, "beyond the mirror's limit of +-2 degrees"),
+    ({"amplitude": 15.0}, "amplitude 15 deg at 250 Hz exceeds the galvo's derated limit of 2.074 deg"),
+    ({"amplitude": 3.0, "max_angle": 2.0, "frequency": 30.0}, "exceeds the mechanical travel of +-2 deg"),
+    ({"amplitude": 15.0, "galvo_model": "ideal"}, "exceeds the mechanical travel of +-10 deg"),
+    ({"galvo_model": "gvs99"}, "galvo_model = 'gvs99': allowed gvs01x, ideal"),
     ({"frequency": 0.0}, "frequency = 0.0: must be a finite frequency > 0 Hz"),
     ({"frequency": -250.0}, "frequency = -250.0"),
     ({"curve": "spiral"}, "unknown curve 'spiral'"),

@@ -11,7 +11,7 @@ CURVES = {
     "circle": dict(frequency=250.0, amplitude=2.0, phase=30.0),
     "lissajous": dict(freq_x=300.0, freq_y=200.0, amplitude_x=1.5, amplitude_y=1.0, phase_x=10.0, phase_y=50.0),
     "line": dict(frequency=100.0, amplitude=1.0, axis="x"),
-    "raster": dict(frequency=400.0, lines=4, amplitude_x=1.0, amplitude_y=0.5),
+    "raster": dict(frequency=400.0, lines=4, amplitude_x=0.8, amplitude_y=0.5),   # inside the 400 Hz envelope
     "moore": dict(frequency=20.0, order=3, amplitude=1.0),
 }
 PERIODS = {"circle": 1 / 250, "lissajous": 1 / 100, "line": 1 / 100, "raster": 4 / 400, "moore": 1 / 20}
@@ -93,7 +93,8 @@ def test_bandwidth_shrinks_and_delays():
 @pytest.mark.parametrize("kwargs, message", [
     (dict(name="circle", frequency=0.0), "frequency = 0.0: must be a finite frequency > 0 Hz"),
     (dict(name="circle", frequency=-5.0), "frequency = -5.0"),
-    (dict(name="circle", amplitude=12.0), "beyond the mirror's limit of +-10 degrees"),
+    (dict(name="circle", amplitude=12.0), "amplitude 12 deg at 250 Hz exceeds the galvo's derated limit"),
+    (dict(name="circle", amplitude=12.0, galvo_model="ideal"), "exceeds the mechanical travel of +-10 deg"),
     (dict(name="spiral"), "unknown curve 'spiral'; allowed: circle, lissajous, line, raster, moore"),
     (dict(name="circle", freq_x=3.0), "'freq_x' does not apply to a circle scan"),
     (dict(name="moore", order=12), "order must be an integer in 1..8"),

@@ -39,7 +39,7 @@ def scan_curve(a, spec):
     """The scan curve a ``device scan`` request names (validated by the scan module)."""
     from ..optics.scan import make_curve
     common = {"phase": a.phase} if a.curve != "lissajous" else {}
-    limit = {"max_angle_deg": spec.max_mech_deg, "where": "device scan"}
+    limit = {"envelope": spec.scan_envelope, "where": "device scan"}     # the rig's own, with its driver scaling
     if a.curve == "lissajous":
         return make_curve("lissajous", freq_x=a.freq, freq_y=a.freq_y or a.freq, amplitude_x=a.amplitude_deg,
                           amplitude_y=a.amplitude_y_deg if a.amplitude_y_deg is not None else a.amplitude_deg,

@@ -26,8 +26,9 @@ from fractions import Fraction
 import numpy as np
 
 from ..errors import ConfigError
+from .envelope import DEFAULT_GALVO_MODEL, EnvelopeError, galvo_model
 
-DEFAULT_MAX_ANGLE_DEG = 10.0   # mechanical; +-10 V at 1 V/deg on a GVS01x-class controller (DESIGN.md section 5)
+DEFAULT_MAX_ANGLE_DEG = 10.0   # the mechanical travel curves had before galvo models existed (the ideal model's)
 TWO_PI = 2.0 * math.pi
 
 
@@ -52,8 +53,10 @@ def second_order_response(freq_hz, natural_hz: float, damping: float):
 
 @dataclass(frozen=True)
 class ScanCurve:
-    """Base class. Subclasses define :meth:`angles` and :meth:`velocity` (rad and rad/s, mechanical)."""
+    """Base class. Subclasses define :meth:`angles` and :meth:`velocity` (rad and rad/s, mechanical).
+    ``galvo_model``/``max_angle_deg``: the envelope the scan must stay in (``optics.envelope``)."""
     max_angle_deg: float = DEFAULT_MAX_ANGLE_DEG
+    galvo_model: str = "ideal"
 
     @property
     def name(self) -> str:
@@ -124,13 +127,16 @@ class ScanCurve:
         phase, whole = round(math.fmod(t, T) % T, 9), round(T, 9)
         return 0.0 if phase >= whole else phase     # fmod can land a hair below T: that instant is phase 0
 
-    def validate(self, where: str = "scan") -> "ScanCurve":
-        if not (math.isfinite(self.max_angle_deg) and self.max_angle_deg > 0):
-            raise ConfigError(f"{where}: max_angle = {self.max_angle_deg!r}: must be a finite number > 0 degrees")
-        peak = self.peak_angle_deg()
-        if peak > self.max_angle_deg * (1 + 1e-9):
-            raise ConfigError(f"{where}: the {self.name} scan reaches {peak:.4g} mechanical degrees, beyond the "
-                              f"mirror's limit of +-{self.max_angle_deg:g} degrees (max_angle)")
+    def envelope(self, where: str = "scan"):
+        return galvo_model(self.galvo_model, where, self.max_angle_deg)
+
+    def validate(self, where: str = "scan", envelope=None) -> "ScanCurve":
+        """The curve itself if its galvo (``envelope``, default: its model's) can drive it; else EnvelopeError
+        with the device layer's reason, prefixed by ``where``."""
+        try:
+            (envelope or self.envelope(where)).check_curve(self)
+        except EnvelopeError as e:
+            raise EnvelopeError(f"{where}: {e}" if not str(e).startswith(where) else str(e)) from None
         return self
 
 
@@ -198,9 +204,9 @@ class Lissajous(ScanCurve):
 
 
 def circle(frequency=250.0, amplitude=1.0, phase=0.0, offset_x=0.0, offset_y=0.0,
-           max_angle_deg=DEFAULT_MAX_ANGLE_DEG) -> Lissajous:
+           max_angle_deg=DEFAULT_MAX_ANGLE_DEG, galvo_model="ideal") -> Lissajous:
     """Counter-clockwise circle of radius ``amplitude`` mechanical degrees, starting at angle ``phase``."""
-    c = Lissajous(max_angle_deg=max_angle_deg, freq_x=frequency, freq_y=frequency, amplitude_x=amplitude,
+    c = Lissajous(max_angle_deg=max_angle_deg, galvo_model=galvo_model, freq_x=frequency, freq_y=frequency, amplitude_x=amplitude,
                   amplitude_y=amplitude, phase_x=phase + 90.0, phase_y=phase, offset_x=offset_x, offset_y=offset_y,
                   kind="circle")
     return c
@@ -252,8 +258,18 @@ class TabulatedCurve(ScanCurve):
     def peak_angle_deg(self) -> float:
         return float(np.degrees(max(np.max(np.abs(self._table[0])), np.max(np.abs(self._table[1])))))
 
+    def fundamental_hz(self) -> float:
+        """The faster axis's back-and-forth rate: half its direction reversals per period, over the period."""
+        rates = []
+        for axis in self._table:
+            step = np.diff(np.asarray(axis + axis[:1]))
+            moving = np.sign(step[step != 0])
+            reversals = int(np.count_nonzero(moving != np.roll(moving, 1))) if moving.size else 0
+            rates.append(max(reversals, 2) / 2 / self.period_s)
+        return max(rates)
+
     def to_dict(self) -> dict:
-        return dict(self.source, max_angle_deg=self.max_angle_deg)
+        return dict(self.source, max_angle_deg=self.max_angle_deg, galvo_model=self.galvo_model)
 
     def with_bandwidth(self, natural_hz: float, damping: float = 0.7) -> "TabulatedCurve":
         n = len(self._table[0])
@@ -265,7 +281,7 @@ class TabulatedCurve(ScanCurve):
 
 
 def raster(frequency=250.0, lines=8, amplitude_x=1.0, amplitude_y=1.0, samples_per_line=64,
-           max_angle_deg=DEFAULT_MAX_ANGLE_DEG) -> TabulatedCurve:
+           max_angle_deg=DEFAULT_MAX_ANGLE_DEG, galvo_model="ideal") -> TabulatedCurve:
     """x: triangle wave at ``frequency`` (a line each half period); y: a triangle over ``lines`` lines and back."""
     if not isinstance(lines, int) or lines < 1:
         raise ConfigError(f"scan: lines = {lines!r}: must be an integer >= 1")
@@ -277,8 +293,8 @@ def raster(frequency=250.0, lines=8, amplitude_x=1.0, amplitude_y=1.0, samples_p
     y = math.radians(amplitude_y) * tri(s)
     src = {"curve": "raster", "frequency": frequency, "lines": lines, "amplitude_x": amplitude_x,
            "amplitude_y": amplitude_y, "samples_per_line": samples_per_line}
-    return TabulatedCurve(max_angle_deg=max_angle_deg, period_s=period, source=src, _table=(tuple(x), tuple(y)),
-                          kind="raster")
+    return TabulatedCurve(max_angle_deg=max_angle_deg, galvo_model=galvo_model, period_s=period, source=src,
+                          _table=(tuple(x), tuple(y)), kind="raster")
 
 
 def moore_vertices(order: int) -> np.ndarray:
@@ -304,7 +320,7 @@ def moore_vertices(order: int) -> np.ndarray:
 
 
 def moore(frequency=10.0, order=3, amplitude=1.0, samples_per_segment=8,
-          max_angle_deg=DEFAULT_MAX_ANGLE_DEG) -> TabulatedCurve:
+          max_angle_deg=DEFAULT_MAX_ANGLE_DEG, galvo_model="ideal") -> TabulatedCurve:
     """Space-filling scan: the Moore curve of ``order`` over [-A, A]^2 degrees, once per 1/frequency seconds."""
     v = moore_vertices(order)
     closed = np.vstack([v, v[:1]])                   # the last vertex is adjacent to the first
@@ -313,8 +329,8 @@ def moore(frequency=10.0, order=3, amplitude=1.0, samples_per_segment=8,
     a = math.radians(amplitude)
     src = {"curve": "moore", "frequency": frequency, "order": order, "amplitude": amplitude,
            "samples_per_segment": samples_per_segment}
-    return TabulatedCurve(max_angle_deg=max_angle_deg, period_s=1.0 / frequency, source=src,
-                          _table=(tuple(a * pts[:, 0]), tuple(a * pts[:, 1])), kind="moore")
+    return TabulatedCurve(max_angle_deg=max_angle_deg, galvo_model=galvo_model, period_s=1.0 / frequency,
+                          source=src, _table=(tuple(a * pts[:, 0]), tuple(a * pts[:, 1])), kind="moore")
 
 
 CURVES = ("circle", "lissajous", "line", "raster", "moore")
@@ -328,9 +344,15 @@ _ARGS = {
 _FREQ_KEYS = ("frequency", "freq_x", "freq_y")
 
 
-def make_curve(name: str, max_angle_deg: float = DEFAULT_MAX_ANGLE_DEG, bandwidth_hz: float = 0.0,
-               damping: float = 0.7, where: str = "scan", **params) -> ScanCurve:
-    """Build and validate a curve by name; errors name ``where``, the parameter and its allowed range."""
+def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: float = 0.0,
+               damping: float = 0.7, where: str = "scan", galvo_model: str = DEFAULT_GALVO_MODEL,
+               envelope=None, **params) -> ScanCurve:
+    """Build a curve by name and check it against the envelope of ``galvo_model`` (``optics.envelope``; a
+    scan the device layer refuses is refused here with the same reason). ``max_angle_deg``: narrows a real
+    galvo's travel, or sets an ideal mirror's (default: the model's own). ``envelope``: a rig's own
+    ``ScanEnvelope`` instead of a named model (the device layer's, with its driver scaling). Errors name
+    ``where``, the parameter and its allowed range. The check applies to the commanded curve, before any
+    ``bandwidth_hz`` response."""
     if name not in CURVES:
         raise ConfigError(f"{where}: unknown curve {name!r}; allowed: {', '.join(CURVES)}")
     unknown = set(params) - _ARGS[name]
@@ -343,30 +365,38 @@ def make_curve(name: str, max_angle_deg: float = DEFAULT_MAX_ANGLE_DEG, bandwidt
     for k, v in params.items():
         if k not in _FREQ_KEYS and k != "axis":
             _finite(v, where, k)
-    _finite(max_angle_deg, where, "max_angle")
+    envelope = envelope or _envelope(galvo_model, where, max_angle_deg)
+    limits = {"max_angle_deg": envelope.max_mech_deg, "galvo_model": envelope.name}
     if name == "circle":
-        curve = circle(max_angle_deg=max_angle_deg, **params)
+        curve = circle(**limits, **params)
     elif name == "lissajous":
-        curve = Lissajous(max_angle_deg=max_angle_deg, **params)
+        curve = Lissajous(**limits, **params)
     elif name == "line":
         axis = params.pop("axis", "x")
         if axis not in ("x", "y"):
             raise ConfigError(f"{where}: axis = {axis!r}: allowed values are 'x', 'y'")
         f, a, ph = params.get("frequency", 250.0), params.get("amplitude", 1.0), params.get("phase", 0.0)
-        curve = Lissajous(max_angle_deg=max_angle_deg, freq_x=f, freq_y=f, amplitude_x=a if axis == "x" else 0.0,
+        curve = Lissajous(**limits, freq_x=f, freq_y=f, amplitude_x=a if axis == "x" else 0.0,
                           amplitude_y=a if axis == "y" else 0.0, phase_x=ph, phase_y=ph, kind="line")
     elif name == "raster":
-        curve = raster(max_angle_deg=max_angle_deg, **{k: (int(v) if k in ("lines", "samples_per_line") else v)
-                                                       for k, v in params.items()})
+        curve = raster(**limits, **{k: (int(v) if k in ("lines", "samples_per_line") else v)
+                                    for k, v in params.items()})
     else:
-        curve = moore(max_angle_deg=max_angle_deg, **{k: (int(v) if k in ("order", "samples_per_segment") else v)
-                                                      for k, v in params.items()})
+        curve = moore(**limits, **{k: (int(v) if k in ("order", "samples_per_segment") else v)
+                                   for k, v in params.items()})
+    curve.validate(where, envelope)              # the commanded scan is what the galvo must be able to drive
     if bandwidth_hz:
         _positive_frequency(bandwidth_hz, where, "bandwidth")
         if not (math.isfinite(damping) and damping > 0):
             raise ConfigError(f"{where}: damping = {damping!r}: must be a finite number > 0")
         curve = curve.with_bandwidth(bandwidth_hz, damping)
-    return curve.validate(where)
+    return curve
+
+
+def _envelope(name, where, max_angle_deg):
+    if not isinstance(name, str):
+        raise ConfigError(f"{where}: galvo_model = {name!r}: expected a name")
+    return galvo_model(name, where, max_angle_deg)
 
 
 def curve_to_dict(curve: ScanCurve, bandwidth_hz: float = 0.0, damping: float = 0.7) -> dict:
@@ -384,18 +414,22 @@ def curve_to_dict(curve: ScanCurve, bandwidth_hz: float = 0.0, damping: float = 
             axis = "x" if curve.amplitude_x else "y"
             d = {"curve": "line", "axis": axis, "frequency": curve.freq_x,
                  "amplitude": curve.amplitude_x or curve.amplitude_y, "phase": curve.phase_x}
-        d.pop("max_angle_deg", None)
+        d.pop("max_angle_deg", None), d.pop("galvo_model", None)
     d["max_angle_deg"] = curve.max_angle_deg
+    d["galvo_model"] = curve.galvo_model
     if bandwidth_hz:
         d["bandwidth_hz"], d["damping"] = bandwidth_hz, damping
     return d
 
 
 def curve_from_dict(d: dict, where: str = "scan") -> ScanCurve:
+    """The curve a ``curve_to_dict`` record describes. Records without a galvo model were written before the
+    models existed, under the ideal mirror's 10 degree travel: they are read that way."""
     d = dict(d)
     name = d.pop("curve", None)
     return make_curve(name, max_angle_deg=d.pop("max_angle_deg", DEFAULT_MAX_ANGLE_DEG),
-                      bandwidth_hz=d.pop("bandwidth_hz", 0.0), damping=d.pop("damping", 0.7), where=where, **d)
+                      bandwidth_hz=d.pop("bandwidth_hz", 0.0), damping=d.pop("damping", 0.7), where=where,
+                      galvo_model=d.pop("galvo_model", "ideal"), **d)
 
 
 def event_angles(events, actual: bool = True):
