@@ -70,7 +70,7 @@ def test_writer_leaves_nothing_on_error(tmp_path, stream):
 
 def test_render_interrupted_leaves_no_file(tmp_path, demo_small, monkeypatch):
     """A failure in the middle of a streamed render removes the partial file."""
-    from mitsuba_eventfield.simulate import render as render_mod
+    from mitsuba_eventfield.simulate import sink as render_mod
     calls = {"n": 0}
     real = render_mod.H5EventWriter.append
 

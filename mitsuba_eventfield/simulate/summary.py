@@ -1,0 +1,91 @@
+"""What a render did (``RenderSummary``: counts, timings split by stage, notes, where the events went) and the
+metadata every event file carries (``run_metadata``: optics, pixel model, sampling, stepping, versions)."""
+from __future__ import annotations
+
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import backend
+from .._version import __version__
+from ..scene.timed import TimedScene
+
+
+@dataclass
+class RenderSummary:
+    """What a render did: counts, timings split by stage, and where the events went."""
+    events: int = 0
+    on: int = 0
+    off: int = 0
+    duration_s: float = 0.0
+    steps: int = 0
+    rejected_steps: int = 0
+    reused_steps: int = 0       # steps whose frame came from the one-period cache
+    copied_steps: int = 0       # steps whose events were copied from the previous period (state repeated)
+    dropped_readout: int = 0    # events the readout cap dropped
+    dropped_refractory: int = 0  # crossings suppressed by the refractory period
+    noise_events: int = 0       # shot-noise events emitted
+    wall_s: float = 0.0
+    render_s: float = 0.0
+    events_s: float = 0.0
+    motion_s: float = 0.0
+    write_s: float = 0.0
+    width: int = 0
+    height: int = 0
+    output: str | None = None
+    notes: list = field(default_factory=list)
+
+    def count(self, p: np.ndarray) -> None:
+        """Add one batch of events (their polarities) to the counts."""
+        n_on = int(np.count_nonzero(p > 0))
+        self.events += len(p)
+        self.on += n_on
+        self.off += len(p) - n_on
+
+    @property
+    def rate(self) -> float:
+        return self.events / self.duration_s if self.duration_s > 0 else 0.0
+
+    def as_dict(self) -> dict:
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        d["rate_ev_per_s"] = self.rate
+        return d
+
+    def format(self) -> str:
+        overhead = self.events_s + self.motion_s + self.write_s
+        lines = [f"{self.events} events ({self.on} ON, {self.off} OFF) in {self.duration_s * 1e3:.3f} ms simulated "
+                 f"on {self.width}x{self.height}: {self.rate:.4g} ev/s",
+                 f"{self.steps} steps ({self.rejected_steps} re-rendered shorter), wall {self.wall_s:.2f} s: "
+                 f"render {self.render_s:.2f} s, events {self.events_s:.2f} s, motion {self.motion_s:.2f} s, "
+                 f"write {self.write_s:.2f} s (overhead {100 * overhead / max(self.render_s, 1e-9):.1f}% of render)"]
+        if self.output:
+            lines.append(f"wrote {self.output}")
+        lines += self.notes
+        return "\n".join(lines)
+
+
+def run_metadata(timed: TimedScene, integ, **run) -> dict:
+    sensor = timed.sensor
+    optics = sensor.optics_metadata() if hasattr(sensor, "optics_metadata") else {"design": "conventional camera",
+                                                                                   "sensor": type(sensor).__name__}
+    for key in timed.params.keys():  # first-level sensor parameters worth recording (e.g. sensor.x_fov)
+        name = key.split(".")[-1]
+        if key.count(".") == 1 and name in ("x_fov", "focus_distance", "aperture_radius") \
+                and key.startswith(_sensor_id(timed)):
+            optics[name] = float(timed.params[key][0])
+    return {"package": "mitsuba-eventfield", "package_version": __version__, "mitsuba_version": backend.mi.__version__,
+            "drjit_version": backend.dr.__version__, "variant": backend.mi.variant(), "python": platform.python_version(),
+            "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "width": timed.film_size[0],
+            "height": timed.film_size[1], "duration_us": int(round(run["duration"] * 1e6)),
+            "t_start_us": int(round(run["t_start"] * 1e6)), "optics": optics,
+            "pixel_model": integ.pixel_model_metadata(), "spp": run["spp"], "seed": run["seed"],
+            "seed_mode": run["seed_mode"], "stepping": run["stepping"], "scene": timed.describe(),
+            "command": " ".join(sys.argv) if sys.argv and sys.argv[0] else None}
+
+
+def _sensor_id(timed: TimedScene) -> str:
+    sid = timed.sensor.id()
+    return sid + "." if sid else "sensor."
