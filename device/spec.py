@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field
 
 from ..errors import EventFieldError
 from ..optics.envelope import GALVO_MODELS, PHASE_RANGE_DEG, EnvelopeError, ScanEnvelope  # noqa: F401
+from ..validate import finite
 
 
 class SafetyError(EventFieldError):
@@ -34,10 +35,7 @@ _MODEL = GALVO_MODELS["gvs01x"]
 
 def finite_number(value, what: str) -> float:
     """``value`` as a float if it is a real, finite number (not bool, NaN or inf); else SafetyError."""
-    import math
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise SafetyError(f"{what} = {value!r} is not a finite number")
-    return float(value)
+    return finite(value, what, error=SafetyError)
 
 
 def check_duration(seconds) -> float:

@@ -1,12 +1,15 @@
 """Checks of user-supplied numbers and sizes, with one message shape: what, the value, the allowed range.
 
-Used by the command line (as argparse types, so a bad number is refused before any work starts) and by
-library functions whose inputs decide how much memory or time a call takes (so ``--fps 1e9`` or
-``--views 1e8`` get a range error naming the limit instead of a MemoryError minutes later).
+The one place numbers are validated: the command line (argparse types built on ``number``, so a bad number is
+refused before any work starts), library arguments (``number(..., strict=True)``, ``positive``, ``finite``:
+text and booleans are refused there), scene and motion files, the scan envelope and the device layer (which
+pass their own error class). Functions whose inputs decide how much memory or time a call takes use it too, so
+``--fps 1e9`` or ``--views 1e8`` get a range error naming the limit instead of a MemoryError minutes later.
 """
 from __future__ import annotations
 
 import math
+import numbers
 import os
 
 from .errors import ConfigError, EventFieldError
@@ -19,11 +22,14 @@ MAX_PLANES = 1000              # depth planes searched
 MAX_SPP = 65536
 
 
-def number(value, name: str, lo=None, hi=None, *, integer: bool = False, lo_open: bool = False):
-    """``value`` as a float (or int) if finite and in [lo, hi] (``lo_open``: lo excluded); else ConfigError
-    naming ``name``, the value and the range."""
+def number(value, name: str, lo=None, hi=None, *, integer: bool = False, lo_open: bool = False,
+           strict: bool = False, error=ConfigError):
+    """``value`` as a float (or int) if finite and in [lo, hi] (``lo_open``: lo excluded); else ``error``
+    naming ``name``, the value and the range. ``strict``: only real numbers (library arguments; the command
+    line passes text, which is parsed)."""
+    kind = "a whole number" if integer else "a number"
     try:
-        if isinstance(value, bool):
+        if isinstance(value, bool) or (strict and not isinstance(value, numbers.Real)):
             raise TypeError
         v = float(value)
         if integer:
@@ -31,12 +37,25 @@ def number(value, name: str, lo=None, hi=None, *, integer: bool = False, lo_open
                 raise ValueError
             v = int(v)
     except (TypeError, ValueError, OverflowError):
-        raise ConfigError(f"{name} = {value!r}: must be {'a whole number' if integer else 'a number'} "
-                          f"{describe_range(lo, hi, lo_open)}") from None
+        raise error(f"{name} = {value!r}: must be {kind} {describe_range(lo, hi, lo_open)}") from None
+    if not math.isfinite(v):
+        bounded = lo is not None or hi is not None
+        raise error(f"{name} = {value!r}: must be a finite number" +
+                    (f" in {describe_range(lo, hi, lo_open)}" if bounded else ""))
     too_low = lo is not None and (v <= lo if lo_open else v < lo)
-    if not math.isfinite(v) or too_low or (hi is not None and v > hi):
-        raise ConfigError(f"{name} = {value!r}: allowed range is {describe_range(lo, hi, lo_open)}")
+    if too_low or (hi is not None and v > hi):
+        raise error(f"{name} = {value!r}: allowed range is {describe_range(lo, hi, lo_open)}")
     return v
+
+
+def finite(value, name: str, error=ConfigError) -> float:
+    """A real, finite number (not text, bool, NaN or inf)."""
+    return number(value, name, strict=True, error=error)
+
+
+def positive(value, name: str, integer: bool = False, error=ConfigError):
+    """A real number (or whole number) > 0."""
+    return number(value, name, 0, integer=integer, lo_open=True, strict=True, error=error)
 
 
 def describe_range(lo, hi, lo_open=False) -> str:

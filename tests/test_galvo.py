@@ -1,5 +1,6 @@
 """The galvo sensor against Mitsuba's own cameras and against the mirror geometry."""
 import math
+import re
 
 import numpy as np
 import pytest
@@ -201,14 +202,14 @@ def test_galvo_time_updates_do_not_recompile():
     ({"amplitude": 3.0, "max_angle": 2.0, "frequency": 30.0}, "exceeds the mechanical travel of +-2 deg"),
     ({"amplitude": 15.0, "galvo_model": "ideal"}, "exceeds the mechanical travel of +-10 deg"),
     ({"galvo_model": "gvs99"}, "galvo_model = 'gvs99': allowed gvs01x, ideal"),
-    ({"frequency": 0.0}, "frequency = 0.0: must be a finite frequency > 0 Hz"),
-    ({"frequency": -250.0}, "frequency = -250.0"),
+    ({"frequency": 0.0}, "frequency (Hz) = 0.0: allowed range is (0, inf]"),
+    ({"frequency": -250.0}, "frequency (Hz) = -250.0"),
     ({"curve": "spiral"}, "unknown curve 'spiral'"),
 ])
 def test_bad_galvo_parameters(params, message):
     mi = _mi()
     sensor = dict({"type": "galvo", "film": {"type": "hdrfilm", "width": 8, "height": 8}}, **params)
-    with pytest.raises(Exception, match=message.replace("+", r"\+")):
+    with pytest.raises(Exception, match=re.escape(message)):
         mi.load_dict({"type": "scene", "sensor": sensor})
 
 

@@ -29,16 +29,13 @@ import numpy as np
 from ..errors import EventFieldError
 from ..scene.timed import load_scene
 from ..simulate.render import render_events, render_frames
+from ..validate import number
 
 START_METHODS = ("frame", "events")
 
 
 def _check_positive(name, value, integer=False, low=0.0):
-    ok = isinstance(value, (int, np.integer)) if integer else isinstance(value, (int, float, np.number))
-    if not ok or not value > low or (not integer and not math.isfinite(value)):
-        kind = "an integer" if integer else "a number"
-        raise ValueError(f"{name} = {value!r}: must be {kind} > {low:g}")
-    return value
+    return number(value, name, low, integer=integer, lo_open=True, strict=True)
 
 
 # The fan's documented set-up (docs/gallery): larger film and scan than the scene's own defaults, two planes.

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from .. import validate
 from ..errors import ConfigError
 
 PHASE_RANGE_DEG = (-360.0, 360.0)
@@ -39,9 +40,7 @@ class EnvelopeError(ConfigError):
 
 def finite(value, what: str) -> float:
     """``value`` as a float if it is a real, finite number (not bool, NaN or inf); else EnvelopeError."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise EnvelopeError(f"{what} = {value!r} is not a finite number")
-    return float(value)
+    return validate.finite(value, what, error=EnvelopeError)
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ from fractions import Fraction
 import numpy as np
 
 from ..errors import ConfigError
+from ..validate import finite, positive
 from .envelope import DEFAULT_GALVO_MODEL, EnvelopeError, galvo_model
 
 DEFAULT_MAX_ANGLE_DEG = 10.0   # the mechanical travel curves had before galvo models existed (the ideal model's)
@@ -138,16 +139,6 @@ class ScanCurve:
         except EnvelopeError as e:
             raise EnvelopeError(f"{where}: {e}" if not str(e).startswith(where) else str(e)) from None
         return self
-
-
-def _positive_frequency(value, where, name):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise ConfigError(f"{where}: {name} = {value!r}: must be a finite frequency > 0 Hz")
-
-
-def _finite(value, where, name):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{where}: {name} = {value!r}: must be a finite number")
 
 
 @dataclass(frozen=True)
@@ -361,10 +352,10 @@ def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: floa
                           f"allowed: {', '.join(sorted(_ARGS[name]))}")
     for k in _FREQ_KEYS:
         if k in params:
-            _positive_frequency(params[k], where, k)
+            positive(params[k], f"{where}: {k} (Hz)")
     for k, v in params.items():
         if k not in _FREQ_KEYS and k != "axis":
-            _finite(v, where, k)
+            finite(v, f"{where}: {k}")
     envelope = envelope or _envelope(galvo_model, where, max_angle_deg)
     limits = {"max_angle_deg": envelope.max_mech_deg, "galvo_model": envelope.name}
     if name == "circle":
@@ -386,7 +377,7 @@ def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: floa
                                    for k, v in params.items()})
     curve.validate(where, envelope)              # the commanded scan is what the galvo must be able to drive
     if bandwidth_hz:
-        _positive_frequency(bandwidth_hz, where, "bandwidth")
+        positive(bandwidth_hz, f"{where}: bandwidth (Hz)")
         if not (math.isfinite(damping) and damping > 0):
             raise ConfigError(f"{where}: damping = {damping!r}: must be a finite number > 0")
         curve = curve.with_bandwidth(bandwidth_hz, damping)

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
+from ..validate import finite, positive
 
 try:
     import tomllib
@@ -219,16 +220,11 @@ def _check_keys(table, allowed, source, prefix):
 
 
 def _finite(value, source, where):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{source}: {where} = {value!r}: must be a finite number")
-    return float(value)
+    return finite(value, f"{source}: {where}")
 
 
 def _positive(value, source, where):
-    v = _finite(value, source, where)
-    if v <= 0:
-        raise ConfigError(f"{source}: {where} = {value!r}: must be > 0")
-    return v
+    return positive(value, f"{source}: {where}")
 
 
 def _vector(value, source, where):

@@ -22,7 +22,7 @@ from ..atomic import check_writable
 from ..errors import EventFieldError
 from ..events.io import format_of
 from ..scene.timed import TimedScene, load_scene
-from ..validate import MAX_DURATION_S, MAX_STEPS, available_memory
+from ..validate import MAX_DURATION_S, MAX_STEPS, available_memory, finite, number, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
 from .sink import Sink, time_order
 from .summary import RenderSummary, run_metadata
@@ -35,18 +35,6 @@ SEED_MODES = ("fixed", "independent")
 BYTES_PER_SAMPLE = 64
 BYTES_PER_PIXEL = 96
 MAX_WAVEFRONT = 2**32 - 1
-
-
-def _check_number(name, value, low=None, integer=False, allow_none=False):
-    if value is None and allow_none:
-        return None
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) \
-        and math.isfinite(value) and (not integer or float(value).is_integer())
-    if not ok or (low is not None and value <= low):
-        kind = "an integer" if integer else "a finite number"
-        rng = f" > {low}" if low is not None else ""
-        raise EventFieldError(f"{name} = {value!r}: must be {kind}{rng}")
-    return int(value) if integer else float(value)
 
 
 def check_memory(width: int, height: int, spp: int, where: str = "film") -> int:
@@ -129,24 +117,24 @@ def _stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_st
         if duration is None:
             raise EventFieldError("duration not given (pass duration=..., --duration, or set `duration` in the "
                                   "motion file)")
-    duration = _check_number("duration", duration, low=0)
+    duration = positive(duration, "duration")
     if duration > MAX_DURATION_S:
         raise EventFieldError(f"duration = {duration:g} s: allowed range is (0, {MAX_DURATION_S:g}] simulated seconds "
                               "per render (the event file indexes every millisecond; split longer captures)")
     if seed_mode not in SEED_MODES:
         raise EventFieldError(f"seed_mode = {seed_mode!r}: allowed values are {', '.join(SEED_MODES)}")
     if adaptive:
-        max_log_change = _check_number("max_log_change", max_log_change, low=0)
-        max_step = _check_number("max_step", max_step if max_step is not None else duration / 20, low=0)
-        min_step = _check_number("min_step", min_step if min_step is not None else min(1e-6, max_step), low=0)
+        max_log_change = positive(max_log_change, "max_log_change")
+        max_step = positive(max_step if max_step is not None else duration / 20, "max_step")
+        min_step = positive(min_step if min_step is not None else min(1e-6, max_step), "min_step")
         if min_step > max_step:
             raise EventFieldError(f"min_step = {min_step} is larger than max_step = {max_step}")
     else:
-        steps = _check_number("steps", steps if steps is not None else 100, low=0, integer=True)
+        steps = positive(steps if steps is not None else 100, "steps", integer=True)
         if steps > MAX_STEPS:
             raise EventFieldError(f"steps = {steps}: allowed range is [1, {MAX_STEPS}] (each step renders the film)")
-    return _Stepping(duration, _check_number("t_start", t_start), _check_number("spp", spp, low=0, integer=True),
-                     _check_number("seed", seed, low=-1, integer=True), seed_mode, adaptive, steps, max_log_change,
+    return _Stepping(duration, finite(t_start, "t_start"), positive(spp, "spp", integer=True),
+                     number(seed, "seed", 0, integer=True, strict=True), seed_mode, adaptive, steps, max_log_change,
                      min_step, max_step)
 
 
@@ -374,7 +362,7 @@ def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
     from ..plugins import pixel_model
     from ..plugins.event_integrator import DEFAULT_LINLOG, is_event_integrator
     timed = load_scene(scene)
-    spp = _check_number("spp", spp, low=0, integer=True)
+    spp = positive(spp, "spp", integer=True)
     integ = timed.scene.integrator()
     if linlog_threshold is None:
         linlog_threshold = (pixel_model.pixel_config(integ.scene_preset, **integ.scene_overrides).linlog_threshold
