@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield.optics import scan
+from mitsuba_eventfield.optics import scan, tabulated
 
 CURVES = {
     "circle": dict(frequency=250.0, amplitude=2.0, phase=30.0),
@@ -68,7 +68,7 @@ def test_numpy_and_drjit_agree(name):
 
 
 def test_moore_curve_is_closed_space_filling_and_unit_step():
-    v = scan.moore_vertices(3)
+    v = tabulated.moore_vertices(3)
     assert len(v) == 4 ** 3
     step = np.diff(np.vstack([v, v[:1]]), axis=0)
     assert np.allclose(np.abs(step).sum(axis=1), 2 / 7)      # unit grid moves, including the closing one

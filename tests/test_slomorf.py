@@ -135,3 +135,25 @@ def test_cli_report_and_bad_factor(tmp_path):
                                                   "slomorf.png"]
     bad = subprocess.run(cmd[:-1] + ["1"], capture_output=True, text=True, timeout=600)
     assert bad.returncode == 2 and "argument --factor: '1': allowed range is [2, 64]" in bad.stderr
+
+
+def test_the_algorithm_runs_on_events_and_keyframes_alone():
+    """slow_motion_frames needs no scene and no truth: events of one pixel that brightens by e^(2 x 0.2) right
+    after the first keyframe; elsewhere (no events) the films are the time-weighted blend."""
+    from mitsuba_eventfield.apps.slomorf import slow_motion_frames
+    from mitsuba_eventfield.events.stream import EventStream
+    rng = np.random.default_rng(0)
+    keys = rng.uniform(0.2, 0.8, (2, 4, 5, 3)).astype(np.float32)
+    keys[1, 2, 3] = keys[0, 2, 3] * np.exp(0.4)                          # the pixel's brightening, seen at t_b
+    times = np.arange(5) / 4 * 0.01                                       # 4 intervals between two keys
+    is_key = np.array([True, False, False, False, True])
+    meta = {"pixel_model": {"threshold_on": 0.2, "threshold_off": 0.2}, "t_start_us": 0}
+    ev = EventStream(np.array([3, 3], np.uint16), np.array([2, 2], np.uint16), np.array([100, 200], np.int64),
+                     np.array([1, 1], np.int8), 5, 4, meta)
+    frames = slow_motion_frames(ev, keys, times, is_key, factor=4)
+    for j in (1, 2, 3):
+        w = j / 4
+        np.testing.assert_allclose(frames["events"][j, 0, 0], (1 - w) * keys[0, 0, 0] + w * keys[1, 0, 0], rtol=1e-5)
+        # the pixel fired both events before t_j: all of its change is already there
+        np.testing.assert_allclose(frames["events"][j, 2, 3], keys[1, 2, 3], rtol=1e-4)
+    assert np.array_equal(frames["linear"][0], keys[0]) and np.array_equal(frames["events"][4], keys[1])

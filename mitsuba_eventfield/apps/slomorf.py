@@ -50,7 +50,6 @@ Timings (render events / render RGB keyframes / render truth / interpolate / ref
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -61,6 +60,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events, render_frames
+from .slomorf_outputs import figure, to_display, write_outputs  # noqa: F401  (the outputs: their own module)
 
 DEFAULT_SCENE = bundled_scene("falling/falling.xml")
 FPS_RANGE = (1.0, 10000.0)          # RGB camera frame rate (Hz)
@@ -120,11 +120,6 @@ def _check(fps, factor, depths, duration):
     if duration is not None and not (math.isfinite(duration) and duration >= 1.0 / fps):
         raise ConfigError(f"duration = {duration!r}: must be at least one RGB frame interval (>= {1.0 / fps:g} s)")
     return float(fps), int(factor), depths
-
-
-def to_display(linear: np.ndarray) -> np.ndarray:
-    """How frames are shown and scored: radiance clipped to [0, 1], gamma 1/2.2, 8 bits."""
-    return np.rint(np.clip(linear, 0.0, 1.0) ** (1 / 2.2) * 255).astype(np.uint8)
 
 
 def interpolate(key_a, key_b, log_ab, log_tb, count_at=None, count_tb=None, w_b=0.5, fusion="events"):
@@ -211,106 +206,83 @@ def _focus_check(refocused, depth_views, depths, is_key):
             "all_sharpest_at_own_depth": all(r["sharpest_at_own_depth"] for r in regions)}
 
 
-def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, factor: int = 8,
-            duration: float | None = None, depths=DEFAULT_DEPTHS, spp: int = 4, seed: int = 0,
-            steps_per_frame: int | None = None, progress: bool = False) -> SloMoRFResult:
-    """Slow-motion refocus of a kaleidoscope scene, scored against the renderer (module docstring).
-
-    ``duration``: seconds (default: the motion file's), cut to whole RGB frame intervals; ``steps_per_frame``:
-    event-render steps per RGB frame interval (default 4 x factor); ``spp``/``seed``: for events and frames.
-    """
-    from ..events.stream import EventStream
-    from ..focus.refocus import refocus
-    from ..lightfield import reconstruct
-    from ..lightfield.model import from_spatial
-    fps, factor, depths = _check(fps, factor, depths, duration)
-    steps_per_frame = 4 * factor if steps_per_frame is None else int(steps_per_frame)
-    if steps_per_frame < 1:
-        raise ConfigError(f"steps_per_frame = {steps_per_frame}: must be an integer >= 1")
-    defines = dict(defines or {})
-    from .. import backend
-    previous = backend.mi.variant()
-    split = {}
-    try:
-        t0 = time.perf_counter()
-        _variant_for(color=False)
-        timed = load_scene(scene_path, **defines)
+def _capture(scene_path, defines, fps, factor, duration, depths, spp, seed, steps_per_frame, progress, split):
+    """What the rig records: kaleidoscope events (mono) and the RGB camera's keyframes. Returns (the colour
+    scene, events, optics, output times, key mask, keyframes, duration)."""
+    t0 = time.perf_counter()
+    _variant_for(color=False)
+    timed = load_scene(scene_path, **defines)
+    if duration is None:
+        duration = timed.motion.duration if timed.motion and timed.motion.duration else None
         if duration is None:
-            duration = timed.motion.duration if timed.motion and timed.motion.duration else None
-            if duration is None:
-                raise ConfigError(f"{scene_path}: duration not given and the scene has no motion file duration")
-            _check(fps, factor, depths, duration)
-        intervals = int(math.floor(duration * fps + 1e-6))
-        duration = intervals / fps
-        optics = timed.sensor.optics_metadata() if hasattr(timed.sensor, "optics_metadata") else {}
-        if optics.get("design") not in ("kaleidoscope", "microlens"):
-            raise ConfigError(f"{scene_path}: SloMoRF needs a kaleidoscope (or microlens) sensor; the scene's "
-                              f"sensor is {type(timed.sensor).__name__}")
-        events = render_events(timed, duration, steps=intervals * steps_per_frame, spp=spp, seed=seed,
-                                  progress=progress)
-        t1 = time.perf_counter()
-        split["render_events"] = t1 - t0
+            raise ConfigError(f"{scene_path}: duration not given and the scene has no motion file duration")
+        _check(fps, factor, depths, duration)
+    intervals = int(math.floor(duration * fps + 1e-6))
+    duration = intervals / fps
+    optics = timed.sensor.optics_metadata() if hasattr(timed.sensor, "optics_metadata") else {}
+    if optics.get("design") not in ("kaleidoscope", "microlens"):
+        raise ConfigError(f"{scene_path}: SloMoRF needs a kaleidoscope (or microlens) sensor; the scene's "
+                          f"sensor is {type(timed.sensor).__name__}")
+    events = render_events(timed, duration, steps=intervals * steps_per_frame, spp=spp, seed=seed,
+                           progress=progress)
+    t1 = time.perf_counter()
+    split["render_events"] = t1 - t0
+    _variant_for(color=True)
+    timed_rgb = load_scene(scene_path, **defines)
+    times = np.arange(intervals * factor + 1) / (fps * factor)
+    is_key = np.arange(len(times)) % factor == 0
+    keys = render_frames(timed_rgb, times[is_key], spp=spp, seed=seed, log=False, rgb=True)
+    split["render_rgb_frames"] = time.perf_counter() - t1
+    return timed_rgb, events, optics, times, is_key, keys, duration
 
-        _variant_for(color=True)
-        timed_rgb = load_scene(scene_path, **defines)
-        times = np.arange(intervals * factor + 1) / (fps * factor)
-        is_key = np.arange(len(times)) % factor == 0
-        keys = render_frames(timed_rgb, times[is_key], spp=spp, seed=seed, log=False, rgb=True)
-        t2 = time.perf_counter()
-        split["render_rgb_frames"] = t2 - t1
-        truth = np.empty((len(times),) + keys.shape[1:], np.float32)
-        truth[is_key] = keys
-        truth[~is_key] = render_frames(timed_rgb, times[~is_key], spp=spp, seed=seed, log=False, rgb=True)
-        depth_views = _depth_views(timed_rgb, times, optics)
-        t3 = time.perf_counter()
-        split["render_truth_for_scoring"] = t3 - t2
 
-        # cumulative log change and event counts from t = 0 at every output instant: one pass each
-        log_cum = reconstruct.direct(events, times, t_start=0.0)
-        ones = EventStream(events.x, events.y, events.t, np.ones_like(events.p), events.width, events.height,
-                           events.meta)
-        count_cum = reconstruct.direct(ones, times, t_start=0.0, c_on=1.0, c_off=1.0)
-        frames = {"truth": truth}
-        for name in METHODS:
-            frames[name] = np.empty_like(truth)
-            frames[name][is_key] = keys
-        for j in np.nonzero(~is_key)[0]:
-            a, b = (j // factor) * factor, (j // factor + 1) * factor
-            ka, kb = truth[a].astype(np.float64), truth[b].astype(np.float64)
-            wb = (j - a) / factor
-            d_at, d_tb = log_cum[j] - log_cum[a], log_cum[b] - log_cum[j]
-            n_at, n_tb = count_cum[j] - count_cum[a], count_cum[b] - count_cum[j]
-            frames["events"][j] = interpolate(ka, kb, d_at, d_tb, n_at, n_tb, wb, "events")
-            frames["events_time"][j] = interpolate(ka, kb, d_at, d_tb, w_b=wb, fusion="time")
-            frames["linear"][j] = (1 - wb) * ka + wb * kb
-        t4 = time.perf_counter()
-        split["interpolate"] = t4 - t3
+def slow_motion_frames(events, keys, times, is_key, factor: int) -> dict:
+    """The algorithm, without any scoring: the films between RGB keyframes ``keys`` at ``times[is_key]``,
+    from the events between them. {"events", "events_time", "linear"} -> (T, H, W, 3) linear RGB (keyframes
+    copied at key instants)."""
+    from ..events.stream import EventStream
+    from ..lightfield import reconstruct
 
-        refocused, scoring_refocus_s = {}, 0.0
-        for name, films in frames.items():
-            t_method = time.perf_counter()
-            out = None
-            for j, film in enumerate(films):
-                lf = from_spatial(film, optics, time=float(times[j]), log=False)
-                imgs = np.stack([refocus(lf, z) for z in depths]).astype(np.float32)
-                if out is None:
-                    out = np.empty((len(films),) + imgs.shape, np.float32)
-                out[j] = imgs
-            refocused[name] = out
-            if name != "events":             # the truth and the comparisons are refocused for scoring only
-                scoring_refocus_s += time.perf_counter() - t_method
-        t5 = time.perf_counter()
-        split["refocus"] = t5 - t4 - scoring_refocus_s
-        split["refocus_for_scoring"] = scoring_refocus_s
+    # cumulative log change and event counts from t = 0 at every output instant: one pass each
+    log_cum = reconstruct.direct(events, times, t_start=0.0)
+    ones = EventStream(events.x, events.y, events.t, np.ones_like(events.p), events.width, events.height,
+                       events.meta)
+    count_cum = reconstruct.direct(ones, times, t_start=0.0, c_on=1.0, c_off=1.0)
+    key_at = np.empty((len(times),) + keys.shape[1:], np.float32)
+    key_at[is_key] = keys
+    frames = {}
+    for name in METHODS:
+        frames[name] = np.empty_like(key_at)
+        frames[name][is_key] = keys
+    for j in np.nonzero(~is_key)[0]:
+        a, b = (j // factor) * factor, (j // factor + 1) * factor
+        ka, kb = key_at[a].astype(np.float64), key_at[b].astype(np.float64)
+        wb = (j - a) / factor
+        d_at, d_tb = log_cum[j] - log_cum[a], log_cum[b] - log_cum[j]
+        n_at, n_tb = count_cum[j] - count_cum[a], count_cum[b] - count_cum[j]
+        frames["events"][j] = interpolate(ka, kb, d_at, d_tb, n_at, n_tb, wb, "events")
+        frames["events_time"][j] = interpolate(ka, kb, d_at, d_tb, w_b=wb, fusion="time")
+        frames["linear"][j] = (1 - wb) * ka + wb * kb
+    return frames
 
-        metrics = _score(frames, refocused, is_key, depths, factor)
-        metrics["focus_check"] = _focus_check(refocused["events"], depth_views, depths, is_key)
-        split["score"] = time.perf_counter() - t5
-    finally:
-        if previous and backend.mi.variant() != previous:
-            backend.set_variant(previous)
-    view = refocused["truth"].shape[2:4]
-    meta = {"scene": os.path.abspath(scene_path), "defines": defines, "fps": fps, "factor": factor,
+
+def refocus_films(films, times, optics, depths) -> np.ndarray:
+    """(T, D, h, w, 3): every film split into its views and refocused at each depth."""
+    from ..focus.refocus import refocus
+    from ..lightfield.model import from_spatial
+    out = None
+    for j, film in enumerate(films):
+        lf = from_spatial(film, optics, time=float(times[j]), log=False)
+        imgs = np.stack([refocus(lf, z) for z in depths]).astype(np.float32)
+        if out is None:
+            out = np.empty((len(films),) + imgs.shape, np.float32)
+        out[j] = imgs
+    return out
+
+
+def _meta(scene_path, defines, fps, factor, duration, depths, spp, seed, steps_per_frame, is_key, truth, view,
+          events, optics, split) -> dict:
+    return {"scene": os.path.abspath(scene_path), "defines": defines, "fps": fps, "factor": factor,
             "output_fps": fps * factor, "duration_s": duration, "rgb_frames": int(is_key.sum()),
             "depths": list(depths), "spp": spp, "seed": seed, "steps_per_frame": steps_per_frame,
             "film": [int(truth.shape[2]), int(truth.shape[1])], "view": [int(view[1]), int(view[0])],
@@ -318,8 +290,57 @@ def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, fa
             "time-distance weights where a pixel did not fire", "baseline": "linear blend of the bracketing frames",
             "score_domain": "8-bit, gamma 1/2.2, of linear radiance clipped to [0, 1]",
             "moving_pixels": f"8-bit difference > {MOVING_LEVEL} from either bracketing keyframe",
+            "inputs": "kaleidoscope events + RGB keyframes (the truth is rendered for scoring only)",
             "optics": optics, "pixel_model": events.meta.get("pixel_model"),
             "package_version": events.meta.get("package_version"), "time_split_s": split}
+
+
+def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, factor: int = 8,
+            duration: float | None = None, depths=DEFAULT_DEPTHS, spp: int = 4, seed: int = 0,
+            steps_per_frame: int | None = None, progress: bool = False) -> SloMoRFResult:
+    """Slow-motion refocus of a kaleidoscope scene, scored against the renderer (module docstring): the
+    capture (``_capture``), the algorithm (``slow_motion_frames``, ``refocus_films``), then the scoring.
+
+    ``duration``: seconds (default: the motion file's), cut to whole RGB frame intervals; ``steps_per_frame``:
+    event-render steps per RGB frame interval (default 4 x factor); ``spp``/``seed``: for events and frames.
+    """
+    from .. import backend
+    fps, factor, depths = _check(fps, factor, depths, duration)
+    steps_per_frame = 4 * factor if steps_per_frame is None else int(steps_per_frame)
+    if steps_per_frame < 1:
+        raise ConfigError(f"steps_per_frame = {steps_per_frame}: must be an integer >= 1")
+    defines = dict(defines or {})
+    previous = backend.mi.variant()
+    split = {}
+    try:
+        timed_rgb, events, optics, times, is_key, keys, duration = _capture(
+            scene_path, defines, fps, factor, duration, depths, spp, seed, steps_per_frame, progress, split)
+        t2 = time.perf_counter()
+        truth = np.empty((len(times),) + keys.shape[1:], np.float32)      # for scoring only
+        truth[is_key] = keys
+        truth[~is_key] = render_frames(timed_rgb, times[~is_key], spp=spp, seed=seed, log=False, rgb=True)
+        depth_views = _depth_views(timed_rgb, times, optics)
+        t3 = time.perf_counter()
+        split["render_truth_for_scoring"] = t3 - t2
+        frames = dict(truth=truth, **slow_motion_frames(events, keys, times, is_key, factor))
+        t4 = time.perf_counter()
+        split["interpolate"] = t4 - t3
+        refocused = {"events": refocus_films(frames["events"], times, optics, depths)}
+        t5 = time.perf_counter()
+        refocused.update({name: refocus_films(films, times, optics, depths) for name, films in frames.items()
+                          if name != "events"})       # the truth and the comparisons: for scoring only
+        split["refocus"] = t5 - t4
+        split["refocus_for_scoring"] = time.perf_counter() - t5
+        t6 = time.perf_counter()
+        metrics = _score(frames, refocused, is_key, depths, factor)
+        metrics["focus_check"] = _focus_check(refocused["events"], depth_views, depths, is_key)
+        split["score"] = time.perf_counter() - t6
+    finally:
+        if previous and backend.mi.variant() != previous:
+            backend.set_variant(previous)
+    meta = _meta(scene_path, defines, fps, factor, duration, depths, spp, seed, steps_per_frame, is_key, truth,
+                 refocused["truth"].shape[2:4], events, optics, split)
+    refocused = {name: refocused[name] for name in frames}           # the order of the films, as before
     return SloMoRFResult(times, is_key, frames, depths, refocused, metrics, meta)
 
 
@@ -343,123 +364,3 @@ def _score(frames, refocused, is_key, depths, factor):
         per_depth = [dict(_aggregate(r), depth=z) for r, z in zip(rf_rows, depths)]
         metrics["refocus"][name] = dict(_aggregate([row for r in rf_rows for row in r]), per_depth=per_depth)
     return metrics
-
-
-def write_outputs(result: SloMoRFResult, out_dir: str, video_fps: float = 24.0, gif: bool = True) -> dict:
-    """Frames (PNG), refocused frames (PNG), a video (MP4, and GIF), metrics.json and a summary figure, all
-    written atomically with the run's metadata. Returns {kind: path(s)}."""
-    import cv2
-    from PIL import Image
-    from PIL.PngImagePlugin import PngInfo
-
-    from ..atomic import atomic_output, write_json
-    t0 = time.perf_counter()
-    os.makedirs(os.path.join(out_dir, "frames"), exist_ok=True)
-    os.makedirs(os.path.join(out_dir, "refocus"), exist_ok=True)
-    meta = {k: v for k, v in result.meta.items() if k != "time_split_s"}
-    meta_json = json.dumps(meta, default=str)
-    written = {"frames": [], "refocus": []}
-
-    def png(path, img8, extra):
-        info = PngInfo()
-        info.add_text("eventfield_meta", json.dumps(dict(extra, **meta), default=str))
-        with atomic_output(path, "image") as tmp:
-            Image.fromarray(img8).save(tmp, format="PNG", pnginfo=info)
-        return path
-
-    films8 = to_display(result.frames["events"])
-    rf8 = to_display(result.refocused["events"])
-    for j, t in enumerate(result.times):
-        kind = "rgb keyframe" if result.is_key[j] else "interpolated (events)"
-        written["frames"].append(png(os.path.join(out_dir, "frames", f"frame_{j:04d}.png"), films8[j],
-                                     {"time_s": float(t), "frame": kind}))
-        for i, z in enumerate(result.depths):
-            written["refocus"].append(png(os.path.join(out_dir, "refocus", f"depth_{z:g}_{j:04d}.png"), rf8[j, i],
-                                          {"time_s": float(t), "frame": kind, "refocus_depth": z}))
-    video = [_video_frame(rf8[j], result.depths, result.times[j], result.is_key[j]) for j in range(len(films8))]
-    h, w = video[0].shape[:2]
-    mp4 = os.path.join(out_dir, "slomorf.mp4")
-    with atomic_output(mp4, "video") as tmp:
-        writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*"mp4v"), float(video_fps), (w, h))
-        if not writer.isOpened():
-            raise ConfigError(f"{mp4}: OpenCV cannot write MP4 (mp4v) video here")
-        for v in video:
-            writer.write(np.ascontiguousarray(v[..., ::-1]))
-        writer.release()
-    written["mp4"] = mp4
-    if gif:
-        path = os.path.join(out_dir, "slomorf.gif")
-        with atomic_output(path, "video") as tmp:
-            imgs = [Image.fromarray(v) for v in video]
-            imgs[0].save(tmp, format="GIF", save_all=True, append_images=imgs[1:], duration=int(1000 / video_fps),
-                         loop=0, comment=meta_json.encode())
-        written["gif"] = path
-    written["figure"] = figure(result, os.path.join(out_dir, "slomorf.png"))
-    result.meta["time_split_s"]["write"] = time.perf_counter() - t0
-    written["metrics"] = write_json(os.path.join(out_dir, "metrics.json"), {"metrics": result.metrics, **result.meta})
-    return written
-
-
-def _label(img8, text, scale=0.4):
-    """A white strip with ``text`` above the image."""
-    import cv2
-    strip = np.full((16, img8.shape[1], 3), 255, np.uint8)
-    cv2.putText(strip, text, (3, 12), cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 1, cv2.LINE_AA)
-    return np.concatenate([strip, img8], 0)
-
-
-def _upscale(img8, min_size=160):
-    k = max(1, int(math.ceil(min_size / img8.shape[0])))
-    return np.repeat(np.repeat(img8, k, 0), k, 1)
-
-
-def _row(images, gap=4):
-    h = max(i.shape[0] for i in images)
-    pad = [np.pad(i, ((0, h - i.shape[0]), (0, gap), (0, 0)), constant_values=255) for i in images]
-    return np.concatenate(pad, 1)[:, :-gap]
-
-
-def _stack(rows, gap=6):
-    w = max(r.shape[1] for r in rows)
-    pad = [np.pad(r, ((0, gap), (0, w - r.shape[1]), (0, 0)), constant_values=255) for r in rows]
-    return np.concatenate(pad, 0)[:-gap]
-
-
-def _video_frame(rf8_t, depths, t, is_key):
-    tag = "RGB frame" if is_key else "interpolated"
-    return _row([_label(_upscale(img), f"focus {z:g} | {t * 1e3:.2f} ms {tag}") for img, z in zip(rf8_t, depths)])
-
-
-def figure(result: SloMoRFResult, path: str) -> str:
-    """Summary: the two RGB keyframes around the middle of the clip, the middle interpolated instant (truth,
-    events, linear blend; centre view) and its refocus at every depth (events vs truth)."""
-    from ..atomic import atomic_output
-    from ..lightfield.views import extract_views
-    factor = result.meta["factor"]
-    key_idx = np.nonzero(result.is_key)[0]
-    a = key_idx[max(0, len(key_idx) // 2 - 1)]
-    b, j = a + factor, a + factor // 2
-    optics = result.meta["optics"]
-    centre = lambda name, i: to_display(extract_views(result.frames[name][i], optics).view(0, 0))  # noqa: E731
-    key_a, key_b = centre("truth", a), centre("truth", b)
-    mid = {k: centre(k, j) for k in ("truth", "events", "linear")}
-    m = result.metrics
-    ms = lambda i: f"{result.times[i] * 1e3:.2f} ms"  # noqa: E731
-    row1 = _row([_label(_upscale(key_a), f"RGB frame {ms(a)}"), _label(_upscale(key_b), f"RGB frame {ms(b)}"),
-                 _label(_upscale(mid["truth"]), f"truth {ms(j)}"),
-                 _label(_upscale(mid["events"]), f"events: {m['frames']['events']['psnr_moving']:.1f} dB moving"),
-                 _label(_upscale(mid["linear"]), f"linear: {m['frames']['linear']['psnr_moving']:.1f} dB moving")])
-    rf = to_display(result.refocused["events"][j])
-    rft = to_display(result.refocused["truth"][j])
-    rfl = to_display(result.refocused["linear"][j])
-    rows = [row1]
-    for name, imgs in (("events", rf), ("truth", rft), ("linear", rfl)):
-        rows.append(_row([_label(_upscale(img), f"{name}, focus {z:g} ({ms(j)})") for img, z in zip(imgs, result.depths)]))
-    canvas = _stack(rows)
-    from PIL import Image
-    from PIL.PngImagePlugin import PngInfo
-    info = PngInfo()
-    info.add_text("eventfield_meta", json.dumps({k: v for k, v in result.meta.items()}, default=str))
-    with atomic_output(path, "figure") as tmp:
-        Image.fromarray(canvas).save(tmp, format="PNG", pnginfo=info)
-    return path
