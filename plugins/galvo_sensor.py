@@ -38,7 +38,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_eventfield.optics import galvo as go
+from mitsuba_eventfield.optics import galvo as galvo_optics
 from mitsuba_eventfield.plugins._per_variant import per_variant, subclass
 
 _FLOAT_PARAMS = ("frequency", "amplitude", "phase", "offset_x", "offset_y", "freq_x", "freq_y", "amplitude_x",
@@ -122,7 +122,7 @@ class _GalvoSensorMethods:
         size, crop, offset = film.size(), film.crop_size(), film.crop_offset()
         u = (offset.x + sample2.x * crop.x) / size.x
         v = (offset.y + sample2.y * crop.y) / size.y
-        dx, dy, dz = go.pinhole_direction(dr, u, v, self.tan_half, self.aspect)
+        dx, dy, dz = galvo_optics.pinhole_direction(dr, u, v, self.tan_half, self.aspect)
         if self.aperture_radius <= 0:
             return (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)), (dx, dy, dz)
         lens = mi.warp.square_to_uniform_disk_concentric(sample3) * self.aperture_radius
@@ -135,7 +135,7 @@ class _GalvoSensorMethods:
         wavelengths, weight = self.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f), sample1, active)
         o, d = self._camera_ray(sample2, sample3)
         theta_x, theta_y = self.curve.angles(self.scan_time + (time - self.shutter_open()))
-        o, d = go.galvo_transform(dr, o, d, theta_x, theta_y, self.mirror_distance, self.mirror_separation)
+        o, d = galvo_optics.galvo_transform(dr, o, d, theta_x, theta_y, self.mirror_distance, self.mirror_separation)
         to_world = self.world_transform()
         ray = mi.Ray3f(to_world @ mi.Point3f(*o), dr.normalize(to_world @ mi.Vector3f(*d)), time, wavelengths)
         ray.maxt = self.far_clip

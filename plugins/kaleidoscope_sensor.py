@@ -32,7 +32,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import kaleido_optics as ko
+from . import kaleido_optics
 from mitsuba_eventfield.plugins._per_variant import per_variant, subclass
 
 MODES = ("lenses", "tube_only", "physical_tube")
@@ -70,7 +70,7 @@ class _KaleidoscopeSensorMethods:
         self.m_needs_sample_3 = self.layout == "microlens" or self.relay_aperture > 0
 
     def _geometry(self, aperture):
-        return ko.kaleido_geometry(self.tube_width, self.tube_height, self.tube_length, self.relay_distance,
+        return kaleido_optics.kaleido_geometry(self.tube_width, self.tube_height, self.tube_length, self.relay_distance,
                                    self.focal_length, self.focus_distance, aperture, self.relay_aperture, WHERE)
 
     def _init_kaleidoscope(self, props):
@@ -109,7 +109,7 @@ class _KaleidoscopeSensorMethods:
                 i, j = col - half, row - half
                 if self.layout == "kaleidoscope":
                     scale = self.geo["lens_to_entrance"] / (self.relay_distance + self.tube_length)
-                    ax, ay = ko.subaperture(i, j, 0.0, 0.0, self.tube_width, self.tube_height, scale, np)
+                    ax, ay = kaleido_optics.subaperture(i, j, 0.0, 0.0, self.tube_width, self.tube_height, scale, np)
                     views.append({"i": i, "j": j, "tile": [col * tw, row * th, tw, th], 
                                   "flip_x": bool(i % 2), "flip_y": bool(j % 2), "subaperture": [float(ax), float(ay)]})
                 else:
@@ -153,7 +153,7 @@ class _KaleidoscopeSensorMethods:
 
     def _kaleido_ray(self, u, v, sample3):
         W, H, L, R = self.tube_width, self.tube_height, self.tube_length, self.relay_distance
-        ex, ey = ko.film_to_exit(u, v, W, H)
+        ex, ey = kaleido_optics.film_to_exit(u, v, W, H)
         qx, qy = ex * (R + L) / R, ey * (R + L) / R          # the relay is focused on the entrance plane
         if self.relay_aperture > 0:
             r = mi.warp.square_to_uniform_disk_concentric(sample3) * self.relay_aperture
@@ -166,15 +166,15 @@ class _KaleidoscopeSensorMethods:
         if self.mode == "physical_tube":
             d = dr.normalize(mi.Vector3f(qx - rx, qy - ry, R + L))
             return (rx, ry, mi.Float(-(R + L))), (d.x, d.y, d.z), valid
-        i, px, sx = ko.fold(dr, qx, W)
-        j, py, sy = ko.fold(dr, qy, H)
+        i, px, sx = kaleido_optics.fold(dr, qx, W)
+        j, py, sy = kaleido_optics.fold(dr, qy, H)
         if self.mode == "tube_only":
             d = dr.normalize(mi.Vector3f(sx * (qx - rx), sy * (qy - ry), R + L))
             return (px, py, mi.Float(0.0)), (d.x, d.y, d.z), valid
         scale = self.geo["lens_to_entrance"] / (R + L)
-        ax, ay = ko.subaperture(i, j, rx, ry, W, H, scale, dr, signs=(sx, sy))
+        ax, ay = kaleido_optics.subaperture(i, j, rx, ry, W, H, scale, dr, signs=(sx, sy))
         valid &= ax * ax + ay * ay <= self.aperture * self.aperture
-        o, d = ko.main_lens_ray(dr, px, py, ax, ay, self.geo["lens_to_entrance"], self.focus_distance)
+        o, d = kaleido_optics.main_lens_ray(dr, px, py, ax, ay, self.geo["lens_to_entrance"], self.focus_distance)
         return o, d, valid
 
     def _microlens_ray(self, sample2, sample3, offset, crop):
@@ -182,8 +182,8 @@ class _KaleidoscopeSensorMethods:
         fx = offset.x + sample2.x * crop.x                  # film pixel coordinates
         fy = offset.y + sample2.y * crop.y
         ix, iy = dr.floor(fx), dr.floor(fy)
-        vi, vj, x, y, cx, cy = ko.microlens_mapping(dr, ix, iy, fx - ix, fy - iy, n, self.film_w, self.film_h,
-                                                    self.tube_width, self.tube_height)
+        vi, vj, x, y, cx, cy = kaleido_optics.microlens_mapping(dr, ix, iy, fx - ix, fy - iy, n, self.film_w,
+                                                                self.film_h, self.tube_width, self.tube_height)
         # spatial position: anywhere under the lenslet (sample3); angle: the pixel's sub-aperture cell
         lw, lh = self.tube_width * n / self.film_w, self.tube_height * n / self.film_h
         x = x + (sample3.x - 0.5) * lw
@@ -191,7 +191,7 @@ class _KaleidoscopeSensorMethods:
         pitch = 2 * self.aperture / n
         ax, ay = (vi + cx) * pitch, (vj + cy) * pitch
         valid = ax * ax + ay * ay <= self.aperture * self.aperture
-        o, d = ko.main_lens_ray(dr, x, y, ax, ay, self.geo["lens_to_entrance"], self.focus_distance)
+        o, d = kaleido_optics.main_lens_ray(dr, x, y, ax, ay, self.geo["lens_to_entrance"], self.focus_distance)
         return o, d, valid
 
     def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):

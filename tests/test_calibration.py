@@ -8,7 +8,7 @@ from conftest import ROOT
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.calibration import CalibrationError, fit_depth, fit_galvo, fit_tracks, track_point
-from mitsuba_eventfield.optics import galvo as go
+from mitsuba_eventfield.optics import galvo as galvo_optics
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
 LED = os.path.join(ROOT, "scenes", "led_depth", "led.xml")
@@ -20,17 +20,17 @@ def _exact_radius(optics, pixel, depth, amplitude_deg, phase_deg, width=W, heigh
     """Radius (px, along x) of the circle traced by the scene point seen at ``pixel`` of the first view, at
     ``depth``: ray through the pixel at the first view's mirror angles, onto the plane z = depth, then projected
     through the mirrors at every angle of the scan (mitsuba_eventfield/optics/galvo.py)."""
-    f = go.focal_length_px(width, optics["fov_x_deg"])
+    f = galvo_optics.focal_length_px(width, optics["fov_x_deg"])
     d1, s = optics["mirror_distance"], optics["mirror_separation"]
     curve = ef.make_curve("circle", frequency=FREQ, amplitude=amplitude_deg, phase=phase_deg)
     th0 = curve.angles(0.0)
     u, v = (pixel[0]) / width, (pixel[1]) / height
-    d = go.pinhole_direction(np, u, v, math.tan(math.radians(optics["fov_x_deg"]) / 2), width / height)
-    o, d = go.galvo_transform(np, (0.0, 0.0, 0.0), d, th0[0], th0[1], d1, s)
+    d = galvo_optics.pinhole_direction(np, u, v, math.tan(math.radians(optics["fov_x_deg"]) / 2), width / height)
+    o, d = galvo_optics.galvo_transform(np, (0.0, 0.0, 0.0), d, th0[0], th0[1], d1, s)
     t = (depth - o[2]) / d[2]
     p = (o[0] + t * d[0], o[1] + t * d[1], depth)
     ax, ay = curve.angles(np.linspace(0, 1 / FREQ, 720, endpoint=False))
-    uu, _ = go.project_point(np, p, ax, ay, d1, s, f, width, height)
+    uu, _ = galvo_optics.project_point(np, p, ax, ay, d1, s, f, width, height)
     return np.ptp(uu) / 2
 
 
@@ -84,7 +84,7 @@ def test_depth_calibration_recovers_the_geometry(capsys):
         cal, optics = _led_scale(float(z))
         scales.append(cal.scale_px_per_rad[0])
     dc = fit_depth(depths, scales)
-    f = go.focal_length_px(346, optics["fov_x_deg"])
+    f = galvo_optics.focal_length_px(346, optics["fov_x_deg"])
     with capsys.disabled():
         print(f"\n[depth calibration 15-100 in] scale residual rms: inverse {dc.rms_inverse:.3f}, linear (paper) "
               f"{dc.rms_linear:.3f} px/rad; depth rms: inverse {dc.depth_rms_inverse * 1000:.1f} mm, linear "
@@ -181,7 +181,7 @@ def test_depth_calibration_keeps_each_axis_pivot(tmp_path):
     optics = {"design": "galvo", "fov_x_deg": 40.0, "mirror_distance": 0.1, "mirror_separation": 0.01,
               "scan": {"curve": "circle", "frequency": FREQ, "amplitude": 0.5, "phase": 0.0}}
     save_calibration(str(tmp_path / "c.json"), optics_record(optics, W, H), depth=dc)
-    nominal = go.GalvoGeometry(W, H, f, 0.3, 0.5)                       # pivots that the calibration replaces
+    nominal = galvo_optics.GalvoGeometry(W, H, f, 0.3, 0.5)                       # pivots that the calibration replaces
     g = load_calibration(str(tmp_path / "c.json"))["depth"].geometry(nominal)
     assert np.allclose([g.pivot_x, g.pivot_y, g.gain_x, g.gain_y], [0.10, 0.11, 1.0, 1.0])
     g1 = fit_depth(z, 2 * f * (1 - 0.10 / z)).geometry(nominal)
@@ -200,7 +200,7 @@ def test_calibration_file_round_trip_and_use_in_refocus(tmp_path):
     from mitsuba_eventfield.calibration.depth import fit_depth
 
     # depth calibration from exact geometry of the LED scene's galvo (the test above checks the LED fit)
-    f = go.focal_length_px(W, 40.0)
+    f = galvo_optics.focal_length_px(W, 40.0)
     z = np.array([0.4, 0.7, 1.0, 1.6, 2.5])
     dc = fit_depth(z, 2 * f * (1 - 0.1 / z))
     scene = ef.load_scene(GALVO, width=W, height=H, amplitude=0.5, phase=70.0)

@@ -14,7 +14,7 @@ from mitsuba_eventfield.calibration import (CalibrationError, PatchTrack, check_
                                             galvo_scale_limit, load_calibration, optics_difference, optics_record,
                                             register, same_optics, save_calibration)
 from mitsuba_eventfield.images import write_exr
-from mitsuba_eventfield.optics import galvo as go
+from mitsuba_eventfield.optics import galvo as galvo_optics
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
 RUNNER = os.path.join(ROOT, "scenes", "runner", "runner.xml")
@@ -25,7 +25,7 @@ Z = np.array([0.4, 0.7, 1.0, 1.6, 2.5])          # calibration depths (m)
 
 def _exact_scales(pivot, width=W, fov=40.0):
     """Curve scales of an LED at the depths Z through a galvo with this pivot (S = 2 f (1 - pivot / z))."""
-    return 2 * go.focal_length_px(width, fov) * (1 - pivot / Z)
+    return 2 * galvo_optics.focal_length_px(width, fov) * (1 - pivot / Z)
 
 
 def cli_run(capsys, *args):
@@ -95,7 +95,7 @@ def test_galvo_fit_with_absurd_radius_refused(galvo_stream):
         ax, ay = curve.angles(times + 0.3 / FREQ)
         a0 = curve.angles(0.3 / FREQ)
         return PatchTrack((30, 20), np.stack([scale * (ax - a0[0]), scale * (ay - a0[1])], -1), np.ones(16))
-    f = go.focal_length_px(W, 40.0)
+    f = galvo_optics.focal_length_px(W, 40.0)
     limit = galvo_scale_limit(record)
     assert 2 * f < limit < 4 * f
     assert fit_tracks([track(2 * f)], times, curve, scale_limit=limit).scale_px_per_rad[0] == pytest.approx(2 * f)

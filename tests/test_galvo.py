@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield.optics import galvo as go
+from mitsuba_eventfield.optics import galvo as galvo_optics
 
 
 def _mi():
@@ -84,7 +84,7 @@ def _semi_axes(t, xy):
 
 
 def test_point_traces_ellipse_sized_by_mirror_geometry(capsys):
-    f = go.focal_length_px(W, FOV)
+    f = galvo_optics.focal_length_px(W, FOV)
     times = np.arange(12) / (12 * FREQ)
     measured = {}
     for z in (0.4, 0.8, 1.6):
@@ -95,7 +95,7 @@ def test_point_traces_ellipse_sized_by_mirror_geometry(capsys):
         # exact geometry: project the point through the rotated mirrors
         curve = ef.make_curve("circle", frequency=FREQ, amplitude=A_DEG)
         ax, ay = curve.angles(np.linspace(0, 1 / FREQ, 400, endpoint=False))
-        u, v = go.project_point(np, (0.0, 0.0, z), ax, ay, D1, SEP, f, W, W)
+        u, v = galvo_optics.project_point(np, (0.0, 0.0, z), ax, ay, D1, SEP, f, W, W)
         ex, ey = np.ptp(u) / 2, np.ptp(v) / 2
         with capsys.disabled():
             print(f"\n[galvo point z={z}] rx {rx:.3f} px (first order {px:.3f}, exact {ex:.3f}); "
@@ -230,4 +230,4 @@ def test_galvo_camera_moves_through_motion_file():
         timed.set_time(t)
         img = np.array(mi.render(sc))[..., 0]
         cx.append((img * xs).sum() / img.sum())
-    assert cx[1] - cx[0] == pytest.approx(go.focal_length_px(32, 40) * 0.3 / 2.0, rel=0.02)
+    assert cx[1] - cx[0] == pytest.approx(galvo_optics.focal_length_px(32, 40) * 0.3 / 2.0, rel=0.02)

@@ -8,13 +8,13 @@ import pytest
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.focus.measures import focus_measure, refine_peak
 from mitsuba_eventfield.lightfield.model import Disparity, LightField
-from mitsuba_eventfield.optics import galvo as go
+from mitsuba_eventfield.optics import galvo as galvo_optics
 
 W, H, FOV, D1, SEP = 96, 72, 40.0, 0.2, 0.01
 
 
 def _geometry():
-    return go.GalvoGeometry(W, H, go.focal_length_px(W, FOV), D1, D1 + SEP)
+    return galvo_optics.GalvoGeometry(W, H, galvo_optics.focal_length_px(W, FOV), D1, D1 + SEP)
 
 
 @pytest.mark.parametrize("depth", [0.4, 1.3, math.inf])
@@ -25,7 +25,7 @@ def test_homography_matches_the_ray_traced_projection(depth):
         u, v = rng.uniform(0, W), rng.uniform(0, H)
         z = depth if math.isfinite(depth) else 1e9
         p = ((W / 2 - u) / g.focal_px * z, (H / 2 - v) / g.focal_px * z, z)   # the reference pixel's point
-        want = go.project_point(np, p, tx, ty, D1, SEP, g.focal_px, W, H)
+        want = galvo_optics.project_point(np, p, tx, ty, D1, SEP, g.focal_px, W, H)
         q = g.homography(tx, ty, depth) @ (u, v, 1.0)
         assert q[:2] / q[2] == pytest.approx(want, abs=1e-6)
 
@@ -52,9 +52,9 @@ def _traced_view(theta_x, theta_y, depth, texture):
     u = (np.arange(W * s) + 0.5) / (W * s)
     v = (np.arange(H * s) + 0.5) / (H * s)
     uu, vv = np.meshgrid(u, v)
-    d = go.pinhole_direction(np, uu, vv, math.tan(math.radians(FOV) / 2), W / H)
+    d = galvo_optics.pinhole_direction(np, uu, vv, math.tan(math.radians(FOV) / 2), W / H)
     zero = np.zeros_like(uu)
-    (ox, oy, oz), (dx, dy, dz) = go.galvo_transform(np, (zero, zero, zero), d, theta_x, theta_y, D1, SEP)
+    (ox, oy, oz), (dx, dy, dz) = galvo_optics.galvo_transform(np, (zero, zero, zero), d, theta_x, theta_y, D1, SEP)
     t = (depth - oz) / dz
     img = texture(ox + t * dx, oy + t * dy)
     return img.reshape(H, s, W, s).mean(axis=(1, 3))

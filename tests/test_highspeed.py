@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from mitsuba_eventfield.apps import highspeed as hs
+from mitsuba_eventfield.apps import highspeed
 from mitsuba_eventfield.evaluation.quality import psnr
 from mitsuba_eventfield.focus.refocus import depth_planes, refocus, track_focus
 from mitsuba_eventfield.images import read_exr
@@ -22,7 +22,7 @@ DART_ROI = (0.58, 0.44, 0.78, 0.56)
 
 
 def test_fan_refocus_every_period_matches_rendered_views_and_selects_its_plane(capsys):
-    r = hs.refocus_planes(FAN, {"fan": 0.6, "wall": 1.5},
+    r = highspeed.refocus_planes(FAN, {"fan": 0.6, "wall": 1.5},
                           {"width": 128, "height": 96, "amplitude": 2, "mirror_distance": 0.2}, periods=2, views=24)
     with capsys.disabled():
         print("\n[high-speed refocus, fan, 128x96]\n" + r.report())
@@ -50,11 +50,11 @@ def test_fan_refocus_every_period_matches_rendered_views_and_selects_its_plane(c
 
 @pytest.fixture(scope="module")
 def dart_capture():
-    return hs.capture(DART, {"width": 120, "height": 90}, views=40)
+    return highspeed.capture(DART, {"width": 120, "height": 90}, views=40)
 
 
 def test_dart_focus_tracking_follows_mitsuba_depth(dart_capture, capsys):
-    r = hs.track_focus_depth(DART, DART_ROI, 0.6, 1.5, 1.6, captured=dart_capture)
+    r = highspeed.track_focus_depth(DART, DART_ROI, 0.6, 1.5, 1.6, captured=dart_capture)
     with capsys.disabled():
         print("\n[focus tracking, dart at 20 m/s, 120x90]\n" + r.report())
     assert len(r.depths) == 6 and np.all(np.diff(r.truth) < 0)          # the dart approaches: 1.04 m -> 0.70 m
@@ -64,7 +64,7 @@ def test_dart_focus_tracking_follows_mitsuba_depth(dart_capture, capsys):
     assert r.rois[-1][0] < r.rois[0][0] - 15
     assert np.all(r.velocities[:, 0] < 0)
     # without taking the dart's motion out of the views, the depths are worse (measured median 0.043, max 0.107)
-    plain = hs.track_focus_depth(DART, DART_ROI, 0.6, 1.5, 1.6, captured=dart_capture, compensate_motion=False)
+    plain = highspeed.track_focus_depth(DART, DART_ROI, 0.6, 1.5, 1.6, captured=dart_capture, compensate_motion=False)
     assert np.median(plain.relative_errors) > np.median(e)
 
 
@@ -72,7 +72,7 @@ def test_exact_refocus_finds_an_off_axis_wall(dart_capture):
     # the wall (1.8 m) in a corner: the exact per-view homographies refocus it at its depth; one constant shift
     # per view (the same light field without its galvo geometry) reads it much too far (measured 2.17 m)
     w, h = 120, 90
-    roi = hs.roi_pixels((0.03, 0.05, 0.3, 0.3), w, h)
+    roi = highspeed.roi_pixels((0.03, 0.05, 0.3, 0.3), w, h)
     lf = dart_capture.lightfields[0]
     z, _, _, _ = track_focus([lf], depth_planes(1.0, 3.0, 40), roi)
     shift_only = LightField(lf.views, lf.positions, lf.times, lf.disparity, lf.kind)
@@ -148,7 +148,7 @@ def test_views_from_events_alone_on_a_static_scene():
     static = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
     corr = {}
     for start in ("frame", "events"):
-        cap = hs.capture(static, {"width": 96, "height": 72, "amplitude": 2}, periods=2, views=24, start=start)
+        cap = highspeed.capture(static, {"width": 96, "height": 72, "amplitude": 2}, periods=2, views=24, start=start)
         a, b = refocus(cap.lightfields[1], 2.5), refocus(cap.truth_lightfields[1], 2.5)
         corr[start] = np.corrcoef(a.ravel(), b.ravel())[0, 1]
     assert corr["frame"] > 0.99 and 0.95 < corr["events"] < corr["frame"]
@@ -156,11 +156,11 @@ def test_views_from_events_alone_on_a_static_scene():
 
 def test_bad_arguments_name_the_field():
     with pytest.raises(ValueError, match="views"):
-        hs.capture(FAN, {"width": 32, "height": 24}, periods=1, views=1)
+        highspeed.capture(FAN, {"width": 32, "height": 24}, periods=1, views=1)
     with pytest.raises(ValueError, match="start"):
-        hs.capture(FAN, {"width": 32, "height": 24}, periods=1, start="magic")
+        highspeed.capture(FAN, {"width": 32, "height": 24}, periods=1, start="magic")
     with pytest.raises(ValueError, match="needs at least 3 x 3"):
-        hs.roi_pixels((0.5, 0.5, 0.51, 0.51), 64, 48)
+        highspeed.roi_pixels((0.5, 0.5, 0.51, 0.51), 64, 48)
     with pytest.raises(ValueError, match="near"):
-        hs.track_focus_depth(DART, DART_ROI, 1.5, 0.6, 1.6)
-    assert math.isclose(hs.roi_pixels((0.25, 0.5, 0.75, 1.0), 64, 48)[0], 16)
+        highspeed.track_focus_depth(DART, DART_ROI, 1.5, 0.6, 1.6)
+    assert math.isclose(highspeed.roi_pixels((0.25, 0.5, 0.75, 1.0), 64, 48)[0], 16)

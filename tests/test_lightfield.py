@@ -7,7 +7,7 @@ from conftest import DEMO, ROOT
 from lf_scenes import FAR, NEAR, kaleido_sensor, two_planes, view_fov_deg
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield.lightfield import reconstruct as rc
+from mitsuba_eventfield.lightfield import reconstruct
 
 
 def _mi():
@@ -23,11 +23,11 @@ def test_reconstruction_methods_against_rendered_frames(capsys):
     truth = ef.render_frames(timed, times)                      # what the pixel saw: lin-log, same seed
     start = ef.render_frames(timed, [0.0])[0]
     c = ev.meta["pixel_model"]["threshold_on"]
-    err = {"direct": np.abs(rc.direct(ev, times, start) - truth)}
+    err = {"direct": np.abs(reconstruct.direct(ev, times, start) - truth)}
     change = truth - start                                      # the high-pass filter sees changes only
-    err["highpass"] = np.abs(rc.highpass(ev, times, cutoff_hz=20.0) - change)
+    err["highpass"] = np.abs(reconstruct.highpass(ev, times, cutoff_hz=20.0) - change)
     ft = np.array([0.0, 0.01, 0.02])
-    err["complementary"] = np.abs(rc.complementary(ev, times, ef.render_frames(timed, ft), ft, 20.0) - truth)
+    err["complementary"] = np.abs(reconstruct.complementary(ev, times, ef.render_frames(timed, ft), ft, 20.0) - truth)
     with capsys.disabled():
         print("\n[reconstruction, C = 0.2] mean / p99 |log error|: "
               + "; ".join(f"{k} {v.mean():.4f} / {np.percentile(v, 99):.3f}" for k, v in err.items()))
@@ -37,13 +37,13 @@ def test_reconstruction_methods_against_rendered_frames(capsys):
     assert err["highpass"].mean() < np.abs(change).mean()      # better than knowing nothing
     # a first frame taken mid-stream already holds the earlier events: at its own time it comes back unchanged
     mid = ef.render_frames(timed, [0.01])
-    assert np.array_equal(rc.complementary(ev, [0.01], mid, [0.01], 20.0)[0], mid[0])
+    assert np.array_equal(reconstruct.complementary(ev, [0.01], mid, [0.01], 20.0)[0], mid[0])
 
 
 def test_galvo_solver_recovers_the_static_image(capsys):
     timed = ef.load_scene(f"{ROOT}/scenes/galvo_static/galvo_static.xml", width=173, height=130)
     ev = ef.render_events(timed, 0.004, steps=40)
-    est = rc.galvo_start_image(ev, 0.0, samples=16)
+    est = reconstruct.galvo_start_image(ev, 0.0, samples=16)
     truth = ef.render_frames(timed, [0.0])[0]
     e = np.abs((est - est.mean()) - (truth - truth.mean()))
     with capsys.disabled():
@@ -196,7 +196,7 @@ def test_kaleidoscope_static_scene_reconstructs_without_events():
     sc = ef.load_scene(mi.load_dict(two_planes(mi, kaleido_sensor(film=120, spp=4))), motion=None)
     ev = ef.render_events(sc, 0.003, steps=6)
     assert len(ev) == 0
-    frames = rc.highpass(ev, [0.001, 0.003])
+    frames = reconstruct.highpass(ev, [0.001, 0.003])
     assert np.all(frames == 0)
     lf = ef.from_spatial(frames[-1], ev.meta["optics"])
     assert np.all(np.isfinite(ef.refocus(lf, 1.0)))

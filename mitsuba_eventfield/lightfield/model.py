@@ -21,7 +21,7 @@ import numpy as np
 
 from ..optics.galvo import GalvoGeometry
 from ..optics.scan import curve_from_dict, scan_period
-from . import reconstruct as rc
+from . import reconstruct
 from .views import extract_views
 
 
@@ -180,7 +180,7 @@ def galvo_lightfields(events, views: int = 32, method: str = "direct", periods=N
     starts = galvo_period_starts(events, periods)
     wanted = list(starts)
     all_times = np.concatenate([galvo_view_times(optics, starts[p], views) for p in wanted])
-    frames = rc.reconstruct(events, all_times, method, **method_kw)
+    frames = reconstruct.reconstruct(events, all_times, method, **method_kw)
     for i, p in enumerate(wanted):
         sl = slice(i * views, (i + 1) * views)
         yield from_galvo(frames[sl], all_times[sl], optics, {"period_index": p})
@@ -216,7 +216,7 @@ def from_events(events, period: int = 0, views: int = 32, time: float | None = N
         return next(galvo_lightfields(events, views, method, periods=[period], **kw))
     if design in ("kaleidoscope", "microlens"):
         t = t0 + events.duration_us * 1e-6 if time is None else time
-        frame = rc.reconstruct(events, [t], method, **kw)[0]
+        frame = reconstruct.reconstruct(events, [t], method, **kw)[0]
         return from_spatial(frame, optics, time=t, log=True)
     raise ValueError("the stream's metadata describes no light-field optics (optics.design is "
                      f"{design!r}; expected galvo, kaleidoscope or microlens)")
