@@ -22,6 +22,7 @@ import numpy as np
 
 from ..scene.timed import load_scene
 from ..simulate.render import render_events, render_frames
+from .result import AppResult
 
 LDR_BITS = 8
 WELL_EXPOSED = (10, 245)        # codes a frame records with < 10% quantisation error and no clipping
@@ -45,7 +46,7 @@ def ldr_to_linear(codes: np.ndarray, exposure: float, bits: int = LDR_BITS) -> n
 
 
 @dataclass
-class HDRComparison:
+class HDRComparison(AppResult):
     truth_log: np.ndarray                  # ground truth, lin-log domain of the pixel
     estimates: dict                        # name -> log image: "events", "ldr_short", "ldr_long"
     errors: dict                           # name -> {"all", "bright", "dark"}: mean |log error|
@@ -62,6 +63,12 @@ class HDRComparison:
         if "time_split_s" in self.meta:
             lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
         return "\n".join(lines)
+
+    def write(self, out_dir: str) -> dict:
+        return write_outputs(self, out_dir)
+
+    def figure(self, path: str) -> str:
+        return figure(self, path)
 
 
 def compare(scene_path: str, defines: dict | None = None, depth: float = math.inf, steps_per_period: int = 64,

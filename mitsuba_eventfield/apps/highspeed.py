@@ -31,6 +31,7 @@ from ..scene.timed import load_scene
 from ..simulate.render import render_events, render_frames
 from ..validate import number
 from .highspeed_outputs import planes_figure, track_figure, write_planes, write_track  # noqa: F401  (outputs)
+from .result import AppResult
 
 START_METHODS = ("frame", "events")
 
@@ -103,7 +104,7 @@ def _meta(cap: Capture, scene_path, defines, **kw) -> dict:
 # ----------------------------------------------------------------------------------------- refocus on planes
 
 @dataclass
-class PlaneRefocus:
+class PlaneRefocus(AppResult):
     planes: dict                 # name -> depth
     refocused: dict              # name -> (P, H, W): from events, one image per period
     truth: dict                  # name -> (P, H, W): the rendered views refocused the same way
@@ -130,6 +131,12 @@ class PlaneRefocus:
                          + " (motion blur; and it cannot refocus)")
         lines.append("  time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
         return "\n".join(lines)
+
+    def write(self, out_dir: str) -> dict:
+        return write_planes(self, out_dir)
+
+    def figure(self, path: str) -> str:
+        return planes_figure(self, path)
 
 
 def _check_planes(planes: dict) -> dict:
@@ -211,7 +218,7 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
 # ------------------------------------------------------------------------------------------- focus tracking
 
 @dataclass
-class FocusTrack:
+class FocusTrack(AppResult):
     depths: np.ndarray           # (P,) metric depth per period (sharpest exact refocus)
     truth: np.ndarray            # (P,) median true depth of the object inside its region, mid-period
     rois: np.ndarray             # (P, 4) x0, y0, x1, y1 followed per period (pixels)
@@ -235,6 +242,12 @@ class FocusTrack:
         lines.append(f"median |relative depth error| {np.median(e):.3f}, max {e.max():.3f}")
         lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
         return "\n".join(lines)
+
+    def write(self, out_dir: str) -> dict:
+        return write_track(self, out_dir)
+
+    def figure(self, path: str) -> str:
+        return track_figure(self, path)
 
 
 def _check_roi(roi) -> tuple:

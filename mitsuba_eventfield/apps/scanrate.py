@@ -28,10 +28,11 @@ from ..focus.depth import depth_from_focus
 from ..lightfield.reconstruct import direct
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events, render_frames
+from .result import AppResult
 
 
 @dataclass
-class ScanRateDepth:
+class ScanRateDepth(AppResult):
     depth_maps: list                    # DepthMap per scan period (metric)
     truth: list                         # z (H, W) per period, at its middle
     textured: list                      # bool (H, W) per period: where depth is measurable
@@ -62,6 +63,12 @@ class ScanRateDepth:
         ts = self.meta["time_split_s"]
         lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in ts.items()))
         return "\n".join(lines)
+
+    def write(self, out_dir: str) -> dict:
+        return write_outputs(self, out_dir)
+
+    def figure(self, path: str) -> str:
+        return figure(self, path)
 
 
 LED_SCENE = "led_depth/led.xml"                     # bundled (scene.bundled_scene)

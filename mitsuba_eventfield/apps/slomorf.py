@@ -60,6 +60,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events, render_frames
+from .result import AppResult
 from .slomorf_outputs import figure, to_display, write_outputs  # noqa: F401  (the outputs: their own module)
 
 DEFAULT_SCENE = bundled_scene("falling/falling.xml")
@@ -73,7 +74,7 @@ FOCUS_BAND = 0.10                   # focus check: true depth within 10% of a re
 
 
 @dataclass
-class SloMoRFResult:
+class SloMoRFResult(AppResult):
     times: np.ndarray              # (T,) seconds: every output instant (keyframes included)
     is_key: np.ndarray             # (T,) bool: instants of RGB keyframes
     frames: dict                   # "truth", "events", "events_time", "linear" -> (T, H, W, 3) linear RGB films
@@ -105,6 +106,12 @@ class SloMoRFResult:
         ts = self.meta["time_split_s"]
         lines.append("time split: " + ", ".join(f"{k.replace('_', ' ')} {v:.1f} s" for k, v in ts.items()))
         return "\n".join(lines)
+
+    def write(self, out_dir: str) -> dict:
+        return write_outputs(self, out_dir)
+
+    def figure(self, path: str) -> str:
+        return figure(self, path)
 
 
 def _check(fps, factor, depths, duration):

@@ -84,11 +84,12 @@ def _add_galvo_apps(sub) -> None:
                           "it as OUTPUT/calibration.json and use it")
 
 
-def _application(run, write, wrote) -> int:
-    """Run an application, write its outputs, print its report: bad input is one line, no traceback."""
+def _application(run, output: str, wrote) -> int:
+    """Run an application, write its outputs (``AppResult.write``), print its report: bad input is one line,
+    no traceback."""
     try:
         result = run()
-        paths = write(result)
+        paths = result.write(output)
     except ValueError as e:
         raise EventFieldError(str(e)) from None
     print(result.report())
@@ -99,7 +100,7 @@ def _application(run, write, wrote) -> int:
 def run_hdr(a) -> int:
     from ..apps import hdr
     return _application(lambda: hdr.compare(a.scene, defines(a), a.depth, a.steps, spp=a.spp, progress=True),
-                        lambda r: hdr.write_outputs(r, a.output),
+                        a.output,
                         lambda p: f"{p['figure']}, EXRs (log) and {p['metrics']}")
 
 
@@ -112,7 +113,7 @@ def run_highspeed(a) -> int:
         planes = pairs(a.plane if a.plane is not None else (highspeed.FAN_DEFAULTS["plane"] if fan else []),
                        "--plane")
         return highspeed.refocus_planes(a.scene, planes, scene_defines, a.periods, a.views, a.start, progress=True)
-    return _application(run, lambda r: highspeed.write_planes(r, a.output),
+    return _application(run, a.output,
                         lambda p: f"{p['figure']}, per-plane EXRs and PNGs, {p['metrics']}")
 
 
@@ -121,7 +122,7 @@ def run_track_focus(a) -> int:
     return _application(
         lambda: highspeed.track_focus_depth(a.scene, a.roi, a.near, a.far, a.object_far, a.planes, a.background,
                                             defines(a), a.periods, a.views, progress=True),
-        lambda r: highspeed.write_track(r, a.output),
+        a.output,
         lambda p: f"{p['figure']}, per-period PNGs, {p['exr']}, {p['metrics']}")
 
 
@@ -142,7 +143,7 @@ def run_scanrate_depth(a) -> int:
         lambda: scanrate.run(a.scene, defines(a), a.periods, a.views, a.near, a.far, a.planes,
                              min_confidence=a.min_confidence, split_depth=a.split_depth, calibration=calibration,
                              progress=True),
-        lambda r: scanrate.write_outputs(r, a.output),
+        a.output,
         lambda p: f"{p['figure']}, {len(p['exr'])} depth EXRs and PNGs, {p['metrics']}")
 
 
@@ -152,7 +153,7 @@ def run_slomorf(a) -> int:
     return _application(
         lambda: slomorf.slomorf(a.scene or slomorf.DEFAULT_SCENE, defines(a), a.fps, a.factor, a.duration, depths,
                                 a.spp, progress=True),
-        lambda r: slomorf.write_outputs(r, a.output),
+        a.output,
         lambda p: f"{a.output}: {len(p['frames'])} frames, {len(p['refocus'])} refocused images, slomorf.mp4, "
                   "slomorf.gif, slomorf.png, metrics.json")
 
