@@ -3,8 +3,13 @@
 Our plugins are Python classes. Under a ``scalar_*`` variant Mitsuba calls them once per sample (about 90x
 slower than the vectorised variants, docs/design.md, "Measured facts and pitfalls"), so scalar variants are refused with an explanation
 rather than used silently.
+
+Mitsuba's log is left as it is unless asked: :func:`quiet_mitsuba_log` (which the ``eventfield`` command uses)
+drops the messages that are expected and say nothing to our users.
 """
 from __future__ import annotations
+
+import sys
 
 from . import _llvm
 from .errors import EventFieldError
@@ -18,23 +23,47 @@ _active: str | None = None
 _QUIET_MESSAGES = (
     # hdrfilm's default pixel format is rgb; under mono variants Mitsuba switches it and says so on every load
     "Monochrome mode enabled, setting film output pixel format",
+    # Ctrl-C inside Mitsuba's render: it logs this, then the KeyboardInterrupt reaches the caller, which reports it
+    "Received interrupt signal, winding down",
 )
+_saved_appenders: list | None = None    # Mitsuba's appenders before quiet_mitsuba_log(), restored by (False)
 
 
-def _install_log_filter() -> None:
-    """Route Mitsuba's log to stderr, minus messages that are expected and say nothing to our users."""
-    class _FilteringAppender(mi.Appender):
-        def append(self, level, text):
-            if not any(q in text for q in _QUIET_MESSAGES):
-                print(text, file=__import__("sys").stderr)
+def quiet_mitsuba_log(enable: bool = True) -> bool:
+    """Opt in to a quieter Mitsuba log: one appender printing to ``sys.stderr`` that drops the messages which
+    are expected and say nothing to our users (``_QUIET_MESSAGES``: the monochrome-film note on every scene load
+    under ``*_mono`` variants, the "winding down" line of a Ctrl-C inside ``mi.render``) and progress bars.
 
-        def log_progress(self, progress, name, formatted, eta, ptr=None):
-            pass
-
+    Importing the package, or :func:`set_variant`, never touches Mitsuba's log; the ``eventfield`` command
+    calls this for its run and restores the log afterwards. ``quiet_mitsuba_log(False)`` puts back the
+    appenders that were there before. Idempotent; Mitsuba's logger is shared by all variants. Returns whether
+    the quiet log was on before the call."""
+    global _saved_appenders
     logger = mi.logger()
-    if logger is not None:
+    was_quiet = _saved_appenders is not None
+    if logger is None or bool(enable) == was_quiet:
+        return was_quiet
+    if enable:
+        _saved_appenders = [logger.appender(i) for i in range(logger.appender_count())]
         logger.clear_appenders()
         logger.add_appender(_FilteringAppender())
+    else:
+        logger.clear_appenders()
+        for appender in _saved_appenders:
+            logger.add_appender(appender)
+        _saved_appenders = None
+    return was_quiet
+
+
+class _FilteringAppender(mi.Appender):
+    """Mitsuba's log to ``sys.stderr``, minus ``_QUIET_MESSAGES`` and progress (see :func:`quiet_mitsuba_log`)."""
+
+    def append(self, level, text):
+        if not any(q in text for q in _QUIET_MESSAGES):
+            print(text, file=sys.stderr)
+
+    def log_progress(self, progress, name, formatted, eta, ptr=None):
+        pass
 
 
 def available_backends() -> dict:
@@ -82,7 +111,6 @@ def set_variant(variant: str | None = None, color: bool = False) -> str:
     chosen = choose_variant(variant, color)
     if _active != chosen or mi.variant() != chosen:
         mi.set_variant(chosen)
-        _install_log_filter()
         from . import plugins  # noqa: F401  (plugins are registered per variant)
         plugins.register()
         _active = chosen

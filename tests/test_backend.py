@@ -21,3 +21,64 @@ def test_llvm_library_is_at_least_16():
     path = os.environ.get("DRJIT_LIBLLVM_PATH", "")
     m = re.search(r"LLVM[-.]?(\d+)", os.path.basename(path))
     assert m and int(m.group(1)) >= 16, path
+
+
+APPENDERS = """
+import json, sys
+import mitsuba as mi
+mi.set_variant("llvm_ad_mono")
+def appenders():
+    log = mi.logger()
+    return [type(log.appender(i)).__name__ for i in range(log.appender_count())]
+seen = {"before": appenders()}
+import mitsuba_eventfield as ef
+seen["import"] = appenders()
+ef.set_variant("llvm_ad_mono")
+ef.load_scene(ef.scene.bundled_scene("demo/demo.xml"), width=8, height=6)
+seen["set_variant"] = appenders()
+ef.quiet_mitsuba_log()
+ef.quiet_mitsuba_log()                              # idempotent
+seen["quiet"] = appenders()
+ef.quiet_mitsuba_log(False)
+seen["restored"] = appenders()
+from mitsuba_eventfield import cli
+cli.main(["info", sys.argv[1]])
+seen["after_cli"] = appenders()
+print(json.dumps(seen))
+"""
+
+
+def test_mitsuba_log_is_ours_only_when_asked(tmp_path):
+    """Importing the package or choosing a variant leaves Mitsuba's appenders as they were (a fresh process, so
+    no other test's state counts); quiet_mitsuba_log() replaces them, (False) puts them back, and so does the
+    CLI once it returns."""
+    import json
+    import subprocess
+    import sys
+    path = str(tmp_path / "e.h5")
+    ef.write_events(path, ef.EventStream([1], [2], [3], [1], 8, 6, {}))
+    r = subprocess.run([sys.executable, "-c", APPENDERS, path], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    seen = json.loads(r.stdout.strip().splitlines()[-1])
+    assert seen["before"] == ["StreamAppender"]
+    for when in ("import", "set_variant", "restored", "after_cli"):
+        assert seen[when] == seen["before"], (when, seen)
+    assert seen["quiet"] == ["_FilteringAppender"]
+    assert "Monochrome mode enabled" in r.stdout       # Mitsuba's own appender (it writes to stdout) still speaks
+
+
+def test_cli_prints_only_our_lines(tmp_path, capfd):
+    """With the quiet log the CLI shows no Mitsuba notes (here: the monochrome film note on every mono load),
+    then leaves the log as it found it."""
+    import mitsuba as mi
+    from conftest import DEMO
+
+    from mitsuba_eventfield import cli
+    log = mi.logger()
+    before = [log.appender(i) for i in range(log.appender_count())]
+    capfd.readouterr()
+    out = str(tmp_path / "f.exr")
+    assert cli.main(["frame", DEMO, "-o", out, "-D", "width=16", "-D", "height=12", "--times", "0"]) == 0
+    out, err = capfd.readouterr()
+    assert "WARN" not in out + err and "Monochrome" not in out + err, out + err   # Mitsuba's appender: stdout
+    assert [log.appender(i) for i in range(log.appender_count())] == before

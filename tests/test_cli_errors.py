@@ -1,6 +1,7 @@
 """Bad input on every subcommand: one line naming the field and the allowed range, a non-zero exit, no traceback,
 no output file, and nothing rendered first. Interrupts and leftovers of killed runs."""
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -133,6 +134,14 @@ def _wait_for_rendering(proc):
         buf += ch
 
 
+def _messages(err):
+    """The lines of stderr without the progress bar. Strict: the bar is removed by its exact format, not by
+    dropping every line that mentions it, because tqdm redraws with \\r and a log line printed mid-render (Mitsuba's
+    "Received interrupt signal, winding down..") lands glued to the end of a bar."""
+    text = re.sub(r"rendering: [^\r\n|]*\|[^\r\n|]*\| [\d.]+/[\d.]+ ms sim \[[^\]\r\n]*\](, \d+ events)?", "", err)
+    return [line for line in text.replace("\r", "\n").splitlines() if line.strip()]
+
+
 @pytest.mark.parametrize("sig, rc, word", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")])
 def test_interrupt_mid_render_is_one_line_and_leaves_nothing(tmp_path, sig, rc, word):
     out = tmp_path / "fan.h5"
@@ -141,9 +150,35 @@ def test_interrupt_mid_render_is_one_line_and_leaves_nothing(tmp_path, sig, rc, 
     time.sleep(0.5)
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=120)
-    lines = [line for line in err.replace("\r", "\n").splitlines() if line.strip() and "rendering" not in line
-             and "winding down" not in line]        # Mitsuba's own log line when its render loop sees SIGINT
-    assert proc.returncode == rc and lines == [f"eventfield: {word} (no partial output kept)"], err[-2000:]
+    assert proc.returncode == rc and _messages(err) == [f"eventfield: {word} (no partial output kept)"], err[-2000:]
+    assert os.listdir(tmp_path) == []
+
+
+INSIDE_MITSUBA_RENDER = """
+import os, signal, sys
+signal.signal(signal.SIGINT, signal.default_int_handler)
+from mitsuba_eventfield.plugins import galvo_sensor
+traced = galvo_sensor._GalvoSensorMethods.sample_ray_differential
+calls = []
+def sample_ray_differential(self, *args, **kwargs):   # runs while Mitsuba traces, inside its render call
+    calls.append(1)
+    if len(calls) == 5:                               # a few steps in: Mitsuba's own SIGINT handler catches it
+        os.kill(os.getpid(), signal.SIGINT)
+    return traced(self, *args, **kwargs)
+galvo_sensor._GalvoSensorMethods.sample_ray_differential = sample_ray_differential
+from mitsuba_eventfield.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_interrupt_inside_mitsuba_render_is_one_line(tmp_path):
+    """Ctrl-C while Mitsuba's render runs (not between steps, as the test above mostly lands): Mitsuba logs
+    "Received interrupt signal, winding down.." before the KeyboardInterrupt reaches us; only our line shows."""
+    r = subprocess.run([sys.executable, "-c", INSIDE_MITSUBA_RENDER, "render", os.path.join(ROOT, "scenes", "fan",
+                        "fan.xml"), "-o", str(tmp_path / "fan.h5"), "-D", "width=64", "-D", "height=48",
+                        "--duration", "0.02", "--steps", "200"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 130 and _messages(r.stderr) == ["eventfield: interrupted (no partial output kept)"], \
+        r.stderr[-2000:]
     assert os.listdir(tmp_path) == []
 
 

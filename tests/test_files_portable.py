@@ -198,6 +198,40 @@ def test_damaged_file_on_the_command_line(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "empty file (0 bytes)" in r.stderr, r.stderr
 
 
+def _aedat4_body_damaged(tmp_path, stream, damage):
+    """A valid AEDAT4 header and data table, the packets after it damaged (64 bytes overwritten, or cut)."""
+    good = str(tmp_path / "good.aedat4")
+    ef.write_events(good, stream)
+    data = bytearray(open(good, "rb").read())
+    os.remove(good)
+    body = 18 + int.from_bytes(data[14:18], "little")          # after "#!AER-DAT4.0\r\n", length, header
+    at = body + (len(data) - body) // 2
+    if damage == "overwritten_ff":
+        data[at:at + 64] = b"\xff" * 64
+    elif damage == "overwritten_random":
+        data[body + 1500:body + 1564] = np.random.default_rng(1).bytes(64)
+    else:                                                       # cut in the middle of a packet
+        del data[at:]
+    path = tmp_path / f"{damage}.aedat4"
+    path.write_bytes(bytes(data))
+    return str(path)
+
+
+@pytest.mark.parametrize("damage", ["overwritten_ff", "overwritten_random", "truncated_mid_packet"])
+def test_aedat4_with_a_damaged_body_is_one_line_never_a_hang(tmp_path, stream, damage):
+    """dv-processing spins forever inside one call on some damaged packets (these two among them): the read
+    is refused with one line naming the file, in seconds. In a child process, so a hang fails the test."""
+    path = _aedat4_body_damaged(tmp_path, stream, damage)
+    try:
+        r = subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "info", path], capture_output=True,
+                           text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"reading {damage} AEDAT4 hung for 60 s")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and err[0].startswith(f"eventfield: error: {path}: "), r.stderr
+    assert "Traceback" not in r.stderr and "Stacktrace" not in r.stderr
+
+
 @pytest.mark.parametrize("ext", FORMATS)
 def test_stream_without_events_round_trips(tmp_path, ext):
     path = str(tmp_path / f"none{ext}")

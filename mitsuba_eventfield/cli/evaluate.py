@@ -21,8 +21,9 @@ def add_parsers(sub) -> None:
                     help="depth of the downstream refocus (fan: 0.6)")
     rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with reference images")
     rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
-    rg.add_argument("--references", default=os.path.join("tests", "regression"),
-                    help="folder of the reference images (default: tests/regression, the repository's)")
+    rg.add_argument("--references", metavar="DIR",
+                    help="folder of the reference images (default: tests/regression under the current folder, "
+                         "the repository's, when it exists; required otherwise)")
 
 
 def run_bench(a) -> int:
@@ -40,8 +41,16 @@ def run_bench(a) -> int:
     return 0
 
 
+REPOSITORY_REFERENCES = os.path.join("tests", "regression")     # from the repository root; the library has none
+
+
 def run_regression(a) -> int:
     from ..evaluation import regression
+    if a.references is None:
+        if not os.path.isdir(REPOSITORY_REFERENCES):
+            raise EventFieldError(f"--references DIR is required: no {REPOSITORY_REFERENCES} here (run from the "
+                                  "repository root, or name the folder of the reference images)")
+        a.references = REPOSITORY_REFERENCES
     if a.bless:
         for path in regression.bless(a.references):
             print(f"wrote {path}")

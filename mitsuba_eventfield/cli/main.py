@@ -67,8 +67,11 @@ def _os_error(e: OSError) -> int | None:
 
 
 def main(argv=None) -> int:
+    from ..backend import quiet_mitsuba_log
     from ..errors import EventFieldError
     args = build_parser().parse_args(argv)
+    # our lines only: no Mitsuba notes (monochrome film, "winding down" on Ctrl-C); restored when main returns
+    was_quiet = quiet_mitsuba_log()
     previous = _signals_as_interrupts()
     try:
         return _run(args)
@@ -94,6 +97,8 @@ def main(argv=None) -> int:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        if not was_quiet:
+            quiet_mitsuba_log(False)
     signum = received[0] if received else signal.SIGINT
     print(f"eventfield: {'terminated' if signum == signal.SIGTERM else 'interrupted'} (no partial output kept)",
           file=sys.stderr)
