@@ -16,7 +16,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 from ..errors import EventFieldError
-from ..optics.envelope import GALVO_MODELS, PHASE_RANGE_DEG, EnvelopeError, ScanEnvelope  # noqa: F401
+from ..optics.envelope import (GALVO_MODELS, PHASE_RANGE_DEG, VOLTS_PER_DEG_RANGE, EnvelopeError,  # noqa: F401
+                               ScanEnvelope)
 from ..validate import finite
 
 
@@ -25,9 +26,6 @@ class SafetyError(EventFieldError):
     what it was told. Outputs are off (or were never switched on)."""
 
 
-# Drivers scale 0.5-1.0 V per mechanical degree; anything outside this bracket is a typo (or a unit mix-up of
-# optical vs mechanical degrees or mV) that would scale every voltage we send by the same mistake.
-VOLTS_PER_DEG_RANGE = (0.1, 2.0)
 # Longest unattended scan the CLI accepts (seconds); 0 means "until Ctrl-C / SIGTERM".
 MAX_DURATION_S = 24 * 3600.0
 _MODEL = GALVO_MODELS["gvs01x"]

@@ -17,6 +17,7 @@ amplitude          float      1           scan radius / half-width
 phase              float      0           start angle on the curve (degrees)
 galvo_model        string     gvs01x      the galvo simulated: gvs01x (the device layer's envelope) | ideal
 max_angle          float      (model's)   narrows a real galvo's travel, or sets an ideal mirror's
+volts_per_deg      float      (model's)   the driver's scaling (0.1-2 V per degree), as the rig is set
 bandwidth          float      0           > 0: second-order mirror response, natural frequency
 damping            float      0.7         damping of that response
 far_clip           float      1e4         longest ray
@@ -49,14 +50,23 @@ _INT_PARAMS = ("lines", "order", "samples_per_line", "samples_per_segment")
 def curve_from_props(props) -> tuple:
     """(scan curve as the mirror moves, description dict) from the plugin's properties. The commanded curve
     must fit the envelope of the named galvo model (``optics.envelope``), exactly as the device layer checks."""
+    from dataclasses import replace
+
+    from mitsuba_eventfield.optics.envelope import VOLTS_PER_DEG_RANGE, galvo_model
     from mitsuba_eventfield.optics.scan import curve_to_dict, make_curve
+    from mitsuba_eventfield.validate import number
     name = props.get("curve", "circle")
     params = {k: float(props.get(k)) for k in _FLOAT_PARAMS if k in props}
     params.update({k: int(props.get(k)) for k in _INT_PARAMS if k in props})
     if "axis" in props:
         params["axis"] = props.get("axis")
-    limits = {"max_angle_deg": float(props.get("max_angle")) if "max_angle" in props else None,
-              "galvo_model": props.get("galvo_model", "gvs01x"), "where": "sensor 'galvo'"}
+    where = "sensor 'galvo'"
+    envelope = galvo_model(props.get("galvo_model", "gvs01x"), where,
+                           float(props.get("max_angle")) if "max_angle" in props else None)
+    if "volts_per_deg" in props:         # the rig's driver scaling, as `eventfield device --volts-per-deg`
+        envelope = replace(envelope, volts_per_deg=number(props.get("volts_per_deg"), f"{where}: volts_per_deg",
+                                                          *VOLTS_PER_DEG_RANGE))
+    limits = {"envelope": envelope, "where": where}
     bandwidth = float(props.get("bandwidth", 0.0))
     damping = float(props.get("damping", 0.7))
     commanded = make_curve(name, **limits, **params)

@@ -9,27 +9,39 @@ from hypothesis import strategies as st
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.device import GalvoController, GalvoSpec, SafetyError
+from mitsuba_eventfield.optics import scan
 from mitsuba_eventfield.optics.envelope import GALVO_MODELS, EnvelopeError
 
 
-def _simulator(kind, params):
-    """None if the simulator renders this scan, else its refusal."""
+def _simulator(kind, params, volts_per_deg=None):
+    """None if a scene's galvo sensor renders this scan (its own code path, without Mitsuba), else its refusal."""
+    from mitsuba_eventfield.plugins.galvo_sensor import curve_from_props
+    props = dict(params, curve=kind)
+    if volts_per_deg is not None:
+        props["volts_per_deg"] = volts_per_deg
     try:
-        ef.make_curve(kind, where="sensor 'galvo'", **params)
+        curve_from_props(props)
         return None
     except EnvelopeError as e:
         return str(e)
 
 
-def _device(kind, params):
-    """None if the device layer would drive this scan, else its refusal (nothing is connected)."""
-    spec = GalvoSpec()
+def _raw_curve(kind, params):
+    """The curve as plain geometry, built without any check (what a buggy caller could hand the device)."""
+    if kind == "circle":
+        return scan.circle(**params)
+    if kind == "line":
+        f, a = params["frequency"], params["amplitude"]
+        x = params["axis"] == "x"
+        return scan.Lissajous(freq_x=f, freq_y=f, amplitude_x=a if x else 0.0, amplitude_y=0.0 if x else a,
+                              phase_x=0.0, phase_y=0.0, kind="line")
+    return scan.Lissajous(**params)
+
+
+def _device(kind, params, volts_per_deg=0.8):
+    """None if the device layer would drive this scan, else its refusal (plan(): nothing is connected)."""
     try:
-        curve = ef.make_curve(kind, envelope=spec.scan_envelope, where="device scan", **params)   # as the CLI does
-    except EnvelopeError as e:
-        return str(e)
-    try:
-        GalvoController(None, "keysight", spec).plan(curve)
+        GalvoController(None, "keysight", GalvoSpec(volts_per_deg=volts_per_deg)).plan(_raw_curve(kind, params))
         return None
     except SafetyError as e:
         return str(e)
@@ -47,13 +59,16 @@ scans = st.one_of(
 
 
 @settings(max_examples=400, deadline=None)
-@given(scans)
-def test_the_simulator_refuses_what_the_device_refuses_with_the_same_reason(scan):
-    kind, params = scan
-    simulated, driven = _simulator(kind, params), _device(kind, params)
-    assert (simulated is None) == (driven is None), (kind, params, simulated, driven)
+@given(scans, st.sampled_from([None, 0.5, 0.8, 1.0]))
+def test_the_simulator_refuses_what_the_device_refuses_with_the_same_reason(request, volts_per_deg):
+    """Two code paths: the scene sensor's (curve_from_props -> make_curve -> the envelope) and the device's
+    (plan(): per-axis sines -> GalvoSpec with the rig's driver scaling), on curves built without any check."""
+    kind, params = request
+    simulated = _simulator(kind, params, volts_per_deg)
+    driven = _device(kind, params, 0.8 if volts_per_deg is None else volts_per_deg)
+    assert (simulated is None) == (driven is None), (kind, params, volts_per_deg, simulated, driven)
     if driven is not None:
-        assert simulated == f"sensor 'galvo': {driven.removeprefix('device scan: ')}"
+        assert simulated == f"sensor 'galvo': {driven}"
 
 
 @pytest.mark.parametrize("frequency, amplitude, refused", [
@@ -74,11 +89,25 @@ def test_a_scene_sensor_refuses_like_the_device_and_names_its_model():
     assert driven is not None and "derated limit" in driven
     with pytest.raises(Exception) as refused:
         mi.load_dict({"type": "galvo", "film": film, **params})
-    assert "sensor 'galvo': " + driven.removeprefix("device scan: ") in str(refused.value)
+    assert "sensor 'galvo': " + driven in str(refused.value)
+    # the rig's driver scaling: at 1 V/deg, 11 deg at 10 Hz is 11 V, beyond the +-10 V input
+    slow = {"frequency": 10.0, "amplitude": 11.0}
+    assert _simulator("circle", slow) is None and _device("circle", slow) is None
+    driven = _device("circle", slow, 1.0)
+    assert "11 V exceeds the +-10 V command input" in driven
+    assert _simulator("circle", slow, 1.0) == f"sensor 'galvo': {driven}"
+    with pytest.raises(Exception, match="11 V exceeds"):
+        mi.load_dict({"type": "galvo", "film": film, "volts_per_deg": 1.0, **slow})
     # the ideal mirror renders it, and the event metadata records which galvo was simulated
     ideal = mi.load_dict({"type": "galvo", "film": film, "galvo_model": "ideal", **params})
     assert ideal.scan_description["galvo_model"] == "ideal"
     assert mi.load_dict({"type": "galvo", "film": film}).scan_description["galvo_model"] == "gvs01x"
+
+
+def test_a_lightly_damped_mirror_may_not_overshoot_its_travel():
+    ef.make_curve("circle", frequency=100.0, amplitude=5.0, bandwidth_hz=100.0, damping=0.7)
+    with pytest.raises(EnvelopeError, match="as the mirror responds .* exceeds the mechanical travel"):
+        ef.make_curve("circle", frequency=100.0, amplitude=5.0, bandwidth_hz=100.0, damping=0.1)   # 25 deg
 
 
 def test_tabulated_scans_are_checked_conservatively():

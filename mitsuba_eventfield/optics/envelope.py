@@ -17,10 +17,10 @@ derating or drive limit, only the 10 deg travel the simulator has always assumed
 beyond today's hardware, and for files written before galvo models existed.
 
 Sine scans (circle, line, Lissajous) are checked axis by axis exactly as the device drives them. Tabulated
-scans (raster, Moore), which a sine generator cannot drive, are checked conservatively: their peak angle
-against the travel and the derated amplitude at their highest per-axis fundamental (the triangle's own rate
-for a raster's fast axis), because a triangle's harmonics need more acceleration than a sine of the same
-fundamental and amplitude, never less.
+scans (raster, Moore), which a sine generator cannot drive, get a necessary condition only: their peak angle
+against the travel and against the sine derating at their faster axis's back-and-forth rate. A triangle's
+corners need more acceleration than a sine of the same rate and amplitude, so a refused tabulated scan is
+certainly impossible, but an accepted one is not thereby safe to drive.
 """
 from __future__ import annotations
 
@@ -31,6 +31,9 @@ from .. import validate
 from ..errors import ConfigError
 
 PHASE_RANGE_DEG = (-360.0, 360.0)
+# Drivers scale 0.5-1.0 V per mechanical degree; anything outside this bracket is a typo (or a unit mix-up of
+# optical vs mechanical degrees or mV) that would scale every voltage we send by the same mistake.
+VOLTS_PER_DEG_RANGE = (0.1, 2.0)
 MAX_CURVE_PHASE_DEG = 720.0     # the circle adds 90 deg to the user's phase; beyond +-720 deg is a mistake
 
 
@@ -146,8 +149,11 @@ class ScanEnvelope:
         peak = curve.peak_angle_deg()
         self.check_travel(f"the {curve.name} scan", peak, 0.0)
         frequency = curve.fundamental_hz()
+        if frequency > self.max_frequency:
+            raise EnvelopeError(f"the {curve.name} scan: {frequency:g} Hz (its fastest axis) is above the galvo's "
+                                f"{self.max_frequency:g} Hz limit")
         limit = self.derated_amplitude_deg(frequency)
-        if peak > limit * (1 + 1e-12) or frequency > self.max_frequency:
+        if peak > limit * (1 + 1e-12):
             raise EnvelopeError(f"the {curve.name} scan: amplitude {peak:g} deg at {frequency:g} Hz (its fastest "
                                 f"axis) exceeds the galvo's derated limit of {limit:.4g} deg (peak acceleration "
                                 "envelope)")

@@ -330,6 +330,12 @@ def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: floa
         if not (math.isfinite(damping) and damping > 0):
             raise ConfigError(f"{where}: damping = {damping!r}: must be a finite number > 0")
         curve = curve.with_bandwidth(bandwidth_hz, damping)
+        # a lightly damped mirror overshoots: what it actually does must stay within its travel too
+        try:
+            envelope.check_travel(f"the {curve.name} scan as the mirror responds (bandwidth {bandwidth_hz:g} Hz, "
+                                  f"damping {damping:g})", curve.peak_angle_deg(), 0.0)
+        except EnvelopeError as e:
+            raise EnvelopeError(f"{where}: {e}") from None
     return curve
 
 
