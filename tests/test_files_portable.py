@@ -14,6 +14,7 @@ import OpenEXR
 import pytest
 
 import mitsuba_eventfield as ef
+from mitsuba_eventfield.events import disk
 from mitsuba_eventfield.events import io as eventio
 from mitsuba_eventfield.images import read_exr, write_exr
 
@@ -254,7 +255,7 @@ def _disk(monkeypatch, free_after, calls_with_room=0):
         free = 1 << 40 if calls["n"] <= calls_with_room else free_after
         return Usage(1 << 41, (1 << 41) - free, free)
 
-    monkeypatch.setattr(eventio.shutil, "disk_usage", disk_usage)
+    monkeypatch.setattr(disk.shutil, "disk_usage", disk_usage)
     return calls
 
 
@@ -299,14 +300,14 @@ HDF5_ENOSPC = """
 import errno, io, os, sys
 import numpy as np
 import mitsuba_eventfield as ef
-from mitsuba_eventfield.events import io as eventio
+from mitsuba_eventfield.events import disk, io as eventio
 written = [0]
 def write_some(self, view):              # the disk is full after 40 kB
     if written[0] > 40_000:
         raise OSError(errno.ENOSPC, "No space left on device")
     written[0] += len(view)
     return io.FileIO.write(self, view)
-eventio._GuardedFile._write_some = write_some
+disk.GuardedFile._write_some = write_some
 rng = np.random.default_rng(0)
 n = 200_000
 ev = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 10**6, n)),

@@ -1,0 +1,135 @@
+"""AEDAT4 event files, through dv-processing: written in chunks after a free-space check (its writer thread
+aborts the process on a full disk), read in a child process that is stopped when a damaged packet leaves it
+making no progress."""
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+
+from ..atomic import atomic_output
+from ..errors import EventFieldError
+from .disk import HEADER_BYTES, WRITE_CHUNK, BadFile, check_space, disk_errors
+from .stream import EventStream
+
+AEDAT4_BYTES_PER_EVENT = 16    # dv::Event: int64 t, int16 x, y, uint8 p, padded
+
+
+def write_aedat4(path, events):
+    try:
+        import dv_processing as dv
+    except ImportError:
+        raise EventFieldError(f"{path}: AEDAT4 export needs dv-processing (pip install dv-processing)") from None
+    # the whole file is checked first: dv-processing writes on a thread of its own and aborts the process
+    # on a write error there, so a full disk must never be reached
+    need = AEDAT4_BYTES_PER_EVENT * len(events) + HEADER_BYTES
+    check_space(path, need)
+    with atomic_output(path, "event file") as tmp, disk_errors(path, need):
+        writer = dv.io.MonoCameraWriter(tmp, dv.io.MonoCameraWriter.EventOnlyConfig(
+            "mitsuba-eventfield", (events.width, events.height)))
+        for i in range(0, len(events), WRITE_CHUNK):
+            check_space(path, AEDAT4_BYTES_PER_EVENT * (len(events) - i) + HEADER_BYTES)
+            store = dv.EventStore()
+            s = slice(i, i + WRITE_CHUNK)
+            for t, x, y, p in zip(events.t[s].tolist(), events.x[s].tolist(), events.y[s].tolist(),
+                                  (events.p[s] > 0).tolist()):
+                store.push_back(t, x, y, p)
+            writer.writeEvents(store)
+        del writer  # flushes and closes the file
+
+
+# AEDAT4 is decoded by dv-processing in a child process: on some damaged packets (a valid header and data
+# table, bytes of a packet overwritten) its decoder spins forever inside one C++ call, which no thread of ours
+# could stop. The child sends each batch as it decodes it; no batch for AEDAT4_STALL_S (a healthy packet takes
+# milliseconds) means it is stuck, and it is killed.
+AEDAT4_STALL_S = 10.0
+_AEDAT4_DTYPE = np.dtype([("timestamp", "<i8"), ("x", "<i2"), ("y", "<i2"), ("polarity", "i1")])
+_AEDAT4_READER = r"""
+import json, sys
+import numpy as np
+out = sys.stdout.buffer
+try:
+    import dv_processing as dv
+    dtype = np.dtype([("timestamp", "<i8"), ("x", "<i2"), ("y", "<i2"), ("polarity", "i1")])
+    rec = dv.io.MonoCameraRecording(sys.argv[1])
+    w, h = rec.getEventResolution()
+    out.write((json.dumps({"width": int(w), "height": int(h), "camera": rec.getCameraName()}) + "\n").encode())
+    out.flush()
+    while True:
+        batch = rec.getNextEventBatch()
+        if batch is None:
+            break
+        a = batch.numpy()
+        b = np.empty(len(a), dtype)
+        for k in dtype.names:
+            b[k] = a[k]
+        out.write(b.tobytes())
+        out.flush()
+except BaseException as e:
+    sys.stderr.write(str(e) or type(e).__name__)
+    sys.exit(1)
+"""
+
+
+def read_aedat4(path):
+    import importlib.util
+    import queue
+    import signal
+    import subprocess
+    import sys
+    import threading
+    if importlib.util.find_spec("dv_processing") is None:
+        raise EventFieldError(f"{path}: reading AEDAT4 needs dv-processing (pip install dv-processing)")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))   # the same dv-processing
+    proc = subprocess.Popen([sys.executable, "-c", _AEDAT4_READER, path], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    chunks, errors = queue.Queue(), []
+
+    def pump():
+        while True:
+            data = proc.stdout.read1(1 << 20)
+            chunks.put(data)
+            if not data:
+                return
+    readers = [threading.Thread(target=pump, daemon=True),
+               threading.Thread(target=lambda: errors.append(proc.stderr.read()), daemon=True)]
+    for r in readers:
+        r.start()
+    stuck = BadFile(f"damaged AEDAT4 file: dv-processing stopped making progress decoding it (nothing for "
+                     f"{AEDAT4_STALL_S:g} s; a corrupt packet?)")
+    received = bytearray()
+    try:
+        while True:
+            try:
+                data = chunks.get(timeout=AEDAT4_STALL_S)
+            except queue.Empty:
+                raise stuck from None
+            if not data:
+                break
+            received += data
+        try:
+            rc = proc.wait(timeout=AEDAT4_STALL_S)
+        except subprocess.TimeoutExpired:
+            raise stuck from None
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for r in readers:
+            r.join(timeout=5)
+    if rc < 0:
+        try:
+            name = signal.Signals(-rc).name
+        except ValueError:
+            name = f"signal {-rc}"
+        raise BadFile(f"damaged AEDAT4 file: dv-processing crashed decoding it ({name})")
+    if rc != 0:
+        raise RuntimeError((errors[0] if errors else b"").decode("utf-8", "replace") or f"exit status {rc}")
+    head, _, body = bytes(received).partition(b"\n")
+    info = json.loads(head)
+    if len(body) % _AEDAT4_DTYPE.itemsize:
+        raise BadFile("damaged AEDAT4 file: an incomplete event from dv-processing")
+    arr = np.frombuffer(body, _AEDAT4_DTYPE)
+    return EventStream(arr["x"], arr["y"], arr["timestamp"], np.where(arr["polarity"] > 0, 1, -1), info["width"],
+                       info["height"], {"camera": info["camera"]})

@@ -1,0 +1,214 @@
+"""Event files in HDF5, the DSEC layout (``io`` has the layout): a writer that streams time-sorted chunks while
+rendering, and the reader."""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+
+import numpy as np
+
+from ..atomic import check_writable, remove_stale_partials, temporary_name
+from ..errors import EventFieldError
+from .disk import DISK_MARGIN, HEADER_BYTES, GuardedFile, _disk_full, _free_bytes, _no_space, check_space
+from .stream import EventStream
+
+H5_FORMAT_VERSION = 1
+H5_GZIP_LEVEL = 1   # deflate level: 2-4x faster to write than level 4+, within 15% of their size (docs/design.md)
+H5_BYTES_PER_EVENT = 13        # x, y uint16 + t int64 + p uint8
+
+
+def _json(meta: dict) -> str:
+    return json.dumps(meta, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o), sort_keys=True)
+
+
+class H5EventWriter:
+    """Append time-sorted event chunks to a DSEC-layout HDF5 file; memory stays flat in the stream length.
+
+    Use as a context manager: the file is renamed into place by :meth:`close`, and deleted if an exception
+    escapes (so no half-written file is ever visible under the target name). ``compression``: "gzip" (deflate,
+    readable everywhere; ``level`` 0-9) or None; "lzf" is accepted but only h5py reads it.
+    """
+
+    def __init__(self, path: str, width: int, height: int, meta: dict | None = None, chunk: int = 1 << 16,
+                 compression: str | None = "gzip", level: int | None = H5_GZIP_LEVEL, shuffle: bool = True):
+        self.path = check_writable(path, "event file")
+        remove_stale_partials(self.path)
+        self.tmp = temporary_name(self.path)
+        self.width, self.height, self.meta = int(width), int(height), dict(meta or {})
+        self.count = 0             # events appended (written or buffered)
+        self.written = 0           # events already in the file
+        self.chunk = int(chunk)
+        self._buffer = []          # small appends are gathered into chunk-sized writes
+        self._ms_buffer = []       # ms_to_idx entries waiting for the next flush
+        self.last_t = None
+        self._ms_written = 0
+        self._closed = False
+        self.f = self._io = None
+        try:
+            with self._writing(HEADER_BYTES):
+                self._create(compression, level if compression == "gzip" else None, shuffle and bool(compression))
+        except BaseException:
+            self.abort()
+            raise
+
+    def _create(self, compression, level, shuffle):
+        import h5py
+        self._io = GuardedFile(self.tmp, "w+")
+        # no chunk cache: HDF5 would hold megabytes of compressed chunks in it and write them at close,
+        # unaccounted for by the free-space checks; _flush writes whole chunks, so the cache saves nothing
+        self.f = h5py.File(self._io, "w", rdcc_nbytes=0)
+        g = self.f.create_group("events")
+        kw = dict(maxshape=(None,), chunks=(self.chunk,), compression=compression, compression_opts=level,
+                  shuffle=shuffle)
+        self.ds = {k: g.create_dataset(k, shape=(0,), dtype=dt, **kw)
+                   for k, dt in (("x", np.uint16), ("y", np.uint16), ("t", np.int64), ("p", np.uint8))}
+        self.ms_to_idx = self.f.create_dataset("ms_to_idx", shape=(0,), dtype=np.uint64, maxshape=(None,),
+                                               chunks=(4096,))
+        self.f.create_dataset("t_offset", data=np.int64(0))
+
+    @contextlib.contextmanager
+    def _writing(self, need: int):
+        """One write step of about ``need`` bytes: refused up front when the disk has no room for it, and any
+        full disk met during it (recorded by GuardedFile, or raised) ends it as the one-line error."""
+        check_space(self.path, need)
+        try:
+            yield
+        except Exception as e:
+            # after a swallowed failed write HDF5 may trip over what it then reads back: still a full disk
+            if not (self._io is not None and self._io.failed) and not _no_space(e):
+                raise
+        else:
+            if not (self._io is not None and self._io.failed):
+                return
+        raise _disk_full(self.path, _free_bytes(self.path), int(need) + DISK_MARGIN)
+
+    def append(self, x, y, t, p, complete_until_us: int | None = None):
+        """Append events sorted by t (int64 us). ``complete_until_us``: no later chunk holds an event before it,
+        so ms_to_idx entries up to it can be written now."""
+        t = np.asarray(t, dtype=np.int64)
+        if len(t):
+            if self.last_t is not None and t[0] < self.last_t:
+                raise ValueError(f"{self.path}: events must be appended in time order: this chunk starts at "
+                                 f"t = {int(t[0])} us, before the last written event at {self.last_t} us")
+            back = np.flatnonzero(np.diff(t) < 0)
+            if len(back):
+                raise ValueError(f"{self.path}: events must be appended in time order: t = {int(t[back[0] + 1])} us "
+                                 f"follows {int(t[back[0]])} us within the chunk")
+            self._buffer.append((np.asarray(x, np.uint16), np.asarray(y, np.uint16), t,
+                                 (np.asarray(p) > 0).astype(np.uint8)))
+            self.count, self.last_t = self.count + len(t), int(t[-1])
+            if self.count - self.written >= self.chunk:
+                self._flush()
+        # boundaries up to the last timestamp are final (later events are not earlier), and so are those up
+        # to complete_until_us when the caller knows no earlier event will come
+        until = max(int(complete_until_us) if complete_until_us is not None else -1,
+                    int(t[-1]) if len(t) else -1)
+        if until >= 0:
+            self._write_ms_index(t, self.count - len(t), until)
+
+    def _pending_bytes(self, events: int) -> int:
+        """What writing ``events`` buffered events and the buffered index entries takes at most: their
+        uncompressed size (HDF5 keeps no chunk cache here, so it writes them now, not at close)."""
+        return H5_BYTES_PER_EVENT * events + 8 * sum(len(i) for i in self._ms_buffer)
+
+    def _flush(self, final: bool = False):
+        """Write the buffered events in whole chunks (all of them when ``final``), checking the free space
+        before each: a chunk is compressed and written once, and the rest waits for the next flush."""
+        pending = self.count - self.written
+        n = pending if final else pending - pending % self.chunk
+        if n == 0:
+            return
+        cols = [np.concatenate([b[i] for b in self._buffer]) for i in range(4)]
+        for i in range(0, n, self.chunk):
+            m = min(self.chunk, n - i)
+            with self._writing(self._pending_bytes(m)):
+                n0, n1 = self.written, self.written + m
+                for k, v in zip("xytp", cols):
+                    self.ds[k].resize((n1,))
+                    self.ds[k][n0:n1] = v[i:i + m]
+                self.written = n1
+                self._flush_ms_index()
+        self._buffer = [tuple(c[n:] for c in cols)] if n < pending else []
+
+    def _flush_ms_index(self):
+        if not self._ms_buffer:
+            return
+        idx = np.concatenate(self._ms_buffer)
+        m0 = self.ms_to_idx.shape[0]
+        self.ms_to_idx.resize((m0 + len(idx),))
+        self.ms_to_idx[m0:] = idx
+        self._ms_buffer = []
+
+    def _write_ms_index(self, t_chunk, chunk_start, until_us):
+        last_ms = until_us // 1000
+        if last_ms < self._ms_written:
+            return
+        bounds = np.arange(self._ms_written, last_ms + 1, dtype=np.int64) * 1000
+        self._ms_buffer.append((chunk_start + np.searchsorted(t_chunk, bounds, side="left")).astype(np.uint64))
+        self._ms_written = last_ms + 1   # entries decided (buffered until the next flush)
+
+    def close(self, end_us: int | None = None, meta: dict | None = None):
+        """Finish the index up to ``end_us`` (default: last event), write the metadata and publish the file."""
+        if self._closed:
+            return
+        self._flush(final=True)
+        end = end_us if end_us is not None else (self.last_t or 0)
+        self._write_ms_index(np.empty(0, np.int64), self.count, int(end))
+        if meta:
+            self.meta.update(meta)
+        meta_json = _json(self.meta)
+        with self._writing(self._pending_bytes(0) + len(meta_json) + HEADER_BYTES):
+            self._flush_ms_index()
+            g = self.f.create_group("eventfield")
+            g.attrs["width"], g.attrs["height"] = self.width, self.height
+            g.attrs["format_version"] = H5_FORMAT_VERSION
+            g.attrs["polarity"] = "events/p: 1 = ON (brighter), 0 = OFF"
+            g.attrs["time_unit"] = "microseconds, relative to t_offset"
+            g.attrs["meta_json"] = meta_json
+            self.f.close()
+            self._io.close()
+        os.replace(self.tmp, self.path)
+        self._closed = True
+
+    def abort(self):
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            for handle in (self.f, self._io):   # HDF5 first: it writes its last bytes through _io
+                with contextlib.suppress(Exception):
+                    if handle is not None:
+                        handle.close()
+        finally:
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(self.tmp)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+        return False
+
+
+def read_h5(path):
+    import h5py
+    with h5py.File(path, "r") as f:
+        if "events" not in f:
+            raise EventFieldError(f"{path}: no /events group (not a DSEC-layout event file)")
+        ev = f["events"]
+        t = ev["t"][()].astype(np.int64) + int(f["t_offset"][()]) if "t_offset" in f else ev["t"][()]
+        p = np.where(ev["p"][()] > 0, 1, -1).astype(np.int8)
+        meta, w, h = {}, None, None
+        if "eventfield" in f:
+            g = f["eventfield"]
+            meta = json.loads(g.attrs["meta_json"])
+            w, h = int(g.attrs["width"]), int(g.attrs["height"])
+        x, y = ev["x"][()], ev["y"][()]
+        if w is None:  # a foreign DSEC file: size from the data
+            w, h = (int(x.max()) + 1, int(y.max()) + 1) if len(x) else (0, 0)
+        return EventStream(x, y, t, p, w, h, meta)
