@@ -4,7 +4,7 @@
     print(plan.report())
     events = ef.render_events(ef.load_scene(path, **plan.defines), 0.02, **plan.render_kwargs())
 
-Choices (each verified against the full computation in tests/test_auto.py):
+Choices (each verified against the full computation in tests/simulate/test_auto.py):
 
 * colour: one tiny RGB probe frame; if every pixel is grey (R = G = B to 1e-6), the luminance the event pixel
   sees is the mono render's, so mono suffices (events identical, about 3x less work per sample);

@@ -7,7 +7,7 @@ import sys
 import analytic as an
 import numpy as np
 import pytest
-from conftest import DEMO
+from conftest import DEMO, ROOT
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.plugins import pixel_model as pm
@@ -200,7 +200,7 @@ def test_refractory_holds_with_shot_noise_too():
 
 def test_scan_frequency_sweep_loses_events_beyond_the_cap(capsys):
     """The paper's scan-frequency experiment at small scale (benchmarks/bench_scan_frequency.py runs the chart)."""
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "benchmarks"))
+    sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
     from bench_scan_frequency import sweep
     rows, cap = sweep([100, 1000], width=86, height=66, views=16, steps_per_period=16)
     slow, fast = rows
