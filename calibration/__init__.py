@@ -6,12 +6,10 @@
 * ``optics``: the optics a calibration was made for, and the check that refuses one made for other optics;
 * ``store``: save / load calibration files (JSON) and apply them to light fields.
 """
-from mitsuba_eventfield.calibration.depth import DepthCalibration, fit_depth  # noqa: F401
-from mitsuba_eventfield.calibration.galvo import (CalibrationError, GalvoCalibration, PatchTrack, fit_galvo,
-                                                  fit_tracks, galvo_scale_limit, track_patch, track_point)
-from mitsuba_eventfield.calibration.kaleidoscope import (KaleidoscopeCalibration, find_tiles,  # noqa: F401,E402
-                                                         flat_field, register)
-from mitsuba_eventfield.calibration.optics import (check_optics, kaleidoscope_record, optics_difference,
-                                                   optics_record, same_optics)
-from mitsuba_eventfield.calibration.store import save_calibration  # noqa: F401,E402
-from mitsuba_eventfield.calibration.store import CalibrationFile, apply_to_lightfield, load_calibration
+from .depth import DepthCalibration, fit_depth  # noqa: F401
+from .galvo import (CalibrationError, GalvoCalibration, PatchTrack, fit_galvo, fit_tracks, galvo_scale_limit,
+                    track_patch, track_point)
+from .kaleidoscope import KaleidoscopeCalibration, find_tiles, flat_field, register  # noqa: F401,E402
+from .optics import check_optics, kaleidoscope_record, optics_difference, optics_record, same_optics
+from .store import save_calibration  # noqa: F401,E402
+from .store import CalibrationFile, apply_to_lightfield, load_calibration

@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from mitsuba_eventfield.calibration.galvo import CalibrationError
+from .galvo import CalibrationError
 
 LINEAR_MODEL_TOLERANCE = 0.05     # relative depth error at which the linear model is said to break
 

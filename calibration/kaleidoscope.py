@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from mitsuba_eventfield.calibration.galvo import CalibrationError
+from .galvo import CalibrationError
 
 
 def _symmetry_profile(img: np.ndarray, axis: int, half: int) -> np.ndarray:

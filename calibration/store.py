@@ -20,11 +20,12 @@ import os
 import numpy as np
 
 from mitsuba_eventfield.atomic import atomic_output
-from mitsuba_eventfield.calibration.depth import DepthCalibration
-from mitsuba_eventfield.calibration.galvo import GalvoCalibration
-from mitsuba_eventfield.calibration.kaleidoscope import KaleidoscopeCalibration
-from mitsuba_eventfield.calibration.optics import KINDS_FOR_DESIGN, _plain, check_optics, optics_difference
 from mitsuba_eventfield.errors import EventFieldError
+
+from .depth import DepthCalibration
+from .galvo import GalvoCalibration
+from .kaleidoscope import KaleidoscopeCalibration
+from .optics import KINDS_FOR_DESIGN, _plain, check_optics, optics_difference
 
 FORMAT, VERSION = "mitsuba-eventfield calibration", 2
 _KINDS = {"galvo": GalvoCalibration, "depth": DepthCalibration, "kaleidoscope": KaleidoscopeCalibration}

@@ -28,9 +28,10 @@ import signal
 import threading
 import time
 
-from mitsuba_eventfield.device.dialects import Dialect, dialect
-from mitsuba_eventfield.device.spec import GalvoSpec, SafetyError, finite_number
 from mitsuba_eventfield.optics.envelope import AxisSine, EnvelopeError, axis_sines  # noqa: F401  (AxisSine: API)
+
+from .dialects import Dialect, dialect
+from .spec import GalvoSpec, SafetyError, finite_number
 
 
 def sines_from_curve(curve) -> list:

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mitsuba_eventfield.device.controller import GalvoController
-from mitsuba_eventfield.device.spec import GalvoSpec, SafetyError
+from .controller import GalvoController
+from .spec import GalvoSpec, SafetyError
 
 
 class DAQmxOutput:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 
-from mitsuba_eventfield.device.spec import SafetyError
+from .spec import SafetyError
 
 
 def _g(v: float) -> str:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from collections import deque
 
-from mitsuba_eventfield.device.dialects import SafetyError, dialect
+from .dialects import SafetyError, dialect
 
 # The instrument's own limits (a 33500-class generator into high-Z), not the galvo's: it accepts much more than
 # the galvo can take, which is exactly why the controller must not rely on it.

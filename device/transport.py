@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 
-from mitsuba_eventfield.device.spec import SafetyError
+from .spec import SafetyError
 
 SIM_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sim")
 SIM_RESOURCES = {"keysight": "TCPIP0::sim-keysight::inst0::INSTR", "rigol": "TCPIP0::sim-rigol::inst0::INSTR"}
@@ -43,8 +43,8 @@ class VisaTransport:
 
 def simulated(dialect_name: str, **kw):
     """An in-memory generator speaking ``dialect_name`` (every dialect; ``device.simulator``)."""
-    from mitsuba_eventfield.device.dialects import dialect
-    from mitsuba_eventfield.device.simulator import SimulatedGenerator
+    from .dialects import dialect
+    from .simulator import SimulatedGenerator
     dialect(dialect_name)                  # the one "unknown dialect" message
     return SimulatedGenerator(dialect_name, **kw)
 

@@ -15,14 +15,14 @@ def register() -> None:
     variant = mi.variant()
     if variant in _registered:
         return
-    from mitsuba_eventfield.plugins.event_integrator import integrator_class
-    from mitsuba_eventfield.plugins.galvo_sensor import sensor_class as galvo_class
+    from .event_integrator import integrator_class
+    from .galvo_sensor import sensor_class as galvo_class
 
     cls = integrator_class()
     mi.register_integrator("eventfield", lambda props: cls(props))
     galvo = galvo_class()
     mi.register_sensor("galvo", lambda props: galvo(props))
-    from mitsuba_eventfield.plugins.kaleidoscope_sensor import sensor_class as kaleido_class
+    from .kaleidoscope_sensor import sensor_class as kaleido_class
     kaleido = kaleido_class()
     mi.register_sensor("kaleidoscope", lambda props: kaleido(props))
     _registered.add(variant)

@@ -55,7 +55,8 @@ import mitsuba as mi
 import numpy as np
 
 from mitsuba_eventfield.plugins import pixel_model
-from mitsuba_eventfield.plugins._per_variant import per_variant, subclass
+
+from ._per_variant import per_variant, subclass
 
 DEFAULT_THRESHOLD = 0.2
 DEFAULT_LINLOG = 1e-3

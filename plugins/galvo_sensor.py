@@ -40,7 +40,8 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsuba_eventfield.optics import galvo as galvo_optics
-from mitsuba_eventfield.plugins._per_variant import per_variant, subclass
+
+from ._per_variant import per_variant, subclass
 
 _FLOAT_PARAMS = ("frequency", "amplitude", "phase", "offset_x", "offset_y", "freq_x", "freq_y", "amplitude_x",
                  "amplitude_y", "phase_x", "phase_y")

@@ -33,7 +33,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import kaleido_optics
-from mitsuba_eventfield.plugins._per_variant import per_variant, subclass
+from ._per_variant import per_variant, subclass
 
 MODES = ("lenses", "tube_only", "physical_tube")
 LAYOUTS = ("kaleidoscope", "microlens")
