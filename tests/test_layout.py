@@ -150,3 +150,16 @@ def test_every_application_returns_the_one_result_type():
         assert issubclass(cls, AppResult)
         for method in ("report", "write", "figure"):
             assert getattr(cls, method) is not getattr(AppResult, method), (cls.__name__, method)
+
+
+def test_small_pieces():
+    """No library file over ~400 lines and no function over ~60 (a little slack for docstrings)."""
+    too_big = []
+    for name, path in _modules():
+        source = open(path).read()
+        if len(source.splitlines()) > 420:
+            too_big.append(f"{name}: {len(source.splitlines())} lines")
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno - node.lineno >= 65:
+                too_big.append(f"{name}.{node.name}: {node.end_lineno - node.lineno + 1} lines")
+    assert not too_big, "\n".join(too_big)
