@@ -141,12 +141,13 @@ def test_every_repository_path_named_in_code_and_docs_exists():
 
 
 def test_every_application_returns_the_one_result_type():
+    from mitsuba_eventfield.apps.demo import DemoResult
     from mitsuba_eventfield.apps.hdr import HDRComparison
     from mitsuba_eventfield.apps.highspeed import FocusTrack, PlaneRefocus
     from mitsuba_eventfield.apps.result import AppResult
     from mitsuba_eventfield.apps.scanrate import ScanRateDepth
     from mitsuba_eventfield.apps.slomorf import SloMoRFResult
-    for cls in (HDRComparison, FocusTrack, PlaneRefocus, ScanRateDepth, SloMoRFResult):
+    for cls in (DemoResult, HDRComparison, FocusTrack, PlaneRefocus, ScanRateDepth, SloMoRFResult):
         assert issubclass(cls, AppResult)
         for method in ("report", "write", "figure"):
             assert getattr(cls, method) is not getattr(AppResult, method), (cls.__name__, method)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 
 class AppResult:
-    """Base of the applications' result dataclasses (``highspeed.PlaneRefocus``, ``highspeed.FocusTrack``,
+    """Base of the applications' result dataclasses (``demo.DemoResult``, ``highspeed.PlaneRefocus``, ``highspeed.FocusTrack``,
     ``scanrate.ScanRateDepth``, ``slomorf.SloMoRFResult``, ``hdr.HDRComparison``)."""
 
     def report(self) -> str:

@@ -11,6 +11,12 @@ from .args import add_defines, defines, num, pairs
 
 
 def add_parsers(sub) -> None:
+    dm = sub.add_parser("demo", help="the main job: a galvo event field, refocused on two cards and a depth map, "
+                                     "from the events alone")
+    dm.add_argument("-o", "--output", default="out/demo", help="output directory (events, PNGs, EXRs, metrics)")
+    dm.add_argument("--width", type=num(16, 4096, integer=True), default=160, help="film width (default 160)")
+    dm.add_argument("--height", type=num(12, 4096, integer=True), default=120, help="film height (default 120)")
+    dm.add_argument("--views", type=num(4, MAX_VIEWS, integer=True), default=32, help="views per scan period")
     hd = sub.add_parser("hdr", help="HDR light field of a static galvo scene: events vs 8-bit exposures")
     hd.add_argument("scene", nargs="?", default=bundled_scene("hdr_leds/hdr_leds.xml"))
     hd.add_argument("-o", "--output", default="out/hdr", help="output directory (EXRs, figure, metrics JSON)")
@@ -97,6 +103,16 @@ def _application(run, output: str, wrote) -> int:
     return 0
 
 
+def run_demo(a) -> int:
+    from ..apps import demo
+
+    def wrote(p):
+        return (f"{a.output}/: demo.png (the four results side by side), preview.png (the events: every edge "
+                "fires as the scan sweeps it), refocus_0.5m.png (near card sharp), refocus_1.2m.png (far card "
+                f"sharp), depth.png/.exr (depth map), events.h5, {os.path.basename(p['metrics'])}")
+    return _application(lambda: demo.run(a.width, a.height, a.views, progress=True), a.output, wrote)
+
+
 def run_hdr(a) -> int:
     from ..apps import hdr
     return _application(lambda: hdr.compare(a.scene, defines(a), a.depth, a.steps, spp=a.spp, progress=True),
@@ -158,5 +174,5 @@ def run_slomorf(a) -> int:
                   "slomorf.gif, slomorf.png, metrics.json")
 
 
-COMMANDS = {"hdr": run_hdr, "highspeed": run_highspeed, "track-focus": run_track_focus, "slomorf": run_slomorf,
+COMMANDS = {"demo": run_demo, "hdr": run_hdr, "highspeed": run_highspeed, "track-focus": run_track_focus, "slomorf": run_slomorf,
             "scanrate-depth": run_scanrate_depth}
