@@ -17,9 +17,8 @@ import numpy as np
 from ..evaluation.truth import centre_frame, textured, truth_depth
 from ..focus.depth import depth_from_focus
 from ..focus.refocus import refocus
-from ..lightfield.model import from_events
-from ..scene import bundled_scene, load_scene
-from ..simulate.render import render_events
+from ..scene import bundled_scene
+from .capture import capture
 from .result import AppResult
 
 DEMO_SCENE = "offaxis_cards/offaxis_cards.xml"
@@ -53,13 +52,13 @@ class DemoResult(AppResult):
 
 
 def run(width: int = 160, height: int = 120, views: int = 32, progress: bool = False) -> DemoResult:
-    """Render the demo scene's events, refocus on both cards and measure depth, from the events alone."""
+    """Render the demo scene's events, refocus on both cards and measure depth, from the events alone (the
+    applications' shared capture stage, with the galvo start-image solver and no ground-truth views)."""
     t0 = time.perf_counter()
-    scene = load_scene(bundled_scene(DEMO_SCENE), width=width, height=height)
-    period = scene.scan_period
-    events = render_events(scene, period, steps=16 * views // 2, progress=progress)
+    cap = capture(bundled_scene(DEMO_SCENE), {"width": width, "height": height}, periods=1, views=views,
+                  start="events", truth_views=False, progress=progress)
+    scene, events, lf = cap.timed, cap.events, cap.lightfields[0]
     t1 = time.perf_counter()
-    lf = from_events(events, period=0, views=views)           # events only: the galvo solver's start image
     refocused = {z: refocus(lf, z) for z in CARDS.values()}
     depth = depth_from_focus(lf, NEAR, FAR, PLANES, "tenengrad")
     t2 = time.perf_counter()
@@ -67,7 +66,8 @@ def run(width: int = 160, height: int = 120, views: int = 32, progress: bool = F
     meta = {"scene": DEMO_SCENE, "width": width, "height": height, "views": views, "planes": PLANES,
             "inputs": "events only (galvo start-image solver; no frame camera)",
             "scored_against": "Mitsuba's depth output of the centre view (truth.truth_depth)",
-            "time_split_s": {"render_events": t1 - t0, "light_field_refocus_depth": t2 - t1,
+            "time_split_s": {"render_events": cap.seconds["render_events"],
+                             "light_field": t1 - t0 - cap.seconds["render_events"], "refocus_depth": t2 - t1,
                              "scoring": time.perf_counter() - t2}}
     return DemoResult(events, refocused, depth, cards, meta)
 

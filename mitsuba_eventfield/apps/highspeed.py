@@ -27,71 +27,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import EventFieldError
-from ..scene.timed import load_scene
-from ..simulate.render import render_events, render_frames
-from ..validate import number
+from .capture import START_METHODS, Capture, _check_positive, capture  # noqa: F401  (the shared capture stage)
 from .highspeed_outputs import planes_figure, track_figure, write_planes, write_track  # noqa: F401  (outputs)
 from .result import AppResult
-
-START_METHODS = ("frame", "events")
-
-
-def _check_positive(name, value, integer=False, low=0.0):
-    return number(value, name, low, integer=integer, lo_open=True, strict=True)
-
 
 # The fan's documented set-up (docs/gallery): larger film and scan than the scene's own defaults, two planes.
 FAN_DEFAULTS = {"define": ["width=240", "height=180", "amplitude=2", "mirror_distance=0.2"],
                 "plane": ["fan=0.6", "wall=1.5"]}
-
-@dataclass
-class Capture:
-    timed: object
-    events: object
-    lightfields: list           # one per period, from events
-    truth_lightfields: list     # same views rendered directly
-    period_s: float
-    seconds: dict
-
-
-def capture(scene_path: str, defines: dict | None = None, periods: int | None = None, views: int = 40,
-            start: str = "frame", px_per_step: float = 1.0, spp: int = 4, progress: bool = False) -> Capture:
-    """Events of ``periods`` whole scan periods (default: all of the motion file's duration) and, per period,
-    the light field from the events and the ground-truth light field of the same views."""
-    from ..lightfield.model import from_galvo, galvo_lightfields, galvo_steps_per_period
-    from ..lightfield.reconstruct import galvo_start_image
-    if start not in START_METHODS:
-        raise ValueError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
-    _check_positive("views", views, integer=True, low=1)
-    _check_positive("px_per_step", px_per_step)
-    timed = load_scene(scene_path, **(defines or {}))
-    period = timed.scan_period
-    if not period:
-        raise ValueError(f"{scene_path}: needs a galvo sensor with a periodic scan")
-    if periods is None:
-        duration = timed.motion.duration if timed.motion is not None else None
-        if not duration:
-            raise ValueError(f"{scene_path}: no duration in its motion file: give periods")
-        periods = max(1, int(math.floor(duration / period + 1e-9)))
-    _check_positive("periods", periods, integer=True)
-    optics = timed.sensor.optics_metadata()
-    width, height = (int(v) for v in timed.sensor.film().size())
-    steps = periods * max(2 * views, galvo_steps_per_period(optics, width, height, px_per_step))
-    t0 = time.perf_counter()
-    events = render_events(timed, periods * period, steps=steps, spp=spp, progress=progress)
-    t1 = time.perf_counter()
-    if start == "frame":
-        log_start = render_frames(timed, [0.0], spp=spp)[0]
-    else:
-        log_start = galvo_start_image(events, 0.0)
-    lfs = list(galvo_lightfields(events, views, "direct", log_start=log_start, t_start=0.0))
-    t2 = time.perf_counter()
-    truth = [from_galvo(render_frames(timed, lf.times, spp=spp), lf.times, events.meta["optics"],
-                        {"period_index": k}) for k, lf in enumerate(lfs)]
-    t3 = time.perf_counter()
-    return Capture(timed, events, lfs, truth, period,
-                   {"render_events": t1 - t0, "views_from_events": t2 - t1, "ground_truth_views": t3 - t2})
-
 
 def _meta(cap: Capture, scene_path, defines, **kw) -> dict:
     ev = cap.events
