@@ -11,6 +11,10 @@ from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import num, save_image, times_ms
 
 
+CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a recording that carries none "
+                 "(default: the file's pixel-model metadata)")
+
+
 def add_parsers(sub) -> None:
     lf_args = argparse.ArgumentParser(add_help=False)
     lf_args.add_argument("file", help="event file")
@@ -22,7 +26,9 @@ def add_parsers(sub) -> None:
     lf_args.add_argument("--views", type=num(2, MAX_VIEWS, integer=True), default=32,
                          help="galvo: views per scan period (default 32)")
     lf_args.add_argument("--time", type=num(0), help="kaleidoscope: time in ms (default: stream end)")
-    lf_args.add_argument("--calibration", help="calibration JSON (eventfield calibrate): view phase, depth model")
+    lf_args.add_argument("--calibration", help="calibration JSON (eventfield calibrate): view phase, depth model; "
+                                               "a camera recording (.raw, .dat, .aedat4) takes its optics from it")
+    lf_args.add_argument("--contrast", help=CONTRAST_HELP)
 
     rc = sub.add_parser("reconstruct", help="log-intensity frames from events: EXR + PNG per frame")
     rc.add_argument("file")
@@ -32,6 +38,7 @@ def add_parsers(sub) -> None:
     g.add_argument("--times", help="comma-separated times in ms")
     g.add_argument("--fps", type=num(0, 1e6, lo_open=True), help="frames per second over the whole stream")
     rc.add_argument("--start-frame", help="EXR of the linear frame at the stream start")
+    rc.add_argument("--contrast", help=CONTRAST_HELP)
     rc.add_argument("--cutoff", type=num(0, 1e6, lo_open=True), default=5.0,
                     help="filter cutoff in Hz (highpass, complementary)")
 
@@ -49,6 +56,23 @@ def add_parsers(sub) -> None:
 
 
 # ------------------------------------------------------------------ inputs shared with calibrate
+def read_input(a):
+    """The event file of a command, with ``--contrast`` (when given) as its contrast thresholds; a stream that has
+    none (a camera recording) and no ``--contrast`` is refused in one line."""
+    from ..events.io import read_events
+    ev = read_events(a.file)
+    if getattr(a, "contrast", None):
+        c = number_list(a.contrast, "--contrast", lo=0, lo_open=True)
+        if len(c) not in (1, 2):
+            raise EventFieldError(f"--contrast {a.contrast!r}: expected ON or ON,OFF")
+        ev.meta["pixel_model"] = dict(ev.meta.get("pixel_model") or {}, threshold_on=c[0], threshold_off=c[-1])
+    pm = ev.meta.get("pixel_model") or {}
+    if pm.get("threshold_on") is None or pm.get("threshold_off") is None:
+        raise EventFieldError(f"{a.file}: the recording carries no contrast thresholds (pixel-model metadata): pass "
+                              "--contrast ON[,OFF], log intensity per event (e.g. 0.2)")
+    return ev
+
+
 def luminance_channel(path):
     """The Y (or else R) channel of an EXR frame, with a named error when it has neither."""
     from ..images import read_exr
@@ -78,7 +102,8 @@ def galvo_frames(ev, period, views, start_frame_log=None):
     from ..optics.scan import curve_from_dict
     optics = ev.meta.get("optics", {})
     if optics.get("design") != "galvo":
-        raise EventFieldError("not a galvo event stream (optics.design != 'galvo')")
+        raise EventFieldError("not a galvo event stream (optics.design != 'galvo')" if optics else
+                              "the stream carries no optics (a camera recording?): a galvo stream is needed")
     curve = curve_from_dict(optics["scan"])
     try:
         t0 = galvo_period_starts(ev, [period])[period]
@@ -96,14 +121,45 @@ def _out_meta(a, events, **extra):
                  "optics": events.meta.get("optics"), "pixel_model": events.meta.get("pixel_model")}, **extra)
 
 
+# what from_events needs of each design's optics, beyond what a calibration's optics record always holds
+LIGHTFIELD_FIELDS = {"galvo": ("scan", "fov_x_deg", "mirror_distance", "mirror_separation"),
+                     "kaleidoscope": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance"),
+                     "microlens": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance")}
+
+
+def recording_optics(calibration, ev, where) -> dict:
+    """The optics of a recording (which carries none) from the calibration made for its set-up: the optics record
+    its parts share, checked against the recording's film size and for what the light field needs."""
+    records = [getattr(part, "optics", None) or {} for part in calibration.values()]
+    designs = sorted({r.get("design") for r in records if r.get("design")})
+    source = getattr(calibration, "path", "calibration")
+    if len(designs) != 1:
+        raise EventFieldError(f"{source}: cannot give optics to {where}, which carries none: the calibration is for "
+                              f"{' and '.join(map(str, designs)) or 'no'} optics, it must be for one design")
+    record = next(r for r in records if r.get("design") == designs[0])
+    if (record.get("width"), record.get("height")) != (ev.width, ev.height):
+        raise EventFieldError(f"{source}: made for a {record.get('width')}x{record.get('height')} film, the "
+                              f"recording {where} is {ev.width}x{ev.height}")
+    missing = [k for k in LIGHTFIELD_FIELDS[designs[0]] if record.get(k) is None]
+    if missing:
+        raise EventFieldError(f"{source}: its {designs[0]} optics record lacks {', '.join(missing)}, which the light "
+                              f"field of {where} (a recording without optics) needs")
+    return {k: v for k, v in record.items() if k not in ("width", "height")}
+
+
 def _lightfield(a, ev):
     """The light field the light-field commands share, calibrated when asked (a calibration made for other
     optics than this stream's is refused before any reconstruction)."""
     from ..calibration import apply_to_lightfield, check_optics, load_calibration, optics_record
     from ..lightfield.model import from_events
+    if not ev.meta.get("optics") and not a.calibration:
+        raise EventFieldError(f"{a.file}: the recording carries no optics (no light-field metadata): pass "
+                              "--calibration, a calibration file made for its set-up")
     calibration = optics = None
     if a.calibration:
         calibration = load_calibration(a.calibration)
+        if not ev.meta.get("optics"):
+            ev.meta["optics"] = recording_optics(calibration, ev, a.file)
         optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
         check_optics(calibration, optics)
     try:
@@ -140,9 +196,8 @@ def _method_arguments(a, ev) -> dict:
 
 
 def run_reconstruct(a) -> int:
-    from ..events.io import read_events
     from ..lightfield.reconstruct import reconstruct
-    ev = read_events(a.file)
+    ev = read_input(a)
     times = _reconstruct_times(a, ev)
     try:
         frames = reconstruct(ev, times, a.method, **_method_arguments(a, ev))
@@ -157,9 +212,8 @@ def run_reconstruct(a) -> int:
 
 
 def run_refocus(a) -> int:
-    from ..events.io import read_events
     from ..focus.refocus import refocus
-    ev = read_events(a.file)
+    ev = read_input(a)
     depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
     lf = _lightfield(a, ev)
     for z in depths:
@@ -170,10 +224,9 @@ def run_refocus(a) -> int:
 
 
 def run_depth(a) -> int:
-    from ..events.io import read_events
     from ..focus.depth import MEASURES, depth_from_focus
     from ..images import depth_png, write_exr, write_png
-    ev = read_events(a.file)
+    ev = read_input(a)
     if not (0 < a.near < a.far) or a.planes < 2:
         raise EventFieldError(f"--near {a.near} --far {a.far} --planes {a.planes}: need 0 < near < far, "
                               "planes >= 2")

@@ -1,4 +1,5 @@
-"""Event files: HDF5 in the DSEC layout (streamed while rendering), TimeLens npz, E2VID text, AEDAT4.
+"""Event files: HDF5 in the DSEC layout (streamed while rendering), TimeLens npz, E2VID text, AEDAT4, and the
+event cameras' own recordings: Prophesee RAW (EVT 2.0 / 2.1 / 3.0) and DAT (``recordings.py``, through faery).
 
 HDF5 layout (DSEC, plus our metadata)::
 
@@ -32,17 +33,21 @@ from ..errors import EventFieldError
 from .aedat import AEDAT4_BYTES_PER_EVENT, read_aedat4, write_aedat4  # noqa: F401  (re-exported)
 from .disk import DISK_MARGIN, HEADER_BYTES, WRITE_CHUNK, BadFile, GuardedFile, check_space, disk_errors  # noqa: F401
 from .hdf5 import H5_BYTES_PER_EVENT, H5_GZIP_LEVEL, H5EventWriter, _json, read_h5  # noqa: F401
+from .recordings import EVT_VERSIONS, RECORDING_FORMATS, read_aedat4_faery, read_recording, write_recording
 from .stream import EventStream
 
-FORMATS = {".h5": "h5", ".hdf5": "h5", ".npz": "npz", ".txt": "txt", ".aedat4": "aedat4"}
+FORMATS = {".h5": "h5", ".hdf5": "h5", ".npz": "npz", ".txt": "txt", ".aedat4": "aedat4", **RECORDING_FORMATS}
+# formats named by the caller only: a RAW file of a given EVT version (when its header does not say)
+NAMED_FORMATS = set(EVT_VERSIONS)
 
 NPZ_BYTES_PER_EVENT = 22       # x, y, timestamp (float64), polarity, t, p
 
 
 def format_of(path: str, fmt: str | None = None) -> str:
     if fmt:
-        if fmt not in set(FORMATS.values()):
-            raise EventFieldError(f"{path}: unknown event format '{fmt}'; allowed: h5, npz, txt, aedat4")
+        if fmt not in set(FORMATS.values()) | NAMED_FORMATS:
+            allowed = sorted(set(FORMATS.values()) | NAMED_FORMATS)
+            raise EventFieldError(f"{path}: unknown event format '{fmt}'; allowed: {', '.join(allowed)}")
         return fmt
     ext = os.path.splitext(path)[1].lower()
     if ext not in FORMATS:
@@ -51,7 +56,8 @@ def format_of(path: str, fmt: str | None = None) -> str:
 
 
 def write_events(path: str, events: EventStream, fmt: str | None = None) -> str:
-    """Write a whole stream; the format follows the extension (.h5/.hdf5, .npz, .txt, .aedat4)."""
+    """Write a whole stream; the format follows the extension (.h5/.hdf5, .npz, .txt, .aedat4, .raw = EVT 3.0,
+    .dat) or ``fmt`` (evt2, evt2.1, evt3 for a RAW file of that version). RAW, DAT and text keep no metadata."""
     fmt = format_of(path, fmt)
     meta = dict(events.meta)
     meta.setdefault("package_version", __version__)
@@ -63,6 +69,8 @@ def write_events(path: str, events: EventStream, fmt: str | None = None) -> str:
         _write_npz(path, events, _json(meta))
     elif fmt == "txt":
         _write_txt(path, events)
+    elif fmt in ("raw", "dat") or fmt in NAMED_FORMATS:
+        write_recording(path, events, fmt)
     else:
         write_aedat4(path, events)
     return os.path.abspath(path)
@@ -131,8 +139,10 @@ def _one_line(e: BaseException) -> str:
     eof = re.search(r"truncated file: eof = (\d+).*stored_eof = (\d+)", text)
     if eof:
         return f"truncated ({eof[1]} of {eof[2]} bytes)"
-    if "End-Of-File" in text:
+    if "End-Of-File" in text or "failed to fill whole buffer" in text:   # dv-processing; faery (Rust's read_exact)
         return "truncated (unexpected end of file)"
+    if text.startswith("LZ4 error") or text.startswith("Zstd error"):   # faery on a damaged AEDAT4 packet
+        return f"damaged packet ({text})"
     columns = re.search(r"number of columns changed from (\d+) to (\d+) at row (\d+)", text)
     if columns:  # NumPy's loadtxt; its advice (usecols) does not apply
         return f"truncated or malformed: data row {columns[3]} has {columns[2]} columns, not {columns[1]}"
@@ -147,12 +157,16 @@ def _one_line(e: BaseException) -> str:
 
 
 def read_events(path: str, fmt: str | None = None) -> EventStream:
-    """Read an event file (format by extension). A missing, empty, truncated or foreign file raises
-    ``EventFieldError`` with one line naming the file and the problem."""
+    """Read an event file (format by extension, or ``fmt``: evt2 / evt2.1 / evt3 names a RAW file's version when
+    its header does not). A missing, empty, truncated or foreign file raises ``EventFieldError`` with one line
+    naming the file and the problem. AEDAT4 is decoded by faery (in-process; dv-processing when faery is not
+    installed), RAW and DAT by faery."""
     if not os.path.isfile(path):
         raise EventFieldError(f"{path}: no such event file")
     fmt = format_of(path, fmt)
     try:
+        if fmt in ("raw", "dat") or fmt in NAMED_FORMATS:
+            return read_recording(path, fmt)
         _check_file(path, fmt)
         if fmt == "h5":
             return read_h5(path)
@@ -160,11 +174,18 @@ def read_events(path: str, fmt: str | None = None) -> EventStream:
             return _read_npz(path)
         if fmt == "txt":
             return _read_txt(path)
-        return read_aedat4(path)
+        return _read_aedat4(path)
     except EventFieldError:
         raise
     except Exception as e:  # corrupt or foreign file
         raise EventFieldError(f"{path}: cannot read as {fmt} event file: {_one_line(e)}") from None
+
+
+def _read_aedat4(path):
+    import importlib.util
+    if importlib.util.find_spec("faery") is None:
+        return read_aedat4(path)
+    return read_aedat4_faery(path)
 
 
 def _read_npz(path):

@@ -1,0 +1,177 @@
+"""Event-camera recordings in (Prophesee RAW EVT 2.0 / 3.0 and DAT, through faery), files the cameras' software
+reads out (AEDAT4 for faery and dv-processing, RAW / DAT for tonic), and the light-field commands on a
+recording, which carries no optics: refused in one line without ``--calibration``, run with it."""
+import importlib.util
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+import mitsuba_eventfield as ef
+
+faery = pytest.importorskip("faery")
+
+GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
+KINDS = [("evt2", "x.raw"), ("evt3", "x.raw"), ("dat2", "x.dat")]
+
+
+@pytest.fixture(scope="module")
+def stream():
+    rng = np.random.default_rng(11)
+    n = 30_000
+    t = np.sort(rng.integers(1_000, 2_000_000, n))
+    return ef.EventStream(rng.integers(0, 640, n), rng.integers(0, 480, n), t, rng.choice([-1, 1], n), 640, 480)
+
+
+def _faery_file(path, stream, version):
+    """A recording as faery's writer (the camera's format, not ours) makes it."""
+    a = np.zeros(len(stream), faery.EVENTS_DTYPE)
+    a["t"], a["x"], a["y"], a["on"] = stream.t, stream.x, stream.y, stream.p > 0
+    faery.events_stream_from_array(a, (stream.width, stream.height)).to_file(str(path), version=version)
+    return str(path)
+
+
+@pytest.mark.parametrize("version,name", KINDS)
+def test_recording_reads_exactly(tmp_path, stream, version, name):
+    path = _faery_file(tmp_path / name, stream, version)
+    back = ef.read_events(path)
+    assert (back.width, back.height) == (640, 480) and len(back) == len(stream)
+    for k in "xytp":
+        assert np.array_equal(getattr(back, k), getattr(stream, k)), k
+    assert back.meta["recording"]["format"] == version and back.meta["t_start_us"] == int(stream.t[0])
+
+
+@pytest.mark.parametrize("ext,fmt", [(".raw", "evt2"), (".raw", "evt3"), (".raw", None), (".dat", None)])
+def test_written_recording_round_trips(tmp_path, stream, ext, fmt):
+    path = str(tmp_path / f"w{ext}")
+    ef.write_events(path, stream, fmt)
+    assert ef.read_events(path).equals(stream)
+    assert ef.read_events(path, fmt).equals(stream) if fmt else True
+
+
+def test_named_version_must_match_the_header(tmp_path, stream):
+    path = _faery_file(tmp_path / "a.raw", stream, "evt3")
+    with pytest.raises(ef.EventFieldError, match=r"a\.raw: .*header says evt3, not evt2"):
+        ef.read_events(path, "evt2")
+
+
+def _cli_info(path):
+    r = subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "info", str(path)], capture_output=True,
+                       text=True, timeout=120)
+    return r.returncode, r.stderr.strip().splitlines()
+
+
+@pytest.mark.parametrize("version,name", KINDS)
+@pytest.mark.parametrize("damage", ["empty", "cut_mid_word", "cut_in_header", "text"])
+def test_damaged_recording_is_one_line(tmp_path, stream, version, name, damage):
+    data = open(_faery_file(tmp_path / name, stream, version), "rb").read()
+    content = {"empty": b"", "cut_mid_word": data[:-1], "cut_in_header": data[:16],
+               "text": b"hello world\nnot events\n"}[damage]
+    path = tmp_path / f"{damage}{os.path.splitext(name)[1]}"
+    path.write_bytes(content)
+    code, err = _cli_info(path)
+    assert code == 2 and len(err) == 1 and err[0].startswith(f"eventfield: error: {path}: "), err
+    assert "Traceback" not in err[0] and "panicked" not in err[0]
+
+
+# --- our files in the ecosystem's readers ----------------------------------------------------------------------
+
+def test_our_aedat4_reads_in_faery_and_dv(tmp_path, stream):
+    path = str(tmp_path / "ours.aedat4")
+    ef.write_events(path, stream)                   # written by dv-processing's writer
+    decoder = faery.events_stream_from_file(path)
+    a = np.concatenate(list(decoder))
+    assert decoder.dimensions() == (640, 480)
+    assert np.array_equal(a["t"], stream.t) and np.array_equal(a["x"], stream.x)
+    assert np.array_equal(a["y"], stream.y) and np.array_equal(a["on"], stream.p > 0)
+    if importlib.util.find_spec("dv_processing") is None:
+        pytest.skip("dv-processing not installed")
+    script = ("import sys, dv_processing as dv\nr = dv.io.MonoCameraRecording(sys.argv[1])\nn = 0\n"
+              "while (b := r.getNextEventBatch()) is not None:\n    n += len(b)\nprint(n, *r.getEventResolution())")
+    out = subprocess.run([sys.executable, "-c", script, path], capture_output=True, text=True, timeout=120)
+    assert out.stdout.split() == [str(len(stream)), "640", "480"], out.stderr
+
+
+@pytest.mark.parametrize("ext", [".raw", ".dat", ".aedat4"])
+def test_our_recordings_read_in_faery(tmp_path, stream, ext):
+    path = str(tmp_path / f"ours{ext}")
+    ef.write_events(path, stream)
+    a = np.concatenate(list(faery.events_stream_from_file(path)))
+    assert np.array_equal(a["t"].astype(np.int64), stream.t) and np.array_equal(a["x"], stream.x)
+
+
+@pytest.mark.parametrize("ext", [".h5", ".npz", ".txt", ".aedat4", ".raw", ".dat"])
+def test_our_files_in_tonic(tmp_path, stream, ext):
+    if importlib.util.find_spec("tonic") is None:
+        pytest.skip("tonic is not installed (an optional reader, not a dependency)")
+    import tonic.io
+    path = str(tmp_path / f"ours{ext}")
+    ef.write_events(path, stream)
+    readers = {".raw": "read_mvs_events" if hasattr(tonic.io, "read_mvs_events") else None,
+               ".dat": "read_dvs_red" if hasattr(tonic.io, "read_dvs_red") else None,
+               ".aedat4": "read_aedat4" if hasattr(tonic.io, "read_aedat4") else None}
+    name = readers.get(ext)
+    if name is None:
+        pytest.skip(f"tonic {getattr(tonic, '__version__', '?')} has no reader for {ext}")
+    events = getattr(tonic.io, name)(path)
+    assert len(events) == len(stream)
+
+
+# --- the light-field commands on a recording -------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def galvo_recording(tmp_path_factory):
+    """Two scan periods of the static galvo scene, written as an EVT 3.0 recording (which keeps no optics), and a
+    calibration file made for its optics."""
+    from mitsuba_eventfield.calibration import fit_depth, optics_record, save_calibration
+    from mitsuba_eventfield.optics import galvo as galvo_optics
+    d = tmp_path_factory.mktemp("recording")
+    scene = ef.load_scene(GALVO, width=64, height=48, amplitude=0.5)
+    events = ef.render_events(scene, 2 / 250.0, steps=64, threshold=0.1)
+    raw = str(d / "g.raw")
+    ef.write_events(raw, events)
+    record = optics_record(events.meta["optics"], events.width, events.height)
+    z = np.array([0.4, 0.7, 1.0, 1.6, 2.5])
+    scales = 2 * galvo_optics.focal_length_px(64, record["fov_x_deg"]) * (1 - 0.1 / z)
+    cal = str(d / "cal.json")
+    save_calibration(cal, record, depth=fit_depth(z, scales))
+    return d, raw, cal
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", *map(str, args)], capture_output=True,
+                          text=True, timeout=600)
+
+
+def test_recording_without_optics_needs_a_calibration(galvo_recording):
+    d, raw, cal = galvo_recording
+    assert "optics" not in ef.read_events(raw).meta
+    r = _cli("refocus", raw, "-o", d / "rf.png", "--depth", "1", "--views", "8")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "carries no contrast thresholds" in err[0], err
+    r = _cli("refocus", raw, "-o", d / "rf.png", "--depth", "1", "--views", "8", "--contrast", "0.1")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "carries no optics" in err[0] and "--calibration" in err[0], err
+    r = _cli("refocus", raw, "-o", d / "rf.png", "--depth", "1", "--views", "8", "--calibration", cal,
+             "--contrast", "0.1")
+    assert r.returncode == 0, r.stderr
+    assert os.path.getsize(d / "rf.png") > 0 and os.path.exists(d / "rf.exr")
+    r = _cli("depth", raw, "-o", d / "dp.png", "--near", "0.3", "--far", "4", "--planes", "4", "--views", "8",
+             "--calibration", cal, "--contrast", "0.1,0.1")
+    assert r.returncode == 0, r.stderr
+
+
+def test_calibration_without_the_fields_a_light_field_needs(galvo_recording, tmp_path):
+    import json
+    d, raw, cal = galvo_recording
+    data = json.load(open(cal))
+    del data["depth"]["optics"]["mirror_separation"]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(data))
+    r = _cli("refocus", raw, "-o", tmp_path / "rf.png", "--depth", "1", "--views", "8", "--calibration", bad,
+             "--contrast", "0.1")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "lacks mirror_separation" in err[0], err
