@@ -23,9 +23,10 @@ def check_writable(path: str, what: str = "output") -> str:
         raise EventFieldError(f"{what} path {path}: is a directory")
     if not os.path.isdir(parent):
         existing = _nearest_existing(parent)
-        why = "is not a directory" if os.path.isfile(existing) else "does not exist"
-        raise EventFieldError(f"{what} path {path}: directory {parent} does not exist ({existing} {why})"
-                              if existing != parent else f"{what} path {path}: {parent} {why}")
+        if os.path.isfile(existing):
+            raise EventFieldError(f"{what} path {path}: {existing} is a file, not a directory")
+        raise EventFieldError(f"{what} path {path}: directory {parent} does not exist (create it first, e.g. "
+                              f"mkdir -p {os.path.relpath(parent)})")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise EventFieldError(f"{what} path {path}: directory {parent} is not writable")
     return path

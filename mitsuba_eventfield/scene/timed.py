@@ -149,6 +149,7 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
         path = os.fspath(scene)
         if not os.path.isfile(path):
             raise EventFieldError(f"{path}: scene file not found")
+        xml_params = _film_override(path, xml_params)
         try:
             scene = mi.load_file(path, **{k: str(v) for k, v in xml_params.items()})
         except Exception as e:  # Mitsuba reports XML/plugin errors as RuntimeError with a long trace
@@ -163,6 +164,31 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
     elif isinstance(motion, dict):
         motion = parse_motion(motion)
     return TimedScene(scene, motion, path)
+
+
+FILM_ENV = "EVENTFIELD_FILM"
+
+
+def _film_override(path: str, xml_params: dict) -> dict:
+    """``EVENTFIELD_FILM=WxH`` (the documented size for quick runs, e.g. the docs test): every scene file that
+    declares ``width``/``height`` (or a square ``views_px`` film) defaults is loaded at that size instead,
+    whatever the caller asked for."""
+    import re
+    spec = os.environ.get(FILM_ENV)
+    if not spec:
+        return xml_params
+    size = re.fullmatch(r"\s*(\d+)\s*x\s*(\d+)\s*", spec)
+    if not size or not (8 <= int(size[1]) <= 8192 and 8 <= int(size[2]) <= 8192):
+        raise EventFieldError(f"{FILM_ENV} = {spec!r}: expected WIDTHxHEIGHT, each 8 to 8192 pixels")
+    width, height = int(size[1]), int(size[2])
+    with open(path) as f:
+        declared = set(re.findall(r'<default\s+name="(\w+)"', f.read()))
+    out = dict(xml_params)
+    if {"width", "height"} <= declared:
+        out.update(width=width, height=height)
+    if "views_px" in declared:
+        out["views_px"] = max(30, height - height % 6)     # n x n views of whole, even tiles
+    return out
 
 
 def _mitsuba_message(e: Exception) -> str:
