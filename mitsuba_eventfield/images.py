@@ -110,3 +110,12 @@ def depth_png(depth: np.ndarray, confidence: np.ndarray | None = None, near: flo
         cv2.putText(canvas, f"{1 / inv:.3g}{unit}", (x0 + bar_w + 2, min(max(y + 4, 10), scale_h - 2)), font,
                     0.33, (0, 0, 0), 1, cv2.LINE_AA)
     return canvas
+
+
+def save_figure(fig, path: str, what: str = "figure", dpi: int = 110) -> str:
+    """A matplotlib figure as a PNG, atomically (nothing half-written under ``path``), then closed."""
+    import matplotlib.pyplot as plt
+    with atomic_output(path, what) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)
+    return path

@@ -124,8 +124,8 @@ def figure(result: DemoResult, path: str) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..atomic import atomic_output
     from ..events.preview import event_frame_rgb
+    from ..images import save_figure
     (z_near, near), (z_far, far) = sorted(result.refocused.items())
     dm = result.depth
     shown = np.where(dm.confidence >= 0.6, dm.depth, np.nan)
@@ -145,7 +145,4 @@ def figure(result: DemoResult, path: str) -> str:
     fig.colorbar(shown_img, ax=axes[-1], fraction=0.046)
     fig.suptitle("An event field from a scanning galvo: refocus and depth from the events alone", fontsize=10)
     fig.tight_layout()
-    with atomic_output(path, "figure") as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100)

@@ -124,7 +124,7 @@ def figure(result: HDRComparison, path: str) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..atomic import atomic_output
+    from ..images import save_figure
     lo, hi = float(result.truth_log.min()), float(result.truth_log.max())     # the full range: clipping shows
     panels = [("ground truth (log)", result.truth_log)] + [
         (f"{name}: |err| {result.errors[name]['all']:.2f} (worst region {result.errors[name]['worst_region']:.2f})",
@@ -136,10 +136,7 @@ def figure(result: HDRComparison, path: str) -> str:
         ax.axis("off")
     fig.suptitle(f"HDR light field: {result.dynamic_range:.2g}:1 radiance, one log scale for all panels", fontsize=9)
     fig.tight_layout()
-    with atomic_output(path, "figure") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_outputs(result: HDRComparison, out_dir: str) -> dict:

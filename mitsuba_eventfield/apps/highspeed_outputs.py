@@ -6,15 +6,7 @@ import os
 
 import numpy as np
 
-
-def _save_figure(fig, path):
-    import matplotlib.pyplot as plt
-
-    from ..atomic import atomic_output
-    with atomic_output(path, "figure") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return path
+from ..images import save_figure
 
 
 def _pyplot():
@@ -55,7 +47,7 @@ def planes_figure(result, path: str, period: int | None = None) -> str:
     fig.suptitle(f"High-speed refocus: scan period {k} of {len(result.refocused[names[0]])} "
                  f"({1 / result.period_s:g} light fields per second)", fontsize=9)
     fig.tight_layout()
-    return _save_figure(fig, path)
+    return save_figure(fig, path)
 
 
 def track_figure(result, path: str, columns: int = 6) -> str:
@@ -88,7 +80,7 @@ def track_figure(result, path: str, columns: int = 6) -> str:
     ax.set_title(f"focus tracking at {result.meta['light_fields_per_second']:g} light fields per second: median "
                  f"|relative error| {np.median(e):.3f}, max {e.max():.3f}", fontsize=8)
     fig.tight_layout()
-    return _save_figure(fig, path)
+    return save_figure(fig, path)
 
 
 def write_planes(result, out_dir: str) -> dict:

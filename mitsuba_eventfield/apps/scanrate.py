@@ -192,7 +192,7 @@ def figure(result: ScanRateDepth, path: str, columns: int = 4) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..atomic import atomic_output
+    from ..images import save_figure
     n = len(result.depth_maps)
     pick = np.unique(np.linspace(0, n - 1, min(columns, n)).round().astype(int))
     lo, hi = result.meta["near"], float(np.nanmax([np.nanmax(np.where(np.isfinite(z), z, np.nan))
@@ -217,10 +217,7 @@ def figure(result: ScanRateDepth, path: str, columns: int = 4) -> str:
     fig.suptitle(f"Depth at the scan rate: {result.meta['depth_maps_per_second']:g} metric depth maps per second "
                  "(confident textured pixels; black: no estimate)", fontsize=9)
     fig.tight_layout()
-    with atomic_output(path, "figure") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_outputs(result: ScanRateDepth, out_dir: str) -> dict:

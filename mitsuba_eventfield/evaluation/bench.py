@@ -108,7 +108,7 @@ def chart(rows, path: str, title: str = "") -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..atomic import atomic_output
+    from ..images import save_figure
     pts = [r for r in rows if r["setting"] != REFERENCE["name"]]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, metric, label in ((axes[0], "product_error", "refocused light field: relative error"),
@@ -128,10 +128,7 @@ def chart(rows, path: str, title: str = "") -> str:
         ax.set_xlabel("wall time relative to the default"), ax.set_ylabel(label)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    with atomic_output(path, "chart") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, "chart")
 
 
 def default_on_front(rows, tolerance: float = 1.25) -> bool:
