@@ -43,18 +43,22 @@ previous instant, reference level and per-pixel ON/OFF thresholds.
 
 Pixel realism (``pixel_model.PixelConfig``; all off in the default ``ideal`` preset): threshold mismatch and
 per-crossing jitter, leak, shot noise and the photoreceptor low-pass evolve in the step's single Dr.Jit kernel
-(random numbers from a per-pixel PCG32, seeded); refractory selection happens on the sparse events of the
-step, timestamp quantisation and the readout cap in :meth:`readout`, once the step's events are time-sorted.
+(random numbers from a per-pixel PCG32, seeded). :meth:`commit_events` makes the step's events: on the device
+(``event_fill``: count, prefix sum, fill, sort, clock) for every pixel model without sparse sequential state;
+with a refractory period, shot-noise events or a readout cap, on the host (:meth:`commit`, then
+:meth:`readout` for the clock and the cap once the step's events are time-sorted). Both give the same events.
 """
 from __future__ import annotations
 
+import contextlib
+import math
 from dataclasses import fields
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import pixel_model
+from mitsuba_eventfield.plugins import event_fill, pixel_model
 
 from ._per_variant import per_variant, subclass
 
@@ -196,20 +200,66 @@ class _EventIntegratorMethods:
         Returns numpy arrays (x uint16, y uint16, t float64 seconds, p int8 +1/-1), unsorted. The first commit
         only initialises the pixels (reference = current brightness) and fires nothing.
         """
+        step = self._take_staged(t1 - t0, "commit()")
+        if step is None:
+            return _no_events()
+        width = self.staged_size[0]
+        pix, t, p = self._step_events(step, t0, t1)
+        self._advance(step)
+        return (pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p
+
+    def _take_staged(self, duration: float, caller: str):
+        """The staged frame through the pixel step (its arrays by name), or None when it only initialised the
+        pixels (the first commit)."""
         if self.staged is None:
-            raise RuntimeError("commit() without a staged frame: render first")
+            raise RuntimeError(f"{caller} without a staged frame: render first")
         width, height = self.staged_size
         log_in, intensity = self.staged, self.staged_intensity
         self.staged = self.staged_intensity = None
         if self.log_prev is None:
             self._init_state(log_in, width, height)
             dr.eval(self.log_prev, self.anchor)
-            return _no_events()
-        step = self._pixel_step(log_in, intensity, t1 - t0)
-        pix, t, p = self._step_events(step, t0, t1)
+            return None
+        return self._pixel_step(log_in, intensity, duration)
+
+    def _advance(self, step: dict) -> None:
         self.log_prev, self.k_on, self.k_off, self.offset = step["log_now"], step["k_on"], step["k_off"], \
             step["offset"]
-        return (pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p
+
+    @property
+    def device_resident(self) -> bool:
+        """True when every event of a step can be made on the device (:meth:`commit_device`): the pixel
+        models whose events are sparse and sequential per pixel (refractory period, shot noise, readout cap)
+        still take the host path (:meth:`commit` and :meth:`readout`)."""
+        cfg = self.config
+        return not (cfg.refractory_s or cfg.shot_noise_hz or cfg.readout_cap)
+
+    def commit_events(self, t0: float, t1: float, base_us: int = 0):
+        """Accept the staged frame as the brightness at t1 and return the step's events of (t0, t1], time-sorted
+        and read out, with timestamps ``rint(t 1e6) + base_us`` microseconds: on the device
+        (``event_fill.DeviceEvents``) when the pixel model allows, else made on the host
+        (``event_fill.HostEvents``). Both paths give the same events, bit for bit."""
+        if self.device_resident:
+            return self.commit_device(t0, t1, base_us)
+        x, y, ts, p = self.commit(t0, t1)
+        t_us = np.rint(ts * 1e6).astype(np.int64) + base_us
+        order = event_fill.time_order(t_us, int(math.floor(t0 * 1e6)) + base_us)
+        return event_fill.HostEvents(*self.readout(x[order], y[order], t_us[order], p[order]))
+
+    def commit_device(self, t0: float, t1: float, base_us: int = 0):
+        """:meth:`commit` and :meth:`readout` on the device: the step's events, time-sorted, with integer
+        microsecond timestamps ``rint(t 1e6) + base_us`` (clock-quantised), as ``event_fill.DeviceEvents``.
+        Bit-identical to the host path; only for :attr:`device_resident` pixel models."""
+        if not self.device_resident:
+            raise RuntimeError("commit_device(): this pixel model needs the host path (commit + readout)")
+        step = self._take_staged(t1 - t0, "commit_device()")
+        if step is None:
+            return event_fill.empty()
+        events = event_fill.crossing_events(step["n"], self.log_prev, step["log_now"], step["log_ref"],
+                                            step["c_on"], step["c_off"], self.staged_size[0], t0, t1, base_us,
+                                            self.config.timestamp_resolution_us)
+        self._advance(step)
+        return events
 
     def _pixel_step(self, log_in, intensity, duration: float) -> dict:
         """One step of every pixel, evaluated in one Dr.Jit kernel: photoreceptor low-pass, leak, threshold
@@ -337,6 +387,20 @@ def _define_class():
 
 
 integrator_class = per_variant(_define_class)   # the EventIntegrator class of the active variant
+
+
+@contextlib.contextmanager
+def host_path():
+    """Within the block, every event integrator of the active variant makes its events on the host (NumPy
+    expansion and sort) whatever its pixel model: for comparing the two paths (tests, benchmarks, checking a
+    new backend). They give the same events."""
+    cls = integrator_class()
+    original = cls.__dict__["device_resident"]
+    cls.device_resident = property(lambda self: False)
+    try:
+        yield
+    finally:
+        cls.device_resident = original
 
 
 def _no_events():

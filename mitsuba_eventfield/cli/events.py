@@ -1,4 +1,4 @@
-"""Commands that make and inspect event streams: ``render``, ``frame``, ``info``, ``preview``."""
+"""Commands that make and inspect event streams: ``render``, ``convert``, ``frame``, ``info``, ``preview``."""
 from __future__ import annotations
 
 import json
@@ -13,6 +13,7 @@ PIXEL_INTEGERS = ("seed", "readout_cap_native_pixels")
 
 def add_parsers(sub) -> None:
     _add_render(sub)
+    _add_convert(sub)
     i = sub.add_parser("info", help="resolution, duration, counts and metadata of an event file")
     i.add_argument("file")
     i.add_argument("--json", action="store_true", help="print everything as JSON")
@@ -60,11 +61,7 @@ def _add_render(sub) -> None:
     r.add_argument("--threshold-off", type=num(0, 10, lo_open=True), help="OFF threshold (overrides --threshold)")
     r.add_argument("--linlog-threshold", type=num(0, 1e6, lo_open=True),
                    help="radiance below which the response is linear (1e-3)")
-    r.add_argument("--preset", help="event pixel preset: ideal (default), davis346, prophesee_gen4")
-    r.add_argument("--pixel", action="append", default=[], metavar="NAME=VALUE",
-                   help="pixel-model parameter, e.g. --pixel refractory_s=1e-4 --pixel shot_noise_hz=2 (repeatable; "
-                        "see docs/pixel_model.md)")
-    r.add_argument("--variant", help="Mitsuba variant or backend: cuda, llvm, llvm_ad_mono, ... (default: auto)")
+    _add_pixel_options(r)
     r.add_argument("--color", action="store_true", help="render in colour (rgb variant); events use luminance")
     add_defines(r)
     r.add_argument("--preview", help="also write an event-frame PNG of the last --preview-window ms")
@@ -73,6 +70,41 @@ def _add_render(sub) -> None:
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--auto", action="store_true",
                    help="choose colour, spp and steps from cheap probes (ef.auto), print and record why")
+
+
+def _add_pixel_options(r) -> None:
+    r.add_argument("--preset", help="event pixel preset: ideal (default), davis346, prophesee_gen4")
+    r.add_argument("--pixel", action="append", default=[], metavar="NAME=VALUE",
+                   help="pixel-model parameter, e.g. --pixel refractory_s=1e-4 --pixel shot_noise_hz=2 (repeatable; "
+                        "see docs/pixel_model.md)")
+    r.add_argument("--variant", help="Mitsuba variant or backend: cuda, llvm, llvm_ad_mono, ... (default: auto)")
+    r.add_argument("--event-buffer-mb", type=num(0, 1e6, lo_open=True), default=64.0,
+                   help="device memory for events before they move to the host and the file writer (default 64)")
+
+
+def _add_convert(sub) -> None:
+    c = sub.add_parser("convert", help="events from frames you already have: a video, a folder of images or an "
+                                       ".npz stack (frames, times), through the same pixel model as render")
+    c.add_argument("input", help="video file (OpenCV), folder of images (natural name order) or .npz")
+    c.add_argument("-o", "--output", required=True, help="event file: .h5 (DSEC layout, streamed), .npz, .txt, "
+                                                         ".aedat4")
+    c.add_argument("--fps", type=num(0, 1e9, lo_open=True),
+                   help="frame rate (image folders; overrides a video's own; .npz stacks carry times)")
+    c.add_argument("--threshold", type=num(0, 10, lo_open=True), help="contrast threshold C (default: preset's)")
+    c.add_argument("--srgb", action="store_true", help="decode gamma-encoded (sRGB) frames to linear light first")
+    _add_pixel_options(c)
+    c.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run_convert(a) -> int:
+    from ..backend import set_variant
+    from ..simulate.convert import events_from_frames
+    set_variant(a.variant)
+    summary = events_from_frames(a.input, fps=a.fps, preset=a.preset or "ideal", pixel=pixel_overrides(a.pixel),
+                                 threshold=a.threshold, srgb=a.srgb, output=a.output, progress=not a.quiet,
+                                 event_buffer_mb=a.event_buffer_mb)
+    print(summary.format())
+    return 0
 
 
 def pixel_overrides(items) -> dict:
@@ -118,7 +150,8 @@ def run_render(a) -> int:
         min_step=a.min_step, max_step=a.max_step, spp=a.spp, seed=a.seed,
         seed_mode="independent" if a.independent_seeds else "fixed", threshold=a.threshold,
         threshold_on=a.threshold_on, threshold_off=a.threshold_off, linlog_threshold=a.linlog_threshold,
-        output=a.output, progress=not a.quiet, preset=a.preset, pixel=pixel_overrides(a.pixel), extra_meta=extra)
+        output=a.output, progress=not a.quiet, preset=a.preset, pixel=pixel_overrides(a.pixel), extra_meta=extra,
+        event_buffer_mb=a.event_buffer_mb)
     print(summary.format())
     if a.preview and os.path.splitext(a.output)[1].lower() != ".txt":
         _render_preview(a)
@@ -179,4 +212,4 @@ def run_frame(a) -> int:
     return 0
 
 
-COMMANDS = {"render": run_render, "info": run_info, "preview": run_preview, "frame": run_frame}
+COMMANDS = {"render": run_render, "convert": run_convert, "info": run_info, "preview": run_preview, "frame": run_frame}

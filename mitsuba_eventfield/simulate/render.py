@@ -24,7 +24,7 @@ from ..events.io import format_of
 from ..scene.timed import TimedScene, load_scene
 from ..validate import MAX_DURATION_S, MAX_STEPS, available_memory, finite, number, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
-from .sink import Sink, time_order
+from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary, run_metadata
 
 mi, dr = backend.mi, backend.dr
@@ -205,7 +205,7 @@ class _Loop:
             self._step_events(t, t_next, k)
             if self.bar is not None:
                 _advance(self.bar, t_next - st.t_start)
-                self.bar.set_postfix_str(f"{self.summary.events} events")
+                self.bar.set_postfix_str(f"{self.summary.events + self.sink.device_events} events")
             t, k = t_next, k + 1
         return k
 
@@ -218,7 +218,6 @@ class _Loop:
         tw = time.perf_counter()
         self.sink.add(x, y, t_us, p, complete_until_us=int(math.floor(t_next * 1e6)))
         self.summary.write_s += time.perf_counter() - tw
-        self.summary.count(p)
 
     def _copy_periods(self, k):
         st = self.st
@@ -234,23 +233,26 @@ class _Loop:
         return t_next, k + block
 
     def _step_events(self, t, t_next, k) -> None:
-        st, integ = self.st, self.integ
+        """The step's events (made on the device when the pixel model allows, and kept there until the sink's
+        buffer is full; else on the host: the same events either way, tests/plugins/test_event_fill.py)."""
+        st = self.st
         te = time.perf_counter()
-        if self.grid:
-            steps_per_period, period_us, base_us = self.grid
+        t0, t1, base_us = t, t_next, 0
+        if self.grid:                                    # in-period phase + whole periods (exact copies)
+            steps_per_period, period_us, grid_base_us = self.grid
             p_idx, j = divmod(k, steps_per_period)
             step = st.duration / st.steps
-            x, y, ts, p = integ.commit(j * step, (j + 1) * step)
-            t_us = np.rint(ts * 1e6).astype(np.int64) + (base_us + p_idx * period_us)
-        else:
-            x, y, ts, p = integ.commit(t, t_next)
-            t_us = np.rint(ts * 1e6).astype(np.int64)
-        order = time_order(t_us, int(math.floor(t * 1e6)))
-        x, y, t_us, p = integ.readout(x[order], y[order], t_us[order], p[order])
-        if self.reuse and self.grid:
-            self._remember_period(j, p_idx, (x, y, t_us, p))
+            t0, t1, base_us = j * step, (j + 1) * step, grid_base_us + p_idx * period_us
+        events = self.integ.commit_events(t0, t1, base_us)
         self.summary.events_s += time.perf_counter() - te
-        self._emit(x, y, t_us, p, t_next)
+        if self.reuse and self.grid:                     # a period's events are kept on the host for copying
+            host = events.numpy()
+            self._remember_period(j, p_idx, host)
+            self._emit(*host, t_next)
+            return
+        tw = time.perf_counter()
+        self.sink.add_step(events, complete_until_us=int(math.floor(t_next * 1e6)))
+        self.summary.write_s += time.perf_counter() - tw
 
     def _remember_period(self, j, p_idx, events) -> None:
         """Keep a period's events; at its end, if the pixel state came back, later periods are copies."""
@@ -281,6 +283,10 @@ class _Loop:
         if self.timed.is_static and self.timed.scan_period == 0.0:
             summary.notes.append("static scene seen by a fixed view: events can only come from Monte-Carlo noise "
                                  "(none with a fixed seed)")
+        tw = time.perf_counter()
+        self.sink.drain()
+        summary.write_s += time.perf_counter() - tw
+        summary.writer_wait_s, summary.writer_busy_s = self.sink.writer_wait_s, self.sink.writer_busy_s
         meta["render"] = summary.as_dict()
         tw = time.perf_counter()
         stream = self.sink.finish(int(round((self.st.t_start + self.st.duration) * 1e6)), {"render": meta["render"]})
@@ -301,7 +307,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   threshold_on: float | None = None, threshold_off: float | None = None,
                   linlog_threshold: float | None = None, output: str | None = None, fmt: str | None = None,
                   progress: bool = False, t_start: float = 0.0, reuse: bool = True, preset: str | None = None,
-                  pixel: dict | None = None, extra_meta: dict | None = None):
+                  pixel: dict | None = None, extra_meta: dict | None = None,
+                  event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
     Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by
@@ -313,6 +320,9 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
 
     ``preset`` ("ideal", "davis346", "prophesee_gen4") and ``pixel`` (PixelConfig fields, e.g.
     ``{"refractory_s": 1e-4, "shot_noise_hz": 2}``) choose the event pixel; default: the scene's own.
+
+    ``event_buffer_mb``: how much memory events may take on the device before they move to the host (and to
+    the background file writer) in one chunk.
     """
     timed = load_scene(scene)
     st = _stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_step, spp, seed, seed_mode,
@@ -331,7 +341,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,
                      seed_mode=st.seed_mode, stepping=st.as_meta())
     meta.update(extra_meta or {})
-    sink = Sink(output, fmt, width, height, meta)
+    sink = Sink(output, fmt, width, height, meta, count=summary.count,
+                buffer_mb=positive(event_buffer_mb, "event_buffer_mb"))
     bar = _progress_bar(st.duration) if progress else None
     wall0 = time.perf_counter()
     try:

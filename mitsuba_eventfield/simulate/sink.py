@@ -1,27 +1,87 @@
-"""Where a render's events go, step by step: memory, or an HDF5 file written while rendering (other formats
-are written at the end), each step's events in time order."""
+"""Where a render's events go: memory, or an event file. Steps made on the device are kept there until a chunk
+of about ``buffer_events`` has gathered (one device-to-host copy per chunk, not per step); HDF5 chunks are
+compressed and written by a background thread (``events.writer``) while the next steps render. Other formats
+are written at the end."""
 from __future__ import annotations
 
 import numpy as np
 
-from ..events.io import H5EventWriter, format_of, write_events
+from ..events.hdf5 import H5EventWriter
+from ..events.io import format_of, write_events
 from ..events.stream import EventStream
+from ..events.writer import BackgroundWriter
+from ..plugins.event_fill import DeviceEvents
+
+DEFAULT_EVENT_BUFFER_MB = 64.0
+DEVICE_BYTES_PER_EVENT = 20          # x, y (UInt32), t (Int64), p (Int32) while an event waits on the device
+
+
+def buffer_events(buffer_mb: float) -> int:
+    """Events a device buffer of ``buffer_mb`` MiB holds (at least one step's worth is always kept)."""
+    return max(1, int(buffer_mb * (1 << 20) / DEVICE_BYTES_PER_EVENT))
 
 
 class Sink:
-    """Where a step's events go: an in-memory list or a streaming HDF5 writer (other formats: at the end)."""
+    """Where a step's events go, in time order: an in-memory list or an HDF5 file written in the background.
+    ``count`` is called with each chunk's polarities as it leaves the buffer (the render's ON/OFF totals)."""
 
-    def __init__(self, output, fmt, width, height, meta):
+    def __init__(self, output, fmt, width, height, meta, count=None, buffer_mb: float = DEFAULT_EVENT_BUFFER_MB):
         self.output, self.width, self.height, self.meta = output, width, height, meta
         self.fmt = format_of(output, fmt) if output else None
-        self.writer = H5EventWriter(output, width, height, meta) if self.fmt == "h5" else None
+        self.writer = BackgroundWriter(H5EventWriter(output, width, height, meta)) if self.fmt == "h5" else None
         self.parts = []
+        self.count = count or (lambda p: None)
+        self.capacity = buffer_events(buffer_mb)
+        self.device_parts, self.device_events, self.until = [], 0, None
+
+    @property
+    def writer_wait_s(self) -> float:
+        return self.writer.wait_s if self.writer is not None else 0.0
+
+    @property
+    def writer_busy_s(self) -> float:
+        return self.writer.busy_s if self.writer is not None else 0.0
+
+    def add_device(self, events: DeviceEvents, complete_until_us: int) -> None:
+        """Keep a step's device-side events; move the buffer to the host when it is full."""
+        if events.count:
+            self.device_parts.append(events)
+            self.device_events += events.count
+        self.until = complete_until_us
+        if self.device_events >= self.capacity:
+            self.flush_device()
+
+    def flush_device(self) -> None:
+        if not self.device_parts and self.until is None:
+            return
+        host = DeviceEvents.concat(self.device_parts).numpy()
+        until, self.device_parts, self.device_events, self.until = self.until, [], 0, None
+        self._add_host(*host, until)
+
+    def add_step(self, events, complete_until_us: int) -> None:
+        """A step's events from ``EventIntegrator.commit_events``: device-side ones are buffered there."""
+        if isinstance(events, DeviceEvents):
+            self.add_device(events, complete_until_us)
+        else:
+            self.add(*events.numpy(), complete_until_us)
 
     def add(self, x, y, t, p, complete_until_us):
+        """A chunk already on the host (after anything still buffered on the device: time order is kept)."""
+        self.flush_device()
+        self._add_host(x, y, t, p, complete_until_us)
+
+    def _add_host(self, x, y, t, p, complete_until_us):
+        self.count(p)
         if self.writer is not None:
             self.writer.append(x, y, t, p, complete_until_us)
         elif len(t):
             self.parts.append((x, y, t, p))
+
+    def drain(self) -> None:
+        """Everything buffered moved out and written (the writer's timings are final after this)."""
+        self.flush_device()
+        if self.writer is not None:
+            self.writer.drain()
 
     def stream(self, meta):
         if not self.parts:
@@ -30,6 +90,7 @@ class Sink:
                            self.width, self.height, meta)
 
     def finish(self, end_us, meta):
+        self.drain()
         if self.writer is not None:
             self.writer.close(end_us=end_us, meta=meta)
             return None
@@ -42,11 +103,3 @@ class Sink:
         if self.writer is not None:
             self.writer.abort()
 
-
-def time_order(t_us: np.ndarray, step_start_us: int) -> np.ndarray:
-    """Stable time order of one step's events. Offsets within a step usually fit 16 bits, where NumPy's
-    stable sort is a radix sort (about 8x faster than comparison sorting here)."""
-    offset = t_us - step_start_us
-    if len(offset) and offset.min() >= 0 and offset.max() < 2**16:
-        return np.argsort(offset.astype(np.uint16), kind="stable")
-    return np.argsort(t_us, kind="stable")

@@ -32,7 +32,9 @@ class RenderSummary:
     render_s: float = 0.0
     events_s: float = 0.0
     motion_s: float = 0.0
-    write_s: float = 0.0
+    write_s: float = 0.0        # the render thread's time handing events over (device-to-host copy, queue)
+    writer_busy_s: float = 0.0  # the background writer's time compressing and writing (overlaps the render)
+    writer_wait_s: float = 0.0  # the render thread's time blocked on the writer: > 0 means the disk set the pace
     width: int = 0
     height: int = 0
     output: str | None = None
@@ -57,10 +59,18 @@ class RenderSummary:
     def format(self) -> str:
         overhead = self.events_s + self.motion_s + self.write_s
         lines = [f"{self.events} events ({self.on} ON, {self.off} OFF) in {self.duration_s * 1e3:.3f} ms simulated "
-                 f"on {self.width}x{self.height}: {self.rate:.4g} ev/s",
-                 f"{self.steps} steps ({self.rejected_steps} re-rendered shorter), wall {self.wall_s:.2f} s: "
-                 f"render {self.render_s:.2f} s, events {self.events_s:.2f} s, motion {self.motion_s:.2f} s, "
-                 f"write {self.write_s:.2f} s (overhead {100 * overhead / max(self.render_s, 1e-9):.1f}% of render)"]
+                 f"on {self.width}x{self.height}: {self.rate:.4g} ev/s"]
+        if self.render_s:
+            lines.append(f"{self.steps} steps ({self.rejected_steps} re-rendered shorter), wall {self.wall_s:.2f} s: "
+                         f"render {self.render_s:.2f} s, events {self.events_s:.2f} s, motion {self.motion_s:.2f} s, "
+                         f"write {self.write_s:.2f} s (overhead {100 * overhead / self.render_s:.1f}% of render)")
+        else:                                            # frames given, not rendered (events_from_frames)
+            lines.append(f"{self.steps} frame steps, wall {self.wall_s:.2f} s: events {self.events_s:.2f} s, "
+                         f"write {self.write_s:.2f} s")
+        if self.writer_busy_s:
+            pace = "the disk writer set the pace" if self.writer_wait_s > 0.05 * self.wall_s else "it kept up"
+            lines.append(f"file writer: {self.writer_busy_s:.2f} s on its own thread, the render waited "
+                         f"{self.writer_wait_s:.2f} s for it ({pace})")
         if self.output:
             lines.append(f"wrote {self.output}")
         lines += self.notes

@@ -69,7 +69,8 @@ def test_writer_leaves_nothing_on_error(tmp_path, stream):
 
 
 def test_render_interrupted_leaves_no_file(tmp_path, demo_small, monkeypatch):
-    """A failure in the middle of a streamed render removes the partial file."""
+    """A failure in the middle of a streamed render (here in the background writer's thread, raised again in
+    the render's) removes the partial file. A tiny event buffer moves every step's events to the writer."""
     from mitsuba_eventfield.simulate import sink as render_mod
     calls = {"n": 0}
     real = render_mod.H5EventWriter.append
@@ -82,8 +83,8 @@ def test_render_interrupted_leaves_no_file(tmp_path, demo_small, monkeypatch):
 
     monkeypatch.setattr(render_mod.H5EventWriter, "append", failing_append)
     with pytest.raises(KeyboardInterrupt):
-        ef.render_events(demo_small, 0.005, steps=5, output=str(tmp_path / "out.h5"))
-    assert os.listdir(tmp_path) == []
+        ef.render_events(demo_small, 0.005, steps=5, output=str(tmp_path / "out.h5"), event_buffer_mb=1e-6)
+    assert calls["n"] == 3 and os.listdir(tmp_path) == []
 
 
 def test_render_streams_to_h5_same_as_memory(tmp_path, demo_small):

@@ -1,0 +1,142 @@
+"""The event engine (issue 15): events made on the device (count, prefix sum, fill, sort in Dr.Jit) against
+the host path (NumPy expansion and sort), on a synthetic frame stack and inside renders, in one run.
+
+Frame stack: a textured plane translating at 1.5 px per frame plus a bar rotating about the image centre, 2 kHz
+frames, C = 0.2, ideal pixel: what issue 15 measured on an H100. Throughput is pixel-steps per second of the
+converter (``events_from_frames``: upload, pixel kernel, events, one host copy per chunk), excluding the frame
+synthesis. The host path is forced by overriding ``device_resident`` on the integrator class. Renders: demo and fan scenes, what beyond the radiance render costs (events + motion + write, as a
+fraction of the render) for both paths. Every run checks that both paths give the same events.
+
+Writes benchmarks/results/event_engine.json and .md; the device name is recorded with every number.
+Usage: ./run bench event_engine   (or python benchmarks/bench_event_engine.py [--quick])
+"""
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from _report import write_results  # noqa: E402
+
+SCENES = os.path.join(os.path.dirname(HERE), "scenes")
+
+
+def _path(name):
+    import contextlib
+    from mitsuba_eventfield.plugins.event_integrator import host_path
+    return host_path() if name == "host" else contextlib.nullcontext()
+
+
+def frame_stack(width, height, frames, rate_hz=2000.0):
+    """Textured translation + rotating bar, linear intensity in [0.05, 1]."""
+    rng = np.random.default_rng(0)
+    tex = rng.random((height // 4 + 2, (width + int(1.5 * frames)) // 4 + 4)).astype(np.float32)
+    import cv2
+    tex = cv2.resize(tex, (tex.shape[1] * 4, tex.shape[0] * 4), interpolation=cv2.INTER_CUBIC)
+    yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+    out = np.empty((frames, height, width), np.float32)
+    for i in range(frames):
+        shift = 1.5 * i
+        x0 = int(shift)
+        a = shift - x0
+        img = (1 - a) * tex[:height, x0:x0 + width] + a * tex[:height, x0 + 1:x0 + 1 + width]
+        ang = 2 * np.pi * 50.0 * i / rate_hz
+        d = np.abs(-(xx - width / 2) * np.sin(ang) + (yy - height / 2) * np.cos(ang))
+        bar = np.clip(4.0 - d, 0, 1)
+        out[i] = np.clip(0.05 + 0.6 * img * (1 - bar) + 0.95 * bar, 0.05, 1.0)
+    return out, np.arange(frames) / rate_hz
+
+
+def converter(width, height, frames):
+    import mitsuba_eventfield as ef
+    stack, times = frame_stack(width, height, frames)
+    res = {}
+    for name in ("device", "host"):
+        with _path(name):
+            ef.events_from_frames(stack[:4], times[:4], threshold=0.2)          # compile kernels
+            t0 = time.perf_counter()
+            ev = ef.events_from_frames(stack, times, threshold=0.2)
+            wall = time.perf_counter() - t0
+        res[name] = {"wall_s": wall, "events": len(ev), "mpix_steps_per_s": width * height * (frames - 1) / wall / 1e6,
+                     "mev_per_s": len(ev) / wall / 1e6, "stream": ev}
+    same = res["device"].pop("stream").equals(res["host"].pop("stream"))
+    return {"width": width, "height": height, "frames": frames, "identical": bool(same), **res}
+
+
+def render_overhead(scene, duration, steps, **defines):
+    import mitsuba_eventfield as ef
+    out = {}
+    for name in ("device", "host"):
+        timed = ef.load_scene(scene, **defines)
+        with _path(name):
+            ef.render_events(timed, duration / steps * 3, steps=3, reuse=False)   # compile
+            ev = ef.render_events(timed, duration, steps=steps, reuse=False)
+        r = ev.meta["render"]
+        beyond = r["events_s"] + r["motion_s"] + r["write_s"]
+        out[name] = {"render_s": r["render_s"], "events_s": r["events_s"], "write_s": r["write_s"],
+                     "motion_s": r["motion_s"], "beyond_render_pct": 100 * beyond / r["render_s"],
+                     "events": r["events"], "stream": ev}
+    d, h = out["device"].pop("stream"), out["host"].pop("stream")
+    return {"scene": os.path.relpath(scene, SCENES), "steps": steps, "identical": bool(d.equals(h)),
+            "difference": _difference(d, h), **out}
+
+
+def _difference(a, b):
+    """Where two streams differ (None when they do not)."""
+    if a.equals(b):
+        return None
+    if len(a) != len(b):
+        return f"{len(a)} against {len(b)} events"
+    bad = {k: int(np.count_nonzero(getattr(a, k) != getattr(b, k))) for k in "xytp"}
+    return f"events differing per column: {bad}"
+
+
+def device_name():
+    import mitsuba as mi
+    variant = mi.variant()
+    if variant.startswith("cuda"):
+        import subprocess
+        try:
+            return subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True,
+                                  text=True, check=True).stdout.strip().splitlines()[0]
+        except (OSError, subprocess.CalledProcessError, IndexError):
+            return "CUDA GPU (name unknown)"
+    return f"CPU, {os.cpu_count()} threads (LLVM)"
+
+
+def main(quick=False):
+    import mitsuba_eventfield as ef
+    ef.set_variant(os.environ.get("EVENTFIELD_VARIANT") or None)
+    sizes = [(346, 260, 40 if quick else 200)] + ([] if quick else [(1280, 720, 60)])
+    conv = [converter(*s) for s in sizes]
+    renders = [render_overhead(os.path.join(SCENES, "demo", "demo.xml"), 0.02, 20 if quick else 40)]
+    if not quick:
+        renders.append(render_overhead(os.path.join(SCENES, "fan", "fan.xml"), 0.008, 64, width=346, height=260))
+    device = device_name()
+    res = {"device": device, "variant": __import__("mitsuba").variant(), "converter": conv, "renders": renders,
+           "targets": {"device and host events identical": all(c["identical"] for c in conv + renders)}}
+    md = [f"# Event engine: device path against host path ({device}, {res['variant']})", "",
+          "Converter (synthetic 2 kHz stack, ideal pixel, C = 0.2):", "",
+          "| film | frames | events | device Mpix-steps/s | host Mpix-steps/s | device / host | identical |",
+          "|---|---|---|---|---|---|---|"]
+    for c in conv:
+        d, h = c["device"], c["host"]
+        md.append(f"| {c['width']}x{c['height']} | {c['frames']} | {d['events']} | {d['mpix_steps_per_s']:.1f} | "
+                  f"{h['mpix_steps_per_s']:.1f} | {d['mpix_steps_per_s'] / h['mpix_steps_per_s']:.2f}x | "
+                  f"{c['identical']} |")
+    md += ["", "Renders (everything beyond the radiance render, % of the render):", "",
+           "| scene | steps | events | device: events / write, beyond render | host: events / write, beyond render "
+           "| identical |", "|---|---|---|---|---|---|"]
+    for r in renders:
+        d, h = r["device"], r["host"]
+        md.append(f"| {r['scene']} | {r['steps']} | {d['events']} | {d['events_s']:.3f} s / {d['write_s']:.3f} s, "
+                  f"{d['beyond_render_pct']:.1f}% | {h['events_s']:.3f} s / {h['write_s']:.3f} s, "
+                  f"{h['beyond_render_pct']:.1f}% | {r['identical']} |")
+    md.append("")
+    write_results("event_engine", res, md)
+
+
+if __name__ == "__main__":
+    main(quick="--quick" in sys.argv)

@@ -1,0 +1,117 @@
+"""Frames to events: the renderer's event pixel run on frames a user already has (the job of v2e and ESIM).
+
+Each frame is staged into the same ``eventfield`` integrator a render uses (same pixel model, same presets,
+same device-side count / prefix-sum / fill, same sink and background writer), so a converted video and a
+rendered scene are events of one model. Frames are streamed: memory is one frame plus the event buffer.
+Between two frames the log brightness is taken as linear in time (the renderer's assumption between steps),
+so timestamps are exact for brightness that is log-linear between frames, and frames must be dense enough for
+the motion they show (as for any frame-based emulator).
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+
+from .. import backend
+from .._version import __version__
+from ..atomic import check_writable
+from ..errors import EventFieldError
+from ..events.io import format_of
+from ..plugins import pixel_model
+from ..validate import positive
+from .frame_sources import FrameSource, from_array, open_frames
+from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
+from .summary import RenderSummary
+
+mi, dr = backend.mi, backend.dr
+
+
+def pixel_integrator(preset: str = "ideal", pixel: dict | None = None, threshold: float | None = None):
+    """An ``eventfield`` integrator with this pixel model, for feeding frames (no scene needed)."""
+    props = {"type": "eventfield", "preset": preset or "ideal", **(pixel or {})}
+    if threshold is not None:
+        props["threshold"] = float(threshold)
+    return mi.load_dict(props)
+
+
+def events_from_frames(frames, times=None, *, fps: float | None = None, preset: str = "ideal",
+                       pixel: dict | None = None, threshold: float | None = None, srgb: bool = False,
+                       output: str | None = None, fmt: str | None = None, progress: bool = False,
+                       event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, meta: dict | None = None):
+    """Events of a frame sequence through the event pixel model.
+
+    ``frames``: a (T, H, W[, C]) array (intensity: floats linear, integers scaled by their maximum), a path
+    (folder of images, ``.npz`` with ``frames`` and ``times``, or a video), or a ``FrameSource``. ``times``:
+    seconds per frame (arrays), or ``fps``. ``preset`` / ``pixel`` / ``threshold``: the pixel model, as for
+    :func:`render_events`. ``srgb=True`` decodes gamma-encoded frames to linear light first.
+
+    Returns the :class:`EventStream` (``output`` None) or, writing to ``output``, the :class:`RenderSummary`.
+    """
+    backend.ensure_variant()
+    source = frames if isinstance(frames, FrameSource) else \
+        open_frames(frames, fps, srgb) if isinstance(frames, (str, os.PathLike)) else \
+        from_array(frames, times, fps, srgb)
+    if output:
+        check_writable(output, "event file")
+        format_of(output, fmt)
+    integ = pixel_integrator(preset, pixel, threshold)
+    summary = RenderSummary(width=source.width, height=source.height, output=os.path.abspath(output) if output else None)
+    meta = {"package": "mitsuba-eventfield", "package_version": __version__, "variant": mi.variant(),
+            "width": source.width, "height": source.height, "optics": {"design": "frames (converted)"},
+            "pixel_model": integ.pixel_model_metadata(), "source": source.describe, **(meta or {})}
+    sink = Sink(output, fmt, source.width, source.height, meta, count=summary.count,
+                buffer_mb=positive(event_buffer_mb, "event_buffer_mb"))
+    wall0 = time.perf_counter()
+    try:
+        t_first, t_last = _feed(source, integ, sink, summary, progress)
+        summary.duration_s = t_last - t_first
+        tw = time.perf_counter()
+        sink.drain()
+        summary.write_s += time.perf_counter() - tw
+        summary.writer_wait_s, summary.writer_busy_s = sink.writer_wait_s, sink.writer_busy_s
+        summary.wall_s = time.perf_counter() - wall0
+        meta.update({"t_start_us": int(round(t_first * 1e6)), "duration_us": int(round(summary.duration_s * 1e6))})
+        meta["render"] = summary.as_dict()
+        stream = sink.finish(int(round(t_last * 1e6)), {k: meta[k] for k in ("t_start_us", "duration_us", "render")})
+    except BaseException:
+        sink.abort()
+        raise
+    return summary if output else stream
+
+
+def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progress: bool):
+    """Every frame through the pixel: the first sets the references, each later one ends a step."""
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=source.count, unit="frame", desc="converting")
+    linlog = integ.config.linlog_threshold
+    t_first = t_prev = None
+    try:
+        for t, frame in source.frames():
+            t0 = time.perf_counter()
+            if frame.shape != (source.height, source.width):
+                raise EventFieldError(f"{source.name}: frame size {frame.shape[1]}x{frame.shape[0]} differs from "
+                                 f"{source.width}x{source.height}")
+            integ.stage_log(pixel_model.linlog(dr, mi.Float(frame.ravel()), linlog), (source.width, source.height))
+            if t_prev is not None and not t > t_prev:
+                raise EventFieldError(f"{source.name}: frame times must increase ({t} s after {t_prev} s)")
+            events = integ.commit_events(t_prev if t_prev is not None else t, t)
+            summary.events_s += time.perf_counter() - t0
+            if t_prev is not None:
+                tw = time.perf_counter()
+                sink.add_step(events, complete_until_us=int(math.floor(t * 1e6)))
+                summary.write_s += time.perf_counter() - tw
+                summary.steps += 1
+            t_first = t if t_first is None else t_first
+            t_prev = t
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    if t_first is None or t_first == t_prev:
+        raise EventFieldError(f"{source.name}: fewer than 2 frames: no step to make events from")
+    return t_first, t_prev
+

@@ -1,0 +1,193 @@
+"""Frames a user already has, as a stream of (time in seconds, linear intensity) for the frames-to-events
+converter: a NumPy array, an ``.npz`` stack, a folder of images, or a video (through OpenCV). Frames are read
+one at a time, so a long video never sits in memory.
+
+Intensity: integer pixels are scaled to [0, 1] by their type's maximum (8 and 16 bit), floating-point ones
+(EXR, float arrays) are taken as linear radiance. Colour becomes luminance (Rec. 709 weights, as Mitsuba's
+``luminance``). Video and ordinary images are gamma-encoded: ``srgb=True`` decodes them to linear light first,
+which is what a photoreceptor sees; the default leaves values as they are (the convention of v2e and ESIM).
+"""
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import EventFieldError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr", ".pgm", ".ppm")
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg")
+LUMA = np.array([0.212671, 0.715160, 0.072169], np.float32)   # Rec. 709 / sRGB primaries, as mi.luminance
+
+
+@dataclass
+class FrameSource:
+    """A sequence of frames: ``count`` (None when a video does not say), size, and ``frames()`` yielding
+    (t seconds, float32 (H, W) linear intensity)."""
+    name: str
+    width: int
+    height: int
+    count: int | None
+    frames: object          # () -> Iterator[tuple[float, np.ndarray]]
+    describe: dict
+
+
+def srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def intensity(frame: np.ndarray, srgb: bool = False, bgr: bool = False, where: str = "frame") -> np.ndarray:
+    """One frame (H, W), (H, W, 1), (H, W, 3) or (H, W, 4) as float32 linear luminance."""
+    a = np.asarray(frame)
+    if a.ndim == 3 and a.shape[2] in (1, 3, 4):
+        pass
+    elif a.ndim != 2:
+        raise EventFieldError(f"{where}: shape {a.shape}: expected (H, W) or (H, W, 1|3|4)")
+    if np.issubdtype(a.dtype, np.integer):
+        v = a.astype(np.float32) / np.float32(np.iinfo(a.dtype).max)
+    elif np.issubdtype(a.dtype, np.floating):
+        v = a.astype(np.float32)
+    else:
+        raise EventFieldError(f"{where}: pixel type {a.dtype}: expected integers or floats")
+    if not np.isfinite(v).all() or (v < 0).any():
+        raise EventFieldError(f"{where}: intensities must be finite and >= 0")
+    if srgb:
+        v = srgb_to_linear(v)
+    if v.ndim == 3:
+        if v.shape[2] == 1:
+            v = v[..., 0]
+        else:
+            rgb = v[..., 2::-1] if bgr else v[..., :3]      # OpenCV reads BGR(A)
+            v = rgb @ LUMA
+    return np.ascontiguousarray(v, np.float32)
+
+
+def _uniform_times(count: int | None, fps: float | None, where: str):
+    if fps is None:
+        raise EventFieldError(f"{where}: give the frame rate (--fps / fps=): the frames carry no times")
+    if not (np.isfinite(fps) and fps > 0):
+        raise EventFieldError(f"{where}: fps = {fps!r}: must be a finite number > 0")
+    return lambda i: i / float(fps)
+
+
+def check_times(times, count: int, where: str) -> np.ndarray:
+    t = np.asarray(times, dtype=np.float64).ravel()
+    if len(t) != count:
+        raise EventFieldError(f"{where}: times: {len(t)} values for {count} frames")
+    if not np.isfinite(t).all() or (len(t) > 1 and (np.diff(t) <= 0).any()):
+        raise EventFieldError(f"{where}: times must be finite and strictly increasing (seconds)")
+    return t
+
+
+def from_array(frames, times=None, fps=None, srgb=False, where="frames") -> FrameSource:
+    """An in-memory stack (T, H, W[, C]) with times in seconds (or a frame rate)."""
+    a = np.asarray(frames)
+    if a.ndim not in (3, 4) or a.shape[0] < 2:
+        raise EventFieldError(f"{where}: shape {a.shape}: expected (T, H, W) or (T, H, W, C) with T >= 2")
+    t = check_times(times, a.shape[0], where) if times is not None else \
+        np.array([_uniform_times(a.shape[0], fps, where)(i) for i in range(a.shape[0])])
+
+    def frames_iter():
+        for i in range(a.shape[0]):
+            yield float(t[i]), intensity(a[i], srgb, where=f"{where}[{i}]")
+    return FrameSource(where, a.shape[2], a.shape[1], a.shape[0], frames_iter, {"kind": "array"})
+
+
+def from_npz(path: str, fps=None, srgb=False) -> FrameSource:
+    """An ``.npz`` with ``frames`` (T, H, W[, C]) and ``times`` (seconds) or ``timestamps_us``."""
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as e:
+        raise EventFieldError(f"{path}: not a readable .npz ({e})") from None
+    if "frames" not in data:
+        raise EventFieldError(f"{path}: no 'frames' array (found: {', '.join(data.files) or 'nothing'})")
+    times = data["times"] if "times" in data else (data["timestamps_us"] * 1e-6 if "timestamps_us" in data else None)
+    src = from_array(data["frames"], times, fps, srgb, where=path)
+    src.describe = {"kind": "npz", "path": os.path.abspath(path)}
+    return src
+
+
+def _natural_key(name: str):
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
+
+
+def _read_image(path: str) -> np.ndarray:
+    import cv2
+    if path.lower().endswith(".exr"):
+        from ..images import read_exr
+        channels, _ = read_exr(path)
+        if "Y" in channels:
+            return channels["Y"]
+        if all(c in channels for c in "RGB"):
+            return np.stack([channels[c] for c in "BGR"], axis=-1)   # as OpenCV would give it
+        raise EventFieldError(f"{path}: EXR without Y or R, G, B channels")
+    img = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise EventFieldError(f"{path}: cannot read this image")
+    return img
+
+
+def from_folder(path: str, fps=None, srgb=False) -> FrameSource:
+    """Every image of a folder in natural name order (frame_2 before frame_10), at ``fps``."""
+    names = sorted((n for n in os.listdir(path) if n.lower().endswith(IMAGE_SUFFIXES)), key=_natural_key)
+    if len(names) < 2:
+        raise EventFieldError(f"{path}: {len(names)} images ({', '.join(IMAGE_SUFFIXES)}); need at least 2")
+    time_of = _uniform_times(len(names), fps, path)
+    first = intensity(_read_image(os.path.join(path, names[0])), srgb, bgr=True, where=names[0])
+    h, w = first.shape
+
+    def frames_iter():
+        for i, name in enumerate(names):
+            f = os.path.join(path, name)
+            img = intensity(_read_image(f), srgb, bgr=True, where=f)
+            if img.shape != (h, w):
+                raise EventFieldError(f"{f}: size {img.shape[1]}x{img.shape[0]}, the first image is {w}x{h}")
+            yield time_of(i), img
+    return FrameSource(path, w, h, len(names), frames_iter,
+                       {"kind": "image folder", "path": os.path.abspath(path), "fps": fps})
+
+
+def from_video(path: str, fps=None, srgb=False) -> FrameSource:
+    """A video through OpenCV; frame times from ``fps`` when given, else from the container's frame rate."""
+    import cv2
+    cap = cv2.VideoCapture(path)
+    if not cap.isOpened():
+        raise EventFieldError(f"{path}: OpenCV cannot open this video")
+    rate = fps if fps is not None else cap.get(cv2.CAP_PROP_FPS)
+    count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) or None
+    w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+    cap.release()
+    time_of = _uniform_times(count, rate if rate and rate > 0 else None, path)
+
+    def frames_iter() -> Iterator[tuple[float, np.ndarray]]:
+        video = cv2.VideoCapture(path)
+        try:
+            i = 0
+            while True:
+                ok, img = video.read()
+                if not ok:
+                    return
+                yield time_of(i), intensity(img, srgb, bgr=True, where=f"{path} frame {i}")
+                i += 1
+        finally:
+            video.release()
+    return FrameSource(path, w, h, count, frames_iter, {"kind": "video", "path": os.path.abspath(path),
+                                                         "fps": float(rate)})
+
+
+def open_frames(path: str, fps=None, srgb=False) -> FrameSource:
+    """The right reader for ``path``: a folder of images, an ``.npz`` stack or a video file."""
+    if os.path.isdir(path):
+        return from_folder(path, fps, srgb)
+    if not os.path.exists(path):
+        raise EventFieldError(f"{path}: no such file or folder")
+    suffix = os.path.splitext(path)[1].lower()
+    if suffix == ".npz":
+        return from_npz(path, fps, srgb)
+    if suffix in VIDEO_SUFFIXES:
+        return from_video(path, fps, srgb)
+    raise EventFieldError(f"{path}: unknown input type {suffix or '(none)'}: expected a folder of images, "
+                          f"an .npz stack or a video ({', '.join(VIDEO_SUFFIXES)})")

@@ -1,0 +1,130 @@
+"""Events made on the device (count, prefix sum, fill, sort in Dr.Jit) against the host path, the analytic
+ramp, and through the render loop and its chunked, background-written output."""
+import math
+import os
+
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.plugins.event_fill import time_order
+
+W, H = 40, 30
+
+
+def _integrator(**pixel):
+    import mitsuba as mi
+    return mi.load_dict({"type": "eventfield", **pixel})
+
+
+def _host_step(integ, t0, t1):
+    """The host path exactly as the render loop runs it: commit, microseconds, stable order, readout."""
+    x, y, ts, p = integ.commit(t0, t1)
+    t_us = np.rint(ts * 1e6).astype(np.int64)
+    order = time_order(t_us, int(math.floor(t0 * 1e6)))
+    return integ.readout(x[order], y[order], t_us[order], p[order])
+
+
+PIXELS = [
+    {},
+    {"threshold_on": 0.15, "threshold_off": 0.25},
+    {"threshold_sigma": 0.03, "threshold_jitter": 0.02, "leak_rate_hz": 50.0, "cutoff_hz": 200.0,
+     "timestamp_resolution_us": 50.0, "seed": 3},
+]
+
+
+@pytest.mark.parametrize("pixel", PIXELS, ids=["ideal", "asymmetric", "mismatch-jitter-leak-lowpass-clock"])
+def test_device_events_bit_identical_to_host(pixel):
+    """Same frames into two integrators: every step's events (x, y, t, p, dtype and order) agree bit for bit,
+    multi-crossing steps (up to ~8 crossings a pixel) included."""
+    import mitsuba as mi
+    host, device = _integrator(**pixel), _integrator(**pixel)
+    assert device.device_resident
+    rng = np.random.default_rng(1)
+    base = rng.random(W * H) * 2
+    t, total, multi = 0.0, 0, 0
+    for s in range(25):
+        frame = (base + np.sin(0.3 * s + 0.01 * np.arange(W * H)) * 1.5 * rng.random()).astype(np.float32)
+        t1 = t + 1e-3 * (1 + rng.random())
+        for integ in (host, device):
+            integ.stage_log(mi.Float(frame), (W, H))
+        expected = list(_host_step(host, t, t1))
+        expected[2] = expected[2] + 7_000_000 * s         # whole periods added on the device (phase grid)
+        got = device.commit_device(t, t1, base_us=7_000_000 * s).numpy()
+        for a, b in zip(expected, got):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
+        total += len(got[2])
+        if len(got[2]):
+            multi += int(np.bincount(got[0].astype(np.int64) + W * got[1]).max() > 1)
+        t = t1
+    assert total > 10_000 and multi > 5
+
+
+def test_device_timestamps_keep_microseconds_after_hours():
+    """A pixel whose log brightness ramps linearly crosses C at an exactly known instant; at t = 3 h 20 min
+    (float32 seconds would be 0.5 ms coarse there) the device path still gives the nearest microsecond."""
+    import mitsuba as mi
+    integ = _integrator(threshold=0.2)
+    t0, dt = 12_000.0, 1e-3
+    integ.stage_log(mi.Float(np.zeros(4, np.float32)), (4, 1))
+    integ.commit_device(t0, t0)
+    # pixel 2 rises by 0.5 in the step: crossings at 0.2 / 0.5 and 0.4 / 0.5 of it
+    integ.stage_log(mi.Float(np.array([0, 0, 0.5, 0], np.float32)), (4, 1))
+    x, y, t_us, p = integ.commit_device(t0, t0 + dt).numpy()
+    expected = [round((t0 + f * dt) * 1e6) for f in (0.2 / 0.5, 0.4 / 0.5)]
+    assert list(x) == [2, 2] and list(p) == [1, 1]
+    assert np.abs(t_us - np.array(expected)).max() <= 1
+
+
+def test_host_only_pixel_models_refuse_the_device_path():
+    for pixel in ({"refractory_s": 1e-4}, {"shot_noise_hz": 1.0}, {"readout_cap": 1e6}):
+        integ = _integrator(**pixel)
+        assert not integ.device_resident
+        with pytest.raises(RuntimeError, match="host path"):
+            integ.commit_device(0.0, 1e-3)
+
+
+def test_render_same_events_on_device_and_host_and_in_any_chunking(tmp_path, demo_small):
+    """The render loop's device path, its chunking (one step per chunk, or the whole render) and the
+    background HDF5 writer change nothing: the file equals the host-path render, event for event. The host
+    path is forced by a readout cap no render reaches (it keeps every event, and draws no random number)."""
+    kw = dict(duration=0.01, steps=10, reuse=False)
+    device = ef.render_events(demo_small, **kw)
+    one_step_chunks = str(tmp_path / "small.h5")
+    summary = ef.render_events(demo_small, **kw, output=one_step_chunks, event_buffer_mb=1e-6)
+    host = ef.render_events(demo_small, **kw, pixel={"readout_cap": 1e15})
+    assert host.meta["render"]["dropped_readout"] == 0
+    assert len(device) > 1500 and device.equals(host)
+    assert ef.read_events(one_step_chunks).equals(device)
+    assert summary.events == len(device) and summary.writer_busy_s > 0
+    assert summary.on == int((device.p > 0).sum())
+    assert os.listdir(tmp_path) == ["small.h5"]
+
+
+def test_galvo_render_with_motion_same_on_device_and_host():
+    """The fan (moving blades, 250 Hz galvo scan): per-period phase timestamps plus whole periods on the
+    device equal the host's, event for event, and a period-reusing static galvo render too."""
+    from mitsuba_eventfield.scene import bundled_scene
+    fan = ef.load_scene(bundled_scene("fan/fan.xml"), width=48, height=36)
+    static = ef.load_scene(bundled_scene("galvo_static/galvo_static.xml"), width=48, height=36)
+    device = [ef.render_events(fan, 0.004, steps=32, reuse=False), ef.render_events(static, 0.008, steps=64)]
+    from mitsuba_eventfield.plugins.event_integrator import host_path
+    with host_path():
+        host = [ef.render_events(fan, 0.004, steps=32, reuse=False), ef.render_events(static, 0.008, steps=64)]
+    assert device[1].meta["render"]["reused_steps"] > 0
+    for d, h in zip(device, host):
+        assert len(d) > 500 and d.equals(h)
+
+
+def test_background_writer_error_reaches_the_caller_and_leaves_no_file(tmp_path):
+    from mitsuba_eventfield.events.hdf5 import H5EventWriter
+    from mitsuba_eventfield.events.writer import BackgroundWriter
+    path = str(tmp_path / "e.h5")
+    w = BackgroundWriter(H5EventWriter(path, 4, 4))
+    w.append(np.zeros(2, np.uint16), np.zeros(2, np.uint16), np.array([5, 6]), np.ones(2, np.int8), 6)
+    w.append(np.zeros(1, np.uint16), np.zeros(1, np.uint16), np.array([1]), np.ones(1, np.int8), 6)   # out of order
+    with pytest.raises(ValueError, match="time order"):
+        w.close()
+    w.abort()
+    assert os.listdir(tmp_path) == []
+
