@@ -99,6 +99,7 @@ class TimedScene:
             return
         for key, node in self._sensor_times:
             self.params[key] = mi.Float(node.phase_time(self.time))
+        moved = []                     # (parameter key, new vertex array) of every moving mesh
         for b in self._bindings:
             m = self.motion.objects[b.name].matrix(self.time)
             if b.kind == "to_world":  # composed on the host: no Dr.Jit kernel for a 4x4 product
@@ -109,13 +110,13 @@ class TimedScene:
                 dr.make_opaque(mat)  # a literal matrix would compile a new kernel every step
                 xf = mi.Transform4f(mat)
                 positions, normals = b.base
-                new = [dr.ravel(xf @ positions)]
+                moved.append((b.key, dr.ravel(xf @ positions)))
                 if normals is not None:
-                    new.append(dr.ravel(dr.normalize(xf @ normals)))
-                dr.eval(*new)          # positions and normals in one kernel
-                self.params[b.key] = new[0]
-                if normals is not None:
-                    self.params[b.name + ".vertex_normals"] = new[1]
+                    moved.append((b.name + ".vertex_normals", dr.ravel(dr.normalize(xf @ normals))))
+        if moved:
+            dr.eval(*(v for _, v in moved))   # every mesh's positions and normals in one kernel per step
+            for key, value in moved:
+                self.params[key] = value
         self.params.update()
 
     def describe(self) -> dict:
