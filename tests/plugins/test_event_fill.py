@@ -128,3 +128,15 @@ def test_background_writer_error_reaches_the_caller_and_leaves_no_file(tmp_path)
     w.abort()
     assert os.listdir(tmp_path) == []
 
+
+
+@pytest.mark.parametrize("bound", [700, 50_000, 3_000_000_000])
+def test_stable_order_is_numpy_stable_argsort(bound):
+    """One, two and three radix passes: the permutation NumPy's stable sort gives (ties in index order)."""
+    import mitsuba as mi
+    from mitsuba_eventfield.plugins.event_fill import stable_order
+    rng = np.random.default_rng(bound % 97)
+    key = rng.integers(0, bound, 5000, dtype=np.int64).astype(np.uint32)
+    key[::7] = key[3]                                   # many ties
+    got = stable_order(mi.UInt32(key), bound).numpy()
+    assert np.array_equal(got, np.argsort(key, kind="stable"))
