@@ -4,8 +4,10 @@ the host path (NumPy expansion and sort), on a synthetic frame stack and inside 
 Frame stack: a textured plane translating at 1.5 px per frame plus a bar rotating about the image centre, 2 kHz
 frames, C = 0.2, ideal pixel: what issue 15 measured on an H100. Throughput is pixel-steps per second of the
 converter (``events_from_frames``: upload, pixel kernel, events, one host copy per chunk), excluding the frame
-synthesis. The host path is forced by overriding ``device_resident`` on the integrator class. Renders: demo and fan scenes, what beyond the radiance render costs (events + motion + write, as a
-fraction of the render) for both paths. Every run checks that both paths give the same events.
+synthesis. The host path is forced by ``event_integrator.host_path()``. Renders: demo and fan scenes, what
+beyond the radiance render costs (events + motion + write, as a fraction of the render) for both paths. Every
+run compares the two paths' events (on the same frames for the converter; renders also compare the renderer
+with itself).
 
 Writes benchmarks/results/event_engine.json and .md; the device name is recorded with every number.
 Usage: ./run bench event_engine   (or python benchmarks/bench_event_engine.py [--quick])
@@ -116,7 +118,7 @@ def main(quick=False):
         renders.append(render_overhead(os.path.join(SCENES, "fan", "fan.xml"), 0.008, 64, width=346, height=260))
     device = device_name()
     res = {"device": device, "variant": __import__("mitsuba").variant(), "converter": conv, "renders": renders,
-           "targets": {"device and host events identical": all(c["identical"] for c in conv + renders)}}
+           "targets": {"device and host events identical on the same frames": all(c["identical"] for c in conv)}}
     md = [f"# Event engine: device path against host path ({device}, {res['variant']})", "",
           "Converter (synthetic 2 kHz stack, ideal pixel, C = 0.2):", "",
           "| film | frames | events | device Mpix-steps/s | host Mpix-steps/s | device / host | identical |",
@@ -134,7 +136,11 @@ def main(quick=False):
         md.append(f"| {r['scene']} | {r['steps']} | {d['events']} | {d['events_s']:.3f} s / {d['write_s']:.3f} s, "
                   f"{d['beyond_render_pct']:.1f}% | {h['events_s']:.3f} s / {h['write_s']:.3f} s, "
                   f"{h['beyond_render_pct']:.1f}% | {r['identical']} |")
-    md.append("")
+    md += ["", "The render rows compare two separate renders, so they also compare the renderer with itself: the fan "
+           "(moving mesh, acceleration structure rebuilt every step) has been seen to differ by one timestamp "
+           "between two renders of the same path and seed (4 renders in one process: the odd one out was a host-path "
+           "render, and another host-path render equalled the device-path ones). The converter rows feed the same "
+           "frames to both paths and are the test of the engine.", ""]
     write_results("event_engine", res, md)
 
 
