@@ -1,6 +1,7 @@
 """Calibration from the data itself (installed as ``mitsuba_eventfield.calibration``).
 
 * ``galvo``: where each frame sits on the scan curve (phase) and the curve's size, from patch or LED tracks;
+* ``led``: an LED's track and curve size from its events alone (no start image), for the depth calibration;
 * ``depth``: curve size against known depths, the paper's linear model and the geometric inverse-depth model;
 * ``kaleidoscope``: tile seams, flips, sub-pixel view registration, flat-field;
 * ``optics``: the optics a calibration was made for, and the check that refuses one made for other optics;
@@ -9,6 +10,7 @@
 from .depth import DepthCalibration, fit_depth  # noqa: F401
 from .galvo import (CalibrationError, GalvoCalibration, PatchTrack, fit_galvo, fit_tracks, galvo_scale_limit,
                     track_patch, track_point)
+from .led import fit_led, fit_point_track, track_led  # noqa: F401,E402
 from .kaleidoscope import KaleidoscopeCalibration, find_tiles, flat_field, register  # noqa: F401,E402
 from .optics import check_optics, kaleidoscope_record, optics_difference, optics_record, same_optics
 from .store import save_calibration  # noqa: F401,E402

@@ -41,6 +41,17 @@ class PatchTrack:
     score: np.ndarray           # (K,) normalised correlation of the best match
 
 
+
+def fit_std(fit) -> np.ndarray:
+    """Standard errors of a ``least_squares`` fit's parameters (Gauss-Newton covariance scaled by the residual
+    variance); infinite when the Jacobian is singular."""
+    n = len(fit.x)
+    sigma2 = float(fit.fun @ fit.fun) / max(len(fit.fun) - n, 1)
+    try:
+        return np.sqrt(np.maximum(np.diag(np.linalg.inv(fit.jac.T @ fit.jac) * sigma2), 0))
+    except np.linalg.LinAlgError:
+        return np.full(n, np.inf)
+
 def _subpixel_peak(corr, x, y):
     """Parabola through the peak and its neighbours, per axis."""
     h, w = corr.shape
@@ -256,19 +267,14 @@ def fit_tracks(tracks, times, curve: ScanCurve, max_phase_std_deg: float = 5.0,
     fit = least_squares(residuals, x0=[tau, sx, sy], loss="soft_l1", f_scale=0.5, method="trf",
                         bounds=([-np.inf, 1e-9, 1e-9], [np.inf, np.inf, np.inf]),
                         x_scale=[period / 20, abs(sx) + 1, abs(sy) + 1])
-    r = residuals(fit.x)
-    sigma2 = float(r @ r) / max(len(r) - 3, 1)
-    try:
-        std = np.sqrt(np.maximum(np.diag(np.linalg.inv(fit.jac.T @ fit.jac) * sigma2), 0))
-    except np.linalg.LinAlgError:
-        std = np.full(3, np.inf)
+    std = fit_std(fit)
     tau0, sx, sy = fit.x
     tau0 %= period
     result = GalvoCalibration(curve=_curve_dict(curve), t_first=float(times[0]), tau0=float(tau0),
                               phase_deg=float(tau0 / period * 360), scale_px_per_rad=(float(sx), float(sy)),
                               std={"phase_deg": float(std[0] / period * 360), "scale_x": float(std[1]),
                                    "scale_y": float(std[2])},
-                              rms_px=float(np.sqrt(np.mean(r ** 2))), frames_used=n_good,
+                              rms_px=float(np.sqrt(np.mean(fit.fun ** 2))), frames_used=n_good,
                               patches=[list(map(float, t.centre)) for t in tracks])
     return _check_fit(result, max_phase_std_deg, max_scale_rel_std, scale_limit)
 

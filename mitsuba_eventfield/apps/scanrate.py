@@ -25,9 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..focus.depth import depth_from_focus
-from ..lightfield.reconstruct import direct
 from ..scene import bundled_scene, load_scene
-from ..simulate.render import render_events, render_frames
+from ..simulate.render import render_events
 from .result import AppResult
 
 
@@ -79,10 +78,10 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
                     progress: bool = False):
     """The paper's one calibration step for depth from a galvo (its supplement): an LED at known depths, seen
     through the same galvo as ``scene_path`` (fov, pivots, scan and film copied from its sensor), one scan period
-    of events each; the LED's track over views integrated from the events gives the curve scale at each depth,
-    and ``calibration.fit_depth`` the disparity model. Returns {"depth": DepthCalibration} for ``run``, made for
+    of events each; the LED's track from the events alone (``calibration.fit_led``, no start frame) gives the
+    curve scale at each depth, and ``calibration.fit_depth`` the disparity model. Returns {"depth": DepthCalibration} for ``run``, made for
     the optics of ``scene_path`` (its ``optics`` record), which ``run`` checks against the scene it is used on."""
-    from ..calibration import fit_depth, fit_tracks, galvo_scale_limit, optics_record, track_point
+    from ..calibration import fit_depth, fit_led, galvo_scale_limit, optics_record
     from ..optics.scan import curve_from_dict
     target = load_scene(scene_path, **(defines or {}))
     optics = target.sensor.optics_metadata()
@@ -102,9 +101,7 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
                             mirror_separation=optics["mirror_separation"], frequency=scan["frequency"],
                             amplitude=scan["amplitude"], phase=scan["phase"])
         events = render_events(led, curve.period, steps=4 * views, progress=progress)
-        times = (np.arange(views) + 0.5) / views * curve.period
-        frames = np.exp(direct(events, times, render_frames(led, [0.0])[0], 0.0))
-        fit = fit_tracks([track_point(frames)], times, curve, scale_limit=limit)
+        fit = fit_led(events, samples=views, scale_limit=limit)      # the LED's track from its events alone
         scales.append(fit.scale_px_per_rad[0])
         scales_y.append(fit.scale_px_per_rad[1])
     depth = fit_depth(list(depths), scales, scales_y)

@@ -22,7 +22,8 @@ def add_parsers(sub) -> None:
     cg.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
     cd = csub.add_parser("depth", help="curve size against known depths from LED captures")
     cd.add_argument("captures", nargs="+", metavar="FILE:DEPTH", help="event file of the LED at DEPTH (scene units)")
-    cd.add_argument("--views", type=num(3, MAX_VIEWS, integer=True), default=24)
+    cd.add_argument("--views", type=num(5, MAX_VIEWS, integer=True), default=24,
+                    help="instants of the scan period the LED is tracked at (default 24)")
     cd.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
     ck = csub.add_parser("kaleidoscope", help="tile seams, flips, view registration, flat-field from frames")
     ck.add_argument("frame", help="EXR (linear) of a textured target at the focus distance")
@@ -61,10 +62,8 @@ def _depth(a) -> None:
         except ValueError:
             raise EventFieldError(f"{item!r}: expected FILE:DEPTH") from None
         ev = read_events(path)
-        frames, times, curve = galvo_frames(ev, 0, a.views)
-        records[path] = cal.optics_record(ev.meta["optics"], ev.width, ev.height, where=path)
-        fit = cal.fit_tracks([cal.track_point(np.exp(frames))], times, curve,
-                             scale_limit=cal.galvo_scale_limit(records[path]))
+        records[path] = cal.optics_record(ev.meta.get("optics"), ev.width, ev.height, where=path)
+        fit = cal.fit_led(ev, samples=a.views, scale_limit=cal.galvo_scale_limit(records[path]))   # events alone
         depths.append(depth)
         scales.append(fit.scale_px_per_rad[0])
         scales_y.append(fit.scale_px_per_rad[1])
