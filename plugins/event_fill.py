@@ -34,6 +34,8 @@ class DeviceEvents:
     t: object
     p: object
     count: int
+    refractory_dropped: int = 0      # crossings and noise events the refractory period removed in this step
+    noise_events: int = 0            # shot-noise events kept in this step
 
     def numpy(self):
         """(x uint16, y uint16, t int64 us, p int8) NumPy arrays: the one device-to-host copy."""
@@ -87,8 +89,12 @@ def time_order(t_us: np.ndarray, step_start_us: int) -> np.ndarray:
     return np.argsort(t_us, kind="stable")
 
 
+def empty_columns():
+    return mi.UInt32(), mi.UInt32(), mi.Int64(), mi.Int32()
+
+
 def empty() -> DeviceEvents:
-    return DeviceEvents(mi.UInt32(), mi.UInt32(), mi.Int64(), mi.Int32(), count=0)
+    return DeviceEvents(*empty_columns(), count=0)
 
 
 def _opaque(value, cls):
@@ -116,36 +122,127 @@ def stable_order(key, key_bound: int):
     return index
 
 
-def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: float, t1: float,
-                    base_us: int = 0, resolution_us: float = 0.0) -> DeviceEvents:
-    """The step's events from its dense per-pixel arrays (all of the film's length, already evaluated):
-    ``n`` signed crossing counts (Int32), brightness at t0 and t1, the reference level and the thresholds.
-    Timestamps are ``rint((t0 + frac (t1 - t0)) 1e6) + base_us`` microseconds, floored to ``resolution_us``
-    when it is > 0 (the sensor clock). Returns the time-sorted events, still on the device."""
-    n_pix = dr.width(n)
-    counts = mi.UInt32(dr.abs(n))
-    ends = dr.prefix_reduce(dr.ReduceOp.Add, counts, exclusive=False)     # inclusive scan: slot ends
-    total = int(dr.gather(mi.UInt32, ends, n_pix - 1)[0]) if n_pix else 0  # the host sync of the step
-    if total == 0:
-        return empty()
-    slot = dr.arange(mi.UInt32, total)
-    pixel = dr.binary_search(0, n_pix - 1, lambda i: dr.gather(mi.UInt32, ends, i) <= slot)
-    n_p = dr.gather(mi.Int32, n, pixel)
-    k = slot - (dr.gather(mi.UInt32, ends, pixel) - dr.gather(mi.UInt32, counts, pixel)) + 1
-    sign = dr.select(n_p > 0, mi.Int32(1), mi.Int32(-1))
-
-    def at(a):
-        return mi.Float64(dr.gather(mi.Float, a, pixel))
-
-    lp, ln, ref = at(log_prev), at(log_now), at(log_ref)
-    step = dr.select(n_p > 0, at(c_on), at(c_off))
-    # same operations, same order, same precision as expand_crossings: ((ref + (sign k) C) - lp) / (ln - lp)
+def _crossing_time(k, sign, lp, ln, ref, step, t0, t1):
+    """Seconds (Float64) of crossing ``k`` (1-based) of a pixel: where its step's linear segment meets level
+    ``ref + sign k C``; the same operations, order and precision as ``pixel_model.expand_crossings``."""
     frac = (ref + mi.Float64(mi.Int64(sign) * mi.Int64(k)) * step - lp) / (ln - lp)
     frac = dr.clip(dr.select(dr.isnan(frac), 1.0, frac), 0.0, 1.0)
+    return t0 + frac * (t1 - t0)
+
+
+@dataclass
+class Refractory:
+    """Refractory state for :func:`crossing_events`: ``last_emit`` (Float64 seconds per pixel, -inf before a
+    pixel's first event; replaced by the updated array) and the period in seconds."""
+    last_emit: object
+    period: float
+
+
+def _refractory_plan(size, tk, last, period):
+    """Per pixel, the closed-form refractory selection of ``pixel_model.refractory_crossings`` on the device:
+    crossings are evenly spaced within a step, so the kept ones are ranks first, first + stride, ... Returns
+    (first, stride, kept count, updated last emission, first kept time), all Float64 per pixel."""
+    size_f = mi.Float64(size)
+    t_a, t_b = tk(1), tk(2)
+    multi = size > 1
+    spacing = dr.select(multi, t_b - t_a, 1.0)
+    wait = last + period - t_a                                  # > 0: the first crossing is too early
+    first_multi = dr.ceil(wait / spacing - 1e-9)
+    first_multi = dr.maximum(dr.select(dr.isnan(first_multi), 0.0, first_multi), 0.0)
+    first = dr.select(multi, first_multi, dr.select(wait <= 0, 0.0, 1.0))
+    stride = dr.select(multi, dr.maximum(1.0, dr.ceil(period / spacing - 1e-9)), 1.0)
+    any_kept = first < size_f
+    runs = dr.floor((size_f - 1 - first) / stride)
+    kept = dr.select(any_kept, runs + 1, 0.0)
+    rank_last = dr.select(dr.isinf(stride), first, first + stride * runs)
+    new_last = dr.select(any_kept, tk(mi.Int64(dr.select(any_kept, rank_last, 0.0)) + 1), last)
+    first_kept = dr.select(any_kept, tk(mi.Int64(dr.select(any_kept, first, 0.0)) + 1), dr.inf)
+    return first, stride, kept, new_last, first_kept
+
+
+def _search(ends, n_pix, total):
+    """(slot, pixel) of every output slot: the first pixel whose inclusive count sum exceeds the slot."""
+    slot = dr.arange(mi.UInt32, total)
+    return slot, dr.binary_search(0, n_pix - 1, lambda i: dr.gather(mi.UInt32, ends, i) <= slot)
+
+
+def _join(a, b, cls):
+    """a then b in one ``cls`` array (scatter at an opaque offset: one cached kernel whatever the sizes)."""
+    a, b = cls(a), cls(b)
+    if dr.width(b) == 0:
+        return a
+    out = dr.empty(cls, dr.width(a) + dr.width(b))
+    if dr.width(a):
+        dr.scatter(out, a, dr.arange(mi.UInt32, dr.width(a)))
+    dr.scatter(out, b, dr.arange(mi.UInt32, dr.width(b)) + _opaque(dr.width(a), mi.UInt32))
+    return out
+
+
+def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: float, t1: float,
+                    base_us: int = 0, resolution_us: float = 0.0, refractory: Refractory | None = None,
+                    noise=None) -> DeviceEvents:
+    """The step's events from its dense per-pixel arrays (all of the film's length, already evaluated):
+    ``n`` signed crossing counts (Int32), brightness at t0 and t1, the reference level and the thresholds.
+    ``refractory``: drop crossings closer than its period to the pixel's previous event (updates its
+    ``last_emit``). ``noise``: (hit Bool, u_pol, u_t) shot-noise draws, at most one event a pixel, placed after
+    the crossings and subject to the same refractory rule. Timestamps are ``rint((t0 + frac (t1 - t0)) 1e6) +
+    base_us`` microseconds, floored to ``resolution_us`` when it is > 0 (the sensor clock). Returns the
+    time-sorted events, still on the device, with the step's refractory drops and noise events counted."""
+    n_pix = dr.width(n)
     t0_d, t1_d = _opaque(t0, mi.Float64), _opaque(t1, mi.Float64)
-    t_us = mi.Int64(dr.round((t0_d + frac * (t1_d - t0_d)) * 1e6)) + _opaque(base_us, mi.Int64)
-    # stable: equal times keep (pixel, k) order. The key is the offset from the step's first microsecond, so
-    # its range is the step's length in microseconds, known here without asking the device
+    size = mi.UInt32(dr.abs(n))
+    sign_d = dr.select(n > 0, mi.Int32(1), mi.Int32(-1))
+    f64 = [mi.Float64(a) for a in (log_prev, log_now, log_ref)]
+    step_d = dr.select(n > 0, mi.Float64(c_on), mi.Float64(c_off))
+
+    def tk(k):
+        return _crossing_time(k, sign_d, *f64, step_d, t0_d, t1_d)
+    first, stride, kept = mi.Float64(0.0), mi.Float64(1.0), size
+    if refractory is not None:
+        period = _opaque(refractory.period, mi.Float64)
+        last = refractory.last_emit
+        first, stride, kept_f, new_last, first_kept = _refractory_plan(size, tk, last, period)
+        kept = mi.UInt32(kept_f)
+    hit = None
+    if noise is not None:
+        hit, u_pol, u_t = noise
+        nt = t0_d + mi.Float64(u_t) * (t1_d - t0_d)
+        if refractory is not None:
+            hit = hit & (nt >= last + period) & (~dr.isfinite(first_kept) | (nt <= first_kept - period)
+                                                 | (nt >= new_last + period))
+            new_last = dr.select(hit, dr.maximum(new_last, nt), new_last)
+    if refractory is not None or hit is not None:   # one kernel for the plan; lazy, every use would redo it
+        dr.eval(*[v for v in (kept, first, stride, hit, nt if hit is not None else None,
+                              new_last if refractory is not None else None) if v is not None])
+    ends = dr.prefix_reduce(dr.ReduceOp.Add, kept, exclusive=False)        # inclusive scan: slot ends
+    totals = [dr.gather(mi.UInt32, ends, n_pix - 1), dr.sum(size)]
+    if hit is not None:
+        noise_ends = dr.prefix_reduce(dr.ReduceOp.Add, mi.UInt32(hit), exclusive=False)
+        totals += [dr.gather(mi.UInt32, noise_ends, n_pix - 1), dr.sum(mi.UInt32(noise[0]))]
+    if refractory is not None:
+        refractory.last_emit = new_last
+    dr.eval(*totals)
+    total, raw, noise_kept, noise_hits = (int(v.numpy()[0]) for v in totals + [mi.UInt32(0)] * (4 - len(totals)))
+    stats = dict(refractory_dropped=(raw - total) + (noise_hits - noise_kept), noise_events=noise_kept)
+    if total + noise_kept == 0:
+        return DeviceEvents(*empty_columns(), count=0, **stats)
+    pixel, t_s, sign = mi.UInt32(), mi.Float64(), mi.Int32()
+    if total:
+        slot, pixel = _search(ends, n_pix, total)
+        j = mi.Float64(slot - (dr.gather(mi.UInt32, ends, pixel) - dr.gather(mi.UInt32, kept, pixel)))
+        rank = dr.gather(mi.Float64, first, pixel) + j * dr.gather(mi.Float64, stride, pixel) \
+            if refractory is not None else j
+        sign = dr.gather(mi.Int32, sign_d, pixel)
+        at = [dr.gather(mi.Float64, a, pixel) for a in f64]
+        t_s = _crossing_time(mi.Int64(rank) + 1, sign, *at, dr.gather(mi.Float64, step_d, pixel), t0_d, t1_d)
+    if noise_kept:
+        _, npix = _search(noise_ends, n_pix, noise_kept)
+        pixel = _join(pixel, npix, mi.UInt32)
+        t_s = _join(t_s, dr.gather(mi.Float64, nt, npix), mi.Float64)
+        sign = _join(sign, dr.select(dr.gather(mi.Float, u_pol, npix) < 0.5, mi.Int32(1), mi.Int32(-1)), mi.Int32)
+    t_us = mi.Int64(dr.round(t_s * 1e6)) + _opaque(base_us, mi.Int64)
+    # stable: equal times keep (pixel, k) order, noise after crossings. The key is the offset from the step's
+    # first microsecond, so its range is the step's length in microseconds, known here without asking the device
     start_us = int(math.floor(t0 * 1e6)) + int(base_us) - 1
     key = mi.UInt32(t_us - _opaque(start_us, mi.Int64))
     dr.eval(pixel, t_us, sign, key)     # one kernel; left lazy, the gathers below would redo the binary search
@@ -157,4 +254,4 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
     w = _opaque(width, mi.UInt32)
     x, y = pixel % w, pixel // w
     dr.eval(x, y, t_us, sign)
-    return DeviceEvents(x, y, t_us, sign, count=total)
+    return DeviceEvents(x, y, t_us, sign, count=total + noise_kept, **stats)

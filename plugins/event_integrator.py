@@ -203,6 +203,8 @@ class _EventIntegratorMethods:
         step = self._take_staged(t1 - t0, "commit()")
         if step is None:
             return _no_events()
+        if self.last_emit is not None and not isinstance(self.last_emit, np.ndarray):
+            self.last_emit = self.last_emit.numpy()          # after device-path steps: the same state, moved
         width = self.staged_size[0]
         pix, t, p = self._step_events(step, t0, t1)
         self._advance(step)
@@ -228,36 +230,50 @@ class _EventIntegratorMethods:
 
     @property
     def device_resident(self) -> bool:
-        """True when every event of a step can be made on the device (:meth:`commit_device`): the pixel
-        models whose events are sparse and sequential per pixel (refractory period, shot noise, readout cap)
-        still take the host path (:meth:`commit` and :meth:`readout`)."""
-        cfg = self.config
-        return not (cfg.refractory_s or cfg.shot_noise_hz or cfg.readout_cap)
+        """True when a step's events are made on the device (:meth:`commit_device`): always, unless
+        ``host_path()`` forces the NumPy path (:meth:`commit` and :meth:`readout`) for a comparison."""
+        return True
 
     def commit_events(self, t0: float, t1: float, base_us: int = 0):
         """Accept the staged frame as the brightness at t1 and return the step's events of (t0, t1], time-sorted
-        and read out, with timestamps ``rint(t 1e6) + base_us`` microseconds: on the device
-        (``event_fill.DeviceEvents``) when the pixel model allows, else made on the host
-        (``event_fill.HostEvents``). Both paths give the same events, bit for bit."""
+        and read out, with timestamps ``rint(t 1e6) + base_us`` microseconds: made on the device
+        (``event_fill.DeviceEvents``), or on the host under ``host_path()`` (``event_fill.HostEvents``). Both
+        paths give the same events, bit for bit. With a readout cap, the step's events come to the host for it
+        (its random drops are NumPy draws per step)."""
         if self.device_resident:
-            return self.commit_device(t0, t1, base_us)
+            events = self.commit_device(t0, t1, base_us)
+            if self.limiter is None:
+                return events
+            x, y, t_us, p = events.numpy()
+            keep = self.limiter.filter(t_us)
+            return event_fill.HostEvents(x[keep], y[keep], t_us[keep], p[keep])
         x, y, ts, p = self.commit(t0, t1)
         t_us = np.rint(ts * 1e6).astype(np.int64) + base_us
         order = event_fill.time_order(t_us, int(math.floor(t0 * 1e6)) + base_us)
         return event_fill.HostEvents(*self.readout(x[order], y[order], t_us[order], p[order]))
 
     def commit_device(self, t0: float, t1: float, base_us: int = 0):
-        """:meth:`commit` and :meth:`readout` on the device: the step's events, time-sorted, with integer
-        microsecond timestamps ``rint(t 1e6) + base_us`` (clock-quantised), as ``event_fill.DeviceEvents``.
-        Bit-identical to the host path; only for :attr:`device_resident` pixel models."""
-        if not self.device_resident:
-            raise RuntimeError("commit_device(): this pixel model needs the host path (commit + readout)")
+        """:meth:`commit` and the clock of :meth:`readout` on the device (count, prefix sum, fill, refractory
+        selection, shot noise, sort): the step's events, time-sorted, with integer microsecond timestamps
+        ``rint(t 1e6) + base_us`` (clock-quantised), as ``event_fill.DeviceEvents``. Bit-identical to the host
+        path. The readout cap is not applied here (:meth:`commit_events` does)."""
         step = self._take_staged(t1 - t0, "commit_device()")
         if step is None:
             return event_fill.empty()
+        cfg = self.config
+        refractory = None
+        if cfg.refractory_s:
+            if isinstance(self.last_emit, np.ndarray):     # after host-path steps: the same state, moved
+                self.last_emit = mi.Float64(self.last_emit)
+            refractory = event_fill.Refractory(self.last_emit, cfg.refractory_s)
+        noise = step["noise"][:3] if step["noise"] is not None else None
         events = event_fill.crossing_events(step["n"], self.log_prev, step["log_now"], step["log_ref"],
                                             step["c_on"], step["c_off"], self.staged_size[0], t0, t1, base_us,
-                                            self.config.timestamp_resolution_us)
+                                            cfg.timestamp_resolution_us, refractory, noise)
+        if refractory is not None:
+            self.last_emit = refractory.last_emit
+        self.refractory_dropped += events.refractory_dropped
+        self.noise_events += events.noise_events
         self._advance(step)
         return events
 

@@ -25,18 +25,23 @@ def _host_step(integ, t0, t1):
     return integ.readout(x[order], y[order], t_us[order], p[order])
 
 
-PIXELS = [
-    {},
-    {"threshold_on": 0.15, "threshold_off": 0.25},
-    {"threshold_sigma": 0.03, "threshold_jitter": 0.02, "leak_rate_hz": 50.0, "cutoff_hz": 200.0,
-     "timestamp_resolution_us": 50.0, "seed": 3},
-]
+PIXELS = {
+    "ideal": {},
+    "asymmetric": {"threshold_on": 0.15, "threshold_off": 0.25},
+    "mismatch-jitter-leak-lowpass-clock": {"threshold_sigma": 0.03, "threshold_jitter": 0.02, "leak_rate_hz": 50.0,
+                                           "cutoff_hz": 200.0, "timestamp_resolution_us": 50.0, "seed": 3},
+    "refractory": {"refractory_s": 4e-4},
+    "shot-noise": {"shot_noise_hz": 300.0, "seed": 5},
+    "refractory-noise-cap": {"refractory_s": 3e-4, "shot_noise_hz": 300.0, "readout_cap": 3e5, "seed": 7},
+    "davis346": {"preset": "davis346", "shot_noise_hz": 200.0},
+}
 
 
-@pytest.mark.parametrize("pixel", PIXELS, ids=["ideal", "asymmetric", "mismatch-jitter-leak-lowpass-clock"])
+@pytest.mark.parametrize("pixel", PIXELS.values(), ids=PIXELS.keys())
 def test_device_events_bit_identical_to_host(pixel):
     """Same frames into two integrators: every step's events (x, y, t, p, dtype and order) agree bit for bit,
-    multi-crossing steps (up to ~8 crossings a pixel) included."""
+    multi-crossing steps (up to ~8 crossings a pixel) included, and so do the refractory drops, the shot-noise
+    events and the readout cap's drops where the pixel model has them."""
     import mitsuba as mi
     host, device = _integrator(**pixel), _integrator(**pixel)
     assert device.device_resident
@@ -49,15 +54,22 @@ def test_device_events_bit_identical_to_host(pixel):
         for integ in (host, device):
             integ.stage_log(mi.Float(frame), (W, H))
         expected = list(_host_step(host, t, t1))
-        expected[2] = expected[2] + 7_000_000 * s         # whole periods added on the device (phase grid)
-        got = device.commit_device(t, t1, base_us=7_000_000 * s).numpy()
+        base_us = 0 if pixel else 7_000_000 * s            # whole periods added (phase grid: ideal pixels only)
+        expected[2] = expected[2] + base_us
+        got = device.commit_events(t, t1, base_us=base_us).numpy()
         for a, b in zip(expected, got):
             assert a.dtype == b.dtype and np.array_equal(a, b)
         total += len(got[2])
         if len(got[2]):
             multi += int(np.bincount(got[0].astype(np.int64) + W * got[1]).max() > 1)
         t = t1
-    assert total > 10_000 and multi > 5
+    assert total > 4000 and multi > 5
+    cfg = device.config
+    assert (device.refractory_dropped > 100) == bool(cfg.refractory_s)
+    assert (device.noise_events > 50) == bool(cfg.shot_noise_hz)
+    assert (device.readout_dropped() > 100) == bool(cfg.readout_cap)
+    assert (host.refractory_dropped, host.noise_events, host.readout_dropped()) == \
+        (device.refractory_dropped, device.noise_events, device.readout_dropped())
 
 
 def test_device_timestamps_keep_microseconds_after_hours():
@@ -74,14 +86,6 @@ def test_device_timestamps_keep_microseconds_after_hours():
     expected = [round((t0 + f * dt) * 1e6) for f in (0.2 / 0.5, 0.4 / 0.5)]
     assert list(x) == [2, 2] and list(p) == [1, 1]
     assert np.abs(t_us - np.array(expected)).max() <= 1
-
-
-def test_host_only_pixel_models_refuse_the_device_path():
-    for pixel in ({"refractory_s": 1e-4}, {"shot_noise_hz": 1.0}, {"readout_cap": 1e6}):
-        integ = _integrator(**pixel)
-        assert not integ.device_resident
-        with pytest.raises(RuntimeError, match="host path"):
-            integ.commit_device(0.0, 1e-3)
 
 
 def test_render_same_events_on_device_and_host_and_in_any_chunking(tmp_path, demo_small):
