@@ -178,6 +178,14 @@ def _join(a, b, cls):
     return out
 
 
+def _read(values) -> list:
+    """Up to four device scalars as Python ints, in one array: one device-to-host copy (the step's only sync)."""
+    packed = dr.zeros(mi.UInt32, 4)
+    for i, v in enumerate(values):
+        dr.scatter(packed, v, mi.UInt32(i))
+    return [int(v) for v in packed.numpy()]
+
+
 def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: float, t1: float,
                     base_us: int = 0, resolution_us: float = 0.0, refractory: Refractory | None = None,
                     noise=None) -> DeviceEvents:
@@ -221,8 +229,7 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
         totals += [dr.gather(mi.UInt32, noise_ends, n_pix - 1), dr.sum(mi.UInt32(noise[0]))]
     if refractory is not None:
         refractory.last_emit = new_last
-    dr.eval(*totals)
-    total, raw, noise_kept, noise_hits = (int(v.numpy()[0]) for v in totals + [mi.UInt32(0)] * (4 - len(totals)))
+    total, raw, noise_kept, noise_hits = _read(totals)
     stats = dict(refractory_dropped=(raw - total) + (noise_hits - noise_kept), noise_events=noise_kept)
     if total + noise_kept == 0:
         return DeviceEvents(*empty_columns(), count=0, **stats)
@@ -240,6 +247,14 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
         pixel = _join(pixel, npix, mi.UInt32)
         t_s = _join(t_s, dr.gather(mi.Float64, nt, npix), mi.Float64)
         sign = _join(sign, dr.select(dr.gather(mi.Float, u_pol, npix) < 0.5, mi.Int32(1), mi.Int32(-1)), mi.Int32)
+    return _time_sorted(pixel, t_s, sign, width, t0, t1, base_us, resolution_us,
+                        DeviceEvents(*empty_columns(), count=total + noise_kept, **stats))
+
+
+def _time_sorted(pixel, t_s, sign, width: int, t0: float, t1: float, base_us: int, resolution_us: float,
+                 out: DeviceEvents) -> DeviceEvents:
+    """The step's events (pixel, seconds, polarity, in slot order) as ``out``'s columns: microseconds, time
+    order, sensor clock, x and y."""
     t_us = mi.Int64(dr.round(t_s * 1e6)) + _opaque(base_us, mi.Int64)
     # stable: equal times keep (pixel, k) order, noise after crossings. The key is the offset from the step's
     # first microsecond, so its range is the step's length in microseconds, known here without asking the device
@@ -252,6 +267,6 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
         res = _opaque(resolution_us, mi.Float64)
         t_us = mi.Int64(dr.floor(mi.Float64(t_us) / res) * res)
     w = _opaque(width, mi.UInt32)
-    x, y = pixel % w, pixel // w
-    dr.eval(x, y, t_us, sign)
-    return DeviceEvents(x, y, t_us, sign, count=total + noise_kept, **stats)
+    out.x, out.y, out.t, out.p = pixel % w, pixel // w, t_us, sign
+    dr.eval(out.x, out.y, out.t, out.p)
+    return out

@@ -58,7 +58,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import event_fill, pixel_model
+from mitsuba_eventfield.plugins import event_fill, host_events, pixel_model, pixel_state
 
 from ._per_variant import per_variant, subclass
 
@@ -118,6 +118,15 @@ class _EventIntegratorMethods:
         self.rng = self.leak_rate = self.last_emit = self.limiter = None
         self.refractory_dropped = 0
         self.noise_events = 0
+
+    # ---------------------------------------------------------------- checkpoints
+    def get_state(self) -> dict:
+        """Everything that fixes the pixels' future events, as NumPy arrays (``pixel_state.get_state``)."""
+        return pixel_state.get_state(self)
+
+    def set_state(self, d: dict) -> None:
+        """Restore :meth:`get_state`'s result (same pixel model, same film)."""
+        pixel_state.set_state(self, d)
 
     def pixel_model_metadata(self) -> dict:
         d = {"model": "ideal" if not (self.config.stochastic or self.config.threshold_sigma) else "realistic",
@@ -188,11 +197,15 @@ class _EventIntegratorMethods:
         if cfg.refractory_s:
             self.last_emit = np.full(n_pix, -np.inf)
         if cfg.readout_cap:
-            cap = cfg.readout_cap * (n_pix / cfg.readout_cap_native_pixels if cfg.readout_cap_native_pixels else 1)
-            self.limiter = pixel_model.ReadoutLimiter(cap, cfg.seed)
+            self.limiter = self._make_limiter(n_pix)
         state = [self.log_prev, self.anchor, self.k_on, self.k_off, self.c_on, self.c_off]
         state += [v for v in (self.offset, self.leak_rate) if v is not None]
         dr.make_opaque(*state)
+
+    def _make_limiter(self, n_pix: int):
+        cfg = self.config
+        cap = cfg.readout_cap * (n_pix / cfg.readout_cap_native_pixels if cfg.readout_cap_native_pixels else 1)
+        return pixel_model.ReadoutLimiter(cap, cfg.seed)
 
     def commit(self, t0: float, t1: float):
         """Accept the staged frame as the brightness at time t1 (seconds) and return the events of (t0, t1].
@@ -206,7 +219,7 @@ class _EventIntegratorMethods:
         if self.last_emit is not None and not isinstance(self.last_emit, np.ndarray):
             self.last_emit = self.last_emit.numpy()          # after device-path steps: the same state, moved
         width = self.staged_size[0]
-        pix, t, p = self._step_events(step, t0, t1)
+        pix, t, p = host_events.step_events(self, step, t0, t1)
         self._advance(step)
         return (pix % width).astype(np.uint16), (pix // width).astype(np.uint16), t, p
 
@@ -228,11 +241,19 @@ class _EventIntegratorMethods:
         self.log_prev, self.k_on, self.k_off, self.offset = step["log_now"], step["k_on"], step["k_off"], \
             step["offset"]
 
+    path_override = None       # "host" or "device" inside event_path(); None: chosen per backend
+
     @property
     def device_resident(self) -> bool:
-        """True when a step's events are made on the device (:meth:`commit_device`): always, unless
-        ``host_path()`` forces the NumPy path (:meth:`commit` and :meth:`readout`) for a comparison."""
-        return True
+        """True when a step's events are made on the device (:meth:`commit_device`), False for the NumPy path
+        (:meth:`commit` and :meth:`readout`); both give the same events. On a GPU always the device. On the CPU
+        (LLVM) the NumPy path is faster for pixel models with a refractory period or shot noise (about 50
+        kernel launches a step against sparse NumPy work on shared memory: benchmarks/results/pixel.md), so
+        those take it; ``event_path()`` overrides the choice."""
+        if self.path_override is not None:
+            return self.path_override == "device"
+        cfg = self.config
+        return mi.variant().startswith("cuda") or not (cfg.refractory_s or cfg.shot_noise_hz)
 
     def commit_events(self, t0: float, t1: float, base_us: int = 0):
         """Accept the staged frame as the brightness at t1 and return the step's events of (t0, t1], time-sorted
@@ -324,48 +345,6 @@ class _EventIntegratorMethods:
         return {"n": n, "k_on": k_on, "k_off": k_off, "log_now": log_now, "log_ref": log_ref, "c_on": c_on,
                 "c_off": c_off, "offset": offset, "noise": noise}
 
-    def _step_events(self, step: dict, t0: float, t1: float):
-        """The step's events on the host: (pixel index, time s, polarity) of every crossing, linearly
-        interpolated in time, then the refractory period and shot-noise events."""
-        n, noise = step["n"], step["noise"]
-        # one compress over every pixel that produced anything (crossings or noise), one gather kernel
-        fired = dr.compress((n != 0) | noise[0]) if noise is not None else dr.compress(n != 0)
-        if dr.width(fired) == 0:
-            return np.empty(0, np.int64), np.empty(0), np.empty(0, np.int8)
-        cols = [n, self.log_prev, step["log_now"], step["log_ref"], step["c_on"], step["c_off"]]
-        if noise is not None:
-            cols += [noise[3], noise[1], noise[2]]
-        sparse = [dr.gather(type(a), a, fired) for a in cols]
-        dr.eval(*sparse)
-        arr = [a.numpy() for a in sparse]
-        fpix = fired.numpy().astype(np.int64)
-        sig = arr[0] != 0
-        pix, t, p = pixel_model.expand_crossings(fpix[sig], *(a[sig] for a in arr[:6]), t0, t1)
-        hit = arr[6] != 0 if noise is not None else None
-        before = self.last_emit[fpix[hit]] if (noise is not None and self.config.refractory_s) else None
-        crossings = None
-        if self.config.refractory_s:
-            keep, crossings = pixel_model.refractory_crossings(pix, t, self.last_emit, self.config.refractory_s)
-            self.refractory_dropped += int(len(t) - keep.sum())
-            pix, t, p = pix[keep], t[keep], p[keep]
-        if noise is None:
-            return pix, t, p
-        npix, nt, pol = self._noise_events(fpix[hit], arr[7][hit], arr[8][hit], before, crossings, t0, t1)
-        return np.concatenate([pix, npix]), np.concatenate([t, nt]), np.concatenate([p, pol])
-
-    def _noise_events(self, npix, u_pol, u_t, before, crossings, t0: float, t1: float):
-        """Shot-noise events of the pixels ``npix`` (uniform polarity and time within the step), subject to the
-        refractory period like the signal's."""
-        pol = np.where(u_pol < 0.5, 1, -1).astype(np.int8)
-        nt = t0 + u_t.astype(np.float64) * (t1 - t0)
-        if self.config.refractory_s:
-            keep = pixel_model.refractory_extra(npix, nt, before, crossings, self.last_emit,
-                                                self.config.refractory_s)
-            self.refractory_dropped += int(len(nt) - keep.sum())
-            npix, nt, pol = npix[keep], nt[keep], pol[keep]
-        self.noise_events += len(npix)
-        return npix, nt, pol
-
     def readout(self, x, y, t_us, p):
         """The sensor's output stage on one step's time-sorted events: clock quantisation, readout cap."""
         cfg = self.config
@@ -406,17 +385,27 @@ integrator_class = per_variant(_define_class)   # the EventIntegrator class of t
 
 
 @contextlib.contextmanager
-def host_path():
-    """Within the block, every event integrator of the active variant makes its events on the host (NumPy
-    expansion and sort) whatever its pixel model: for comparing the two paths (tests, benchmarks, checking a
-    new backend). They give the same events."""
+def event_path(path: str):
+    """Within the block, every event integrator of the active variant makes its events on the ``"host"``
+    (NumPy expansion and sort) or on the ``"device"`` (``event_fill``), whatever the backend and pixel model:
+    for comparing the two paths (tests, benchmarks, checking a new backend). They give the same events."""
+    if path not in ("host", "device"):
+        raise ValueError(f"event_path({path!r}): allowed: 'host', 'device'")
     cls = integrator_class()
-    original = cls.__dict__["device_resident"]
-    cls.device_resident = property(lambda self: False)
+    before = cls.path_override
+    cls.path_override = path
     try:
         yield
     finally:
-        cls.device_resident = original
+        cls.path_override = before
+
+
+def host_path():
+    return event_path("host")
+
+
+def device_path():
+    return event_path("device")
 
 
 def _no_events():

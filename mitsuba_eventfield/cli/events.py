@@ -68,6 +68,11 @@ def _add_render(sub) -> None:
     r.add_argument("--preview-window", type=num(0, 1e9, lo_open=True), default=10.0,
                    help="preview window in ms (default 10)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--checkpoint-every", type=num(0, 1e9, lo_open=True), metavar="SECONDS",
+                   help="save the render's state every so many wall seconds (.h5 output), so that an interrupted "
+                        "render can go on with --resume")
+    r.add_argument("--resume", action="store_true",
+                   help="continue an interrupted render of this output from its last checkpoint (same options)")
     r.add_argument("--auto", action="store_true",
                    help="choose colour, spp and steps from cheap probes (ef.auto), print and record why")
 
@@ -151,7 +156,7 @@ def run_render(a) -> int:
         seed_mode="independent" if a.independent_seeds else "fixed", threshold=a.threshold,
         threshold_on=a.threshold_on, threshold_off=a.threshold_off, linlog_threshold=a.linlog_threshold,
         output=a.output, progress=not a.quiet, preset=a.preset, pixel=pixel_overrides(a.pixel), extra_meta=extra,
-        event_buffer_mb=a.event_buffer_mb)
+        event_buffer_mb=a.event_buffer_mb, checkpoint_s=a.checkpoint_every, resume=a.resume)
     print(summary.format())
     if a.preview and os.path.splitext(a.output)[1].lower() != ".txt":
         _render_preview(a)
@@ -170,6 +175,10 @@ def _render_preview(a) -> None:
 
 def run_info(a) -> int:
     from ..events.io import read_events
+    from ..simulate import checkpoint
+    if os.path.isdir(a.file) and a.file.rstrip("/").endswith(checkpoint.SUFFIX):   # an interrupted render
+        print(checkpoint.describe(os.path.abspath(a.file.rstrip("/"))))
+        return 0
     ev = read_events(a.file)
     s = ev.summary()
     if a.json:

@@ -31,14 +31,14 @@ class BackgroundWriter:
             item = self.queue.get()
             if item is None:
                 return
-            if self.error is not None:        # keep draining so that the caller never blocks on a dead writer
-                continue
-            t0 = time.perf_counter()
-            try:
-                self.writer.append(*item)
-            except BaseException as e:        # noqa: BLE001 - handed to the caller's thread
-                self.error = e
-            self.busy_s += time.perf_counter() - t0
+            if self.error is None:            # after an error keep draining: the caller never blocks on it
+                t0 = time.perf_counter()
+                try:
+                    self.writer.append(*item)
+                except BaseException as e:    # noqa: BLE001 - handed to the caller's thread
+                    self.error = e
+                self.busy_s += time.perf_counter() - t0
+            self.queue.task_done()
 
     def _raise(self):
         if self.error is not None:
@@ -56,6 +56,13 @@ class BackgroundWriter:
             self.queue.put(None)
             self.thread.join()
             self.wait_s += time.perf_counter() - t0
+
+    def wait(self):
+        """Wait until every queued chunk is written, keeping the worker for more (a checkpoint)."""
+        t0 = time.perf_counter()
+        self.queue.join()
+        self.wait_s += time.perf_counter() - t0
+        self._raise()
 
     def drain(self):
         """Wait until every queued chunk is written (raising the worker's error, if any)."""

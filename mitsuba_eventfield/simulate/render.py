@@ -24,6 +24,7 @@ from ..events.io import format_of
 from ..scene.timed import TimedScene, load_scene
 from ..validate import MAX_DURATION_S, MAX_STEPS, available_memory, finite, number, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
+from .checkpoint import checkpoints_for
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary, run_metadata
 
@@ -142,8 +143,9 @@ class _Loop:
     """The time-stepping loop of one render: renders (or reuses) a frame per step, commits it to the event
     integrator, orders and reads out the step's events and hands them to the sink."""
 
-    def __init__(self, timed, integ, st: _Stepping, sink, summary, bar, reuse: bool):
+    def __init__(self, timed, integ, st: _Stepping, sink, summary, bar, reuse: bool, checkpoints=None):
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
+        self.checkpoints = checkpoints
         self.width, self.height = timed.film_size
         self.reuse = None if st.adaptive or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
@@ -180,12 +182,17 @@ class _Loop:
         """All steps; returns how many."""
         st, integ = self.st, self.integ
         t_end = st.t_start + st.duration
-        self.render_at(st.t_start, 0)
-        integ.commit(st.t_start, st.t_start)             # initialises every pixel's reference; fires nothing
-        t, k = st.t_start, 0
-        dt = (st.duration / st.steps) if not st.adaptive else max(st.min_step, st.max_step / 16)
+        if self.checkpoints is not None and self.checkpoints.saved:   # resume: frames rendered again, not reused
+            (t, k, dt), self.reuse = self.checkpoints.restore(self), None
+        else:
+            self.render_at(st.t_start, 0)
+            integ.commit(st.t_start, st.t_start)         # initialises every pixel's reference; fires nothing
+            t, k = st.t_start, 0
+            dt = (st.duration / st.steps) if not st.adaptive else max(st.min_step, st.max_step / 16)
         c_min = min(integ.threshold_on, integ.threshold_off)
         while t < t_end - 1e-12:
+            if self.checkpoints is not None and self.checkpoints.due():
+                self.checkpoints.save(self, t, k, dt)
             if self.copy_from is not None:               # the pixel state repeats: copy whole periods, shifted
                 t, k = self._copy_periods(k)
                 continue
@@ -308,7 +315,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   linlog_threshold: float | None = None, output: str | None = None, fmt: str | None = None,
                   progress: bool = False, t_start: float = 0.0, reuse: bool = True, preset: str | None = None,
                   pixel: dict | None = None, extra_meta: dict | None = None,
-                  event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB):
+                  event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, checkpoint_s: float | None = None,
+                  resume: bool = False):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
     Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by
@@ -321,8 +329,9 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     ``preset`` ("ideal", "davis346", "prophesee_gen4") and ``pixel`` (PixelConfig fields, e.g.
     ``{"refractory_s": 1e-4, "shot_noise_hz": 2}``) choose the event pixel; default: the scene's own.
 
-    ``event_buffer_mb``: how much memory events may take on the device before they move to the host (and to
-    the background file writer) in one chunk.
+    ``event_buffer_mb``: device memory for events before they move to the host (and the file writer) in one
+    chunk. ``checkpoint_s``: save the render's state every so many wall seconds (HDF5 output), so that an
+    interrupted render goes on with ``resume=True`` to the events of an uninterrupted one (``checkpoint.py``).
     """
     timed = load_scene(scene)
     st = _stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_step, spp, seed, seed_mode,
@@ -341,15 +350,19 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,
                      seed_mode=st.seed_mode, stepping=st.as_meta())
     meta.update(extra_meta or {})
+    checkpoints = checkpoints_for(output, fmt, meta, checkpoint_s, resume)
     sink = Sink(output, fmt, width, height, meta, count=summary.count,
-                buffer_mb=positive(event_buffer_mb, "event_buffer_mb"))
+                buffer_mb=positive(event_buffer_mb, "event_buffer_mb"),
+                segments=checkpoints.segments if checkpoints else None)
     bar = _progress_bar(st.duration) if progress else None
     wall0 = time.perf_counter()
     try:
-        loop = _Loop(timed, integ, st, sink, summary, bar, reuse)
+        loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints)
         stream = loop.finish(loop.run(), meta, wall0)
     except BaseException:
         sink.abort()
+        if checkpoints is not None:
+            checkpoints.abandon()
         raise
     finally:
         if bar is not None:

@@ -11,6 +11,7 @@ from ..events.io import format_of, write_events
 from ..events.stream import EventStream
 from ..events.writer import BackgroundWriter
 from ..plugins.event_fill import DeviceEvents
+from .checkpoint import SegmentWriter
 
 DEFAULT_EVENT_BUFFER_MB = 64.0
 DEVICE_BYTES_PER_EVENT = 20          # x, y (UInt32), t (Int64), p (Int32) while an event waits on the device
@@ -25,10 +26,15 @@ class Sink:
     """Where a step's events go, in time order: an in-memory list or an HDF5 file written in the background.
     ``count`` is called with each chunk's polarities as it leaves the buffer (the render's ON/OFF totals)."""
 
-    def __init__(self, output, fmt, width, height, meta, count=None, buffer_mb: float = DEFAULT_EVENT_BUFFER_MB):
+    def __init__(self, output, fmt, width, height, meta, count=None, buffer_mb: float = DEFAULT_EVENT_BUFFER_MB,
+                 segments: list | None = None):
         self.output, self.width, self.height, self.meta = output, width, height, meta
         self.fmt = format_of(output, fmt) if output else None
-        self.writer = BackgroundWriter(H5EventWriter(output, width, height, meta)) if self.fmt == "h5" else None
+        self.writer = None
+        if segments is not None:         # a checkpointed render: segments under <output>.resume, merged at the end
+            self.writer = BackgroundWriter(SegmentWriter(output, width, height, meta, segments))
+        elif self.fmt == "h5":
+            self.writer = BackgroundWriter(H5EventWriter(output, width, height, meta))
         self.parts = []
         self.count = count or (lambda p: None)
         self.capacity = buffer_events(buffer_mb)
@@ -76,6 +82,12 @@ class Sink:
             self.writer.append(x, y, t, p, complete_until_us)
         elif len(t):
             self.parts.append((x, y, t, p))
+
+    def wait_for_writer(self) -> None:
+        """Everything buffered moved out and written, the writer kept for more (a checkpoint)."""
+        self.flush_device()
+        if self.writer is not None:
+            self.writer.wait()
 
     def drain(self) -> None:
         """Everything buffered moved out and written (the writer's timings are final after this)."""

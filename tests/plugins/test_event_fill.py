@@ -42,8 +42,14 @@ def test_device_events_bit_identical_to_host(pixel):
     """Same frames into two integrators: every step's events (x, y, t, p, dtype and order) agree bit for bit,
     multi-crossing steps (up to ~8 crossings a pixel) included, and so do the refractory drops, the shot-noise
     events and the readout cap's drops where the pixel model has them."""
-    import mitsuba as mi
+    from mitsuba_eventfield.plugins.event_integrator import device_path
     host, device = _integrator(**pixel), _integrator(**pixel)
+    with device_path():                 # on the CPU, noise and refractory models default to the host path
+        _run_both(host, device, whole_periods=not pixel)
+
+
+def _run_both(host, device, whole_periods):
+    import mitsuba as mi
     assert device.device_resident
     rng = np.random.default_rng(1)
     base = rng.random(W * H) * 2
@@ -54,7 +60,7 @@ def test_device_events_bit_identical_to_host(pixel):
         for integ in (host, device):
             integ.stage_log(mi.Float(frame), (W, H))
         expected = list(_host_step(host, t, t1))
-        base_us = 0 if pixel else 7_000_000 * s            # whole periods added (phase grid: ideal pixels only)
+        base_us = 7_000_000 * s if whole_periods else 0    # whole periods added (phase grid: ideal pixels only)
         expected[2] = expected[2] + base_us
         got = device.commit_events(t, t1, base_us=base_us).numpy()
         for a, b in zip(expected, got):
@@ -144,3 +150,35 @@ def test_stable_order_is_numpy_stable_argsort(bound):
     key[::7] = key[3]                                   # many ties
     got = stable_order(mi.UInt32(key), bound).numpy()
     assert np.array_equal(got, np.argsort(key, kind="stable"))
+
+
+@pytest.mark.parametrize("pixel", [PIXELS["ideal"], PIXELS["refractory-noise-cap"], PIXELS["davis346"]],
+                         ids=["ideal", "refractory-noise-cap", "davis346"])
+def test_pixel_state_round_trip_continues_identically(pixel):
+    """A checkpoint's pixel state (get_state, through NumPy, set_state into a fresh integrator) makes the same
+    later events as the integrator that never stopped: noise generator, last emissions, limiter included."""
+    import mitsuba as mi
+    rng = np.random.default_rng(2)
+    frames = [(rng.random(W * H) * 2 + 0.3 * s).astype(np.float32) for s in range(12)]
+    from mitsuba_eventfield.plugins.event_integrator import event_path
+    for path in ("device", "host"):
+        with event_path(path):
+            _round_trip(pixel, mi, frames)
+
+
+def _round_trip(pixel, mi, frames):
+    whole, first = _integrator(**pixel), _integrator(**pixel)
+    for s in range(6):
+        for integ in (whole, first):
+            integ.stage_log(mi.Float(frames[s]), (W, H))
+            integ.commit_events(s * 1e-3, (s + 1) * 1e-3)
+    resumed = _integrator(**pixel)
+    resumed.set_state({k: np.array(v) for k, v in first.get_state().items()})
+    for s in range(6, 12):
+        outs = []
+        for integ in (whole, resumed):
+            integ.stage_log(mi.Float(frames[s]), (W, H))
+            outs.append(integ.commit_events(s * 1e-3, (s + 1) * 1e-3).numpy())
+        assert len(outs[0][0]) > 0 and all(np.array_equal(a, b) for a, b in zip(*outs))
+    assert (whole.refractory_dropped, whole.noise_events, whole.readout_dropped()) == \
+        (resumed.refractory_dropped, resumed.noise_events, resumed.readout_dropped())

@@ -1,0 +1,57 @@
+"""The event pixels' state as plain NumPy arrays and numbers, and back: what a checkpoint saves
+(``simulate/checkpoint.py``) so that a resumed render makes the events of an uninterrupted one."""
+from __future__ import annotations
+
+import json
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+STATE_ARRAYS = {"log_prev": "Float", "anchor": "Float", "k_on": "Int32", "k_off": "Int32", "c_on": "Float",
+                "c_off": "Float", "offset": "Float", "leak_rate": "Float"}
+
+
+def get_state(integ) -> dict:
+    """Everything that fixes the pixels' future events, as NumPy arrays and plain numbers (a checkpoint):
+    levels, event counts, thresholds, drift, the noise generator's state, last emissions, the readout
+    limiter's generator and counters."""
+    if integ.staged is not None:
+        raise RuntimeError("get_state() with a staged frame: commit it first")
+    d = {"size": np.array(integ.size or (0, 0)), "refractory_dropped": integ.refractory_dropped,
+         "noise_events": integ.noise_events}
+    for name in STATE_ARRAYS:
+        if getattr(integ, name) is not None:
+            d[name] = getattr(integ, name).numpy()
+    if integ.rng is not None:
+        d["rng_state"], d["rng_inc"] = integ.rng.state.numpy(), integ.rng.inc.numpy()
+    if integ.last_emit is not None:
+        d["last_emit"] = integ.last_emit if isinstance(integ.last_emit, np.ndarray) else integ.last_emit.numpy()
+    if integ.limiter is not None:
+        lim = integ.limiter
+        d["limiter"] = np.array(json.dumps({"rng": lim.rng.bit_generator.state, "open_bin": lim.open_bin,
+                                            "used": lim.used, "dropped": lim.dropped}))
+    return d
+
+
+def set_state(integ, d: dict) -> None:
+    """Restore :func:`get_state`'s result into ``integ`` (same pixel model, same film)."""
+    integ.reset()
+    integ.size = tuple(int(v) for v in d["size"])
+    for name, kind in STATE_ARRAYS.items():
+        if name in d:
+            setattr(integ, name, getattr(mi, kind)(d[name]))
+    if "rng_state" in d:
+        integ.rng = mi.PCG32(size=len(d["rng_state"]))
+        integ.rng.state, integ.rng.inc = mi.UInt64(d["rng_state"]), mi.UInt64(d["rng_inc"])
+    if "last_emit" in d:
+        integ.last_emit = np.array(d["last_emit"], dtype=np.float64)
+    cfg = integ.config
+    if cfg.readout_cap:
+        integ.limiter = integ._make_limiter(integ.size[0] * integ.size[1])
+        saved = json.loads(str(d["limiter"]))
+        integ.limiter.rng.bit_generator.state = saved["rng"]
+        integ.limiter.open_bin, integ.limiter.used, integ.limiter.dropped = \
+            saved["open_bin"], saved["used"], saved["dropped"]
+    integ.refractory_dropped, integ.noise_events = int(d["refractory_dropped"]), int(d["noise_events"])
+    dr.make_opaque(*[v for v in (getattr(integ, n) for n in STATE_ARRAYS) if v is not None])

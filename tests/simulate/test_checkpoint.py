@@ -1,0 +1,118 @@
+"""Checkpoints and --resume: an interrupted render (an exception, SIGKILL) continued from its last checkpoint
+gives the file of an uninterrupted one; the output path never holds a partial file."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.cli.main import main as cli
+from mitsuba_eventfield.simulate import render as render_mod
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+DEMO = os.path.join(ROOT, "scenes", "demo", "demo.xml")
+GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
+
+
+def _same_file(a, b):
+    """Same events, same millisecond index, same metadata apart from what says when and how it ran."""
+    ea, eb = ef.read_events(a), ef.read_events(b)
+    with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
+        same_index = np.array_equal(fa["ms_to_idx"][:], fb["ms_to_idx"][:])
+    volatile = ("created_utc", "command", "render")
+    meta_a = {k: v for k, v in ea.meta.items() if k not in volatile}
+    meta_b = {k: v for k, v in eb.meta.items() if k not in volatile}
+    return len(ea) > 0 and ea.equals(eb) and same_index and meta_a == meta_b
+
+
+def _interrupt_at(monkeypatch, step):
+    real = render_mod._Loop._step_events
+    calls = {"n": 0}
+
+    def step_events(self, *a):
+        calls["n"] += 1
+        if calls["n"] == step:
+            raise KeyboardInterrupt
+        return real(self, *a)
+    monkeypatch.setattr(render_mod._Loop, "_step_events", step_events)
+
+
+@pytest.mark.parametrize("scene, kw", [
+    (DEMO, dict(duration=0.01, steps=20)),
+    (DEMO, dict(duration=0.01, adaptive=True, max_log_change=0.5, min_step=2e-4, preset="davis346",
+                pixel={"shot_noise_hz": 200.0})),
+    (GALVO, dict(duration=0.008, steps=64)),                        # a reused scan period, then copies
+], ids=["uniform-ideal", "adaptive-davis346-noise", "galvo-reuse"])
+def test_interrupted_render_resumes_to_the_uninterrupted_file(tmp_path, monkeypatch, capsys, scene, kw):
+    timed = ef.load_scene(scene, width=48, height=36)
+    ref, out = str(tmp_path / "ref.h5"), str(tmp_path / "out.h5")
+    ef.render_events(timed, output=ref, **kw)
+    _interrupt_at(monkeypatch, 9)
+    with pytest.raises(KeyboardInterrupt):
+        ef.render_events(timed, output=out, checkpoint_s=1e-9, **kw)         # a checkpoint before every step
+    monkeypatch.undo()
+    folder = out + ".resume"
+    assert not os.path.exists(out) and os.path.isfile(os.path.join(folder, "checkpoint.json"))
+    assert cli(["info", folder]) == 0
+    assert "partial render of" in capsys.readouterr().out
+    summary = ef.render_events(timed, output=out, resume=True, **kw)
+    assert any("resumed from checkpoint" in n for n in summary.notes)
+    assert _same_file(ref, out) and not os.path.exists(folder)
+
+
+def test_sigkill_then_resume_from_the_command_line(tmp_path):
+    """A render killed with SIGKILL (no ``finally`` runs) leaves the last checkpoint; --resume finishes it."""
+    out, ref = str(tmp_path / "k.h5"), str(tmp_path / "ref.h5")
+    args = [DEMO, "-D", "width=48", "-D", "height=36", "--duration", "0.03", "--steps", "300", "--quiet"]
+    assert cli(["render", *args, "-o", ref]) == 0
+    cmd = [sys.executable, "-m", "mitsuba_eventfield.cli", "render", *args, "-o", out, "--checkpoint-every", "0.02"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    state = os.path.join(out + ".resume", "checkpoint.json")
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if os.path.isfile(state) and '"number": 2' in open(state).read():
+            break
+        time.sleep(0.01)
+    assert proc.poll() is None, "the render finished before it could be killed"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not os.path.exists(out)
+    assert cli(["render", *args, "-o", out, "--resume", "--checkpoint-every", "0.02"]) == 0
+    assert _same_file(ref, out) and not os.path.exists(out + ".resume")
+
+
+def test_resume_refusals_are_one_line(tmp_path, capsys):
+    out = str(tmp_path / "r.h5")
+    args = ["render", DEMO, "-D", "width=16", "-D", "height=12", "--duration", "0.002", "--steps", "4", "--quiet"]
+    assert cli([*args, "-o", out, "--resume"]) == 2
+    assert "nothing to resume" in capsys.readouterr().err
+    assert cli([*args, "-o", str(tmp_path / "r.npz"), "--checkpoint-every", "5"]) == 2
+    assert "need an HDF5 output" in capsys.readouterr().err
+    os.makedirs(out + ".resume")
+    assert cli([*args, "-o", out]) == 2
+    assert "add --resume" in capsys.readouterr().err
+
+
+def test_resume_with_other_options_names_the_difference(tmp_path, monkeypatch, capsys):
+    timed = ef.load_scene(DEMO, width=16, height=12)
+    out = str(tmp_path / "d.h5")
+    _interrupt_at(monkeypatch, 3)
+    with pytest.raises(KeyboardInterrupt):
+        ef.render_events(timed, 0.004, steps=8, output=out, checkpoint_s=1e-9)
+    monkeypatch.undo()
+    with pytest.raises(ef.EventFieldError, match=r"another render: spp was 4, now 8"):
+        ef.render_events(timed, 0.004, steps=8, spp=8, output=out, resume=True)
+    assert not os.path.exists(out)
+
+
+def test_interrupt_before_any_checkpoint_leaves_nothing(tmp_path, monkeypatch):
+    timed = ef.load_scene(DEMO, width=16, height=12)
+    _interrupt_at(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        ef.render_events(timed, 0.004, steps=8, output=str(tmp_path / "n.h5"), checkpoint_s=3600)
+    assert os.listdir(tmp_path) == []
