@@ -8,35 +8,14 @@ import os
 
 import numpy as np
 
-from ..atomic import atomic_output
 from ..errors import EventFieldError
-from .disk import HEADER_BYTES, WRITE_CHUNK, BadFile, check_space, disk_errors
+from .disk import BadFile
 from .stream import EventStream
 
-AEDAT4_BYTES_PER_EVENT = 16    # dv::Event: int64 t, int16 x, y, uint8 p, padded
-
-
 def write_aedat4(path, events):
-    try:
-        import dv_processing as dv
-    except ImportError:
-        raise EventFieldError(f"{path}: AEDAT4 export needs dv-processing (pip install dv-processing)") from None
-    # the whole file is checked first: dv-processing writes on a thread of its own and aborts the process
-    # on a write error there, so a full disk must never be reached
-    need = AEDAT4_BYTES_PER_EVENT * len(events) + HEADER_BYTES
-    check_space(path, need)
-    with atomic_output(path, "event file") as tmp, disk_errors(path, need):
-        writer = dv.io.MonoCameraWriter(tmp, dv.io.MonoCameraWriter.EventOnlyConfig(
-            "mitsuba-eventfield", (events.width, events.height)))
-        for i in range(0, len(events), WRITE_CHUNK):
-            check_space(path, AEDAT4_BYTES_PER_EVENT * (len(events) - i) + HEADER_BYTES)
-            store = dv.EventStore()
-            s = slice(i, i + WRITE_CHUNK)
-            for t, x, y, p in zip(events.t[s].tolist(), events.x[s].tolist(), events.y[s].tolist(),
-                                  (events.p[s] > 0).tolist()):
-                store.push_back(t, x, y, p)
-            writer.writeEvents(store)
-        del writer  # flushes and closes the file
+    """A whole stream to AEDAT4 (``streaming.Aedat4EventWriter``, as a render streams it)."""
+    from .io import write_events
+    return write_events(path, events, "aedat4")
 
 
 # AEDAT4 is decoded by dv-processing in a child process: on some damaged packets (a valid header and data

@@ -1,4 +1,4 @@
-"""Event files: HDF5 in the DSEC layout (streamed while rendering), TimeLens npz, E2VID text, AEDAT4, and the
+"""Event files: HDF5 in the DSEC layout, TimeLens npz, E2VID text, AEDAT4 (all four streamed while rendering), and the
 event cameras' own recordings: Prophesee RAW (EVT 2.0 / 2.1 / 3.0) and DAT (``recordings.py``, through faery).
 
 HDF5 layout (DSEC, plus our metadata)::
@@ -28,19 +28,17 @@ import warnings
 import numpy as np
 
 from .._version import __version__
-from ..atomic import atomic_output
 from ..errors import EventFieldError
-from .aedat import AEDAT4_BYTES_PER_EVENT, read_aedat4, write_aedat4  # noqa: F401  (re-exported)
+from .aedat import read_aedat4, write_aedat4  # noqa: F401  (re-exported)
 from .disk import DISK_MARGIN, HEADER_BYTES, WRITE_CHUNK, BadFile, GuardedFile, check_space, disk_errors  # noqa: F401
 from .hdf5 import H5_BYTES_PER_EVENT, H5_GZIP_LEVEL, H5EventWriter, _json, read_h5  # noqa: F401
 from .recordings import EVT_VERSIONS, RECORDING_FORMATS, read_aedat4_faery, read_recording, write_recording
 from .stream import EventStream
+from .streaming import AEDAT4_BYTES_PER_EVENT, BYTES_PER_EVENT, NPZ_BYTES_PER_EVENT, open_writer  # noqa: F401
 
 FORMATS = {".h5": "h5", ".hdf5": "h5", ".npz": "npz", ".txt": "txt", ".aedat4": "aedat4", **RECORDING_FORMATS}
 # formats named by the caller only: a RAW file of a given EVT version (when its header does not say)
 NAMED_FORMATS = set(EVT_VERSIONS)
-
-NPZ_BYTES_PER_EVENT = 22       # x, y, timestamp (float64), polarity, t, p
 
 
 def format_of(path: str, fmt: str | None = None) -> str:
@@ -57,47 +55,22 @@ def format_of(path: str, fmt: str | None = None) -> str:
 
 def write_events(path: str, events: EventStream, fmt: str | None = None) -> str:
     """Write a whole stream; the format follows the extension (.h5/.hdf5, .npz, .txt, .aedat4, .raw = EVT 3.0,
-    .dat) or ``fmt`` (evt2, evt2.1, evt3 for a RAW file of that version). RAW, DAT and text keep no metadata."""
+    .dat) or ``fmt`` (evt2, evt2.1, evt3 for a RAW file of that version). RAW, DAT and text keep no metadata.
+    HDF5, npz, text and AEDAT4 go through the same chunk writers a render streams to (``streaming.py``)."""
     fmt = format_of(path, fmt)
     meta = dict(events.meta)
     meta.setdefault("package_version", __version__)
-    if fmt == "h5":
-        with H5EventWriter(path, events.width, events.height, meta) as w:
-            w.append(events.x, events.y, events.t, events.p)
-            w.close(end_us=max(events.duration_us, int(events.t[-1]) if len(events) else 0))
-    elif fmt == "npz":
-        _write_npz(path, events, _json(meta))
-    elif fmt == "txt":
-        _write_txt(path, events)
-    elif fmt in ("raw", "dat") or fmt in NAMED_FORMATS:
+    if fmt in ("raw", "dat") or fmt in NAMED_FORMATS:
         write_recording(path, events, fmt)
-    else:
-        write_aedat4(path, events)
-    return os.path.abspath(path)
-
-
-def _write_npz(path, events, meta_json):
-    """TimeLens keys (x, y, timestamp, polarity 0/1) plus ours; np.savez writes it in one go, so one check."""
-    need = NPZ_BYTES_PER_EVENT * len(events) + len(meta_json) + HEADER_BYTES
-    check_space(path, need)
-    with atomic_output(path, "event file") as tmp, disk_errors(path, need), open(tmp, "wb") as f:
-        np.savez(f, x=events.x, y=events.y, timestamp=events.t.astype(np.float64),
-                 polarity=(events.p > 0).astype(np.uint8), t=events.t, p=events.p,
-                 width=events.width, height=events.height, meta_json=meta_json)
-
-
-def _write_txt(path, events):
-    """E2VID: "width height" then "t[s] x y p(0/1)" per line; metadata is not kept."""
-    t_max = int(events.t.max()) if len(events) else 0
-    line = len(f"{t_max * 1e-6:.6f} {events.width} {events.height} 1\n") + 1   # + a minus sign
-    check_space(path, line * len(events) + HEADER_BYTES)
-    with atomic_output(path, "event file") as tmp, disk_errors(path, line * len(events)), open(tmp, "w") as f:
-        f.write(f"{events.width} {events.height}\n")
-        for i in range(0, len(events), WRITE_CHUNK):
+        return os.path.abspath(path)
+    if fmt in BYTES_PER_EVENT:       # the whole file's size is known: refuse before writing anything
+        check_space(path, BYTES_PER_EVENT[fmt] * len(events) + len(_json(meta)) + HEADER_BYTES)
+    with open_writer(path, fmt, events.width, events.height, meta) as w:
+        for i in range(0, max(len(events), 1), WRITE_CHUNK):
             s = slice(i, i + WRITE_CHUNK)
-            check_space(path, line * (len(events) - i))
-            rows = np.column_stack([events.t[s] * 1e-6, events.x[s], events.y[s], (events.p[s] > 0).astype(np.int64)])
-            np.savetxt(f, rows, fmt=["%.6f", "%d", "%d", "%d"])
+            w.append(events.x[s], events.y[s], events.t[s], events.p[s])
+        w.close(end_us=max(events.duration_us, int(events.t[-1]) if len(events) else 0))
+    return os.path.abspath(path)
 
 
 # How each format's files start: checked before a library parses them, since dv-processing answers an empty or

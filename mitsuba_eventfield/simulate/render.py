@@ -320,7 +320,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
     Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by
-    extension; HDF5 is written in chunks while rendering, the others at the end) and returns a
+    extension; HDF5, npz, text and AEDAT4 in chunks while rendering, RAW and DAT at the end) and returns a
     :class:`RenderSummary`. Either way the summary is also in ``stream.meta["render"]``.
 
     ``reuse``: when the scene is static and the view periodic (galvo scan, or a fixed camera), render one

@@ -1,13 +1,13 @@
 """Where a render's events go: memory, or an event file. Steps made on the device are kept there until a chunk
-of about ``buffer_events`` has gathered (one device-to-host copy per chunk, not per step); HDF5 chunks are
-compressed and written by a background thread (``events.writer``) while the next steps render. Other formats
-are written at the end."""
+of about ``buffer_events`` has gathered (one device-to-host copy per chunk, not per step); chunks are written
+(HDF5, npz, text, AEDAT4: ``events.streaming``) by a background thread (``events.writer``) while the next steps
+render. Camera recordings (RAW, DAT) are written at the end."""
 from __future__ import annotations
 
 import numpy as np
 
-from ..events.hdf5 import H5EventWriter
 from ..events.io import format_of, write_events
+from ..events.streaming import STREAMED, open_writer
 from ..events.stream import EventStream
 from ..events.writer import BackgroundWriter
 from ..plugins.event_fill import DeviceEvents
@@ -33,8 +33,8 @@ class Sink:
         self.writer = None
         if segments is not None:         # a checkpointed render: segments under <output>.resume, merged at the end
             self.writer = BackgroundWriter(SegmentWriter(output, width, height, meta, segments))
-        elif self.fmt == "h5":
-            self.writer = BackgroundWriter(H5EventWriter(output, width, height, meta))
+        elif self.fmt in STREAMED:       # HDF5, npz, text, AEDAT4: written while rendering
+            self.writer = BackgroundWriter(open_writer(output, self.fmt, width, height, meta))
         self.parts = []
         self.count = count or (lambda p: None)
         self.capacity = buffer_events(buffer_mb)

@@ -285,12 +285,14 @@ def test_disk_fills_during_render(tmp_path, demo_small, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
-@pytest.mark.parametrize("ext, writer", [(".npz", "savez"), (".txt", "savetxt")])
-def test_enospc_from_a_write_is_one_line(tmp_path, stream, ext, writer, monkeypatch):
-    """The disk fills between the check and the write (another program): the OSError becomes the same error."""
+@pytest.mark.parametrize("ext, module, writer", [(".npz", np.lib.format, "write_array_header_1_0"),
+                                                (".txt", np, "savetxt")])
+def test_enospc_from_a_write_is_one_line(tmp_path, stream, ext, module, writer, monkeypatch):
+    """The disk fills between the check and the write (another program): the OSError becomes the same error,
+    and the partial file (and the npz writer's column files) are gone."""
     def no_space(*a, **k):
         raise OSError(errno.ENOSPC, "No space left on device")
-    monkeypatch.setattr(eventio.np, writer, no_space)
+    monkeypatch.setattr(module, writer, no_space)
     with pytest.raises(ef.EventFieldError, match="disk full"):
         ef.write_events(str(tmp_path / f"ev{ext}"), stream)
     assert os.listdir(tmp_path) == []

@@ -1,0 +1,214 @@
+"""Chunk writers for the event formats besides HDF5: E2VID text, TimeLens npz and AEDAT4, fed time-sorted
+chunks while a render runs (by the background writer) or a whole stream at once (``write_events``), with
+memory flat in the stream's length.
+
+Each has the interface of ``H5EventWriter``: ``append(x, y, t, p, complete_until_us)``, ``close(end_us,
+meta)``, ``abort()``. Each writes to a partial file beside the target (``atomic.temporary_name``), renamed into
+place by ``close`` and removed by ``abort``, and checks the free disk space before every chunk (``disk.py``).
+
+npz is a zip of ``.npy`` arrays whose sizes are only known at the end: the columns are appended to raw
+partial files while streaming, and ``close`` writes each as one zip member (header, then the bytes copied in
+chunks), so no column is ever held in memory whole.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import zipfile
+
+import numpy as np
+
+from ..atomic import check_writable, remove_stale_partials, temporary_name
+from ..errors import EventFieldError
+from .disk import HEADER_BYTES, check_space, disk_errors
+from .hdf5 import H5EventWriter, _json
+
+NPZ_BYTES_PER_EVENT = 22       # x, y, timestamp (float64), polarity, t, p
+AEDAT4_BYTES_PER_EVENT = 16    # dv::Event: int64 t, int16 x, y, uint8 p, padded
+TXT_BYTES_PER_EVENT = 32       # "t.tttttt x y p\n" for timestamps below 10^5 s and sensors below 10^5 px
+COPY_CHUNK = 1 << 20
+
+
+class _PartialFile:
+    """The partial-file discipline shared by the writers: a temporary name, published by :meth:`_publish`,
+    removed by :meth:`abort`."""
+
+    def __init__(self, path: str, width: int, height: int, meta: dict | None):
+        self.path = check_writable(path, "event file")
+        remove_stale_partials(self.path)
+        self.tmp = temporary_name(self.path)
+        self.width, self.height, self.meta = int(width), int(height), dict(meta or {})
+        self.count, self.closed = 0, False
+
+    def _check_order(self, t):
+        if len(t) and np.any(np.diff(t) < 0):
+            raise ValueError(f"{self.path}: events must be appended in time order")
+
+    def _publish(self):
+        os.replace(self.tmp, self.path)
+        self.closed = True
+
+    def _remove(self, *paths):
+        for p in paths:
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(p)
+
+    def abort(self):
+        if not self.closed:
+            self.closed = True
+            self._release()
+            self._remove(self.tmp)
+
+    def _release(self):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            if not self.closed:
+                self.close()
+        else:
+            self.abort()
+        return False
+
+
+class TxtEventWriter(_PartialFile):
+    """E2VID text: "width height", then "t[s] x y p(0/1)" per event; no metadata (the format has none)."""
+
+    def __init__(self, path, width, height, meta=None):
+        super().__init__(path, width, height, meta)
+        check_space(self.path, HEADER_BYTES)
+        self.f = open(self.tmp, "w")
+        self.f.write(f"{self.width} {self.height}\n")
+
+    def append(self, x, y, t, p, complete_until_us=None):
+        t = np.asarray(t, np.int64)
+        self._check_order(t)
+        need = TXT_BYTES_PER_EVENT * len(t)
+        check_space(self.path, need)
+        with disk_errors(self.path, need):
+            rows = np.column_stack([t * 1e-6, x, y, (np.asarray(p) > 0).astype(np.int64)])
+            np.savetxt(self.f, rows, fmt=["%.6f", "%d", "%d", "%d"])
+        self.count += len(t)
+
+    def close(self, end_us=None, meta=None):
+        with disk_errors(self.path, HEADER_BYTES):
+            self.f.close()
+        self._publish()
+
+    def _release(self):
+        self.f.close()
+
+
+NPZ_COLUMNS = {"x": np.uint16, "y": np.uint16, "t": np.int64, "p": np.int8}
+
+
+class NpzEventWriter(_PartialFile):
+    """TimeLens npz (x, y, timestamp float64, polarity 0/1) plus ours (t, p, width, height, meta_json)."""
+
+    def __init__(self, path, width, height, meta=None):
+        super().__init__(path, width, height, meta)
+        check_space(self.path, HEADER_BYTES)
+        self.columns = {k: open(f"{self.tmp}.{k}", "wb") for k in NPZ_COLUMNS}
+
+    def append(self, x, y, t, p, complete_until_us=None):
+        t = np.asarray(t, np.int64)
+        self._check_order(t)
+        need = 2 * NPZ_BYTES_PER_EVENT * len(t)          # the raw columns now, the zip at close
+        check_space(self.path, need)
+        with disk_errors(self.path, need):
+            for key, values in zip("xytp", (x, y, t, p)):
+                self.columns[key].write(np.asarray(values).astype(NPZ_COLUMNS[key]).tobytes())
+        self.count += len(t)
+
+    def _member(self, zf, name, dtype, n, chunks):
+        with zf.open(f"{name}.npy", "w", force_zip64=True) as f:
+            np.lib.format.write_array_header_1_0(f, {"descr": np.dtype(dtype).str, "fortran_order": False,
+                                                     "shape": (n,)})
+            for chunk in chunks:
+                f.write(np.ascontiguousarray(chunk, dtype).tobytes())
+
+    def _chunks(self, key, convert=None):
+        dtype = NPZ_COLUMNS[key]
+        with open(f"{self.tmp}.{key}", "rb") as f:
+            while True:
+                raw = f.read(COPY_CHUNK * np.dtype(dtype).itemsize)
+                if not raw:
+                    return
+                values = np.frombuffer(raw, dtype)
+                yield convert(values) if convert else values
+
+    def close(self, end_us=None, meta=None):
+        for f in self.columns.values():
+            f.close()
+        self.meta.update(meta or {})
+        meta_json, n = _json(self.meta), self.count
+        need = NPZ_BYTES_PER_EVENT * n + len(meta_json) + HEADER_BYTES
+        check_space(self.path, need)
+        with disk_errors(self.path, need), zipfile.ZipFile(self.tmp, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
+            self._member(zf, "x", np.uint16, n, self._chunks("x"))
+            self._member(zf, "y", np.uint16, n, self._chunks("y"))
+            self._member(zf, "timestamp", np.float64, n, self._chunks("t", lambda v: v.astype(np.float64)))
+            self._member(zf, "polarity", np.uint8, n, self._chunks("p", lambda v: (v > 0).astype(np.uint8)))
+            self._member(zf, "t", np.int64, n, self._chunks("t"))
+            self._member(zf, "p", np.int8, n, self._chunks("p"))
+            for name, value in (("width", self.width), ("height", self.height), ("meta_json", meta_json)):
+                with zf.open(f"{name}.npy", "w") as f:
+                    np.lib.format.write_array(f, np.asarray(value))
+        self._remove(*(f"{self.tmp}.{k}" for k in NPZ_COLUMNS))
+        self._publish()
+
+    def _release(self):
+        for f in self.columns.values():
+            f.close()
+        self._remove(*(f"{self.tmp}.{k}" for k in NPZ_COLUMNS))
+
+
+class Aedat4EventWriter(_PartialFile):
+    """AEDAT4 through dv-processing. Its writer thread aborts the process on a write error, so the free space
+    for every chunk is checked before the chunk is handed over."""
+
+    def __init__(self, path, width, height, meta=None):
+        super().__init__(path, width, height, meta)
+        try:
+            import dv_processing as dv
+        except ImportError:
+            raise EventFieldError(f"{path}: AEDAT4 export needs dv-processing (pip install dv-processing)") from None
+        self.dv = dv
+        check_space(self.path, HEADER_BYTES)
+        with disk_errors(self.path, HEADER_BYTES):
+            self.writer = dv.io.MonoCameraWriter(self.tmp, dv.io.MonoCameraWriter.EventOnlyConfig(
+                "mitsuba-eventfield", (self.width, self.height)))
+
+    def append(self, x, y, t, p, complete_until_us=None):
+        t = np.asarray(t, np.int64)
+        self._check_order(t)
+        need = AEDAT4_BYTES_PER_EVENT * len(t) + HEADER_BYTES
+        check_space(self.path, need)
+        with disk_errors(self.path, need):
+            store = self.dv.EventStore()
+            for ti, xi, yi, pi in zip(t.tolist(), np.asarray(x).tolist(), np.asarray(y).tolist(),
+                                      (np.asarray(p) > 0).tolist()):
+                store.push_back(ti, xi, yi, pi)
+            self.writer.writeEvents(store)
+        self.count += len(t)
+
+    def close(self, end_us=None, meta=None):
+        with disk_errors(self.path, HEADER_BYTES):
+            del self.writer                     # flushes and closes the file
+        self._publish()
+
+    def _release(self):
+        if hasattr(self, "writer"):
+            del self.writer
+
+
+STREAMED = {"h5": H5EventWriter, "npz": NpzEventWriter, "txt": TxtEventWriter, "aedat4": Aedat4EventWriter}
+BYTES_PER_EVENT = {"npz": NPZ_BYTES_PER_EVENT, "txt": TXT_BYTES_PER_EVENT, "aedat4": AEDAT4_BYTES_PER_EVENT}
+
+
+def open_writer(path: str, fmt: str, width: int, height: int, meta: dict | None = None):
+    """The chunk writer of format ``fmt`` (h5, npz, txt, aedat4) for ``path``."""
+    return STREAMED[fmt](path, width, height, meta)
