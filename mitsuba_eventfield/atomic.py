@@ -161,7 +161,14 @@ def output_dir_run(path: str, command: str):
               + ("; " if previous and foreign else "")
               + (f"{len(foreign)} other files stay beside the new ones" if foreign else ""), file=sys.stderr)
     start = time.time() - 1.0          # file systems with coarse timestamps
-    yield path
+    existed = os.path.isdir(path)
+    try:
+        yield path
+    except BaseException:
+        if not existed:                # a failed run leaves no folder it made, when nothing was written into it
+            with contextlib.suppress(OSError):
+                os.rmdir(path)         # only an empty folder goes
+        raise
     if not os.path.isdir(path):
         return
     written = sorted(n for n in _files_below(path) if n != MANIFEST

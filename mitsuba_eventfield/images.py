@@ -3,6 +3,7 @@ bar. All writes are atomic (``atomic.py``)."""
 from __future__ import annotations
 
 import json
+import os
 
 import cv2
 import numpy as np
@@ -52,9 +53,14 @@ def read_exr(path: str) -> tuple[dict, dict]:
     """(channels, meta): name -> (H, W) float array under the names given to write_exr (R, G, B separately for
     a colour image), and our metadata from the header."""
     import OpenEXR
-    with OpenEXR.File(path, separate_channels=True) as f:   # (closing it empties its header: read all inside)
-        primary, meta = f.header().get(PRIMARY_ATTRIBUTE), f.header().get("eventfield_meta")
-        channels = {k: np.array(c.pixels) for k, c in f.channels().items()}
+    if not os.path.isfile(path):
+        raise EventFieldError(f"{path}: no such EXR file")
+    try:
+        with OpenEXR.File(path, separate_channels=True) as f:   # (closing it empties its header: read all inside)
+            primary, meta = f.header().get(PRIMARY_ATTRIBUTE), f.header().get("eventfield_meta")
+            channels = {k: np.array(c.pixels) for k, c in f.channels().items()}
+    except Exception as e:             # empty, cut or foreign: OpenEXR says only "Unable to open ... for read"
+        raise EventFieldError(f"{path}: not a readable EXR file ({' '.join(str(e).split())[:120]})") from None
     if primary and "Y" in channels and primary not in channels:
         channels = {(primary if k == "Y" else k): v for k, v in channels.items()}
     return channels, json.loads(meta) if meta else {}

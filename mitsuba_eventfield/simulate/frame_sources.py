@@ -100,8 +100,9 @@ def from_npz(path: str, fps=None, srgb=False) -> FrameSource:
     """An ``.npz`` with ``frames`` (T, H, W[, C]) and ``times`` (seconds) or ``timestamps_us``."""
     try:
         data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as e:
-        raise EventFieldError(f"{path}: not a readable .npz ({e})") from None
+    except Exception as e:            # empty (EOFError), not a zip, damaged: one line whatever NumPy raises
+        raise EventFieldError(f"{path}: not a readable .npz ({' '.join(str(e).split())[:100] or type(e).__name__})") \
+            from None
     if "frames" not in data:
         raise EventFieldError(f"{path}: no 'frames' array (found: {', '.join(data.files) or 'nothing'})")
     times = data["times"] if "times" in data else (data["timestamps_us"] * 1e-6 if "timestamps_us" in data else None)
