@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..optics.galvo import GalvoGeometry
+from ..optics.galvo import GalvoGeometry, scan_image_path_px
 from ..optics.scan import curve_from_dict, scan_period
 from . import reconstruct
 from .views import extract_views
@@ -141,17 +141,9 @@ def from_galvo(log_frames, times, optics: dict, meta: dict | None = None) -> Lig
 
 def galvo_steps_per_period(optics: dict, width: int, height: int | None = None, px_per_step: float = 1.0) -> int:
     """Render steps per scan period so the scan moves the image by at most ``px_per_step`` pixels per step
-    (at infinity and at the image corners, where the exact shift is largest): the longest path of one period
-    over ``px_per_step``."""
-    period = scan_period(optics["scan"])
+    (``optics.galvo.scan_image_path_px`` over ``px_per_step``)."""
     height = width if height is None else height
-    geometry = galvo_geometry(optics, width, height)
-    ax, ay = curve_from_dict(optics["scan"]).angles(np.linspace(0.0, period, 2049))
-    length = 0.0
-    for x, y in ((width / 2, height / 2), (0.0, 0.0), (width, 0.0), (0.0, height), (width, height)):
-        shifts = geometry.image_shift(ax, ay, math.inf, x, y)
-        length = max(length, float(np.hypot(*np.diff(shifts, axis=0).T).sum()))
-    return max(1, int(math.ceil(length / px_per_step)))
+    return max(1, int(math.ceil(scan_image_path_px(optics, width, height) / px_per_step)))
 
 
 def galvo_view_times(optics: dict, t_period_start: float, views: int) -> np.ndarray:

@@ -183,3 +183,18 @@ class GalvoGeometry:
         f = self.focal_px
         return ((f * self.gain_x, f * self.gain_y),
                 (-f * self.gain_x * self.pivot_x, -f * self.gain_y * self.pivot_y))
+
+
+def scan_image_path_px(optics: dict, width: int, height: int) -> float:
+    """How far, in pixels, the scan moves the image in one period: the longest path over the image centre and
+    corners (where the exact shift is largest), at infinity (the largest shift of a two-mirror scan). The
+    steps a period needs for at most p pixels of scan motion per step is this over p."""
+    from .scan import curve_from_dict, scan_period
+    geometry = GalvoGeometry.from_optics(optics, width, height)
+    ax, ay = curve_from_dict(optics["scan"]).angles(np.linspace(0.0, scan_period(optics["scan"]), 2049))
+    length = 0.0
+    for x, y in ((width / 2, height / 2), (0.0, 0.0), (width, 0.0), (0.0, height), (width, height)):
+        shifts = geometry.image_shift(ax, ay, math.inf, x, y)
+        length = max(length, float(np.hypot(*np.diff(shifts, axis=0).T).sum()))
+    return length
+

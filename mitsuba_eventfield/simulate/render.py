@@ -25,6 +25,7 @@ from ..scene.timed import TimedScene, load_scene
 from ..validate import MAX_DURATION_S, MAX_STEPS, available_memory, finite, number, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
 from .checkpoint import checkpoints_for
+from .image_motion import note_image_motion
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary, run_metadata
 
@@ -347,6 +348,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                             output=os.path.abspath(output) if output else None)
     if not st.adaptive:
         warn_coarse_scan_steps(timed.scan_period, st.duration, st.steps, summary.notes)
+        note_image_motion(timed, st.t_start, st.duration, st.steps, summary)
     meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,
                      seed_mode=st.seed_mode, stepping=st.as_meta())
     meta.update(extra_meta or {})

@@ -35,6 +35,7 @@ class RenderSummary:
     write_s: float = 0.0        # the render thread's time handing events over (device-to-host copy, queue)
     writer_busy_s: float = 0.0  # the background writer's time compressing and writing (overlaps the render)
     writer_wait_s: float = 0.0  # the render thread's time blocked on the writer: > 0 means the disk set the pace
+    image_motion_px_per_step: dict | None = None  # scan and objects, pixels per step (uniform stepping)
     width: int = 0
     height: int = 0
     output: str | None = None

@@ -1,0 +1,55 @@
+"""Image motion per step (the coarse-step note) against closed-form projections."""
+import math
+
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.simulate.image_motion import note_image_motion, object_px_per_step, scan_px_per_step
+from mitsuba_eventfield.simulate.summary import RenderSummary
+
+
+def _sliding_sphere(width=64, velocity=0.5):
+    """A sphere of radius 0.1 at 2 m in front of a 45 deg pinhole, sliding sideways at ``velocity`` m/s."""
+    import mitsuba as mi
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": "eventfield", "threshold": 0.2},
+        "sensor": {"type": "perspective", "fov": 45.0, "to_world": mi.ScalarTransform4f().look_at(
+            origin=[0, 0, 0], target=[0, 0, 1], up=[0, 1, 0]),
+            "film": {"type": "hdrfilm", "width": width, "height": width * 3 // 4}},
+        "ball": {"type": "sphere", "id": "ball", "center": [0, 0, 2.0], "radius": 0.1,
+                 "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 1.0}}}})
+    return ef.load_scene(scene, motion={"objects": {"ball": {"velocity": [velocity, 0, 0]}}})
+
+
+def test_object_motion_matches_the_pinhole_projection():
+    """The box corner nearest the camera (z = 1.9 m) moves fastest on the image: f v dt / 1.9 pixels a step."""
+    timed = _sliding_sphere()
+    focal = 64 / (2 * math.tan(math.radians(45.0) / 2))
+    duration, steps = 0.02, 10
+    expected = focal * 0.5 * (duration / steps) / 1.9
+    assert object_px_per_step(timed, 0.0, duration, steps) == pytest.approx(expected, rel=0.02)
+    assert scan_px_per_step(timed, duration, steps) is None
+
+
+def test_coarse_steps_are_noted_with_the_steps_that_suffice():
+    timed = _sliding_sphere(velocity=20.0)               # 5 ms steps: 0.1 m, 77.25 px x 0.1 / 1.9 = 4.07 px
+    coarse, fine = RenderSummary(), RenderSummary()
+    note_image_motion(timed, 0.0, 0.02, 4, coarse)
+    note_image_motion(timed, 0.0, 0.02, 64, fine)
+    assert coarse.image_motion_px_per_step["objects"] == pytest.approx(4.07, rel=0.02)
+    assert "steps coarser than the image motion" in coarse.notes[0]
+    need = int(coarse.notes[0].rsplit("--steps ", 1)[1].split()[0])
+    assert need == 17 and fine.notes == [] and fine.image_motion_px_per_step["objects"] < 1
+
+
+def test_galvo_scan_motion_in_the_render_metadata():
+    """The fan's scan: the image path of one period (the same geometry the light fields use) over the steps of
+    a period; recorded in every render's metadata, noted when over a pixel."""
+    from mitsuba_eventfield.optics.galvo import scan_image_path_px
+    from mitsuba_eventfield.scene import bundled_scene
+    timed = ef.load_scene(bundled_scene("fan/fan.xml"), width=48, height=36)
+    ev = ef.render_events(timed, 0.004, steps=4)         # one 4 ms period in 4 steps: about 1.8 px each
+    motion = ev.meta["render"]["image_motion_px_per_step"]
+    path = scan_image_path_px(timed.sensor.optics_metadata(), 48, 36)
+    assert motion["scan"] == pytest.approx(path / 4, rel=1e-6) and motion["scan"] > 1
+    assert any("steps coarser than the image motion" in n for n in ev.meta["render"]["notes"])
