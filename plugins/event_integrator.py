@@ -43,10 +43,10 @@ previous instant, reference level and per-pixel ON/OFF thresholds.
 
 Pixel realism (``pixel_model.PixelConfig``; all off in the default ``ideal`` preset): threshold mismatch and
 per-crossing jitter, leak, shot noise and the photoreceptor low-pass evolve in the step's single Dr.Jit kernel
-(random numbers from a per-pixel PCG32, seeded). :meth:`commit_events` makes the step's events: on the device
-(``event_fill``: count, prefix sum, fill, sort, clock) for every pixel model without sparse sequential state;
-with a refractory period, shot-noise events or a readout cap, on the host (:meth:`commit`, then
-:meth:`readout` for the clock and the cap once the step's events are time-sorted). Both give the same events.
+(random numbers from a per-pixel PCG32, seeded). :meth:`commit_events` makes the step's events either on the
+device (``event_fill``: count, prefix sum, fill, refractory selection, shot noise, sort, clock) or on the host
+(``host_events``, then :meth:`readout`), whichever is faster on the backend (:attr:`device_resident`); both
+give the same events. The readout cap's random drops are always NumPy draws, per step.
 """
 from __future__ import annotations
 
@@ -258,8 +258,8 @@ class _EventIntegratorMethods:
     def commit_events(self, t0: float, t1: float, base_us: int = 0):
         """Accept the staged frame as the brightness at t1 and return the step's events of (t0, t1], time-sorted
         and read out, with timestamps ``rint(t 1e6) + base_us`` microseconds: made on the device
-        (``event_fill.DeviceEvents``), or on the host under ``host_path()`` (``event_fill.HostEvents``). Both
-        paths give the same events, bit for bit. With a readout cap, the step's events come to the host for it
+        (``event_fill.DeviceEvents``) or on the host (``event_fill.HostEvents``) as :attr:`device_resident`
+        says. Both paths give the same events, bit for bit. With a readout cap, the step's events come to the host for it
         (its random drops are NumPy draws per step)."""
         if self.device_resident:
             events = self.commit_device(t0, t1, base_us)

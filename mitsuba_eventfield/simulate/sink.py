@@ -23,8 +23,8 @@ def buffer_events(buffer_mb: float) -> int:
 
 
 class Sink:
-    """Where a step's events go, in time order: an in-memory list or an HDF5 file written in the background.
-    ``count`` is called with each chunk's polarities as it leaves the buffer (the render's ON/OFF totals)."""
+    """Where a step's events go, in time order: an in-memory list, or an event file written in the background
+    (segments under ``<output>.resume`` for a checkpointed render). ``count`` is called with each chunk's polarities as it leaves the buffer (the render's ON/OFF totals)."""
 
     def __init__(self, output, fmt, width, height, meta, count=None, buffer_mb: float = DEFAULT_EVENT_BUFFER_MB,
                  segments: list | None = None):
