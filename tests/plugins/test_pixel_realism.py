@@ -4,12 +4,12 @@ import os
 import subprocess
 import sys
 
-import analytic as an
 import numpy as np
 import pytest
 from conftest import DEMO, ROOT
 
 import mitsuba_eventfield as ef
+from mitsuba_eventfield.evaluation import analytic as an
 from mitsuba_eventfield.plugins import pixel_model as pm
 
 

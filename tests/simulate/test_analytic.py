@@ -1,9 +1,9 @@
-"""The event integrator against the exact events of an analytic scene (tests/analytic.py)."""
-import analytic as an
+"""The event integrator against the exact events of an analytic scene (evaluation/analytic.py)."""
 import numpy as np
 import pytest
 
 import mitsuba_eventfield as ef
+from mitsuba_eventfield.evaluation import analytic as an
 
 C = 0.1
 DURATION, STEPS = 0.01, 100
@@ -21,22 +21,6 @@ def _truth():
     return an.ideal_events(np.log(an.exact_intensity(times, SPEED)), times, C)
 
 
-def _match(ev, truth):
-    """Per pixel: (count difference, |dt| of the paired events, polarity agreement)."""
-    count_diff, errors, pol_ok = [], [], True
-    for row in range(an.HEIGHT):
-        for col in range(an.WIDTH):
-            sel = (ev.x == col) & (ev.y == row)
-            t_sim, p_sim = ev.t[sel] * 1e-6, ev.p[sel]
-            t_true = np.array([e[0] for e in truth[col]])
-            p_true = np.array([e[1] for e in truth[col]])
-            count_diff.append(len(t_sim) - len(t_true))
-            n = min(len(t_sim), len(t_true))
-            errors.append(np.abs(t_sim[:n] - t_true[:n]))
-            pol_ok &= bool(np.array_equal(p_sim[:n], p_true[:n]))
-    return np.array(count_diff), np.concatenate(errors), pol_ok
-
-
 def test_rendered_frame_matches_analytic_radiance():
     import mitsuba as mi
     timed = _scene(mi)
@@ -51,9 +35,9 @@ def test_events_match_exact_crossings(adaptive, capsys):
     kwargs = dict(adaptive=True, max_log_change=0.5, max_step=DT) if adaptive else dict(steps=STEPS)
     ev = ef.render_events(_scene(mi), DURATION, threshold=C, **kwargs)
     truth = _truth()
-    count_diff, err, pol_ok = _match(ev, truth)
-    n_true = sum(len(e) for e in truth) * an.HEIGHT
-    med, p99 = np.median(err) / DT, np.percentile(err, 99) / DT
+    scored = an.score(ev, truth)
+    count_diff, pol_ok, n_true = scored["count_diff"], scored["polarity_ok"], scored["exact_events"]
+    med, p99 = scored["timing_median_us"] * 1e-6 / DT, scored["timing_p99_us"] * 1e-6 / DT
     with capsys.disabled():
         print(f"\n[analytic {'adaptive' if adaptive else 'uniform'}] {len(ev)} events (exact {n_true}); "
               f"steps {ev.meta['render']['steps']}; max |count diff| {np.abs(count_diff).max()}; "
