@@ -24,6 +24,7 @@ from ..events.io import format_of
 from ..scene.timed import TimedScene, load_scene
 from ..validate import MAX_DURATION_S, MAX_STEPS, available_memory, finite, number, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
+from .accuracy_limit import MIN_STEPS, AccuracyLimit
 from .checkpoint import checkpoints_for
 from .image_motion import note_image_motion
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
@@ -147,6 +148,8 @@ class _Loop:
     def __init__(self, timed, integ, st: _Stepping, sink, summary, bar, reuse: bool, checkpoints=None):
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
         self.checkpoints = checkpoints
+        self.limit = AccuracyLimit(st.duration / st.steps, st.spp) \
+            if not st.adaptive and st.seed_mode == "fixed" and st.steps >= MIN_STEPS else None
         self.width, self.height = timed.film_size
         self.reuse = None if st.adaptive or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
@@ -188,6 +191,8 @@ class _Loop:
         else:
             self.render_at(st.t_start, 0)
             integ.commit(st.t_start, st.t_start)         # initialises every pixel's reference; fires nothing
+            if self.limit is not None:
+                self.limit.first_frame(self, st.t_start)
             t, k = st.t_start, 0
             dt = (st.duration / st.steps) if not st.adaptive else max(st.min_step, st.max_step / 16)
         c_min = min(integ.threshold_on, integ.threshold_off)
@@ -211,6 +216,8 @@ class _Loop:
                     continue
                 dt = self._next_dt(change / dt, dt, c_min)
             self._step_events(t, t_next, k)
+            if self.limit is not None:
+                self.limit.step_frame(integ)
             if self.bar is not None:
                 _advance(self.bar, t_next - st.t_start)
                 self.bar.set_postfix_str(f"{self.summary.events + self.sink.device_events} events")
@@ -282,6 +289,8 @@ class _Loop:
         summary, integ = self.summary, self.integ
         summary.steps = steps
         summary.dropped_readout, summary.dropped_refractory = integ.readout_dropped(), integ.refractory_dropped
+        if self.limit is not None:
+            self.limit.note(summary)
         summary.noise_events = integ.noise_events
         if summary.dropped_readout:
             total = summary.events + summary.dropped_readout

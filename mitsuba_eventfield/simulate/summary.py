@@ -36,6 +36,7 @@ class RenderSummary:
     writer_busy_s: float = 0.0  # the background writer's time compressing and writing (overlaps the render)
     writer_wait_s: float = 0.0  # the render thread's time blocked on the writer: > 0 means the disk set the pace
     image_motion_px_per_step: dict | None = None  # scan and objects, pixels per step (uniform stepping)
+    timing_limit: dict | None = None            # what limits timestamp accuracy, with both estimates (us)
     width: int = 0
     height: int = 0
     output: str | None = None
