@@ -28,11 +28,19 @@ mi, dr = backend.mi, backend.dr
 
 
 def pixel_integrator(preset: str = "ideal", pixel: dict | None = None, threshold: float | None = None):
-    """An ``eventfield`` integrator with this pixel model, for feeding frames (no scene needed)."""
-    props = {"type": "eventfield", "preset": preset or "ideal", **(pixel or {})}
+    """An ``eventfield`` integrator with this pixel model, for feeding frames (no scene needed). A bad preset or
+    parameter is one ``EventFieldError`` naming it (checked before the plugin is built)."""
+    overrides = dict(pixel or {})
     if threshold is not None:
-        props["threshold"] = float(threshold)
-    return mi.load_dict(props)
+        overrides.setdefault("threshold_on", float(threshold))
+        overrides.setdefault("threshold_off", float(threshold))
+    try:
+        config = pixel_model.pixel_config(preset or "ideal", "pixel model", **overrides)
+    except ValueError as e:
+        raise EventFieldError(str(e)) from None
+    integ = mi.load_dict({"type": "eventfield"})
+    integ.configure(config)
+    return integ
 
 
 def events_from_frames(frames, times=None, *, fps: float | None = None, preset: str = "ideal",

@@ -89,6 +89,8 @@ def test_video_through_opencv(tmp_path):
     (["{d}/bad.npz"], "no 'frames' array"),
     (["{d}/back.npz"], "strictly increasing"),
     (["{d}/imgs", "--fps", "-5"], "--fps"),
+    (["{d}/imgs", "--fps", "10", "--preset", "bogus"], "unknown preset 'bogus'"),
+    (["{d}/imgs", "--fps", "10", "--pixel", "refractory_s=-1"], "refractory_s = -1.0: must be >= 0"),
 ])
 def test_bad_input_one_line_no_output(tmp_path, capsys, args, message):
     cv2 = pytest.importorskip("cv2")
