@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import ConfigError
+
 
 @dataclass
 class EventStream:
@@ -29,11 +31,11 @@ class EventStream:
         self.width, self.height = int(self.width), int(self.height)
         n = len(self.t)
         if not (len(self.x) == len(self.y) == len(self.p) == n):
-            raise ValueError(f"x, y, t, p must have one length (got {len(self.x)}, {len(self.y)}, {n}, {len(self.p)})")
+            raise ConfigError(f"event stream: x, y, t, p must have one length (got {len(self.x)}, {len(self.y)}, {n}, {len(self.p)})")
         if n and (self.x.max() >= self.width or self.y.max() >= self.height):
-            raise ValueError(f"event coordinates exceed the {self.width}x{self.height} sensor")
+            raise ConfigError(f"event stream: coordinates exceed the {self.width}x{self.height} sensor")
         if n and (self.p.min() < -1 or self.p.max() > 1 or not np.all(self.p)):
-            raise ValueError("polarity must be +1 or -1")
+            raise ConfigError("event stream: polarity must be +1 or -1")
 
     @classmethod
     def empty(cls, width, height, meta=None):

@@ -18,10 +18,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..errors import ConfigError
 from ..lightfield.model import LightField
 from .measures import (IMAGE_MEASURES, focus_measure,  # noqa: F401  (focus_measure, refine_peak: re-exported)
                        parabola_offset, refine_peak)
-from .refocus import aligned_views, depth_planes, refocus
+from .refocus import aligned_views, check_lightfield, depth_planes, refocus
 
 MEASURES = IMAGE_MEASURES + ("variance",)
 
@@ -58,8 +59,9 @@ def _volume(lf: LightField, planes, measure, window):
 def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, measure: str = "sml",
                      window: int = 7) -> DepthMap:
     """Per-pixel depth: the plane whose refocused image is sharpest, refined between planes."""
+    check_lightfield(lf, "depth_from_focus")
     if measure not in MEASURES:
-        raise ValueError(f"unknown focus measure {measure!r}; allowed: {', '.join(MEASURES)}")
+        raise ConfigError(f"depth_from_focus: unknown focus measure {measure!r}; allowed: {', '.join(MEASURES)}")
     zs = depth_planes(near, far, planes)
     inv = 1.0 / zs
     vol = _volume(lf, zs, measure, window)                     # (D, H, W)

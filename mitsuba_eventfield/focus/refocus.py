@@ -20,6 +20,7 @@ import math
 import cv2
 import numpy as np
 
+from ..errors import ConfigError
 from ..lightfield.model import LightField
 from .measures import focus_measure, refine_peak
 
@@ -99,13 +100,22 @@ def motion_shifts(lf: LightField, motion) -> np.ndarray:
     return np.stack([vx * dt, vy * dt], axis=-1)
 
 
+def check_lightfield(lf, where: str) -> None:
+    """A clear error for what is not a light field (e.g. None from a failed step), instead of an AttributeError
+    deep inside."""
+    if not isinstance(lf, LightField):
+        raise ConfigError(f"{where}: expected a LightField (ef.from_galvo, ef.from_spatial, ef.galvo_lightfields), "
+                          f"got {type(lf).__name__}")
+
+
 def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None) -> np.ndarray:
     """The light field refocused at ``depth`` (scene units; math.inf allowed) or at the disparity slope
     ``alpha`` (pixels per unit of view position, on-axis for a galvo, see ``LightField``): (H, W[, C]) linear
     intensity.
     ``motion``: (vx, vy) image velocity in pixels per second of the object to make sharp (``motion_shifts``)."""
+    check_lightfield(lf, "refocus")
     if alpha is None and not (depth is not None and depth > 0):
-        raise ValueError(f"depth = {depth!r}: must be > 0 (math.inf for infinity), or give alpha")
+        raise ConfigError(f"refocus: depth = {depth!r}: must be > 0 (math.inf for infinity), or give alpha")
     if alpha is None and not lf.shift_invariant:
         return _refocus_warped(lf, depth, motion)
     shifts = lf.shifts(depth, alpha)
@@ -130,7 +140,7 @@ def _refocus_warped(lf: LightField, depth: float, motion=None) -> np.ndarray:
 def depth_planes(near: float, far: float, count: int) -> np.ndarray:
     """``count`` depths from near to far, uniform in inverse depth (uniform in disparity)."""
     if not (0 < near < far) or count < 2:
-        raise ValueError(f"depth planes: need 0 < near ({near}) < far ({far}) and count ({count}) >= 2")
+        raise ConfigError(f"depth planes: need 0 < near ({near}) < far ({far}) and count ({count}) >= 2")
     return 1.0 / np.linspace(1.0 / near, 1.0 / far, count)
 
 

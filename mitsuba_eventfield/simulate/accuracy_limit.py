@@ -24,12 +24,22 @@ MIN_STEPS = 3
 class AccuracyLimit:
     """Collects the frames the estimates need while the render runs; :meth:`note` writes the verdict."""
 
-    def __init__(self, dt: float, spp: int):
-        self.dt, self.spp = dt, spp
+    def __init__(self, dt: float, spp: int, active: bool = True):
+        self.dt, self.spp, self.active = dt, spp, active
         self.frames, self.sigma = [], None
+
+    @classmethod
+    def for_stepping(cls, st) -> "AccuracyLimit":
+        """Active for uniform, fixed-seed renders of at least MIN_STEPS steps; otherwise every method does
+        nothing (adaptive steps and independent seeds have no single step or frozen noise to speak of)."""
+        uniform = not st.adaptive and st.steps is not None
+        return cls(st.duration / st.steps if uniform else 0.0, st.spp,
+                   active=uniform and st.seed_mode == "fixed" and st.steps >= MIN_STEPS)
 
     def first_frame(self, loop, t_start: float) -> None:
         """Keep the first frame (the pixels' initial brightness) and render it again with another seed."""
+        if not self.active:
+            return
         integ, st = loop.integ, loop.st
         self.frames.append(integ.log_prev.numpy())
         loop.timed.set_time(t_start)
@@ -40,7 +50,7 @@ class AccuracyLimit:
         self.sigma = np.abs(self.frames[0] - other) / math.sqrt(2)
 
     def step_frame(self, integ) -> None:
-        if len(self.frames) < 3:
+        if self.active and len(self.frames) < 3:
             self.frames.append(integ.log_prev.numpy())
 
     def estimate(self) -> dict | None:
@@ -59,7 +69,7 @@ class AccuracyLimit:
                 "steps_us": steps_us, "spp": self.spp}
 
     def note(self, summary) -> None:
-        est = self.estimate()
+        est = self.estimate() if self.active else None
         summary.timing_limit = est
         if est is None:
             return

@@ -24,7 +24,7 @@ from ..events.io import format_of
 from ..scene.timed import TimedScene, load_scene
 from ..validate import MAX_DURATION_S, MAX_STEPS, available_memory, finite, number, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
-from .accuracy_limit import MIN_STEPS, AccuracyLimit
+from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
 from .image_motion import note_image_motion
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
@@ -148,8 +148,7 @@ class _Loop:
     def __init__(self, timed, integ, st: _Stepping, sink, summary, bar, reuse: bool, checkpoints=None):
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
         self.checkpoints = checkpoints
-        self.limit = AccuracyLimit(st.duration / st.steps, st.spp) \
-            if not st.adaptive and st.seed_mode == "fixed" and st.steps >= MIN_STEPS else None
+        self.limit = AccuracyLimit.for_stepping(st)      # what limits timing accuracy: steps or noise
         self.width, self.height = timed.film_size
         self.reuse = None if st.adaptive or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
@@ -191,8 +190,7 @@ class _Loop:
         else:
             self.render_at(st.t_start, 0)
             integ.commit(st.t_start, st.t_start)         # initialises every pixel's reference; fires nothing
-            if self.limit is not None:
-                self.limit.first_frame(self, st.t_start)
+            self.limit.first_frame(self, st.t_start)
             t, k = st.t_start, 0
             dt = (st.duration / st.steps) if not st.adaptive else max(st.min_step, st.max_step / 16)
         c_min = min(integ.threshold_on, integ.threshold_off)
@@ -216,8 +214,7 @@ class _Loop:
                     continue
                 dt = self._next_dt(change / dt, dt, c_min)
             self._step_events(t, t_next, k)
-            if self.limit is not None:
-                self.limit.step_frame(integ)
+            self.limit.step_frame(integ)
             if self.bar is not None:
                 _advance(self.bar, t_next - st.t_start)
                 self.bar.set_postfix_str(f"{self.summary.events + self.sink.device_events} events")
@@ -289,8 +286,7 @@ class _Loop:
         summary, integ = self.summary, self.integ
         summary.steps = steps
         summary.dropped_readout, summary.dropped_refractory = integ.readout_dropped(), integ.refractory_dropped
-        if self.limit is not None:
-            self.limit.note(summary)
+        self.limit.note(summary)
         summary.noise_events = integ.noise_events
         if summary.dropped_readout:
             total = summary.events + summary.dropped_readout
@@ -404,7 +400,10 @@ def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
                             if is_event_integrator(integ) else DEFAULT_LINLOG)
     inner = integ.inner if is_event_integrator(integ) else integ
     frames = []
-    for t in np.atleast_1d(np.asarray(times, dtype=np.float64)):
+    times = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    if not np.isfinite(times).all():
+        raise EventFieldError(f"render_frames: times must be finite seconds (got {times[~np.isfinite(times)][0]})")
+    for t in times:
         timed.set_time(float(t))
         img = mi.render(timed.scene, integrator=inner, seed=seed, spp=spp, sensor=sensor or timed.scene.sensors()[0])
         arr = np.array(img)
