@@ -46,21 +46,26 @@ class DeviceEvents:
 
     @staticmethod
     def concat(parts: list["DeviceEvents"]) -> "DeviceEvents":
-        """One chunk from many steps, still on the device. Each part is scattered at an opaque offset: one
-        cached kernel whatever the sizes (``dr.concat`` bakes each offset into a new kernel)."""
+        """One chunk from many steps, still on the device (``concat_arrays`` per column)."""
         parts = [q for q in parts if q.count]
         if len(parts) <= 1:
             return parts[0] if parts else empty()
-        total = sum(q.count for q in parts)
-        cols = {k: dr.empty(type(getattr(parts[0], k)), total) for k in "xytp"}
-        start = 0
-        for q in parts:
-            index = dr.arange(mi.UInt32, q.count) + _opaque(start, mi.UInt32)
-            for k, buf in cols.items():
-                dr.scatter(buf, getattr(q, k), index)
-            start += q.count
-        dr.eval(*cols.values())
-        return DeviceEvents(*cols.values(), count=total)
+        cols = [concat_arrays([getattr(q, k) for q in parts], type(getattr(parts[0], k))) for k in "xytp"]
+        dr.eval(*cols)
+        return DeviceEvents(*cols, count=sum(q.count for q in parts))
+
+
+def concat_arrays(arrays: list, cls):
+    """The arrays one after the other in one ``cls`` array, each scattered at an opaque offset: one cached
+    kernel whatever the sizes (``dr.concat`` bakes each offset into a new kernel)."""
+    arrays = [cls(a) for a in arrays if dr.width(a)]
+    if len(arrays) <= 1:
+        return arrays[0] if arrays else cls()
+    out, start = dr.empty(cls, sum(dr.width(a) for a in arrays)), 0
+    for a in arrays:
+        dr.scatter(out, a, dr.arange(mi.UInt32, dr.width(a)) + _opaque(start, mi.UInt32))
+        start += dr.width(a)
+    return out
 
 
 @dataclass
@@ -166,18 +171,6 @@ def _search(ends, n_pix, total):
     return slot, dr.binary_search(0, n_pix - 1, lambda i: dr.gather(mi.UInt32, ends, i) <= slot)
 
 
-def _join(a, b, cls):
-    """a then b in one ``cls`` array (scatter at an opaque offset: one cached kernel whatever the sizes)."""
-    a, b = cls(a), cls(b)
-    if dr.width(b) == 0:
-        return a
-    out = dr.empty(cls, dr.width(a) + dr.width(b))
-    if dr.width(a):
-        dr.scatter(out, a, dr.arange(mi.UInt32, dr.width(a)))
-    dr.scatter(out, b, dr.arange(mi.UInt32, dr.width(b)) + _opaque(dr.width(a), mi.UInt32))
-    return out
-
-
 def _read(values) -> list:
     """Up to four device scalars as Python ints, in one array: one device-to-host copy (the step's only sync)."""
     packed = dr.zeros(mi.UInt32, 4)
@@ -244,9 +237,10 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
         t_s = _crossing_time(mi.Int64(rank) + 1, sign, *at, dr.gather(mi.Float64, step_d, pixel), t0_d, t1_d)
     if noise_kept:
         _, npix = _search(noise_ends, n_pix, noise_kept)
-        pixel = _join(pixel, npix, mi.UInt32)
-        t_s = _join(t_s, dr.gather(mi.Float64, nt, npix), mi.Float64)
-        sign = _join(sign, dr.select(dr.gather(mi.Float, u_pol, npix) < 0.5, mi.Int32(1), mi.Int32(-1)), mi.Int32)
+        pixel = concat_arrays([pixel, npix], mi.UInt32)
+        t_s = concat_arrays([t_s, dr.gather(mi.Float64, nt, npix)], mi.Float64)
+        sign = concat_arrays([sign, dr.select(dr.gather(mi.Float, u_pol, npix) < 0.5, mi.Int32(1), mi.Int32(-1))],
+                             mi.Int32)
     return _time_sorted(pixel, t_s, sign, width, t0, t1, base_us, resolution_us,
                         DeviceEvents(*empty_columns(), count=total + noise_kept, **stats))
 

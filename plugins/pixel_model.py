@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from mitsuba_eventfield.errors import ConfigError   # a ValueError too: one named error for bad pixel input
+
 
 def linlog(dr, intensity, linear_below: float):
     """Log brightness with a linear segment below ``linear_below`` (C1-continuous), so zero radiance is finite.
@@ -128,26 +130,26 @@ class PixelConfig:
             if f.name in ("preset",):
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"{where}: {f.name} = {v!r}: must be a finite number")
+                raise ConfigError(f"{where}: {f.name} = {v!r}: must be a finite number")
         for name in ("threshold_on", "threshold_off", "linlog_threshold", "bright_intensity"):
             if getattr(self, name) <= 0:
-                raise ValueError(f"{where}: {name} = {getattr(self, name)!r}: must be > 0")
+                raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: must be > 0")
         for name in ("threshold_sigma", "threshold_jitter", "refractory_s", "leak_rate_hz", "leak_jitter",
                      "shot_noise_hz", "cutoff_hz", "timestamp_resolution_us", "readout_cap",
                      "readout_cap_native_pixels"):
             if getattr(self, name) < 0:
-                raise ValueError(f"{where}: {name} = {getattr(self, name)!r}: must be >= 0 (rates, times and "
+                raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: must be >= 0 (rates, times and "
                                  "spreads cannot be negative)")
         c = min(self.threshold_on, self.threshold_off)
         for name in ("threshold_sigma", "threshold_jitter"):
             if getattr(self, name) * 4 >= c:
-                raise ValueError(f"{where}: {name} = {getattr(self, name)}: with thresholds of {c} it would make "
+                raise ConfigError(f"{where}: {name} = {getattr(self, name)}: with thresholds of {c} it would make "
                                  f"thresholds <= 0 (C - 4 sigma <= 0); must be < {c / 4:g}")
         for name in ("shot_noise_bright_factor", "cutoff_min_fraction"):
             if not 0 < getattr(self, name) <= 1:
-                raise ValueError(f"{where}: {name} = {getattr(self, name)!r}: must be in (0, 1]")
+                raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: must be in (0, 1]")
         if self.readout_cap and self.readout_cap < READOUT_BINS_PER_MS * 1000 * 2:
-            raise ValueError(f"{where}: readout_cap = {self.readout_cap:g} events/s is below the smallest the "
+            raise ConfigError(f"{where}: readout_cap = {self.readout_cap:g} events/s is below the smallest the "
                              f"limiter can enforce ({READOUT_BINS_PER_MS * 2000:g})")
         return self
 
@@ -174,11 +176,11 @@ PRESETS = {
 
 def pixel_config(preset: str = "ideal", where: str = "pixel model", **overrides) -> PixelConfig:
     if preset not in PRESETS:
-        raise ValueError(f"{where}: unknown preset {preset!r}; allowed: {', '.join(PRESETS)}")
+        raise ConfigError(f"{where}: unknown preset {preset!r}; allowed: {', '.join(PRESETS)}")
     names = {f.name for f in fields(PixelConfig)}
     unknown = set(overrides) - names
     if unknown:
-        raise ValueError(f"{where}: unknown pixel parameter {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(names))}")
+        raise ConfigError(f"{where}: unknown pixel parameter {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(names))}")
     values = dict(PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
     return PixelConfig(preset=preset, **values).validate(where)
 

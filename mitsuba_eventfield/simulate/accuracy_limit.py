@@ -45,7 +45,7 @@ class AccuracyLimit:
         loop.timed.set_time(t_start)
         import mitsuba as mi
         mi.render(loop.timed.scene, integrator=integ, seed=st.seed + 1, spp=st.spp)
-        other = np.array(integ.staged.numpy() if hasattr(integ.staged, "numpy") else integ.staged)
+        other = integ.staged.numpy()
         integ.staged = integ.staged_intensity = None          # not a step: nothing is committed
         self.sigma = np.abs(self.frames[0] - other) / math.sqrt(2)
 

@@ -34,10 +34,7 @@ def pixel_integrator(preset: str = "ideal", pixel: dict | None = None, threshold
     if threshold is not None:
         overrides.setdefault("threshold_on", float(threshold))
         overrides.setdefault("threshold_off", float(threshold))
-    try:
-        config = pixel_model.pixel_config(preset or "ideal", "pixel model", **overrides)
-    except ValueError as e:
-        raise EventFieldError(str(e)) from None
+    config = pixel_model.pixel_config(preset or "ideal", "pixel model", **overrides)   # ConfigError if bad
     integ = mi.load_dict({"type": "eventfield"})
     integ.configure(config)
     return integ

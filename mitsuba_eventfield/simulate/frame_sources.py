@@ -65,12 +65,18 @@ def intensity(frame: np.ndarray, srgb: bool = False, bgr: bool = False, where: s
     return np.ascontiguousarray(v, np.float32)
 
 
-def _uniform_times(count: int | None, fps: float | None, where: str):
+def _uniform_rate(fps: float | None, where: str) -> float:
+    """The frame rate, checked: frames without times need one."""
     if fps is None:
         raise EventFieldError(f"{where}: give the frame rate (--fps / fps=): the frames carry no times")
     if not (np.isfinite(fps) and fps > 0):
         raise EventFieldError(f"{where}: fps = {fps!r}: must be a finite number > 0")
-    return lambda i: i / float(fps)
+    return float(fps)
+
+
+def _uniform_times(fps: float | None, where: str):
+    rate = _uniform_rate(fps, where)
+    return lambda i: i / rate
 
 
 def check_times(times, count: int, where: str) -> np.ndarray:
@@ -88,7 +94,7 @@ def from_array(frames, times=None, fps=None, srgb=False, where="frames") -> Fram
     if a.ndim not in (3, 4) or a.shape[0] < 2:
         raise EventFieldError(f"{where}: shape {a.shape}: expected (T, H, W) or (T, H, W, C) with T >= 2")
     t = check_times(times, a.shape[0], where) if times is not None else \
-        np.array([_uniform_times(a.shape[0], fps, where)(i) for i in range(a.shape[0])])
+        np.arange(a.shape[0]) / _uniform_rate(fps, where)
 
     def frames_iter():
         for i in range(a.shape[0]):
@@ -136,7 +142,7 @@ def from_folder(path: str, fps=None, srgb=False) -> FrameSource:
     names = sorted((n for n in os.listdir(path) if n.lower().endswith(IMAGE_SUFFIXES)), key=_natural_key)
     if len(names) < 2:
         raise EventFieldError(f"{path}: {len(names)} images ({', '.join(IMAGE_SUFFIXES)}); need at least 2")
-    time_of = _uniform_times(len(names), fps, path)
+    time_of = _uniform_times(fps, path)
     first = intensity(_read_image(os.path.join(path, names[0])), srgb, bgr=True, where=names[0])
     h, w = first.shape
 
@@ -161,7 +167,7 @@ def from_video(path: str, fps=None, srgb=False) -> FrameSource:
     count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) or None
     w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
     cap.release()
-    time_of = _uniform_times(count, rate if rate and rate > 0 else None, path)
+    time_of = _uniform_times(rate if rate and rate > 0 else None, path)
 
     def frames_iter() -> Iterator[tuple[float, np.ndarray]]:
         video = cv2.VideoCapture(path)

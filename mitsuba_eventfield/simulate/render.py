@@ -71,11 +71,7 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
     for name, v in explicit.items():
         if v is not None:
             overrides[name] = v
-    try:
-        config = pixel_model.pixel_config(preset or integ.scene_preset, "pixel model", **overrides)
-    except ValueError as e:
-        raise EventFieldError(str(e)) from None
-    integ.configure(config)
+    integ.configure(pixel_model.pixel_config(preset or integ.scene_preset, "pixel model", **overrides))
     return integ
 
 
