@@ -10,7 +10,8 @@ from ..scene import load_scene
 from ..simulate.render import render_events, render_frames
 from ..validate import number
 
-START_METHODS = ("frame", "events")
+START_METHODS = ("events", "frame")
+INPUTS = {"events": "events only", "frame": "events + a rendered frame at t = 0"}
 
 
 def _check_positive(name, value, integer=False, low=0.0):
@@ -22,24 +23,28 @@ class Capture:
     timed: object
     events: object
     lightfields: list           # one per period, from events
+    periods_solved: list        # start="events": what the solver found per period (depth, outliers); else []
     truth_lightfields: list     # same views rendered directly (for scoring; empty when not asked)
     period_s: float
     seconds: dict
 
 
 def capture(scene_path: str, defines: dict | None = None, periods: int | None = None, views: int = 40,
-            start: str = "frame", px_per_step: float = 1.0, spp: int = 4, progress: bool = False,
-            truth_views: bool = True) -> Capture:
+            start: str = "events", px_per_step: float = 1.0, spp: int = 4, progress: bool = False,
+            truth_views: bool = True, depth_range=None, truth_spp: int = 64) -> Capture:
     """Events of ``periods`` whole scan periods (default: all of the motion file's duration) and, per period,
     the light field from the events; with ``truth_views`` also the ground-truth light field of the same views
     (for scoring only).
 
-    ``start``: what the views are integrated onto: ``events`` (the galvo start-image solver: events only) or
-    ``frame`` (one rendered frame at t = 0, a conventional camera beside the event camera: extra
-    information the rig must have). Steps: enough that the scan moves the image at most ``px_per_step``
-    pixels per step anywhere in the field."""
+    ``start``: where each period's log image comes from: ``events`` (default: ``focus.galvo_periods.reconstruct_periods``,
+    period by period from the events alone, per-pixel depth from focus in ``depth_range``, moving objects
+    down-weighted; up to one unknown constant, as for any event camera) or ``frame`` (one rendered frame at
+    t = 0 that every view integrates onto: a conventional camera beside the event camera, extra information
+    the paper's rig does not have; every report says which). Steps: enough that the scan moves the image at
+    most ``px_per_step`` pixels per step anywhere in the field. Truth views are rendered at ``truth_spp``
+    (converged: the reference is the scene, not one noisy render)."""
     from ..lightfield.model import from_galvo, galvo_lightfields, galvo_steps_per_period
-    from ..lightfield.reconstruct import galvo_start_image
+    from ..focus.galvo_periods import reconstruct_periods
     if start not in START_METHODS:
         raise ValueError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
     _check_positive("views", views, integer=True, low=1)
@@ -60,14 +65,18 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     t0 = time.perf_counter()
     events = render_events(timed, periods * period, steps=steps, spp=spp, progress=progress)
     t1 = time.perf_counter()
+    solved = []
     if start == "frame":
         log_start = render_frames(timed, [0.0], spp=spp)[0]
+        lfs = list(galvo_lightfields(events, views, "direct", log_start=log_start, t_start=0.0))
     else:
-        log_start = galvo_start_image(events, 0.0)
-    lfs = list(galvo_lightfields(events, views, "direct", log_start=log_start, t_start=0.0))
+        pairs = list(reconstruct_periods(events, views, depth_range=depth_range))
+        lfs, solved = [lf for lf, _ in pairs], [s for _, s in pairs]
+    for lf in lfs:
+        lf.meta["inputs"] = INPUTS[start]
     t2 = time.perf_counter()
-    truth = [from_galvo(render_frames(timed, lf.times, spp=spp), lf.times, events.meta["optics"],
+    truth = [from_galvo(render_frames(timed, lf.times, spp=truth_spp), lf.times, events.meta["optics"],
                         {"period_index": k}) for k, lf in enumerate(lfs)] if truth_views else []
     t3 = time.perf_counter()
-    return Capture(timed, events, lfs, truth, period,
+    return Capture(timed, events, lfs, solved, truth, period,
                    {"render_events": t1 - t0, "views_from_events": t2 - t1, "ground_truth_views": t3 - t2})

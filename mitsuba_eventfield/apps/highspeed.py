@@ -39,7 +39,8 @@ def _meta(cap: Capture, scene_path, defines, **kw) -> dict:
     ev = cap.events
     return {"scene": scene_path, "defines": dict(defines or {}), "events": len(ev), "periods": len(cap.lightfields),
             "views_per_period": len(cap.lightfields[0].views), "scan_period_s": cap.period_s,
-            "light_fields_per_second": 1 / cap.period_s, "pixel_model": ev.meta["pixel_model"],
+            "light_fields_per_second": 1 / cap.period_s, "inputs": cap.lightfields[0].meta["inputs"],
+            "pixel_model": ev.meta["pixel_model"],
             "optics": ev.meta["optics"], "render": ev.meta.get("render", {}), **kw}
 
 
@@ -59,7 +60,10 @@ class PlaneRefocus(AppResult):
                                                              # the mean instant, on the plane's region
 
     def report(self) -> str:
-        lines = [f"{len(next(iter(self.refocused.values())))} refocused light fields per plane, "
+        gain = self.meta.get("scoring_gain", 1.0)
+        lines = [f"inputs: {self.meta['inputs']}" + (f" (one overall gain fitted for scoring: x{gain:.3g}; events "
+                                                      "record changes, not levels)" if gain != 1.0 else ""),
+                 f"{len(next(iter(self.refocused.values())))} refocused light fields per plane, "
                  f"{1 / self.period_s:g} per second; against the rendered views refocused alike:",
                  "  plane        depth   PSNR dB (mean, min)   SSIM (mean, min)   focus selectivity"]
         for name, z in self.planes.items():
@@ -97,14 +101,17 @@ def _check_planes(planes: dict) -> dict:
 
 
 def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, periods: int | None = None,
-                   views: int = 40, start: str = "frame", region_tolerance: float = 0.15, spp: int = 4,
+                   views: int = 40, start: str = "events", region_tolerance: float = 0.15, spp: int = 4,
                    conventional_fps: float | None = 60.0, progress: bool = False) -> PlaneRefocus:
     """Refocus every scan period's light field on each named plane ({name: depth}), scored against the rendered
     views. A plane's region (for ``selectivity``): textured pixels whose true depth at the middle of the period
     is within ``region_tolerance`` (relative) of the plane's depth. ``conventional_fps``: also render what a
     conventional camera at that frame rate records around the middle period (``truth.conventional_frame``; the
     paper's 60 Hz comparison) and how far it is from the instant it is centred on, per plane's region (motion
-    blur; a pinhole has no defocus to compare); None: skip."""
+    blur; a pinhole has no defocus to compare); None: skip. ``start``: ``events`` (default, events alone) or
+    ``frame`` (events + a rendered frame at t = 0, ``capture``); from events alone the images carry one unknown
+    overall gain, which scoring fits once per capture (``quality.fit_gain``) and the report states."""
+    from ..evaluation.quality import fit_gain
     from ..evaluation.quality import scores as quality_scores
     from ..evaluation.truth import centre_frame, textured, truth_depth
     from ..focus.measures import focus_measure
@@ -115,6 +122,7 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
     refocused = {n: np.stack([refocus(lf, z) for lf in cap.lightfields]) for n, z in planes.items()}
     t1 = time.perf_counter()
     truth = {n: np.stack([refocus(lf, z) for lf in cap.truth_lightfields]) for n, z in planes.items()}
+    gain = 1.0 if start == "frame" else fit_gain(np.stack(list(refocused.values())), np.stack(list(truth.values())))
     scores = {n: {"psnr_db": [], "ssim": []} for n in planes}
     focus = {n: {m: [] for m in planes} for n in planes}       # region n refocused on plane m
     depth_maps = []                                             # Mitsuba depth per period (reused below)
@@ -124,7 +132,7 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
         depth_maps.append(z_true)
         tex = textured(centre_frame(cap.timed, t_mid))         # the centre view: sharp, aligned with z_true
         for n in planes:
-            s = quality_scores(refocused[n][k], truth[n][k])
+            s = quality_scores(gain * refocused[n][k], truth[n][k])
             for key in s:
                 scores[n][key].append(s[key])
             region = tex & (np.abs(z_true / planes[n] - 1) < region_tolerance)
@@ -151,7 +159,7 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
                 blur[n] = float(np.abs(conventional - instant)[region].mean() / instant[region].mean())
     t3 = time.perf_counter()
     return PlaneRefocus(planes, refocused, truth, scores, selectivity, cap.period_s, _meta(
-        cap, scene_path, defines, planes=planes, start=start, region_tolerance=region_tolerance,
+        cap, scene_path, defines, planes=planes, start=start, region_tolerance=region_tolerance, scoring_gain=gain,
         conventional_fps=conventional_fps,
         time_split_s={**cap.seconds, "refocus": t1 - t0, "scoring": t2 - t1, "conventional_camera": t3 - t2}),
         conventional, blur)
@@ -177,7 +185,8 @@ class FocusTrack(AppResult):
         return np.abs(self.depths - self.truth) / self.truth
 
     def report(self) -> str:
-        lines = ["period  t (ms)   chosen z   true z (object's p25-p75)   |rel err|"]
+        lines = [f"inputs: {self.meta['inputs']}",
+                 "period  t (ms)   chosen z   true z (object's p25-p75)   |rel err|"]
         for k, (t, z, zt, (a, b)) in enumerate(zip(self.times, self.depths, self.truth, self.truth_spread)):
             lines.append(f"  {k:4d} {t * 1e3:8.2f} {z:10.3f} {zt:8.3f} ({a:.3f}-{b:.3f}) {abs(z - zt) / zt:12.3f}")
         e = self.relative_errors
@@ -214,7 +223,7 @@ def roi_pixels(roi, width: int, height: int) -> tuple:
 
 def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far: float, planes: int = 24,
                       background_depth: float | None = None, defines: dict | None = None,
-                      periods: int | None = None, views: int = 40, start: str = "frame", smooth: float = 0.0,
+                      periods: int | None = None, views: int = 40, start: str = "events", smooth: float = 0.0,
                       compensate_motion: bool = True, spp: int = 4, progress: bool = False,
                       captured: Capture | None = None) -> FocusTrack:
     """Follow an object moving in depth: per scan period, the depth in [near, far] at which the object's region
@@ -231,7 +240,8 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
                          "object_far > near (scene units)")
     _check_roi(roi)                                   # before rendering: bad input costs nothing
     _check_positive("planes", planes, integer=True, low=1)
-    cap = captured or capture(scene_path, defines, periods, views, start, spp=spp, progress=progress)
+    cap = captured or capture(scene_path, defines, periods, views, start, spp=spp, progress=progress,
+                              depth_range=(near, max(far, background_depth or far)))
     h, w = cap.lightfields[0].shape
     roi_px = roi_pixels(roi, w, h)
     t0 = time.perf_counter()

@@ -1,7 +1,7 @@
 """Depth at the scan rate (paper section 6): one metric depth map per galvo scan period, scored against Mitsuba.
 
 Each scan period of events gives one light field (``highspeed.capture``: views integrated from the events onto
-a start frame and placed at their scan angles) and so one depth map from focus (``depth.depth_from_focus``):
+each period's start image, solved from the events alone by default, and placed at their scan angles) and so one depth map from focus (``depth.depth_from_focus``):
 at 100 Hz, 100 depth maps per second. Refocus maps each view with the exact two-mirror geometry
 (``optics.galvo``), so "sharpest refocus plane" is metric depth across the whole field (off-axis pixels move
 (1 + t^2) times more per mirror turn than on-axis ones; one shift per view read them too far).
@@ -51,7 +51,8 @@ class ScanRateDepth(AppResult):
         return out
 
     def report(self) -> str:
-        lines = [f"{len(self.depth_maps)} depth maps at {1 / self.period_s:g} per second; median |relative depth "
+        lines = [f"inputs: {self.meta.get('inputs', 'events only')}",
+                 f"{len(self.depth_maps)} depth maps at {1 / self.period_s:g} per second; median |relative depth "
                  f"error| on confident (>= {self.meta['min_confidence']:g}) textured pixels:"]
         for k, e in enumerate(self.errors):
             lines.append(f"  period {k} ({self.times[k] * 1e3:5.1f} ms): near (z < {self.meta['split_depth']:g} m) "
@@ -127,7 +128,7 @@ def _check_calibration(calibration: dict, scene_path: str, defines, captured):
 def run(scene_path: str, defines: dict | None = None, periods: int | None = None, views: int = 40,
         near: float = 0.4, far: float = 4.0, planes: int = 32, measure: str = "tenengrad",
         min_confidence: float = 0.6, split_depth: float = 1.2, texture_threshold: float = 0.1,
-        calibration: dict | None = None, start: str = "frame", progress: bool = False, captured=None) -> ScanRateDepth:
+        calibration: dict | None = None, start: str = "events", progress: bool = False, captured=None) -> ScanRateDepth:
     """Render the scene's scan periods of events, one metric depth map per period (planes uniform in inverse
     depth over [near, far]), each scored against Mitsuba's depth at the period's middle.
 
@@ -144,7 +145,8 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
     if not split_depth > 0:
         raise ValueError(f"split_depth = {split_depth}: must be > 0 (scene units)")
     record = _check_calibration(calibration, scene_path, defines, captured) if calibration else None
-    cap = captured or capture(scene_path, defines, periods, views, start, progress=progress)
+    cap = captured or capture(scene_path, defines, periods, views, start, progress=progress,
+                              depth_range=(near, far))
     t0 = time.perf_counter()
     maps = []
     for lf in cap.lightfields:
@@ -176,6 +178,7 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
     meta = {"scene": scene_path, "defines": dict(defines or {}), "views": len(cap.lightfields[0].views),
             "planes": planes, "measure": measure, "near": near, "far": far, "split_depth": split_depth,
             "min_confidence": min_confidence, "texture_threshold": texture_threshold, "start": start,
+            "inputs": cap.lightfields[0].meta["inputs"],
             "calibrated": sorted(calibration) if calibration else [],
             "events": len(cap.events), "depth_maps_per_second": 1 / cap.period_s,
             "pixel_model": cap.events.meta["pixel_model"], "optics": cap.events.meta["optics"],

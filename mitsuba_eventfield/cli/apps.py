@@ -44,6 +44,12 @@ def _periods_and_views(parser) -> None:
                         help="views per scan period (default 40)")
 
 
+def _start_option(parser) -> None:
+    parser.add_argument("--start", choices=("events", "frame"), default="events",
+                        help="where each period's image comes from: 'events' (default: solved from the events "
+                             "alone) or 'frame' (a rendered frame at t = 0: a conventional camera the rig lacks)")
+
+
 def _add_galvo_apps(sub) -> None:
     hs = sub.add_parser("highspeed", help="galvo refocus of every scan period on named depth planes, vs truth")
     hs.add_argument("scene", nargs="?", default=bundled_scene("fan/fan.xml"))
@@ -53,8 +59,7 @@ def _add_galvo_apps(sub) -> None:
     hs.add_argument("--plane", action="append", default=None, metavar="NAME=DEPTH",
                     help="refocus plane (repeatable; default for the fan: fan=0.6 wall=1.5)")
     _periods_and_views(hs)
-    hs.add_argument("--start", choices=("frame", "events"), default="frame",
-                    help="start frame the views integrate onto: one rendered frame, or the galvo solver")
+    _start_option(hs)
     tf = sub.add_parser("track-focus", help="galvo focus tracking of an object moving in depth, vs Mitsuba depth")
     tf.add_argument("scene", nargs="?", default=bundled_scene("dart/galvo.xml"))
     tf.add_argument("-o", "--output", default="out/track", help="output directory (PNGs, EXR, figure, metrics)")
@@ -71,11 +76,13 @@ def _add_galvo_apps(sub) -> None:
     tf.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=24,
                     help="depth planes searched (default 24)")
     _periods_and_views(tf)
+    _start_option(tf)
     sd = sub.add_parser("scanrate-depth", help="a metric depth map per galvo scan period, vs Mitsuba's depth")
     sd.add_argument("scene", nargs="?", default=bundled_scene("runner/runner.xml"))
     sd.add_argument("-o", "--output", default="out/scanrate", help="output directory (EXRs, PNGs, figure, metrics)")
     add_defines(sd)
     _periods_and_views(sd)
+    _start_option(sd)
     sd.add_argument("--near", type=num(0, lo_open=True), default=0.4, help="nearest depth plane (default 0.4)")
     sd.add_argument("--far", type=num(0, lo_open=True), default=4.0, help="farthest depth plane (default 4)")
     sd.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=32,
@@ -137,7 +144,7 @@ def run_track_focus(a) -> int:
     from ..apps import highspeed
     return _application(
         lambda: highspeed.track_focus_depth(a.scene, a.roi, a.near, a.far, a.object_far, a.planes, a.background,
-                                            defines(a), a.periods, a.views, progress=True),
+                                            defines(a), a.periods, a.views, a.start, progress=True),
         a.output,
         lambda p: f"{p['figure']}, per-period PNGs, {p['exr']}, {p['metrics']}")
 
@@ -158,7 +165,7 @@ def run_scanrate_depth(a) -> int:
     return _application(
         lambda: scanrate.run(a.scene, defines(a), a.periods, a.views, a.near, a.far, a.planes,
                              min_confidence=a.min_confidence, split_depth=a.split_depth, calibration=calibration,
-                             progress=True),
+                             start=a.start, progress=True),
         a.output,
         lambda p: f"{p['figure']}, {len(p['exr'])} depth EXRs and PNGs, {p['metrics']}")
 

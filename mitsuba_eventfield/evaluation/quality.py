@@ -9,6 +9,18 @@ from __future__ import annotations
 import numpy as np
 
 
+def fit_gain(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """The one factor that best brings ``estimate`` to ``truth`` (median of their log ratio over pixels
+    where both are positive): for scoring reconstructions from events, which fix log brightness only up to
+    one constant (an event camera records changes, not levels). Fitted once per capture, never per image, so
+    it cannot hide errors of shape; the method itself never sees it."""
+    e, t = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
+    ok = (e > 0) & (t > 0)
+    if not ok.any():
+        raise ValueError("no pixel is positive in both images: no gain to fit")
+    return float(np.exp(np.median(np.log(t[ok]) - np.log(e[ok]))))
+
+
 def white_level(truth: np.ndarray) -> float:
     level = float(np.percentile(np.asarray(truth, np.float64), 99.9))
     if not level > 0:

@@ -10,7 +10,8 @@ Methods (``reconstruct(events, times, method=...)``; all vectorised over events,
   top. Needs frames (log intensity) with their times.
 * ``galvo``: for a static scene seen through a periodic scan, every view is the same image shifted by the known
   scan offset, so events (directional derivatives along the scan velocity) fix the start image up to a
-  constant: a sparse least-squares solve, then ``direct``.
+  constant: a sparse least-squares solve (``galvo_solve``), then ``direct``. Dynamic scenes with depth, period
+  by period from events alone: ``focus.galvo_periods.reconstruct_periods``.
 
 A learned model (e.g. E2VID) plugs in with ``register_method(name, fn)``; ``fn(events, times, **kw)`` returns
 (len(times), H, W) log-intensity frames.
@@ -22,8 +23,6 @@ import math
 import numpy as np
 
 from ..events.stream import EventStream
-from ..optics.galvo import GalvoGeometry
-from ..optics.scan import curve_from_dict, scan_period
 
 _METHODS = {}
 
@@ -130,72 +129,15 @@ def complementary(events: EventStream, times, frames, frame_times, cutoff_hz: fl
     return _filtered(events, times, cutoff_hz, c_on, c_off, frames=frames, frame_times=frame_times)
 
 
-def _galvo_views(events: EventStream, times):
-    """For a galvo stream: (geometry, mechanical angles (N, 2) at ``times``) from its metadata."""
-    optics = events.meta.get("optics", {})
-    if optics.get("design") != "galvo":
-        raise ValueError("galvo_start_image needs a galvo event stream (optics.design == 'galvo')")
-    geometry = GalvoGeometry.from_optics(optics, events.width, events.height)
-    ax, ay = curve_from_dict(optics["scan"], where="event metadata").angles(np.asarray(times, np.float64))
-    return geometry, np.stack([ax, ay], axis=-1)
-
-
-def galvo_start_image(events: EventStream, t_start: float, samples: int = 16, depth: float = math.inf,
+def galvo_start_image(events: EventStream, t_start: float, samples: int = 16, depth=math.inf,
                       damp: float = 1e-4, c_on=None, c_off=None, iterations: int = 1000, tolerance: float = 1e-4):
-    """Start image L(t_start) (up to a constant) of a static scene under a periodic galvo scan.
-
-    Every view is the start image mapped by the scan: for a plane at ``depth``, pixel x of the view at t_k2
-    shows what the view at t_k shows at H(x), H the exact view-to-view homography (``optics.galvo``;
-    ``depth`` is one depth for the whole scene, the solver's assumption). With L(x, t) = L0(x) + C N(x, t)
-    (N: net events since t_0), consecutive samples around one period give sparse linear equations for L0
-    (bilinear interpolation at the mapped positions), solved by LSQR. The constant is
-    fixed by a small Tikhonov term (``damp``): compare results up to their mean. ``tolerance``: LSQR's relative
-    stopping tolerance; 1e-4 instead of scipy's 1e-6 took 72 iterations instead of 106 on scenes/hdr_leds with the
-    same log error to 0.001 (the threshold's quantisation, C = 0.2, dominates).
-    """
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.linalg import lsqr
-    geometry, _ = _galvo_views(events, [])
-    period = scan_period(events.meta["optics"]["scan"])
-    h, w = events.height, events.width
-    ts = t_start + np.arange(samples + 1) * (period / samples)            # closes the loop
-    _, angles = _galvo_views(events, ts)
-    counts = direct(events, ts, None, t_start, c_on, c_off)               # C N(x, t_k), N(t_0) = 0
-    yy, xx = np.mgrid[0:h, 0:w]
-    rows, cols, vals, rhs = [], [], [], []
-    n_eq = 0
-    # pairs one sample apart (small shifts) and a quarter period apart (large, well-conditioned shifts)
-    pairs = [(k, k + 1) for k in range(samples)]
-    lag = max(1, samples // 4)
-    pairs += [(k, (k + lag) % samples) for k in range(samples)]
-    for k, k2 in pairs:
-        hom = geometry.view_to_view(angles[k2], angles[k], depth)        # view k2 pixel -> view k pixel
-        den = hom[2, 0] * xx + hom[2, 1] * yy + hom[2, 2]
-        sx = (hom[0, 0] * xx + hom[0, 1] * yy + hom[0, 2]) / den
-        sy = (hom[1, 0] * xx + hom[1, 1] * yy + hom[1, 2]) / den
-        x0, y0 = np.floor(sx).astype(np.int64), np.floor(sy).astype(np.int64)
-        fx, fy = sx - x0, sy - y0
-        ok = (x0 >= 0) & (y0 >= 0) & (x0 + 1 < w) & (y0 + 1 < h)
-        if not ok.any():
-            continue
-        p = (yy * w + xx)[ok]
-        corners = [(y0 * w + x0, (1 - fx) * (1 - fy)), (y0 * w + x0 + 1, fx * (1 - fy)),
-                   ((y0 + 1) * w + x0, (1 - fx) * fy), ((y0 + 1) * w + x0 + 1, fx * fy)]
-        m = int(ok.sum())
-        eq = n_eq + np.arange(m)
-        rows.append(eq), cols.append(p), vals.append(np.ones(m))
-        interp_counts = np.zeros(m)
-        ck = counts[k].ravel()
-        for idx, wt in corners:
-            rows.append(eq), cols.append(idx[ok]), vals.append(-wt[ok])
-            interp_counts += wt[ok] * ck[idx[ok]]
-        rhs.append(interp_counts - counts[k2].ravel()[p])
-        n_eq += m
-    if n_eq == 0:
-        raise ValueError("the scan moves the image out of the frame: no equations")
-    A = csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_eq, h * w))
-    sol = lsqr(A, np.concatenate(rhs), damp=damp, iter_lim=iterations, atol=tolerance, btol=tolerance)[0]
-    return sol.reshape(h, w)
+    """Start image L(t_start) (up to a constant) of a static scene under a periodic galvo scan, at one depth
+    (or an (H, W) depth map): ``galvo_solve.start_image`` with pairs one sample and a quarter period apart and
+    the constant fixed by a small Tikhonov term (``damp``). Dynamic scenes with depth:
+    ``focus.galvo_periods.reconstruct_periods``."""
+    from .galvo_solve import start_image
+    return start_image(events, t_start, samples, depth, prior_weight=damp ** 2, c_on=c_on, c_off=c_off,
+                       iterations=iterations, tolerance=tolerance)[0]
 
 
 def galvo(events: EventStream, times, t_start: float | None = None, samples: int = 16, depth: float = math.inf,

@@ -22,14 +22,23 @@ DART_ROI = (0.58, 0.44, 0.78, 0.56)
 
 
 def test_fan_refocus_every_period_matches_rendered_views_and_selects_its_plane(capsys):
-    r = highspeed.refocus_planes(FAN, {"fan": 0.6, "wall": 1.5},
-                          {"width": 128, "height": 96, "amplitude": 2, "mirror_distance": 0.2}, periods=2, views=24)
+    setup = {"width": 128, "height": 96, "amplitude": 2, "mirror_distance": 0.2}
+    r = highspeed.refocus_planes(FAN, {"fan": 0.6, "wall": 1.5}, setup, periods=2, views=24)
+    framed = highspeed.refocus_planes(FAN, {"fan": 0.6, "wall": 1.5}, setup, periods=2, views=24, start="frame",
+                                      conventional_fps=None)
     with capsys.disabled():
-        print("\n[high-speed refocus, fan, 128x96]\n" + r.report())
+        print("\n[high-speed refocus, fan, 128x96, events only]\n" + r.report())
+        print("[the same with a rendered frame at t = 0]\n" + framed.report())
     assert r.refocused["fan"].shape == (2, 96, 128)
-    for name in r.planes:                           # measured 29.2-29.7 dB, SSIM 0.97
-        assert min(r.scores[name]["psnr_db"]) > 27.0 and min(r.scores[name]["ssim"]) > 0.95
-    # each plane's own region is sharpest when refocused on it (measured 1.31x fan, 2.67x wall)
+    assert r.meta["inputs"] == "events only" and framed.meta["inputs"].startswith("events + a rendered frame")
+    # against converged (64 spp) views: events only measured 27.3-28.0 dB, SSIM 0.95; with the frame 27.7-29.2 dB,
+    # SSIM 0.93 (the 4 spp frame's Monte-Carlo noise stays in every view; the solver averages it out)
+    for name in r.planes:
+        assert min(r.scores[name]["psnr_db"]) > 26.5 and min(r.scores[name]["ssim"]) > 0.93
+        assert min(framed.scores[name]["psnr_db"]) > 27.0
+        margin = np.mean(framed.scores[name]["psnr_db"]) - np.mean(r.scores[name]["psnr_db"])
+        assert margin < 1.8                           # measured 1.07 dB (fan), 0.09 dB (wall)
+    # each plane's own region is sharpest when refocused on it (events only: measured 1.56x fan, 2.67x wall)
     assert r.selectivity["fan"] > 1.12 and r.selectivity["wall"] > 1.8
     # a 60 fps frame blurs what moves (the fan turns 48 degrees per exposure): measured 22% from the instant on
     # the fan's pixels; on wall pixels that the fan never crosses during the exposure only its moving shadow

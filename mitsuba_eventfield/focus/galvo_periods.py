@@ -1,0 +1,86 @@
+"""Galvo captures from events alone, period by period: each scan period's log image solved from that period's
+events (``lightfield.galvo_solve``, whose docstring explains the equations), each pixel mapped at its own depth
+from focus on the period's light field, moving objects turned down by robust weights, and the previous period
+carried forward as the prior. No rendered frame is used; the images carry one unknown overall constant.
+Lives above ``focus`` because it estimates depth from focus."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..events.stream import EventStream
+from ..lightfield.galvo_solve import DYNAMIC_LAGS, geometry_and_angles, start_image
+
+
+@dataclass
+class PeriodReconstruction:
+    """What the events-only solver found for one scan period."""
+    period_index: int
+    t_start: float
+    log_start: np.ndarray        # (H, W) log image at t_start, up to the capture's one constant
+    depth: np.ndarray            # (H, W) depth it mapped each pixel with (from focus)
+    confidence: np.ndarray       # (H, W) depth-from-focus confidence in [0, 1]
+    outliers: float              # fraction of equations the robust weights turned down (moving content)
+    meta: dict = field(default_factory=dict)
+
+
+def _depth_from_views(events, t_start, log_start, views, depth_range, planes):
+    """Depth per pixel from focus on the light field integrated onto ``log_start``; flat pixels -> median."""
+    import cv2
+
+    from .depth import depth_from_focus
+    from ..lightfield.model import from_galvo, galvo_view_times
+    from ..lightfield.reconstruct import direct
+    times = galvo_view_times(events.meta["optics"], t_start, views)
+    lf = from_galvo(direct(events, times, log_start, t_start), times, events.meta["optics"])
+    dm = depth_from_focus(lf, depth_range[0], depth_range[1], planes, measure="variance")
+    inv = 1.0 / dm.depth
+    sure = dm.confidence > 0.5
+    fill = float(np.median(inv[sure])) if sure.any() else float(np.median(inv))
+    inv = np.where(sure, inv, fill).astype(np.float32)
+    inv = cv2.medianBlur(inv, 5).astype(np.float64)          # one wrong plane in a window does not survive
+    return 1.0 / np.maximum(inv, 1e-9), dm.confidence
+
+
+def default_depth_range(optics: dict) -> tuple:
+    """Depths searched when none are given: from 2 pivot distances (the Y mirror's; nearer than that a view
+    shift barely changes with depth) to 1000 (practically infinity; the search is uniform in inverse depth)."""
+    return 2.0 * (float(optics["mirror_distance"]) + float(optics["mirror_separation"])), 1000.0
+
+
+
+
+def reconstruct_periods(events: EventStream, views: int = 32, periods=None, depth_range=None, samples: int = 16,
+                        depth_planes: int = 16, depth_iterations: int = 1, robust_iterations: int = 4,
+                        prior_weight: float = 0.05, c_on=None, c_off=None):
+    """Per whole scan period (all, or the indices ``periods``, in order): (LightField of ``views`` views,
+    PeriodReconstruction), from the events alone (module docstring). ``depth_range``: (near, far) searched for
+    each pixel's depth (default ``default_depth_range``)."""
+    from ..lightfield.model import from_galvo, galvo_period_starts, galvo_view_times
+    from ..lightfield.reconstruct import direct
+    optics = events.meta.get("optics", {})
+    geometry_and_angles(events, [])
+    depth_range = default_depth_range(optics) if depth_range is None else tuple(map(float, depth_range))
+    if not 0 < depth_range[0] < depth_range[1]:
+        raise ConfigError(f"depth_range = {depth_range}: need 0 < near < far (scene units)")
+    kw = dict(samples=samples, robust_iterations=robust_iterations, lags=DYNAMIC_LAGS, c_on=c_on, c_off=c_off)
+    prev = None
+    for p, t_s in galvo_period_starts(events, periods).items():
+        if prev is None:        # first period: one plane, then alternate depth from focus and the solve
+            log_s, weights = start_image(events, t_s, depth=math.sqrt(depth_range[0] * depth_range[1]), **kw)
+            for _ in range(depth_iterations):
+                depth, conf = _depth_from_views(events, t_s, log_s, views, depth_range, depth_planes)
+                log_s, weights = start_image(events, t_s, depth=depth, **kw)
+        else:                   # later periods: the previous one carried forward is the prior and the depth
+            prior = direct(events, [t_s], prev.log_start, prev.t_start, c_on, c_off)[0]
+            log_s, weights = start_image(events, t_s, depth=prev.depth, prior=prior, prior_weight=prior_weight,
+                                         **kw)
+        depth, conf = _depth_from_views(events, t_s, log_s, views, depth_range, depth_planes)
+        prev = PeriodReconstruction(p, t_s, log_s, depth, conf, float(np.mean(weights < 1)))
+        times = galvo_view_times(optics, t_s, views)
+        lf = from_galvo(direct(events, times, log_s, t_s, c_on, c_off), times, optics,
+                        {"period_index": p, "inputs": "events only"})
+        yield lf, prev
