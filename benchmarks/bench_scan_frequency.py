@@ -1,9 +1,15 @@
-"""The paper's scan-frequency experiment (issue 6): a static textured scene under a galvo circle at rising scan
-frequencies, seen by a pixel whose only non-ideality is the readout cap of an IMX636-class sensor (1.066 GEPS
-for 1280x720, scaled to the film's pixel count). Past the frequency where the offered event rate crosses the
-cap, events are dropped and the refocused static region loses sharpness.
+"""The paper's scan-frequency experiment (Fig. 11, issue 6), both halves, on the shared pieces of
+``mitsuba_eventfield.apps.scan_frequency`` (the application behind ``eventfield scan-frequency``):
 
-Writes benchmarks/results/scan_frequency.{png,json,md}.  Usage: ./run bench scan_frequency
+* static: a static textured scene under a galvo circle at rising scan frequencies, seen by a pixel whose only
+  non-ideality is the readout cap of an IMX636-class sensor (1.066 GEPS for 1280x720, scaled to the film's pixel
+  count: ``readout_pixel``). Past the frequency where the offered event rate crosses the cap, events are dropped
+  and the refocused static region loses sharpness (``edge_contrast`` against the uncapped pixel's refocus);
+* moving: the spinning fan (``scan_frequency.sweep`` at its defaults: 160x120, 125-500 Hz, 8 ms each, cap x5):
+  the text on the fan gets sharper with the scan frequency, until the cap drops events and it blurs again.
+
+Writes benchmarks/results/scan_frequency.{png,json,md} and scan_frequency_fan.png.
+Usage: ./run bench scan_frequency
 """
 import os
 import sys
@@ -15,45 +21,35 @@ sys.path.insert(0, HERE)
 from _report import RESULTS, write_results  # noqa: E402
 
 SCENE = os.path.join(os.path.dirname(HERE), "scenes", "galvo_static", "galvo_static.xml")
-CAP = {"readout_cap": 1.066e9, "readout_cap_native_pixels": 1280 * 720}
-
-
-def edge_contrast(img, ref):
-    """Sharpness as the fraction of the reference's edge contrast present in ``img``: the projection of its
-    log-image gradient onto the reference's, over the reference's gradient energy. Noise (which raises plain
-    gradient-energy measures) is uncorrelated with the true edges and does not count."""
-    import cv2
-    g = [cv2.Sobel(np.log(np.maximum(a, 1e-6)).astype(np.float32), cv2.CV_32F, dx, dy, ksize=3)
-         for a in (img, ref) for dx, dy in ((1, 0), (0, 1))]
-    return float(((g[0] * g[2]).sum() + (g[1] * g[3]).sum()) / ((g[2] ** 2).sum() + (g[3] ** 2).sum()))
+STATIC_FREQUENCIES = [25, 50, 100, 150, 200, 250, 300, 400, 600, 800, 1000]
 
 
 def sweep(frequencies, width=173, height=130, amplitude=0.08, views=32, steps_per_period=32, wall_depth=2.5):
-    """One row per frequency: offered rate, dropped fraction, sharpness of the refocused wall (Tenengrad of the
-    mean-normalised image) and SSIM against the uncapped pixel's refocus."""
+    """Static half, one row per frequency: offered rate, dropped fraction, edge contrast of the capped pixel's
+    refocused wall kept against the uncapped pixel's, and SSIM against it. Returns (rows, cap in events/s)."""
     from skimage.metrics import structural_similarity as ssim
 
     import mitsuba_eventfield as ef
+    from mitsuba_eventfield.apps.scan_frequency import edge_contrast, film_cap, offered_rates, readout_pixel
+    cap_pixel = readout_pixel()
     rows = []
     for f in frequencies:
         scene = ef.load_scene(SCENE, width=width, height=height, frequency=f, amplitude=amplitude)
         start = ef.render_frames(scene, [0.0])[0]
         out = {}
-        for name, pixel in (("ideal", {}), ("capped", CAP)):
+        for name, pixel in (("ideal", {}), ("capped", cap_pixel)):
             ev = ef.render_events(scene, 2 / f, steps=2 * steps_per_period, pixel=pixel)
             lf = ef.lightfield.from_events(ev, period=1, views=views, log_start=start, method="direct")
-            img = ef.refocus(lf, wall_depth)
-            out[name] = (ev, img)
+            out[name] = (ev, ef.refocus(lf, wall_depth))
         ev, img = out["capped"]
         ref = out["ideal"][1]
-        dropped = ev.meta["render"]["dropped_readout"]
-        offered = (len(ev) + dropped) * f / 2
+        rates = offered_rates(ev, 2 / f)
         region = np.s_[10:height - 10, 10:width // 3]           # wall only (the card sits right of centre)
-        rows.append({"frequency_hz": f, "offered_ev_s": offered, "dropped_fraction": dropped / (len(ev) + dropped),
+        rows.append({"frequency_hz": f, "offered_ev_s": rates["offered_ev_s"],
+                     "dropped_fraction": rates["dropped_fraction"],
                      "edge_contrast": edge_contrast(img[region], ref[region]),
                      "ssim_vs_uncapped": float(ssim(ref / ref.max(), img / ref.max(), data_range=1))})
-    cap = CAP["readout_cap"] * width * height / CAP["readout_cap_native_pixels"]
-    return rows, cap
+    return rows, film_cap(cap_pixel, width, height)
 
 
 def chart(rows, cap, path):
@@ -80,9 +76,27 @@ def chart(rows, cap, path):
     return crossing
 
 
-def main():
-    rows, cap = sweep([25, 50, 100, 150, 200, 250, 300, 400, 600, 800, 1000])
-    crossing = chart(rows, cap, os.path.join(RESULTS, "scan_frequency.png"))
+def fan_half(results, **kwargs):
+    """Moving half: the application's sweep, its figure, and rows / targets / markdown for the results."""
+    from mitsuba_eventfield.apps import scan_frequency
+    fan = scan_frequency.sweep(**kwargs)
+    fan.figure(os.path.join(results, "scan_frequency_fan.png"))
+    free, capped = fan.score("events"), fan.score("capped")
+    res = {"cap_ev_s": fan.cap_ev_s, "crossing_hz": fan.crossing_hz, "rows": fan.rows, "paper": fan.paper_rows(),
+           "meta": fan.meta,
+           "targets": {"fan: edge contrast rises with the scan frequency without a cap":
+                           bool(np.all(np.diff(free) > 0)),
+                       "fan: with the cap, the highest frequency is blurrier than without": bool(capped[-1] < free[-1]),
+                       "fan: with the cap, the sharpest frequency is below the highest":
+                           bool(np.argmax(capped) < len(capped) - 1)}}
+    md = ["## Moving half: the spinning fan (eventfield scan-frequency)", "",
+          "    " + fan.report().replace("\n", "\n    "), "", "Figure: scan_frequency_fan.png", ""]
+    return res, md
+
+
+def main(results=RESULTS, static_frequencies=STATIC_FREQUENCIES, fan_kwargs=None):
+    rows, cap = sweep(static_frequencies)
+    crossing = chart(rows, cap, os.path.join(results, "scan_frequency.png"))
     # events come in bursts, so the busiest milliseconds reach the cap a little before the mean rate does
     first_loss = next((r["frequency_hz"] for r in rows if r["dropped_fraction"] > 0.05), None)
     below = [r for r in rows if r["frequency_hz"] <= 0.8 * crossing]
@@ -93,12 +107,16 @@ def main():
                        "edge contrast >= 0.9 below 0.8x crossing, <= 0.6 beyond 1.5x":
                            min(r["edge_contrast"] for r in below) >= 0.9
                            and max(r["edge_contrast"] for r in beyond) <= 0.6}}
-    md = ["# Scan-frequency sweep (readout cap)", "", f"Cap {cap / 1e6:.1f} Mev/s (IMX636 budget scaled to the film); "
+    md = ["# Scan-frequency sweep (readout cap)", "", "## Static half", "",
+          f"Cap {cap / 1e6:.1f} Mev/s (IMX636 budget scaled to the film); "
           f"the offered rate crosses it at {crossing:.0f} Hz. Chart: scan_frequency.png", "",
           "| scan Hz | offered Mev/s | dropped | edge contrast kept | SSIM vs uncapped |", "|---|---|---|---|---|"]
     md += [f"| {r['frequency_hz']} | {r['offered_ev_s'] / 1e6:.1f} | {100 * r['dropped_fraction']:.1f}% | "
            f"{r['edge_contrast']:.3f} | {r['ssim_vs_uncapped']:.3f} |" for r in rows]
-    write_results("scan_frequency", res, md + [""])
+    fan, fan_md = fan_half(results, **(fan_kwargs or {}))
+    res["fan"] = fan
+    res["targets"].update(fan.pop("targets"))
+    write_results("scan_frequency", res, md + [""] + fan_md)
 
 
 if __name__ == "__main__":

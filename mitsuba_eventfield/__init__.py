@@ -20,6 +20,8 @@ from . import lightfield  # noqa: E402
 # re-exports the names a user needs; each lives in one module.
 from ._version import __version__  # noqa: E402
 from .apps import scanrate  # noqa: E402
+from .apps import scan_frequency  # noqa: E402
+from .apps import designs  # noqa: E402
 from .apps import hdr, highspeed, slomorf  # noqa: E402
 from .backend import choose_variant, quiet_mitsuba_log, set_variant  # noqa: E402
 from .errors import ConfigError, EventFieldError  # noqa: E402
@@ -48,4 +50,4 @@ __all__ = ["__version__", "choose_variant", "set_variant", "quiet_mitsuba_log", 
            "ViewStack", "extract_views", "split_events", "view_of_pixel", "LightField", "from_galvo",
            "from_spatial", "galvo_lightfields", "galvo_view_times", "SweepTable", "sweep", "depth_planes",
            "focal_stack", "refocus", "track_focus", "DepthMap", "depth_from_focus", "focus_measure", "auto",
-           "lightfield", "depth", "quality", "truth", "hdr", "highspeed", "slomorf", "scanrate"]
+           "lightfield", "depth", "quality", "truth", "hdr", "highspeed", "slomorf", "scanrate", "scan_frequency", "designs"]

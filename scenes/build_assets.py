@@ -112,3 +112,15 @@ if __name__ == "__main__":
     noise_texture(os.path.join(HERE, "offaxis_cards", "near.png"), seed=14)
     noise_texture(os.path.join(HERE, "offaxis_cards", "far.png"), seed=15)
     print("assets written")
+
+
+def design_assets():
+    """scenes/designs/static.png, moving.png: coarse band-limited noise (features of about a tenth of a card),
+    coarse enough that a kaleidoscope view (a third of the film per axis) still resolves it."""
+    os.makedirs(os.path.join(HERE, "designs"), exist_ok=True)
+    noise_texture(os.path.join(HERE, "designs", "static.png"), seed=21, size=64, blob=3.0)
+    noise_texture(os.path.join(HERE, "designs", "moving.png"), seed=22, size=64, blob=3.0)
+
+
+if __name__ == "__main__":
+    design_assets()

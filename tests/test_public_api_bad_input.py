@@ -39,6 +39,15 @@ CASES = {
     "refocus no light field": (lambda s: ef.refocus(None, 1.0), "expected a LightField"),
     "depth_from_focus no light field": (lambda s: ef.depth_from_focus(None, 0.5, 2.0), "expected a LightField"),
     "depth_planes": (lambda s: ef.depth_planes(2.0, 1.0, 8), "near"),
+    "render_events adaptive": (lambda s: ef.render_events(s, 0.01, adaptive="sometimes"), "adaptive"),
+    "render_events px_per_step": (lambda s: ef.render_events(s, 0.01, adaptive=True, px_per_step=0), "px_per_step"),
+    "designs.compare speeds": (lambda s: ef.designs.compare(speeds=(1, -2)), "speed"),
+    "designs.grid_experiment texture": (lambda s: ef.designs.grid_experiment(texture="/nonexistent/g.png"),
+                                        "g.png"),
+    "scan_frequency.sweep": (lambda s: ef.scan_frequency.sweep(frequencies=(-5,)), "frequenc"),
+    "hdr.lightfield depths": (lambda s: ef.hdr.lightfield(depths=(0.6, 0.0)), "depth"),
+    "paper.generate only": (lambda s: __import__("mitsuba_eventfield.apps.paper", fromlist=["generate"]).generate(
+        "/tmp/ef_paper_out", "/tmp/ef_paper.md", only=["nonsense"]), "nonsense"),
 }
 
 

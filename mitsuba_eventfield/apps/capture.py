@@ -36,8 +36,8 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     the light field from the events; with ``truth_views`` also the ground-truth light field of the same views
     (for scoring only).
 
-    ``start``: where each period's log image comes from: ``events`` (default: ``focus.galvo_periods.reconstruct_periods``,
-    period by period from the events alone, per-pixel depth from focus in ``depth_range``, moving objects
+    ``start``: where each period's log image comes from: ``events`` (default:
+    ``focus.galvo_periods.reconstruct_periods``, period by period from the events alone, per-pixel depth from focus in ``depth_range``, moving objects
     down-weighted; up to one unknown constant, as for any event camera) or ``frame`` (one rendered frame at
     t = 0 that every view integrates onto: a conventional camera beside the event camera, extra information
     the paper's rig does not have; every report says which). Steps: enough that the scan moves the image at

@@ -18,16 +18,20 @@ def _pyplot():
 
 def planes_figure(result, path: str, period: int | None = None) -> str:
     """For one scan period: refocus from events on each plane (top) and the same refocus of the rendered views
-    (bottom), one grey scale."""
+    (bottom), one grey scale. Events-only images are shown times the gain fitted for scoring (they carry no
+    absolute level), and say so."""
     plt = _pyplot()
     names = list(result.planes)
     k = len(result.refocused[names[0]]) // 2 if period is None else period
     hi = max(float(np.percentile(result.truth[n][k], 99.5)) for n in names)
     extra = result.conventional is not None
+    gain = float(result.meta.get("scoring_gain", 1.0))
+    source = (f"from events only, x{gain:.3g} (gain fitted for scoring)" if result.meta.get("start") == "events"
+              else "from events + a frame at t = 0")
     fig, axes = plt.subplots(2, len(names) + extra, figsize=(4 * (len(names) + extra), 6.4), squeeze=False)
     for j, n in enumerate(names):
         s = result.scores[n]
-        for i, (label, img) in enumerate((("from events", result.refocused[n][k]),
+        for i, (label, img) in enumerate(((source, gain * result.refocused[n][k]),
                                           ("rendered views (truth)", result.truth[n][k]))):
             ax = axes[i, j]
             ax.imshow(img, cmap="gray", vmin=0, vmax=hi)

@@ -17,14 +17,24 @@ def add_parsers(sub) -> None:
     dm.add_argument("--width", type=num(16, 4096, integer=True), default=160, help="film width (default 160)")
     dm.add_argument("--height", type=num(12, 4096, integer=True), default=120, help="film height (default 120)")
     dm.add_argument("--views", type=num(4, MAX_VIEWS, integer=True), default=32, help="views per scan period")
-    hd = sub.add_parser("hdr", help="HDR light field of a static galvo scene: events vs 8-bit exposures")
-    hd.add_argument("scene", nargs="?", default=bundled_scene("hdr_leds/hdr_leds.xml"))
+    hd = sub.add_parser("hdr", help="HDR light field of a static galvo scene: events vs 8-bit exposures (one view; "
+                                     "--lightfield: all views, refocused at several depths)")
+    hd.add_argument("scene", nargs="?", help="static galvo scene (default: scenes/hdr_leds; with --lightfield "
+                                             "scenes/hdr_depth)")
     hd.add_argument("-o", "--output", default="out/hdr", help="output directory (EXRs, figure, metrics JSON)")
     add_defines(hd)
-    hd.add_argument("--depth", type=num(0, lo_open=True), default=1.45,
-                    help="scene distance for the scan shifts (hdr_leds: 1.45)")
-    hd.add_argument("--steps", type=num(1, MAX_STEPS, integer=True), default=64, help="render steps over the scan period")
+    hd.add_argument("--depth", type=num(0, lo_open=True),
+                    help="scene distance for the scan shifts (default: hdr_leds' 1.45; with --lightfield the harmonic "
+                         "mean of --depths)")
+    hd.add_argument("--steps", type=num(1, MAX_STEPS, integer=True),
+                    help="render steps over the scan period (default 64; with --lightfield 1 px of scan per step)")
     hd.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=4)
+    hd.add_argument("--lightfield", action="store_true", help="the light field of one scan period with the scene's "
+                    "event pixel, refocused at --depths, against 8-bit exposures of the same views")
+    hd.add_argument("--depths", default="0.6,1.5", help="with --lightfield: refocus depths (default: hdr_depth's "
+                                                        "card and wall)")
+    hd.add_argument("--views", type=num(2, MAX_VIEWS, integer=True), default=32,
+                    help="with --lightfield: views per scan period (default 32)")
     _add_galvo_apps(sub)
     sm = sub.add_parser("slomorf", help="slow-motion refocus: kaleidoscope events + 120 fps RGB frames, scored")
     sm.add_argument("scene", nargs="?", help="kaleidoscope scene (default: the bundled scenes/falling)")
@@ -32,7 +42,9 @@ def add_parsers(sub) -> None:
     add_defines(sm)
     sm.add_argument("--fps", type=num(0, 1e4, lo_open=True), default=120.0, help="RGB camera frame rate (default 120)")
     sm.add_argument("--factor", type=num(2, 64, integer=True), default=8, help="frames per RGB frame interval (default 8)")
-    sm.add_argument("--depths", default="0.55,0.8,1.4", help="refocus depths (default: falling's post, block, wall)")
+    sm.add_argument("--depths", default="0.55,0.8,1.4",
+                    help="refocus depths (default: falling's post, block, wall; for scenes/dart/kaleidoscope.xml "
+                         "give 0.95,1.8: the dart and the wall)")
     sm.add_argument("--duration", type=num(0, MAX_DURATION_S, lo_open=True), help="seconds (default: the motion file's)")
     sm.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=4)
 
@@ -122,7 +134,15 @@ def run_demo(a) -> int:
 
 def run_hdr(a) -> int:
     from ..apps import hdr
-    return _application(lambda: hdr.compare(a.scene, defines(a), a.depth, a.steps, spp=a.spp, progress=True),
+    if a.lightfield:
+        depths = number_list(a.depths, "--depths", lo=0, lo_open=True)
+        return _application(lambda: hdr.lightfield(a.scene, defines(a), depths, a.views, a.depth, a.steps,
+                                                    spp=a.spp, progress=True),
+                            a.output,
+                            lambda p: f"{p['figure']}, {len(p['exr'])} refocused EXRs (log) and {p['metrics']}")
+    scene = a.scene or bundled_scene("hdr_leds/hdr_leds.xml")
+    depth = 1.45 if a.depth is None else a.depth
+    return _application(lambda: hdr.compare(scene, defines(a), depth, a.steps or 64, spp=a.spp, progress=True),
                         a.output,
                         lambda p: f"{p['figure']}, EXRs (log) and {p['metrics']}")
 

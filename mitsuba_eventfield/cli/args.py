@@ -58,7 +58,7 @@ OUTPUT_FILES = {"render": (("output", "event file"), ("preview", "preview")), "p
                 "frame": (("output", "frame"),), "refocus": (("output", "refocused image"),),
                 "depth": (("output", "depth map"),), "calibrate": (("output", "calibration file"),),
                 "device": (("metadata", "metadata"),)}
-OUTPUT_DIRS = ("demo", "reconstruct", "bench", "hdr", "highspeed", "track-focus", "slomorf", "scanrate-depth")
+OUTPUT_DIRS = ("demo", "reconstruct", "bench", "hdr", "highspeed", "track-focus", "slomorf", "scanrate-depth", "paper")
 
 
 def check_outputs(args) -> None:

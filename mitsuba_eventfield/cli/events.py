@@ -43,7 +43,12 @@ def _add_render(sub) -> None:
     g = r.add_mutually_exclusive_group()
     g.add_argument("--steps", type=num(1, MAX_STEPS, integer=True),
                    help="uniform time steps over the duration (default 100)")
-    g.add_argument("--adaptive", action="store_true", help="adaptive steps bounded by --max-log-change")
+    g.add_argument("--adaptive", nargs="?", const="auto", choices=("auto", "motion", "log-change"),
+                   help="adaptive steps: 'motion' (placed before rendering so the known image motion, galvo scan "
+                        "and moving objects, stays under --px-per-step), 'log-change' (sized while rendering by "
+                        "--max-log-change), or without a value: motion where it is known, else log change")
+    r.add_argument("--px-per-step", type=num(0, 100, lo_open=True), default=1.0,
+                   help="adaptive by motion: largest image motion per step in pixels (default 1)")
     r.add_argument("--max-log-change", type=num(0, 100, lo_open=True), default=0.5,
                    help="adaptive: largest per-pixel log change per step, as a fraction of C (default 0.5)")
     r.add_argument("--min-step", type=num(0, MAX_DURATION_S, lo_open=True),
@@ -151,7 +156,8 @@ def run_render(a) -> int:
     extra = _auto_plan(a, motion, scene_defines) if a.auto else None
     scene = load_scene(a.scene, motion=motion, **scene_defines)
     summary = render_events(
-        scene, a.duration, steps=a.steps, adaptive=a.adaptive, max_log_change=a.max_log_change,
+        scene, a.duration, steps=a.steps, adaptive={None: False, "auto": True}.get(a.adaptive, a.adaptive),
+        max_log_change=a.max_log_change, px_per_step=a.px_per_step,
         min_step=a.min_step, max_step=a.max_step, spp=a.spp, seed=a.seed,
         seed_mode="independent" if a.independent_seeds else "fixed", threshold=a.threshold,
         threshold_on=a.threshold_on, threshold_off=a.threshold_off, linlog_threshold=a.linlog_threshold,

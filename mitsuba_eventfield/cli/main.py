@@ -9,10 +9,10 @@ import signal
 import sys
 import threading
 
-from . import apps, calibrate, device, evaluate, events, lightfield
+from . import apps, calibrate, designs, device, evaluate, events, lightfield, paper, scan_frequency
 from .args import OUTPUT_DIRS, Parser, check_outputs, one_line
 
-MODULES = (events, lightfield, calibrate, evaluate, apps, device)
+MODULES = (events, lightfield, calibrate, evaluate, apps, designs, scan_frequency, paper, device)
 COMMANDS = {name: run for module in MODULES for name, run in module.COMMANDS.items()}
 
 

@@ -46,11 +46,10 @@ def _depth_from_views(events, t_start, log_start, views, depth_range, planes):
 
 
 def default_depth_range(optics: dict) -> tuple:
-    """Depths searched when none are given: from 2 pivot distances (the Y mirror's; nearer than that a view
-    shift barely changes with depth) to 1000 (practically infinity; the search is uniform in inverse depth)."""
+    """Depths searched when none are given: from twice the Y mirror's pivot distance (an assumed near limit:
+    give ``depth_range`` for nearer scenes) to 1000 (practically infinity; the search is uniform in inverse
+    depth, where a galvo's view shift is affine)."""
     return 2.0 * (float(optics["mirror_distance"]) + float(optics["mirror_separation"])), 1000.0
-
-
 
 
 def reconstruct_periods(events: EventStream, views: int = 32, periods=None, depth_range=None, samples: int = 16,

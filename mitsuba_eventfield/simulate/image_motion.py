@@ -1,4 +1,5 @@
-"""How far the image moves in one time step, and a note when that is more than a pixel.
+"""How far the image moves in one time step, a note when that is more than a pixel, and the adaptive step
+instants that keep it under one (``motion_schedule``).
 
 Events between two rendered instants are placed by linear interpolation of each pixel's log brightness; when
 the image moves by more than about a pixel per step, an edge skips pixels between instants and their events
@@ -36,17 +37,15 @@ def _camera(timed: TimedScene):
     return np.linalg.inv(np.array(to_world.matrix.numpy()).reshape(4, 4)), focal
 
 
-def object_px_per_step(timed: TimedScene, t_start: float, duration: float, steps: int) -> float | None:
-    """Largest image displacement of any moving object's bounding-box corners over one step, in pixels (None
-    without moving objects or without a pinhole-like camera)."""
+def object_displacements(timed: TimedScene, times) -> np.ndarray | None:
+    """Largest image displacement of any moving object's bounding-box corners between consecutive ``times``,
+    in pixels, (len(times) - 1,) (None without moving objects or without a pinhole-like camera)."""
     camera = _camera(timed)
     if camera is None or timed.motion is None or timed.is_static:
         return None
     world_to_cam, focal = camera
     shapes = {s.id(): s for s in timed.scene.shapes()}
-    n = min(steps, MOTION_SAMPLES - 1)
-    times = t_start + np.linspace(0.0, duration, n + 1)
-    worst = 0.0
+    worst = np.zeros(len(times) - 1)
     for name, obj in timed.motion.objects.items():
         if name not in shapes:
             continue
@@ -57,11 +56,75 @@ def object_px_per_step(timed: TimedScene, t_start: float, duration: float, steps
         cam = np.stack([(world_to_cam @ obj.matrix(t) @ now @ corners.T).T for t in times])   # (n+1, 8, 4)
         z = np.where(np.abs(cam[..., 2]) > 1e-9, cam[..., 2], 1e-9)
         px = focal * cam[..., :2] / z[..., None]
-        ahead = z[..., None] > 0
-        step = np.linalg.norm(np.diff(px, axis=0), axis=-1)[(ahead[1:] & ahead[:-1])[..., 0]]
-        if step.size:
-            worst = max(worst, float(step.max()) * n / steps)   # samples may span several steps
+        ahead = (z[1:] > 0) & (z[:-1] > 0)                   # (n, 8): both ends in front of the camera
+        step = np.where(ahead, np.linalg.norm(np.diff(px, axis=0), axis=-1), 0.0)
+        worst = np.maximum(worst, step.max(axis=1))
     return worst
+
+
+def object_px_per_step(timed: TimedScene, t_start: float, duration: float, steps: int) -> float | None:
+    """Largest image displacement of any moving object's bounding-box corners over one step, in pixels (None
+    without moving objects or without a pinhole-like camera)."""
+    n = min(steps, MOTION_SAMPLES - 1)
+    timed.set_time(t_start)            # the shapes' bounds at the render's start: the same answer on every call
+    d = object_displacements(timed, t_start + np.linspace(0.0, duration, n + 1))
+    return None if d is None else float(d.max()) * n / steps      # samples may span several steps
+
+
+def scan_displacements(timed: TimedScene, times) -> np.ndarray | None:
+    """The galvo scan's image displacement between consecutive ``times`` (pixels; the largest over the image
+    centre and corners, at infinity: ``optics.galvo``), or None without a periodic scan."""
+    period, sensor = timed.scan_period, timed.sensor
+    if not period or not hasattr(sensor, "optics_metadata"):
+        return None
+    from ..optics.galvo import GalvoGeometry
+    from ..optics.scan import curve_from_dict
+    optics = sensor.optics_metadata()
+    width, height = timed.film_size
+    geometry = GalvoGeometry.from_optics(optics, width, height)
+    ax, ay = curve_from_dict(optics["scan"]).angles(np.asarray(times, np.float64))
+    worst = np.zeros(len(times) - 1)
+    for x, y in ((width / 2, height / 2), (0.0, 0.0), (width, 0.0), (0.0, height), (width, height)):
+        shifts = geometry.image_shift(ax, ay, math.inf, x, y)
+        worst = np.maximum(worst, np.hypot(*np.diff(shifts, axis=0).T))
+    return worst
+
+
+def motion_schedule(timed: TimedScene, t_start: float, duration: float, px_per_step: float = MAX_PX_PER_STEP,
+                    max_step: float | None = None, min_step: float | None = None) -> np.ndarray | None:
+    """Render instants from ``t_start`` to ``t_start + duration`` such that the known image motion (scan plus
+    moving objects, added: a point on a moving object moves by both) is at most ``px_per_step`` pixels between
+    consecutive instants, no step longer than ``max_step`` or (unless the motion demands a finer grid than
+    the samples resolve) shorter than ``min_step``. None when no motion is known (nothing to go by).
+
+    The motion is sampled finely (64 samples per scan period, at least 1024 over the render), its cumulative
+    path is inverted at multiples of ``px_per_step``: as many steps as the path needs, placed where it
+    happens."""
+    period = timed.scan_period or 0.0
+    n = max(1024, int(math.ceil(64 * duration / period)) if period else 0)
+    n = min(n, 200_000)
+    times = t_start + np.linspace(0.0, duration, n + 1)
+    timed.set_time(t_start)            # the shapes' bounds at the render's start: the same answer on every call
+    parts = [d for d in (scan_displacements(timed, times), object_displacements(timed, times)) if d is not None]
+    if not parts:
+        return None
+    path = np.concatenate([[0.0], np.cumsum(np.sum(parts, axis=0))])
+    steps = max(1, int(math.ceil(path[-1] / px_per_step * (1 - 1e-6))))    # 50.0000001 px at 0.5: 100 steps
+    instants = np.interp(np.linspace(0.0, path[-1], steps + 1), path, times) if path[-1] > 0 else times[[0, -1]]
+    if max_step is not None:                     # split steps longer than max_step (nothing moves there)
+        out = [instants[0]]
+        for t0, t1 in zip(instants[:-1], instants[1:]):
+            k = max(1, int(math.ceil((t1 - t0) / max_step - 1e-9)))
+            out.extend(t0 + (t1 - t0) * np.arange(1, k + 1) / k)
+        instants = np.array(out)
+    if min_step is not None and len(instants) > 2:   # merge steps shorter than min_step into their successor
+        keep = [instants[0]]
+        for t in instants[1:-1]:
+            if t - keep[-1] >= min_step:
+                keep.append(t)
+        instants = np.array(keep + [instants[-1]])
+    instants[0], instants[-1] = t_start, t_start + duration
+    return instants
 
 
 def scan_px_per_step(timed: TimedScene, duration: float, steps: int) -> float | None:

@@ -13,7 +13,6 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -22,17 +21,17 @@ from ..atomic import check_writable
 from ..errors import EventFieldError
 from ..events.io import format_of
 from ..scene.timed import TimedScene, load_scene
-from ..validate import MAX_DURATION_S, MAX_STEPS, available_memory, finite, number, positive
+from ..validate import available_memory, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
 from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
 from .image_motion import note_image_motion
+from .stepping import SEED_MODES, Stepping, stepping  # noqa: F401  (SEED_MODES: re-exported)
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary, run_metadata
 
 mi, dr = backend.mi, backend.dr
 
-SEED_MODES = ("fixed", "independent")
 # Memory model used to refuse a frame that cannot fit: bytes per Monte-Carlo sample in flight and per pixel
 # (film, radiance tensor, pixel state). Conservative; measured peak is lower (benchmarks/bench_foundation.py).
 BYTES_PER_SAMPLE = 64
@@ -87,72 +86,22 @@ def _advance(bar, elapsed_s: float) -> None:
     bar.update(min(round(elapsed_s * 1e3, 6), bar.total) - bar.n)
 
 
-@dataclass(frozen=True)
-class _Stepping:
-    """A render's validated time stepping and sampling."""
-    duration: float
-    t_start: float
-    spp: int
-    seed: int
-    seed_mode: str
-    adaptive: bool
-    steps: int | None
-    max_log_change: float
-    min_step: float | None
-    max_step: float | None
-
-    def as_meta(self) -> dict:
-        if self.adaptive:
-            return {"mode": "adaptive", "max_log_change": self.max_log_change, "min_step_s": self.min_step,
-                    "max_step_s": self.max_step}
-        return {"mode": "uniform", "steps": self.steps}
-
-
-def _stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_step, spp, seed, seed_mode,
-              t_start) -> _Stepping:
-    """Every stepping and sampling argument checked, with the duration from the motion file if not given."""
-    if duration is None:
-        duration = timed.motion.duration if timed.motion and timed.motion.duration else None
-        if duration is None:
-            raise EventFieldError("duration not given (pass duration=..., --duration, or set `duration` in the "
-                                  "motion file)")
-    duration = positive(duration, "duration")
-    if duration > MAX_DURATION_S:
-        raise EventFieldError(f"duration = {duration:g} s: allowed range is (0, {MAX_DURATION_S:g}] simulated seconds "
-                              "per render (the event file indexes every millisecond; split longer captures)")
-    if seed_mode not in SEED_MODES:
-        raise EventFieldError(f"seed_mode = {seed_mode!r}: allowed values are {', '.join(SEED_MODES)}")
-    if adaptive:
-        max_log_change = positive(max_log_change, "max_log_change")
-        max_step = positive(max_step if max_step is not None else duration / 20, "max_step")
-        min_step = positive(min_step if min_step is not None else min(1e-6, max_step), "min_step")
-        if min_step > max_step:
-            raise EventFieldError(f"min_step = {min_step} is larger than max_step = {max_step}")
-    else:
-        steps = positive(steps if steps is not None else 100, "steps", integer=True)
-        if steps > MAX_STEPS:
-            raise EventFieldError(f"steps = {steps}: allowed range is [1, {MAX_STEPS}] (each step renders the film)")
-    return _Stepping(duration, finite(t_start, "t_start"), positive(spp, "spp", integer=True),
-                     number(seed, "seed", 0, integer=True, strict=True), seed_mode, adaptive, steps, max_log_change,
-                     min_step, max_step)
-
-
 class _Loop:
     """The time-stepping loop of one render: renders (or reuses) a frame per step, commits it to the event
     integrator, orders and reads out the step's events and hands them to the sink."""
 
-    def __init__(self, timed, integ, st: _Stepping, sink, summary, bar, reuse: bool, checkpoints=None):
+    def __init__(self, timed, integ, st: Stepping, sink, summary, bar, reuse: bool, checkpoints=None):
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
         self.checkpoints = checkpoints
         self.limit = AccuracyLimit.for_stepping(st)      # what limits timing accuracy: steps or noise
         self.width, self.height = timed.film_size
-        self.reuse = None if st.adaptive or not reuse or st.seed_mode != "fixed" else \
+        self.reuse = None if st.steps is None or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
         self.cache = []                                  # log-brightness frames of one period, for reuse
         # periodic view on a uniform grid: timestamps from the in-period phase plus whole periods (integers), so
         # an event copied from the previous period is bit-identical to one computed (not for pixel models with
         # state across steps, e.g. refractory: they need absolute times, and their events are never copied)
-        self.grid = None if st.adaptive or not integ.deterministic else \
+        self.grid = None if st.steps is None or not integ.deterministic else \
             phase_grid(timed, st.duration, st.steps, st.t_start)
         self.period_events, self.copy_from, self.prev_key, self.period_block = {}, None, None, None
 
@@ -188,7 +137,7 @@ class _Loop:
             integ.commit(st.t_start, st.t_start)         # initialises every pixel's reference; fires nothing
             self.limit.first_frame(self, st.t_start)
             t, k = st.t_start, 0
-            dt = (st.duration / st.steps) if not st.adaptive else max(st.min_step, st.max_step / 16)
+            dt = (st.duration / st.steps) if st.steps else max(st.min_step, st.max_step / 16)
         c_min = min(integ.threshold_on, integ.threshold_off)
         while t < t_end - 1e-12:
             if self.checkpoints is not None and self.checkpoints.due():
@@ -200,7 +149,7 @@ class _Loop:
                 dt = min(dt, t_end - t)
                 t_next = t + dt
             else:
-                t_next = st.t_start + (k + 1) * st.duration / st.steps
+                t_next = st.t_next(k)                    # uniform or scheduled by image motion
             self.render_at(t_next, k + 1)
             if st.adaptive:
                 change = integ.staged_max_change()
@@ -310,7 +259,7 @@ def _progress_bar(duration):
                 bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} ms sim [{elapsed}<{remaining}]{postfix}")
 
 
-def render_events(scene, duration: float | None = None, *, steps: int | None = None, adaptive: bool = False,
+def render_events(scene, duration: float | None = None, *, steps: int | None = None, adaptive=False,
                   max_log_change: float = 0.5, min_step: float | None = None, max_step: float | None = None,
                   spp: int = 4, seed: int = 0, seed_mode: str = "fixed", threshold: float | None = None,
                   threshold_on: float | None = None, threshold_off: float | None = None,
@@ -318,7 +267,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   progress: bool = False, t_start: float = 0.0, reuse: bool = True, preset: str | None = None,
                   pixel: dict | None = None, extra_meta: dict | None = None,
                   event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, checkpoint_s: float | None = None,
-                  resume: bool = False):
+                  resume: bool = False, px_per_step: float = 1.0):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
     Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by
@@ -328,6 +277,10 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     ``reuse``: when the scene is static and the view periodic (galvo scan, or a fixed camera), render one
     period and feed its frames again (identical events, much faster); False renders every step.
 
+    ``adaptive``: False (``steps`` uniform steps), True (steps placed by the known image motion, at most
+    ``px_per_step`` pixels each; by the per-pixel log change where no motion is known), "motion" or
+    "log-change" (``stepping``).
+
     ``preset`` ("ideal", "davis346", "prophesee_gen4") and ``pixel`` (PixelConfig fields, e.g.
     ``{"refractory_s": 1e-4, "shot_noise_hz": 2}``) choose the event pixel; default: the scene's own.
 
@@ -336,8 +289,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     interrupted render goes on with ``resume=True`` to the events of an uninterrupted one (``checkpoint.py``).
     """
     timed = load_scene(scene)
-    st = _stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_step, spp, seed, seed_mode,
-                   t_start)
+    st = stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_step, spp, seed, seed_mode,
+                  t_start, px_per_step)
     width, height = timed.film_size
     check_memory(width, height, st.spp, where=f"{timed.path or 'scene'}: film")
     if output:
@@ -347,7 +300,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     integ.reset()
     summary = RenderSummary(width=width, height=height, duration_s=st.duration,
                             output=os.path.abspath(output) if output else None)
-    if not st.adaptive:
+    if st.steps is not None:
         warn_coarse_scan_steps(timed.scan_period, st.duration, st.steps, summary.notes)
         note_image_motion(timed, st.t_start, st.duration, st.steps, summary)
     meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,

@@ -26,13 +26,17 @@ COMMANDS = {
     "convert": ["convert", "{F}", "-o", "{O}/c.h5", "--fps", "100", "--quiet"],
     "bench": ["bench", "{S}", "-o", "{O}/bench"],
     "hdr": ["hdr", "{S}", "-o", "{O}/hdr"],
+    "hdr lightfield": ["hdr", "--lightfield", "{S}", "-o", "{O}/hl"],
     "highspeed": ["highspeed", "{S}", "-o", "{O}/hs", "--plane", "fan=0.5"],
     "track-focus": ["track-focus", "{S}", "-o", "{O}/tf"],
     "scanrate-depth": ["scanrate-depth", "{S}", "-o", "{O}/sd"],
     "slomorf": ["slomorf", "{S}", "-o", "{O}/sm"],
+    "scan-frequency": ["scan-frequency", "{S}", "-o", "{O}/sf", "--plane", "fan=0.6"],
+    "compare-designs": ["compare-designs", "--galvo", "{S}", "-o", "{O}/cd"],
+    "grid-experiment": ["grid-experiment", "--galvo", "{S}", "-o", "{O}/ge"],
 }
 # commands that take no input file
-NO_INPUT = {"regression", "demo", "device"}
+NO_INPUT = {"regression", "demo", "device", "paper"}
 
 
 def test_the_table_covers_every_subcommand():

@@ -29,17 +29,18 @@ def test_rendered_frame_matches_analytic_radiance():
     assert np.max(np.abs(image - expected[None, :]) / expected[None, :]) < 2e-3
 
 
-@pytest.mark.parametrize("adaptive", [False, True], ids=["uniform", "adaptive"])
+@pytest.mark.parametrize("adaptive", [False, "log-change", "motion"], ids=["uniform", "log-change", "motion"])
 def test_events_match_exact_crossings(adaptive, capsys):
     import mitsuba as mi
-    kwargs = dict(adaptive=True, max_log_change=0.5, max_step=DT) if adaptive else dict(steps=STEPS)
+    kwargs = {False: dict(steps=STEPS), "log-change": dict(adaptive="log-change", max_log_change=0.5, max_step=DT),
+              "motion": dict(adaptive="motion", px_per_step=0.5)}[adaptive]
     ev = ef.render_events(_scene(mi), DURATION, threshold=C, **kwargs)
     truth = _truth()
     scored = an.score(ev, truth)
     count_diff, pol_ok, n_true = scored["count_diff"], scored["polarity_ok"], scored["exact_events"]
     med, p99 = scored["timing_median_us"] * 1e-6 / DT, scored["timing_p99_us"] * 1e-6 / DT
     with capsys.disabled():
-        print(f"\n[analytic {'adaptive' if adaptive else 'uniform'}] {len(ev)} events (exact {n_true}); "
+        print(f"\n[analytic {adaptive or 'uniform'}] {len(ev)} events (exact {n_true}); "
               f"steps {ev.meta['render']['steps']}; max |count diff| {np.abs(count_diff).max()}; "
               f"timestamp error median {med:.4f} step, p99 {p99:.4f} step (step = {DT * 1e6:.0f} us)")
     assert n_true > 5000
@@ -54,7 +55,7 @@ def test_adaptive_step_count_follows_log_slope():
     re-rendered) and not many more than the controller's target slope*T/(0.9 f C)."""
     import mitsuba as mi
     f = 0.25
-    ev = ef.render_events(_scene(mi), DURATION, threshold=C, adaptive=True, max_log_change=f)
+    ev = ef.render_events(_scene(mi), DURATION, threshold=C, adaptive="log-change", max_log_change=f)
     bs = an.B * np.sin(np.pi * an.PIX / an.LAM) / (np.pi * an.PIX / an.LAM)
     max_slope = bs / np.sqrt(an.A ** 2 - bs ** 2) * 2 * np.pi * SPEED / an.LAM   # d log I / dt, 1/s
     total = max_slope * DURATION

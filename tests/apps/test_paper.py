@@ -1,0 +1,39 @@
+"""``eventfield paper`` (issue 17): the paper side by side. Every number in the document comes from the run of
+the command its row names: rerunning that command reproduces the numbers."""
+import json
+import os
+import re
+import shlex
+
+from mitsuba_eventfield.apps import paper
+from mitsuba_eventfield.cli.main import main as cli
+
+
+def test_every_paper_figure_has_a_row_and_numbers_come_from_the_named_command(tmp_path, capsys):
+    doc = tmp_path / "docs" / "paper.md"
+    rc = cli(["paper", "-o", str(tmp_path / "out"), "--doc", str(doc), "--only", "demo", "--quick"])
+    assert rc == 0
+    text = doc.read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| Fig") or line.startswith("| Table")]
+    labels = {re.match(r"\| (Fig\. \d+|Table \d+)", r).group(1) for r in rows}
+    assert {"Fig. 1", "Fig. 2", "Fig. 3", "Fig. 4", "Fig. 13", "Fig. 14", "Fig. 15"} <= labels
+    demo_row = next(r for r in rows if r.startswith("| Fig. 14"))
+    assert "](paper/demo.png)" in demo_row and (doc.parent / "paper" / "demo.png").stat().st_size > 1000
+    # the row's command, run again, writes the same card depths the row states
+    command = re.search(r"`(eventfield [^`]+)`", demo_row).group(1)
+    again = tmp_path / "again"
+    assert cli(shlex.split(command)[1:] + ["-o", str(again)]) == 0
+    cards = json.loads((again / "metrics.json").read_text())["cards"]
+    for name, card in cards.items():
+        assert f"{name} {card['true_m']:.3f} m -> {card['measured_m']:.3f} m" in demo_row
+    assert "reduced sizes" in text
+
+
+def test_unknown_result_is_one_line(tmp_path):
+    import pytest
+
+    from mitsuba_eventfield.errors import ConfigError
+    with pytest.raises(ConfigError, match="unknown result"):
+        paper.generate(str(tmp_path / "o"), str(tmp_path / "p.md"), only=["nonsense"])
+    assert not (tmp_path / "p.md").exists()
+    assert os.listdir(tmp_path) == []
