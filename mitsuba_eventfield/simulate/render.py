@@ -276,13 +276,10 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
 
     ``reuse``: when the scene is static and the view periodic (galvo scan, or a fixed camera), render one
     period and feed its frames again (identical events, much faster); False renders every step.
-
-    ``adaptive``: False (``steps`` uniform steps), True (steps placed by the known image motion, at most
-    ``px_per_step`` pixels each; by the per-pixel log change where no motion is known), "motion" or
-    "log-change" (``stepping``).
-
-    ``preset`` ("ideal", "davis346", "prophesee_gen4") and ``pixel`` (PixelConfig fields, e.g.
-    ``{"refractory_s": 1e-4, "shot_noise_hz": 2}``) choose the event pixel; default: the scene's own.
+    ``adaptive``: False (``steps`` uniform steps), True, "motion" or "log-change" (``stepping``: by the known
+    image motion, at most ``px_per_step`` pixels per step, or by the per-pixel log change). ``preset``
+    ("ideal", "davis346", "prophesee_gen4") and ``pixel`` (PixelConfig fields, e.g. ``{"refractory_s": 1e-4,
+    "shot_noise_hz": 2}``) choose the event pixel; default: the scene's own.
 
     ``event_buffer_mb``: device memory for events before they move to the host (and the file writer) in one
     chunk. ``checkpoint_s``: save the render's state every so many wall seconds (HDF5 output), so that an
