@@ -66,13 +66,22 @@ def _os_error(e: OSError) -> int | None:
     return 2
 
 
+def _warning_line(message, category, filename, lineno, file=None, line=None):
+    """A Python warning from the library (e.g. refocus's MotionBlurWarning) as one line of ours, no source line."""
+    print(f"eventfield: warning: {one_line(message) if isinstance(message, BaseException) else message}",
+          file=sys.stderr)
+
+
 def main(argv=None) -> int:
+    import warnings
+
     from ..backend import quiet_mitsuba_log
     from ..errors import EventFieldError
     args = build_parser().parse_args(argv)
     # our lines only: no Mitsuba notes (monochrome film, "winding down" on Ctrl-C); restored when main returns
     was_quiet = quiet_mitsuba_log()
     previous = _signals_as_interrupts()
+    show_warning, warnings.showwarning = warnings.showwarning, _warning_line
     try:
         return _run(args)
     except EventFieldError as e:
@@ -95,6 +104,7 @@ def main(argv=None) -> int:
                   "(EVENTFIELD_DEBUG=1 shows the traceback)", file=sys.stderr)
             return 3
     finally:
+        warnings.showwarning = show_warning
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         if not was_quiet:

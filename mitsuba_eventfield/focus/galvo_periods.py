@@ -15,6 +15,16 @@ from ..events.stream import EventStream
 from ..lightfield.galvo_solve import DYNAMIC_LAGS, geometry_and_angles, start_image
 
 
+# A period whose robust weights turn down more than this share of the equations is flagged (``reliable``):
+# its events do not fit a static scene at the depths mapped (moving content, depths beyond the range searched,
+# noise). From evaluation.failure's depth-range sweep (a textured card in front of a wall, 96 x 72, 24 views):
+# 0.019-0.026 with the card in the range searched (log error 0.015-0.017), 0.093-0.105 with it nearer (log
+# error 0.021-0.040, the card's depth read 3.4-7x too far). The same scene with the card moving sideways 4, 8,
+# 16, 32 px per period: 0.038, 0.065, 0.092, 0.102 (flagged from between 4 and 8 px). Path-traced
+# galvo_static and fan at 4 spp: 0.17-0.20 (log error 0.4: Monte-Carlo noise fires most of their events).
+MAX_OUTLIERS = 0.05
+
+
 @dataclass
 class PeriodReconstruction:
     """What the events-only solver found for one scan period."""
@@ -25,6 +35,10 @@ class PeriodReconstruction:
     confidence: np.ndarray       # (H, W) depth-from-focus confidence in [0, 1]
     outliers: float              # fraction of equations the robust weights turned down (moving content)
     meta: dict = field(default_factory=dict)
+    reliable: bool = field(init=False)   # outliers <= MAX_OUTLIERS (see there); False: do not trust this period
+
+    def __post_init__(self):
+        self.reliable = bool(self.outliers <= MAX_OUTLIERS)
 
 
 def _depth_from_views(events, t_start, log_start, views, depth_range, planes):
