@@ -4,7 +4,7 @@ metrics.json, with the rows that say which of the paper's results each reproduce
 Measured at the defaults (144 x 144 films, two 4 ms scan periods, 16 galvo views per period), refocused on the
 cards' plane, from 1x (2.5 px of motion per scan period) to 8x (20.5 px): on the static card the kaleidoscope
 fires no event and recovers nothing (correlation 0.00, PSNR 3.3 dB: the sky where the card is) at every speed;
-the galvo from its events alone (``focus.galvo_periods``) reads 28.4, 27.8, 27.4, 26.8 dB (correlation 0.96 to
+the galvo from its events alone (``focus.galvo_periods``) reads 28.4 to 26.6 dB (correlation 0.96 to
 0.95: the moving card disturbs the solve a little more as it speeds up), from its rendered views 33.1 dB at
 every speed. On the moving card the galvo falls from 24.7 to 18.0 dB (events) and from 25.7 to 15.2 dB
 (rendered views: the design's own motion blur over one scan period; the events' solve smooths it); the
