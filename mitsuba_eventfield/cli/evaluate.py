@@ -4,21 +4,30 @@ from __future__ import annotations
 import os
 
 from ..errors import EventFieldError
-from ..scene.bundled import bundled_scene
 from ..validate import MAX_DURATION_S, MAX_STEPS
 from .args import add_defines, defines, num
 
 
 def add_parsers(sub) -> None:
-    bn = sub.add_parser("bench", help="speed against accuracy of quality settings (chart + table)")
-    bn.add_argument("scene", nargs="?", default=bundled_scene("fan/fan.xml"))
-    bn.add_argument("-o", "--output", default="out/bench", help="output directory (chart, CSV)")
-    bn.add_argument("--duration", type=num(0, MAX_DURATION_S, lo_open=True), default=0.008,
-                    help="simulated seconds (default 0.008: two periods)")
-    bn.add_argument("--steps", type=num(1, MAX_STEPS, integer=True), default=64, help="steps of the default setting")
-    add_defines(bn, default=["width=96", "height=72"])
-    bn.add_argument("--refocus-depth", type=num(0, lo_open=True), default=0.6,
-                    help="depth of the downstream refocus (fan: 0.6)")
+    bn = sub.add_parser("bench", help="speed against accuracy of a render's levers (spp, sampler, steps, seeds, "
+                                      "adaptive) on four scenes, or one: chart + tables")
+    bn.add_argument("scene", nargs="?", help="one scene file instead of the suite (analytic, demo, fan galvo, "
+                                             "kaleidoscope grid: about 5 minutes on 2 cores)")
+    bn.add_argument("-o", "--output", default="out/bench",
+                    help="output directory: bench_suite.png/.md/.csv/.json (one scene: bench_<name>.*)")
+    bn.add_argument("--scenes", help="suite scenes to run, comma-separated (default: analytic,demo,fan,kaleidoscope)")
+    bn.add_argument("--settings", help="settings to run, comma-separated keys (default: all; see the table in "
+                                       "mitsuba_eventfield.evaluation.bench.SETTINGS)")
+    bn.add_argument("--seeds", type=num(1, 20, integer=True),
+                    help="runs per setting, each with its own seed: the error bars (default 5)")
+    bn.add_argument("--duration", type=num(0, MAX_DURATION_S, lo_open=True),
+                    help="one scene: simulated seconds (default: `duration` of its motion file)")
+    bn.add_argument("--steps", type=num(1, MAX_STEPS, integer=True), default=100,
+                    help="one scene: uniform steps of the default setting (default 100, as eventfield render)")
+    add_defines(bn, help_text="one scene: value of an XML <default name=...> parameter, e.g. -D width=64 "
+                              "(repeatable)")
+    bn.add_argument("--refocus-depth", type=num(0, lo_open=True),
+                    help="one galvo scene: also score the refocus of its first scan period at this depth")
     rg = sub.add_parser("regression", help="compare tiny renders of the bundled scenes with reference images")
     rg.add_argument("--bless", action="store_true", help="re-render the references (after a deliberate change)")
     rg.add_argument("--references", metavar="DIR",
@@ -26,18 +35,42 @@ def add_parsers(sub) -> None:
                          "the repository's, when it exists; required otherwise)")
 
 
+def _bench_scenes(a, bench) -> list:
+    """The scenes of a bench run, every argument checked before anything renders."""
+    if a.scene is None:
+        if a.define or a.duration is not None or a.refocus_depth is not None:
+            raise EventFieldError("-D, --duration and --refocus-depth apply to one scene (eventfield bench SCENE); "
+                                  "the suite's scenes have their own")
+        return bench.pick_scenes(a.scenes.split(",") if a.scenes else None)
+    if a.scenes:
+        raise EventFieldError("give one scene file or --scenes, not both")
+    from ..scene import load_scene
+    probe = load_scene(a.scene, **defines(a))          # a bad scene file fails here, in one line
+    duration = a.duration or (probe.motion.duration if probe.motion and probe.motion.duration else None)
+    if duration is None:
+        raise EventFieldError(f"{a.scene}: no duration (pass --duration, or set `duration` in its motion file)")
+    return [bench.single(a.scene, duration, a.steps, defines(a), a.refocus_depth)]
+
+
 def run_bench(a) -> int:
-    from ..evaluation import bench
-    from ..evaluation.sweep import SweepTable
-    os.makedirs(a.output, exist_ok=True)
-    rows = bench.run(a.scene, a.duration, a.steps, defines(a), a.refocus_depth)
-    SweepTable(rows).to_csv(os.path.join(a.output, "bench.csv"))
-    chart = bench.chart(rows, os.path.join(a.output, "bench.png"), f"{os.path.basename(a.scene)}: speed vs accuracy")
-    for r in rows:
-        print(f"{r['setting']:28s} time x{r.get('relative_time', 0):6.2f}  product err {r['product_error']:.4f}  "
-              f"timing err {r['timing_error']:.4f}  count err {r['count_error']:.4f}"
-              f"{'  (Pareto)' if r.get('pareto') else ''}")
-    print(f"default on or near the Pareto front: {bench.default_on_front(rows)}; wrote {chart}")
+    from ..backend import ensure_variant
+    from ..evaluation import bench, bench_chart
+    ensure_variant()
+    specs = _bench_scenes(a, bench)
+    settings = bench.pick_settings(a.settings.split(",") if a.settings else None)
+    seeds = bench.SEEDS if a.seeds is None else tuple(range(1, a.seeds + 1))
+    rows = bench.run(specs, settings, seeds)
+    import mitsuba as mi
+    stem = "bench_suite" if a.scene is None else f"bench_{specs[0].name}"
+    title = ("speed against accuracy: " + ", ".join(s.name for s in specs) + f" ({len(seeds)} seeds per setting, "
+             f"{mi.variant()}, {bench.THREADS} render thread on a {os.cpu_count()}-CPU machine)")
+    paths = bench_chart.write(rows, a.output, stem, {"variant": mi.variant(), "seeds": len(seeds),
+                                                     "cpus": os.cpu_count(), "threads": bench.THREADS}, title)
+    summary = bench_chart.summarize(rows)
+    print(bench_chart.BEYOND_NOISE)
+    for line in bench_chart.position_lines(summary, bench_chart.default_position(summary)):
+        print(line)
+    print("wrote " + ", ".join(paths.values()))
     return 0
 
 

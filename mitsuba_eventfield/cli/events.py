@@ -80,6 +80,9 @@ def _add_render(sub) -> None:
                    help="continue an interrupted render of this output from its last checkpoint (same options)")
     r.add_argument("--auto", action="store_true",
                    help="choose colour, spp and steps from cheap probes (ef.auto), print and record why")
+    r.add_argument("--timing-accuracy", type=_time_arg, metavar="TIME",
+                   help="with --auto (implied): the median timestamp error wanted, with a unit (20us, 0.5ms, 1e-5s; "
+                        "at least 1us); the sampler, spp and steps are chosen by the accuracy-limit model")
 
 
 def _add_pixel_options(r) -> None:
@@ -139,11 +142,24 @@ def _auto_plan(a, motion, scene_defines):
         duration = probe.motion.duration if probe.motion and probe.motion.duration else None
         if duration is None:
             raise EventFieldError("--auto needs --duration (or `duration` in the motion file)")
-    plan = auto.plan(a.scene, duration, threshold=a.threshold or 0.2, defines=scene_defines)
+    plan = auto.plan(a.scene, duration, threshold=a.threshold, defines=scene_defines,
+                     timing_accuracy=a.timing_accuracy)
     print("automatic choices:\n  " + plan.report().replace("\n", "\n  "))
     set_variant(a.variant, plan.color)
-    a.spp, a.steps, a.duration = plan.spp, plan.steps, duration
+    a.spp, a.steps, a.duration, a.auto_plan = plan.spp, plan.steps, duration, plan
     return {"auto_plan": plan.as_dict()}
+
+
+def _time_arg(text):
+    """argparse type of --timing-accuracy: seconds from a time with a unit (one-line error otherwise)."""
+    import argparse
+
+    from ..errors import ConfigError
+    from ..simulate.auto import parse_time
+    try:
+        return parse_time(text)
+    except ConfigError as e:
+        raise argparse.ArgumentTypeError(str(e).replace("--timing-accuracy ", "", 1)) from None
 
 
 def run_render(a) -> int:
@@ -153,8 +169,8 @@ def run_render(a) -> int:
     set_variant(a.variant, a.color)
     motion = None if a.no_motion else (a.motion or "auto")
     scene_defines = defines(a)
-    extra = _auto_plan(a, motion, scene_defines) if a.auto else None
-    scene = load_scene(a.scene, motion=motion, **scene_defines)
+    extra = _auto_plan(a, motion, scene_defines) if a.auto or a.timing_accuracy else None
+    scene = a.auto_plan.load(a.scene, motion) if extra else load_scene(a.scene, motion=motion, **scene_defines)
     summary = render_events(
         scene, a.duration, steps=a.steps, adaptive={None: False, "auto": True}.get(a.adaptive, a.adaptive),
         max_log_change=a.max_log_change, px_per_step=a.px_per_step,

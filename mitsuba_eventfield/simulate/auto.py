@@ -1,10 +1,11 @@
-"""Model no more than a scene needs: choose colour, samples and steps from cheap probes, and say why.
+"""Model no more than a scene needs: choose colour, sampler, samples and steps from cheap probes, and say why.
 
-    plan = ef.auto.plan("scenes/fan/fan.xml", duration=0.02)
+    plan = ef.auto.plan("scenes/fan/fan.xml", duration=0.02)                         # or timing_accuracy=20e-6
     print(plan.report())
-    events = ef.render_events(ef.load_scene(path, **plan.defines), 0.02, **plan.render_kwargs())
+    events = ef.render_events(plan.load("scenes/fan/fan.xml"), 0.02, **plan.render_kwargs())
 
-Choices (each verified against the full computation in tests/simulate/test_auto.py):
+Choices (each verified against the full computation in tests/simulate/test_auto.py and, for a requested timing
+accuracy, against the analytic scene's exact events in tests/simulate/test_auto_timing.py):
 
 * colour: one tiny RGB probe frame; if every pixel is grey (R = G = B to 1e-6), the luminance the event pixel
   sees is the mono render's, so mono suffices (events identical, about 3x less work per sample);
@@ -16,17 +17,40 @@ Choices (each verified against the full computation in tests/simulate/test_auto.
   steps so that change stays below ``change_fraction`` x C per step (default one threshold: several
   crossings in a step are interpolated exactly, the linearisation error is second order);
 * reuse: a static scene under a periodic view renders one period (already automatic in render_events).
+
+With ``timing_accuracy`` (seconds: the median timestamp error wanted; ``eventfield render --auto
+--timing-accuracy 20us``) the sampler and spp come from the accuracy-limit model instead
+(``simulate/accuracy_limit.py``: a crossing moves by about sigma_L / |dL/dt| from Monte-Carlo noise and by
+dt^2 |L''| / (8 |L'|) from the time step). Three probe frames give |dL/dt| and |L''|; two seeds of one frame
+at 1, 4 and 16 x ``probe_spp`` give each candidate sampler's noise and how fast it falls with spp
+(independent: 1/sqrt(spp); stratified and multi-jittered samplers faster on smooth pixels). The cheapest
+(sampler, spp) whose predicted noise error is at most ``NOISE_SHARE`` of the request (and whose noise stays
+under ``noise_fraction`` x C) is chosen, then the fewest steps whose step error, added in quadrature, keeps the
+total within the request; never fewer steps than the change rule above (count accuracy). A request the limits
+(``max_spp``, ``max_steps``) cannot meet is refused before anything is rendered.
 """
 from __future__ import annotations
 
 import math
+import os
+import re
+import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..backend import set_variant
+from ..errors import ConfigError, EventFieldError
+from ..scene.motion import motion_path_for
 from ..scene.timed import load_scene
+from .accuracy_limit import AccuracyLimit
 from .render import render_frames
+
+NOISE_SHARE = 0.6          # of a requested timing accuracy, the part Monte-Carlo noise may take
+PROBES = (1, 4, 16)        # a timing request probes each sampler's noise at these multiples of probe_spp
+# candidate samplers for a timing request (the scene's own first) and the sample counts each takes exactly
+SAMPLERS = ("independent", "multijitter", "stratified", "ldsampler")
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
 
 
 @dataclass
@@ -37,16 +61,78 @@ class Plan:
     static: bool
     reasons: dict = field(default_factory=dict)
     defines: dict = field(default_factory=dict)
+    sampler: dict | None = None          # a Mitsuba sampler dict replacing the scene's own; None: the scene's
+    timing: dict | None = None           # a timing-accuracy request: the request, the prediction, the candidates
 
     def render_kwargs(self) -> dict:
         return {"spp": self.spp, "steps": self.steps}
+
+    def load(self, scene_path: str, motion="auto"):
+        """The scene as planned: its defines, and the chosen sampler in place of its own."""
+        return load_with_sampler(scene_path, self.sampler, motion=motion, **self.defines)
 
     def report(self) -> str:
         return "\n".join(f"{k}: {v}" for k, v in self.reasons.items())
 
     def as_dict(self) -> dict:
         return {"color": self.color, "spp": self.spp, "steps": self.steps, "static": self.static,
-                "reasons": dict(self.reasons)}
+                "sampler": self.sampler, "timing": self.timing, "reasons": dict(self.reasons)}
+
+
+def parse_time(text, what: str = "--timing-accuracy") -> float:
+    """Seconds from a time with a unit: ``20us``, ``0.5 ms``, ``1e-5s`` (units s, ms, us or µs, ns), from 1 us (event
+    timestamps are whole microseconds) to 1 s."""
+    m = re.fullmatch(r"\s*([0-9.eE+-]+)\s*(s|ms|us|µs|ns)\s*", str(text))
+    try:
+        value = float(m[1]) * TIME_UNITS[m[2]] if m else math.nan
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and 1e-6 <= value <= 1.0):        # timestamps are whole microseconds
+        raise ConfigError(f"{what} {text!r}: expected a time from 1us to 1s with a unit, e.g. 20us, 0.5ms, 1e-5s")
+    return value
+
+
+def _sampler_xml(sampler: dict) -> str:
+    props = "".join(f'<integer name="{k}" value="{int(v)}"/>' if isinstance(v, (int, np.integer)) and
+                    not isinstance(v, bool) else f'<boolean name="{k}" value="{str(v).lower()}"/>'
+                    for k, v in sampler.items() if k != "type")
+    return f'<sampler type="{sampler["type"]}">{props}</sampler>'
+
+
+def load_with_sampler(scene_path: str, sampler: dict | None, motion="auto", **defines):
+    """``load_scene(scene_path, motion, **defines)`` with the sensor's sampler replaced by ``sampler`` (e.g.
+    ``{"type": "multijitter", "sample_count": 16}``; None: the scene as it is). The XML is copied with the new
+    sampler into a temporary folder and loaded with the scene's own folder on Mitsuba's file resolver, so its
+    textures, meshes and includes are found; the returned scene keeps the original path."""
+    if not sampler:
+        return load_scene(scene_path, motion=motion, **defines)
+    with open(scene_path) as f:
+        text = f.read()
+    opening = re.search(r"<sensor\b[^>]*?(/?)>", text)
+    if opening is None or opening[1]:
+        raise EventFieldError(f"{scene_path}: no <sensor> element whose sampler could be chosen")
+    end = text.find("</sensor>", opening.end())
+    body = re.sub(r"<sampler\b[^>]*/>|<sampler\b.*?</sampler>", "", text[opening.end():end], count=1, flags=re.S)
+    text = text[:opening.end()] + _sampler_xml(sampler) + body + text[end:]
+    if isinstance(motion, str) and motion == "auto":
+        candidate = motion_path_for(scene_path)
+        motion = candidate if os.path.isfile(candidate) else None
+    import mitsuba as mi
+    resolver = mi.file_resolver()
+    saved = [resolver[i] for i in range(len(resolver))]
+    resolver.prepend(os.path.dirname(os.path.abspath(scene_path)))
+    try:
+        with tempfile.TemporaryDirectory() as folder:
+            copy = os.path.join(folder, os.path.basename(scene_path))
+            with open(copy, "w") as f:
+                f.write(text)
+            timed = load_scene(copy, motion=motion, **defines)
+    finally:
+        resolver.clear()
+        for p in saved:
+            resolver.append(p)
+    timed.path = scene_path
+    return timed
 
 
 def _grey(scene_path, defines, size=24) -> bool:
@@ -66,10 +152,10 @@ def _grey(scene_path, defines, size=24) -> bool:
 def _tiny(scene_path, size):
     """XML defaults that shrink the film, when the scene has them."""
     with open(scene_path) as f:
-        xml = f.read()
-    if 'name="width"' in xml and 'name="height"' in xml:
+        declared = set(re.findall(r'<default\s+name="(\w+)"', f.read()))
+    if {"width", "height"} <= declared:
         return {"width": size, "height": size * 3 // 4}
-    if 'name="views_px"' in xml:
+    if "views_px" in declared:
         return {"views_px": 3 * (size // 3)}
     return {}
 
@@ -80,34 +166,93 @@ def noise_std(timed, spp: int, seeds=(0, 1, 2, 3), t: float = 0.0) -> float:
     return float(np.median(frames.std(axis=0)))
 
 
-def plan(scene_path: str, duration: float, threshold: float = 0.2, noise_fraction: float = 0.5,
-         change_fraction: float = 1.0, probe_spp: int = 4, probe_dt: float | None = None, defines=None,
-         max_spp: int = 256, max_steps: int = 100_000) -> Plan:
-    defines = dict(defines or {})
-    reasons = {}
-    grey = _grey(scene_path, defines)
-    reasons["colour"] = ("mono: every pixel of an RGB probe is grey, so the luminance the pixel sees equals the mono "
-                         "render" if grey else "rgb: the scene has colour, and luminance needs all three channels")
-    set_variant(color=not grey)
-    timed = load_scene(scene_path, **defines)
-    sigma = noise_std(timed, probe_spp)
-    target = noise_fraction * threshold
-    need = probe_spp * (sigma / target) ** 2 if sigma > 0 else 1
-    spp = int(min(max_spp, 2 ** max(0, math.ceil(math.log2(max(need, 1))))))
-    reached = sigma * math.sqrt(probe_spp / spp)
-    reasons["spp"] = (f"{spp}: Monte-Carlo noise {sigma:.4f} (log) at {probe_spp} spp scales as 1/sqrt(spp); "
-                      f"{spp} spp brings it to {reached:.4f}"
-                      + (f" <= {target:.4f} ({noise_fraction} x C)" if reached <= target * (1 + 1e-9) else
-                         f", still above the target {target:.4f}: capped at max_spp = {max_spp}"))
-    dt = probe_dt or duration / 200
-    f0, f1 = render_frames(timed, [0.0, dt], spp=spp)
+def _ladder(sampler: str, max_spp: int) -> list:
+    """The sample counts a sampler takes exactly: powers of two (independent), else powers of four."""
+    base, low = (2, 1) if sampler == "independent" else (4, 4 if sampler == "ldsampler" else 1)
+    return [base ** k for k in range(int(math.log(max_spp, base) + 1e-9) + 1) if base ** k >= low]
+
+
+def _own_sampler(timed) -> str:
+    name = timed.sensor.sampler().class_name().removesuffix("Sampler").lower()
+    return {"lowdiscrepancy": "ldsampler"}.get(name, name)
+
+
+def _sigma_map(timed, spp: int) -> np.ndarray:
+    """Per-pixel Monte-Carlo noise in log brightness as accuracy_limit measures it: two seeds of one frame."""
+    a, b = (render_frames(timed, [0.0], spp=spp, seed=s)[0] for s in (0, 1))
+    return np.abs(a - b) / math.sqrt(2)
+
+
+def _estimate(frames, sigma, dt, spp) -> dict | None:
+    """accuracy_limit's estimate (noise_us, steps_us) from three frames ``dt`` apart and a noise map."""
+    lim = AccuracyLimit(dt, spp)
+    lim.frames, lim.sigma = list(frames), sigma
+    return lim.estimate()
+
+
+def _noise_model(scene, frames, dt, probe_spp) -> dict | None:
+    """A sampler's noise measured at ``PROBES`` x ``probe_spp``: the timing error (us) and median sigma (log) at
+    each, and between them power laws in spp (below the first and beyond the last, the nearest piece's exponent,
+    kept within [0.25, 1.25]: stratified samplers fall faster once their strata are fine)."""
+    points = []
+    for factor in PROBES:
+        spp = probe_spp * factor
+        sigma = _sigma_map(scene, spp)
+        est = _estimate(frames, sigma, dt, spp)
+        if est is None:
+            return None
+        points.append((spp, max(est["noise_us"], 1e-9), float(np.median(sigma)), est["steps_us"]))
+    slopes = [math.log(a[1] / b[1]) / math.log(b[0] / a[0]) for a, b in zip(points, points[1:])]
+    return {"points": points, "slopes": slopes, "steps_us": points[0][3]}
+
+
+def _predict(model, spp) -> tuple:
+    """(timing error in us, median sigma) of a noise model at ``spp``: between probes the measured power law,
+    outside them the nearest one's exponent kept within [0.25, 1.25]."""
+    points, slopes = model["points"], model["slopes"]
+    i = min(sum(spp > p[0] for p in points[1:-1]), len(slopes) - 1)
+    slope = slopes[i] if points[0][0] <= spp <= points[-1][0] else min(max(slopes[i], 0.25), 1.25)
+    anchor = points[i + 1] if spp > points[-1][0] else points[i]
+    f = (anchor[0] / spp) ** slope
+    return anchor[1] * f, anchor[2] * f
+
+
+def _timing_choice(scene_path, defines, timed, frames, dt, target_s, sigma_cap, probe_spp, max_spp) -> dict:
+    """The cheapest (sampler, spp) whose predicted noise error is within NOISE_SHARE of ``target_s``."""
+    own = _own_sampler(timed)
+    budget_us = NOISE_SHARE * target_s * 1e6
+    models, best = {}, None
+    for order, name in enumerate((own,) + tuple(s for s in SAMPLERS if s != own)):
+        scene = timed if name == own else load_with_sampler(scene_path, {"type": name, "sample_count": probe_spp},
+                                                            **defines)
+        m = _noise_model(scene, frames, dt, probe_spp)
+        if m is None:
+            raise ConfigError("--timing-accuracy: no pixel changes in the probe frames at the start of the render, "
+                              "so there is no event timing to predict")
+        models[name] = m
+        for spp in _ladder(name, max_spp):
+            us, sigma = _predict(m, spp)
+            if us <= budget_us and sigma <= sigma_cap:
+                best = min(best or (spp, order, name, us), (spp, order, name, us))
+                break
+    if best is None:
+        floor = min(_predict(m, max_spp)[0] for m in models.values())
+        raise ConfigError(f"--timing-accuracy {target_s * 1e6:g}us cannot be met within {max_spp} spp: Monte-Carlo "
+                          f"noise alone is predicted to move event times by {floor:.3g} us at best")
+    spp, _, name, noise_us = best
+    return {"sampler": name, "own_sampler": own, "spp": spp, "noise_us": noise_us,
+            "steps_us_at_probe": models[own]["steps_us"], "models": models}
+
+
+def _change_steps(f0, f1, dt, duration, threshold, change_fraction, max_steps):
     rate = float(np.percentile(np.abs(f1 - f0), 99)) / dt
-    steps = int(min(max_steps, max(1, math.ceil(duration * rate / (change_fraction * threshold)))))
-    reasons["steps"] = (f"{steps}: the 99th-percentile log change is {rate:.3g} per second; {steps} steps keep it "
-                        f"under {change_fraction} x C per step")
-    static = timed.is_static
+    return int(min(max_steps, max(1, math.ceil(duration * rate / (change_fraction * threshold))))), rate
+
+
+def _reuse(timed, duration, steps, reasons) -> int:
+    """Steps rounded up to whole steps per scan period when one period can be reused; the reason recorded."""
     period = timed.scan_period
-    if not static:
+    if not timed.is_static:
         reasons["reuse"] = "moving scene: every step is rendered"
     elif period == 0.0:
         reasons["reuse"] = "static scene seen by a fixed view: one frame is rendered and reused"
@@ -125,4 +270,98 @@ def plan(scene_path: str, duration: float, threshold: float = 0.2, noise_fractio
         else:
             reasons["reuse"] = (f"static scene, but {duration:g} s is not a whole number of {period * 1e3:g} ms scan "
                                 "periods: every step is rendered")
-    return Plan(color=not grey, spp=spp, steps=steps, static=static, reasons=reasons, defines=defines)
+    return steps
+
+
+def _noise_spp(timed, threshold, noise_fraction, probe_spp, max_spp, reasons) -> int:
+    sigma = noise_std(timed, probe_spp)
+    target = noise_fraction * threshold
+    need = probe_spp * (sigma / target) ** 2 if sigma > 0 else 1
+    spp = int(min(max_spp, 2 ** max(0, math.ceil(math.log2(max(need, 1))))))
+    reached = sigma * math.sqrt(probe_spp / spp)
+    reasons["spp"] = (f"{spp}: Monte-Carlo noise {sigma:.4f} (log) at {probe_spp} spp scales as 1/sqrt(spp); "
+                      f"{spp} spp brings it to {reached:.4f}"
+                      + (f" <= {target:.4f} ({noise_fraction} x C)" if reached <= target * (1 + 1e-9) else
+                         f", still above the target {target:.4f}: capped at max_spp = {max_spp}"))
+    return spp
+
+
+def _timing_steps(choice, duration, dt, target_s, floor_steps, max_steps) -> tuple:
+    """Fewest steps whose step error, in quadrature with the noise error, keeps the total within the target."""
+    left_us = math.sqrt(max((target_s * 1e6) ** 2 - choice["noise_us"] ** 2, 0.0))
+    s_probe = choice["steps_us_at_probe"]                # step error at the probe's dt; grows as dt^2
+    need = 1 if s_probe <= 0 else math.ceil(duration / (dt * math.sqrt(left_us / s_probe)) - 1e-9)
+    if need > max_steps:
+        raise ConfigError(f"--timing-accuracy {target_s * 1e6:g}us needs {need} steps, more than max_steps = "
+                          f"{max_steps}")
+    steps = max(need, floor_steps)
+    steps_us = s_probe * (duration / steps / dt) ** 2
+    return steps, need, steps_us
+
+
+def scene_threshold(timed) -> float:
+    """The contrast threshold the scene's own event integrator sets (the smaller of ON and OFF; 0.2 without one)."""
+    integ = timed.scene.integrator()
+    on, off = getattr(integ, "threshold_on", None), getattr(integ, "threshold_off", None)
+    return float(min(on, off)) if on and off else 0.2
+
+
+def plan(scene_path: str, duration: float, threshold: float | None = None, noise_fraction: float = 0.5,
+         change_fraction: float = 1.0, probe_spp: int = 4, probe_dt: float | None = None, defines=None,
+         max_spp: int = 256, max_steps: int = 100_000, timing_accuracy: float | None = None) -> Plan:
+    """Colour, spp and steps for rendering ``scene_path`` over ``duration`` seconds (module docstring); with
+    ``timing_accuracy`` (seconds, median timestamp error) also the sampler, by the accuracy-limit model.
+    ``threshold``: the contrast threshold C of the render (default: the scene's own)."""
+    defines = dict(defines or {})
+    reasons = {}
+    grey = _grey(scene_path, defines)
+    reasons["colour"] = ("mono: every pixel of an RGB probe is grey, so the luminance the pixel sees equals the mono "
+                         "render" if grey else "rgb: the scene has colour, and luminance needs all three channels")
+    set_variant(color=not grey)
+    timed = load_scene(scene_path, **defines)
+    threshold = scene_threshold(timed) if threshold is None else threshold
+    dt = probe_dt or duration / 200
+    if timing_accuracy is None:
+        spp = _noise_spp(timed, threshold, noise_fraction, probe_spp, max_spp, reasons)
+        steps, rate = _change_steps(*render_frames(timed, [0.0, dt], spp=spp), dt, duration, threshold,
+                                    change_fraction, max_steps)
+        reasons["steps"] = (f"{steps}: the 99th-percentile log change is {rate:.3g} per second; {steps} steps keep "
+                            f"it under {change_fraction} x C per step")
+        return Plan(color=not grey, spp=spp, steps=_reuse(timed, duration, steps, reasons), static=timed.is_static,
+                    reasons=reasons, defines=defines)
+    frames = render_frames(timed, [0.0, dt, 2 * dt], spp=probe_spp)
+    choice = _timing_choice(scene_path, defines, timed, frames, dt, timing_accuracy, noise_fraction * threshold,
+                            probe_spp, max_spp)
+    floor, rate = _change_steps(frames[0], frames[1], dt, duration, threshold, change_fraction, max_steps)
+    steps, need, steps_us = _timing_steps(choice, duration, dt, timing_accuracy, floor, max_steps)
+    return _timing_plan(grey, timed, choice, steps, need, floor, rate, steps_us, timing_accuracy, duration,
+                        reasons, defines, change_fraction)
+
+
+def _timing_plan(grey, timed, choice, steps, need, floor, rate, steps_us, target_s, duration, reasons, defines,
+                 change_fraction) -> Plan:
+    """The plan of a timing request, with the reason of each choice in words and numbers."""
+    target_us = target_s * 1e6
+    models = choice["models"]
+    listed = "; ".join(f"{name}: " + ", ".join(f"{us:.3g} us at {spp}" for spp, us, _, _ in m["points"]) + " spp"
+                       for name, m in models.items())
+    sampler = None if choice["sampler"] == choice["own_sampler"] else {"type": choice["sampler"],
+                                                                          "sample_count": choice["spp"]}
+    reasons["sampler"] = (f"{choice['sampler']}" + (" (the scene's own)" if sampler is None else
+                                                    f" (in place of the scene's {choice['own_sampler']})")
+                          + f": Monte-Carlo timing error by sampler ({listed}); it needs the fewest samples to "
+                            f"stay under {NOISE_SHARE:g} x {target_us:g} us")
+    reasons["spp"] = f"{choice['spp']}: predicted noise timing error {choice['noise_us']:.3g} us"
+    total = math.hypot(choice["noise_us"], steps_us)
+    reasons["steps"] = (f"{steps}: the time step's error falls as dt^2; {need} steps keep it, in quadrature with the "
+                        f"noise, under {target_us:g} us; the 99th-percentile log change ({rate:.3g} per second) "
+                        f"needs {floor} to stay under {change_fraction} x C per step (count accuracy)")
+    steps = _reuse(timed, duration, steps, reasons)
+    reasons["timing"] = (f"requested median timestamp error {target_us:g} us; predicted {total:.3g} us "
+                         f"(noise {choice['noise_us']:.3g} us, steps {steps_us:.3g} us)")
+    timing = {"requested_s": target_s, "predicted_us": total, "noise_us": choice["noise_us"], "steps_us": steps_us,
+              "steps_for_timing": need, "steps_for_change": floor, "noise_share": NOISE_SHARE,
+              "samplers": {name: {"probe_spp": [p[0] for p in m["points"]], "noise_us": [p[1] for p in m["points"]],
+                                  "slopes": m["slopes"]} for name, m in models.items()}}
+    return Plan(color=not grey, spp=choice["spp"], steps=steps, static=timed.is_static, reasons=reasons,
+                defines=defines, sampler=sampler, timing=timing)

@@ -270,10 +270,9 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   resume: bool = False, px_per_step: float = 1.0):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
-    Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by
-    extension; HDF5, npz, text and AEDAT4 in chunks while rendering, RAW and DAT at the end) and returns a
-    :class:`RenderSummary`. Either way the summary is also in ``stream.meta["render"]``.
-
+    Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by extension;
+    HDF5, npz, text, AEDAT4 in chunks, RAW, DAT at the end) and returns a :class:`RenderSummary` (also in
+    ``stream.meta["render"]``).
     ``reuse``: when the scene is static and the view periodic (galvo scan, or a fixed camera), render one
     period and feed its frames again (identical events, much faster); False renders every step.
     ``adaptive``: False (``steps`` uniform steps), True, "motion" or "log-change" (``stepping``: by the known

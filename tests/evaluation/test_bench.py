@@ -1,25 +1,78 @@
-"""The speed-vs-accuracy bench: Pareto front and a tiny run against its reference."""
+"""The speed-accuracy bench: its measures order the settings as the physics says (more samples, closer to the
+exact events and to the converged render; fewer steps, further), its table and chart, its command line."""
+import dataclasses
+import json
 import math
 import os
 
+import pytest
 from conftest import ROOT
 
-from mitsuba_eventfield.evaluation import bench
+from mitsuba_eventfield.cli.main import main as cli
+from mitsuba_eventfield.errors import ConfigError
+from mitsuba_eventfield.evaluation import bench, bench_chart
+
+FAN = os.path.join(ROOT, "scenes", "fan", "fan.xml")
 
 
 def test_pareto_front():
     pts = [(1, 5), (2, 3), (3, 4), (0.5, 9), (4, 1)]
-    assert sorted(bench.pareto(pts)) == [0, 1, 3, 4]          # (3, 4) is beaten by (2, 3)
+    assert sorted(bench_chart.pareto(pts)) == [0, 1, 3, 4]          # (3, 4) is beaten by (2, 3)
 
 
-def test_tiny_bench_run(tmp_path):
-    settings = [{"name": "1 spp", "spp": 1, "steps_factor": 1}, bench.DEFAULT,
-                {"name": "16 spp", "spp": 16, "steps_factor": 1}]
-    rows = bench.run(os.path.join(ROOT, "scenes", "fan", "fan.xml"), 0.004, 16, {"width": 32, "height": 24},
-                     settings=settings)
-    by = {r["setting"]: r for r in rows}
-    assert by["reference"]["product_error"] == 0 and by["reference"]["count_error"] == 0
-    assert all(math.isfinite(r["product_error"]) and math.isfinite(r["timing_error"]) for r in rows)
-    assert by["16 spp"]["timing_error"] < by["1 spp"]["timing_error"]      # more samples, closer to converged
-    path = bench.chart(rows, str(tmp_path / "c.png"))
-    assert os.path.getsize(path) > 1000
+def test_analytic_scene_measures_order_the_levers(tmp_path):
+    spec = dataclasses.replace(bench.pick_scenes(["analytic"])[0], defines={"height": 4})   # two pairs of rows
+    rows = bench.run([spec], bench.pick_settings(["1spp", "default", "steps/4", "mj16"]), seeds=(1, 2),
+                     log=lambda *_: None)
+    s = {r["setting"]: r for r in bench_chart.summarize(rows)}
+    for k, r in s.items():
+        print(f"\n{r['label']:32s} x{r['relative_time']:.2f} count {r['count_error']:.4f} median "
+              f"{r['timing_median_us']:.3g} p99 {r['timing_p99_us']:.3g} us", end="")
+    # noise-limited timing: 16 multi-jittered spp far below 1 independent spp (measured 0.98 against 18 us)
+    assert s["mj16"]["timing_median_us"] < s["1spp"]["timing_median_us"] / 5
+    assert s["mj16"]["timing_p99_us"] < s["default"]["timing_p99_us"]          # measured 18 against 95 us
+    # a quarter of the steps (2 px of motion per step) loses events: measured 4.3 % against 2.3 %
+    assert s["steps/4"]["count_error"] > 1.3 * s["default"]["count_error"]
+    assert min(r["relative_time"] for r in s.values()) == 1.0
+    assert all(r["seeds"] == 2 and math.isfinite(r["timing_median_us_std"]) for r in s.values())
+    # the fastest setting is on every front; 16 multi-jittered spp, the most accurate, too
+    assert {"count_error", "timing_median_us", "timing_p99_us"} <= set(s["steps/4"]["front"]) & set(s["mj16"]["front"])
+    paths = bench_chart.write(rows, str(tmp_path), "bench_test", {"variant": "test", "seeds": 2})
+    assert os.path.getsize(paths["chart"]) > 10_000
+    table = open(paths["table"]).read()
+    assert all(r["label"] in table for r in s.values()) and "Where the default sits" in table
+    saved = json.load(open(paths["json"]))
+    assert len(saved["runs"]) == 8 and len(saved["default_position"]) == 3
+
+
+def test_one_galvo_scene_from_the_command_line(tmp_path, capsys):
+    """The fan through the galvo (24x18, one 4 ms period): count error and refocus PSNR against the converged
+    render (256 multi-jittered spp, 4x the steps) improve with the samples."""
+    out = tmp_path / "b"
+    assert cli(["bench", FAN, "-o", str(out), "-D", "width=24", "-D", "height=18", "--duration", "0.004",
+                "--steps", "32", "--seeds", "1", "--settings", "1spp,16spp", "--refocus-depth", "0.6"]) == 0
+    saved = json.load(open(out / "bench_fan.json"))
+    s = {r["setting"]: r for r in saved["summary"]}
+    print(capsys.readouterr().out)
+    print({k: (r["count_error"], r["refocus_psnr_db"]) for k, r in s.items()})
+    assert s["16spp"]["count_error"] < s["1spp"]["count_error"] / 3           # measured 0.19 against 1.9
+    assert s["16spp"]["refocus_psnr_db"] > s["1spp"]["refocus_psnr_db"] + 5  # measured 23 against 5.7 dB
+    assert {p.name for p in out.iterdir()} >= {"bench_fan.png", "bench_fan.md", "bench_fan.csv", "bench_fan_runs.csv"}
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--settings", "1spp,nope"], "bench settings nope"),
+    (["--scenes", "analytic,moon"], "bench scenes moon"),
+    (["--scenes", "analytic", "-D", "width=8"], "apply to one scene"),
+    ([FAN, "--scenes", "fan"], "not both"),
+])
+def test_bad_arguments_are_refused_in_one_line(args, message, tmp_path, capsys):
+    assert cli(["bench", "-o", str(tmp_path / "b")] + args) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and not (tmp_path / "b" / "bench_suite.png").exists()
+
+
+def test_pick_settings_keeps_the_table_order():
+    assert [s["key"] for s in bench.pick_settings(["16spp", "1spp"])] == ["1spp", "16spp"]
+    with pytest.raises(ConfigError):
+        bench.pick_settings([])
