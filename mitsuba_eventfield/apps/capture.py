@@ -29,6 +29,23 @@ class Capture:
     seconds: dict
 
 
+def lightfields(events, timed, views: int, start: str = "events", spp: int = 4, depth_range=None) -> tuple:
+    """(one LightField per whole scan period of ``events``, what the solver found per period or []), each
+    light field's ``meta["inputs"]`` naming its inputs; ``start`` as for ``capture``."""
+    from ..focus.galvo_periods import reconstruct_periods
+    from ..lightfield.model import galvo_lightfields
+    solved = []
+    if start == "frame":
+        log_start = render_frames(timed, [0.0], spp=spp)[0]
+        lfs = list(galvo_lightfields(events, views, "direct", log_start=log_start, t_start=0.0))
+    else:
+        pairs = list(reconstruct_periods(events, views, depth_range=depth_range))
+        lfs, solved = [lf for lf, _ in pairs], [s for _, s in pairs]
+    for lf in lfs:
+        lf.meta["inputs"] = INPUTS[start]
+    return lfs, solved
+
+
 def capture(scene_path: str, defines: dict | None = None, periods: int | None = None, views: int = 40,
             start: str = "events", px_per_step: float = 1.0, spp: int = 4, progress: bool = False,
             truth_views: bool = True, depth_range=None, truth_spp: int = 64) -> Capture:
@@ -43,8 +60,7 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     the paper's rig does not have; every report says which). Steps: enough that the scan moves the image at
     most ``px_per_step`` pixels per step anywhere in the field. Truth views are rendered at ``truth_spp``
     (converged: the reference is the scene, not one noisy render)."""
-    from ..lightfield.model import from_galvo, galvo_lightfields, galvo_steps_per_period
-    from ..focus.galvo_periods import reconstruct_periods
+    from ..lightfield.model import from_galvo, galvo_steps_per_period
     if start not in START_METHODS:
         raise ValueError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
     _check_positive("views", views, integer=True, low=1)
@@ -65,15 +81,7 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     t0 = time.perf_counter()
     events = render_events(timed, periods * period, steps=steps, spp=spp, progress=progress)
     t1 = time.perf_counter()
-    solved = []
-    if start == "frame":
-        log_start = render_frames(timed, [0.0], spp=spp)[0]
-        lfs = list(galvo_lightfields(events, views, "direct", log_start=log_start, t_start=0.0))
-    else:
-        pairs = list(reconstruct_periods(events, views, depth_range=depth_range))
-        lfs, solved = [lf for lf, _ in pairs], [s for _, s in pairs]
-    for lf in lfs:
-        lf.meta["inputs"] = INPUTS[start]
+    lfs, solved = lightfields(events, timed, views, start, spp, depth_range)
     t2 = time.perf_counter()
     truth = [from_galvo(render_frames(timed, lf.times, spp=truth_spp), lf.times, events.meta["optics"],
                         {"period_index": k}) for k, lf in enumerate(lfs)] if truth_views else []

@@ -50,7 +50,7 @@ import numpy as np
 from ..errors import ConfigError, EventFieldError
 from ..plugins.pixel_model import PRESETS
 from ..scene import bundled_scene, load_scene
-from ..simulate.render import render_events, render_frames
+from ..simulate.render import render_events
 from ..validate import number
 from .result import AppResult
 
@@ -283,16 +283,6 @@ def _scores(img, instant, region, refocused) -> dict:
     return out
 
 
-def _lightfields(events, timed, views, start, spp) -> list:
-    """Per period the light field of ``events`` exactly as ``capture`` builds it from its own (uncapped) events."""
-    from ..lightfield.model import galvo_lightfields
-    if start == "frame":
-        log_start = render_frames(timed, [0.0], spp=spp)[0]
-        return list(galvo_lightfields(events, views, "direct", log_start=log_start, t_start=0.0))
-    from ..lightfield.galvo_solve import reconstruct_periods
-    return [lf for lf, _ in reconstruct_periods(events, views)]
-
-
 def sweep(scene: str | None = None, frequencies=FREQUENCIES, planes: dict | None = None,
           defines: dict | None = None, duration: float = 0.008, views: int = 24, readout_cap: bool = True,
           cap_scale: float = 5.0, start: str = "frame", region_tolerance: float = 0.1, spp: int = 4,
@@ -304,7 +294,7 @@ def sweep(scene: str | None = None, frequencies=FREQUENCIES, planes: dict | None
     ``scene``: a galvo scene whose scan frequency is its ``frequency`` XML default (default: the bundled fan at
     160 x 120); ``defines``: its other XML defaults."""
     from ..evaluation.truth import truth_depth
-    from .capture import capture
+    from .capture import capture, lightfields
     fan = scene is None
     scene = bundled_scene(SCENE) if fan else scene
     defines = {**({"width": 160, "height": 120} if fan else {}), **(defines or {})}
@@ -333,7 +323,7 @@ def sweep(scene: str | None = None, frequencies=FREQUENCIES, planes: dict | None
             ev = render_events(cap.timed, n / f, steps=cap.events.meta["stepping"]["steps"], spp=spp, pixel=pixel,
                                progress=progress)
             t1 = time.perf_counter()
-            capped_lfs = _lightfields(ev, cap.timed, views, start, spp)
+            capped_lfs = lightfields(ev, cap.timed, views, start, spp)[0]   # as capture builds its own
             seconds["render_events"] += t1 - t0
             seconds["views_from_events"] += time.perf_counter() - t1
             capped = offered_rates(ev, n / f)
