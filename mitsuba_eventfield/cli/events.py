@@ -57,6 +57,9 @@ def _add_render(sub) -> None:
                    help="adaptive: longest step in seconds (default duration/20)")
     r.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=4,
                    help="samples per pixel per step (default 4)")
+    r.add_argument("--spp-changing", type=num(1, MAX_SPP, integer=True), metavar="N",
+                   help="samples where they matter: pixels whose brightness changes during the render (found by "
+                        "probe renders) get N samples per step, the others --spp")
     r.add_argument("--seed", type=num(0, 2**31 - 1, integer=True), default=0, help="sampler seed (default 0)")
     r.add_argument("--independent-seeds", action="store_true",
                    help="new seed every step (Monte-Carlo noise then fires events; for comparisons only)")
@@ -178,7 +181,8 @@ def run_render(a) -> int:
         seed_mode="independent" if a.independent_seeds else "fixed", threshold=a.threshold,
         threshold_on=a.threshold_on, threshold_off=a.threshold_off, linlog_threshold=a.linlog_threshold,
         output=a.output, progress=not a.quiet, preset=a.preset, pixel=pixel_overrides(a.pixel), extra_meta=extra,
-        event_buffer_mb=a.event_buffer_mb, checkpoint_s=a.checkpoint_every, resume=a.resume)
+        event_buffer_mb=a.event_buffer_mb, checkpoint_s=a.checkpoint_every, resume=a.resume,
+        spp_changing=a.spp_changing)
     print(summary.format())
     if a.preview and os.path.splitext(a.output)[1].lower() != ".txt":
         _render_preview(a)

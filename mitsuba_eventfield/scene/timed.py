@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import backend
 from ..errors import EventFieldError
+from . import sampler as sampler_module
 from .motion import Motion, load_motion, motion_path_for, parse_motion
 
 mi, dr = backend.mi, backend.dr
@@ -37,6 +38,7 @@ class TimedScene:
         self.path = path
         self.params = mi.traverse(scene)
         self.time = 0.0
+        self.sampler_choice = "the scene's own"
         self._bindings = [self._bind(name) for name in (motion.objects if motion else {})]
         # time-varying sensors (the galvo) expose an opaque `time` parameter and reduce t to a scan phase
         self._sensor_times = [(key, node) for key, (_, _, node, _) in self.params.properties.items()
@@ -132,12 +134,14 @@ class TimedScene:
         return d
 
 
-def load_scene(scene, motion="auto", variant: str | None = None, color: bool = False, **xml_params) -> TimedScene:
+def load_scene(scene, motion="auto", variant: str | None = None, color: bool = False, sampler: dict | None = None,
+               **xml_params) -> TimedScene:
     """Load a Mitsuba XML scene (or wrap an ``mi.Scene``) with its motion.
 
     motion: "auto" (``<scene>.motion.toml`` next to the XML if it exists), None (static), a path, a dict
     (the TOML content) or a :class:`Motion`. ``xml_params`` fill the XML's ``<default name=...>`` values
-    (e.g. ``width=64``).
+    (e.g. ``width=64``). ``sampler``: the sensor's sampler (e.g. ``{"type": "multijitter", "sample_count": 16}``);
+    None: the scene's own, or ``scene.sampler.DEFAULT_SAMPLER`` when it names none (``timed.sampler_choice``).
     """
     if isinstance(scene, TimedScene):
         return scene
@@ -150,13 +154,20 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
         path = os.fspath(scene)
         if not os.path.isfile(path):
             raise EventFieldError(f"{path}: scene file not found")
-        xml_params = _film_override(path, xml_params)
+        xml_params = {k: str(v) for k, v in _film_override(path, xml_params).items()}
         try:
-            scene = mi.load_file(path, **{k: str(v) for k, v in xml_params.items()})
+            with open(path) as f:
+                text, sampler_choice = sampler_module.choose(f.read(), sampler)
+            scene = mi.load_file(path, **xml_params) if text is None else \
+                sampler_module.load_text(mi, text, path, xml_params)
+        except (OSError, UnicodeDecodeError) as e:
+            raise EventFieldError(f"{path}: cannot read the scene ({e.strerror or type(e).__name__})") from None
         except Exception as e:  # Mitsuba reports XML/plugin errors as RuntimeError with a long trace
             raise EventFieldError(f"{path}: {_mitsuba_message(e)}") from None
     elif not isinstance(scene, mi.Scene):
         raise EventFieldError(f"load_scene: expected a path or mi.Scene, got {type(scene).__name__}")
+    else:
+        sampler_choice = "the scene's own"
     if isinstance(motion, str) and motion == "auto":
         candidate = motion_path_for(path) if path else None
         motion = load_motion(candidate) if candidate and os.path.isfile(candidate) else None
@@ -164,7 +175,9 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
         motion = load_motion(os.fspath(motion))
     elif isinstance(motion, dict):
         motion = parse_motion(motion)
-    return TimedScene(scene, motion, path)
+    timed = TimedScene(scene, motion, path)
+    timed.sampler_choice = sampler_choice
+    return timed
 
 
 FILM_ENV = "EVENTFIELD_FILM"

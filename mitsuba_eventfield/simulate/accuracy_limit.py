@@ -43,8 +43,7 @@ class AccuracyLimit:
         integ, st = loop.integ, loop.st
         self.frames.append(integ.log_prev.numpy())
         loop.timed.set_time(t_start)
-        import mitsuba as mi
-        mi.render(loop.timed.scene, integrator=integ, seed=st.seed + 1, spp=st.spp)
+        loop.render_frame(st.seed + 1)
         other = integ.staged.numpy()
         integ.staged = integ.staged_intensity = None          # not a step: nothing is committed
         self.sigma = np.abs(self.frames[0] - other) / math.sqrt(2)

@@ -32,16 +32,13 @@ total within the request; never fewer steps than the change rule above (count ac
 from __future__ import annotations
 
 import math
-import os
 import re
-import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..backend import set_variant
-from ..errors import ConfigError, EventFieldError
-from ..scene.motion import motion_path_for
+from ..errors import ConfigError
 from ..scene.timed import load_scene
 from .accuracy_limit import AccuracyLimit
 from .render import render_frames
@@ -92,47 +89,10 @@ def parse_time(text, what: str = "--timing-accuracy") -> float:
     return value
 
 
-def _sampler_xml(sampler: dict) -> str:
-    props = "".join(f'<integer name="{k}" value="{int(v)}"/>' if isinstance(v, (int, np.integer)) and
-                    not isinstance(v, bool) else f'<boolean name="{k}" value="{str(v).lower()}"/>'
-                    for k, v in sampler.items() if k != "type")
-    return f'<sampler type="{sampler["type"]}">{props}</sampler>'
-
-
 def load_with_sampler(scene_path: str, sampler: dict | None, motion="auto", **defines):
     """``load_scene(scene_path, motion, **defines)`` with the sensor's sampler replaced by ``sampler`` (e.g.
-    ``{"type": "multijitter", "sample_count": 16}``; None: the scene as it is). The XML is copied with the new
-    sampler into a temporary folder and loaded with the scene's own folder on Mitsuba's file resolver, so its
-    textures, meshes and includes are found; the returned scene keeps the original path."""
-    if not sampler:
-        return load_scene(scene_path, motion=motion, **defines)
-    with open(scene_path) as f:
-        text = f.read()
-    opening = re.search(r"<sensor\b[^>]*?(/?)>", text)
-    if opening is None or opening[1]:
-        raise EventFieldError(f"{scene_path}: no <sensor> element whose sampler could be chosen")
-    end = text.find("</sensor>", opening.end())
-    body = re.sub(r"<sampler\b[^>]*/>|<sampler\b.*?</sampler>", "", text[opening.end():end], count=1, flags=re.S)
-    text = text[:opening.end()] + _sampler_xml(sampler) + body + text[end:]
-    if isinstance(motion, str) and motion == "auto":
-        candidate = motion_path_for(scene_path)
-        motion = candidate if os.path.isfile(candidate) else None
-    import mitsuba as mi
-    resolver = mi.file_resolver()
-    saved = [resolver[i] for i in range(len(resolver))]
-    resolver.prepend(os.path.dirname(os.path.abspath(scene_path)))
-    try:
-        with tempfile.TemporaryDirectory() as folder:
-            copy = os.path.join(folder, os.path.basename(scene_path))
-            with open(copy, "w") as f:
-                f.write(text)
-            timed = load_scene(copy, motion=motion, **defines)
-    finally:
-        resolver.clear()
-        for p in saved:
-            resolver.append(p)
-    timed.path = scene_path
-    return timed
+    ``{"type": "multijitter", "sample_count": 16}``; None: the scene's own or the default, ``scene/sampler.py``)."""
+    return load_scene(scene_path, motion=motion, sampler=sampler or None, **defines)
 
 
 def _grey(scene_path, defines, size=24) -> bool:

@@ -23,6 +23,7 @@ from ..events.io import format_of
 from ..scene.timed import TimedScene, load_scene
 from ..validate import available_memory, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
+from . import sample_allocation
 from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
 from .image_motion import note_image_motion
@@ -90,10 +91,13 @@ class _Loop:
     """The time-stepping loop of one render: renders (or reuses) a frame per step, commits it to the event
     integrator, orders and reads out the step's events and hands them to the sink."""
 
-    def __init__(self, timed, integ, st: Stepping, sink, summary, bar, reuse: bool, checkpoints=None):
+    def __init__(self, timed, integ, st: Stepping, sink, summary, bar, reuse: bool, checkpoints=None,
+                 allocation=None):
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
-        self.checkpoints = checkpoints
+        self.checkpoints, self.allocation = checkpoints, allocation
         self.limit = AccuracyLimit.for_stepping(st)      # what limits timing accuracy: steps or noise
+        if allocation is not None:                       # noise where it counts: in the pixels that change
+            self.limit.spp = allocation.spp_changing
         self.width, self.height = timed.film_size
         self.reuse = None if st.steps is None or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
@@ -114,8 +118,7 @@ class _Loop:
         t0 = time.perf_counter()
         self.timed.set_time(t)
         t1 = time.perf_counter()
-        step_seed = self.st.seed if self.st.seed_mode == "fixed" else self.st.seed + step_index
-        mi.render(self.timed.scene, integrator=integ, seed=step_seed, spp=self.st.spp)
+        self.render_frame(self.st.seed if self.st.seed_mode == "fixed" else self.st.seed + step_index)
         dr.sync_thread()
         t2 = time.perf_counter()
         summary.motion_s += t1 - t0
@@ -125,6 +128,14 @@ class _Loop:
             dr.eval(frame)
             integ.staged = frame                         # commit() uses the evaluated frame: no second evaluation
             self.cache.append(frame)
+
+    def render_frame(self, seed: int) -> None:
+        """Render the scene as it is now and stage the frame in the event integrator: every pixel at the render's
+        spp, or (``allocation``) more samples where the brightness changes (``sample_allocation.py``)."""
+        if self.allocation is None:
+            mi.render(self.timed.scene, integrator=self.integ, seed=seed, spp=self.st.spp)
+        else:
+            self.integ.stage(self.allocation.render(self.timed.scene, self.timed.sensor, self.integ.inner, seed))
 
     def run(self) -> int:
         """All steps; returns how many."""
@@ -232,6 +243,9 @@ class _Loop:
         summary.steps = steps
         summary.dropped_readout, summary.dropped_refractory = integ.readout_dropped(), integ.refractory_dropped
         self.limit.note(summary)
+        if self.allocation is not None and integ.k_on is not None:
+            summary.sample_allocation = dict(self.allocation.as_meta(),
+                                             **self.allocation.check((integ.k_on + integ.k_off).numpy(), summary.notes))
         summary.noise_events = integ.noise_events
         if summary.dropped_readout:
             total = summary.events + summary.dropped_readout
@@ -267,7 +281,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   progress: bool = False, t_start: float = 0.0, reuse: bool = True, preset: str | None = None,
                   pixel: dict | None = None, extra_meta: dict | None = None,
                   event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, checkpoint_s: float | None = None,
-                  resume: bool = False, px_per_step: float = 1.0):
+                  resume: bool = False, px_per_step: float = 1.0, spp_changing: int | None = None):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
     Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by extension;
@@ -283,6 +297,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     ``event_buffer_mb``: device memory for events before they move to the host (and the file writer) in one
     chunk. ``checkpoint_s``: save the render's state every so many wall seconds (HDF5 output), so that an
     interrupted render goes on with ``resume=True`` to the events of an uninterrupted one (``checkpoint.py``).
+    ``spp_changing``: samples where they matter: pixels whose brightness changes (found by probe renders) get
+    this many samples per step, the others ``spp`` (``sample_allocation.py``).
     """
     timed = load_scene(scene)
     st = stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_step, spp, seed, seed_mode,
@@ -294,13 +310,15 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
         format_of(output, fmt)
     integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel)
     integ.reset()
+    allocation = None if spp_changing is None else sample_allocation.plan(timed, st, integ, spp_changing)
     summary = RenderSummary(width=width, height=height, duration_s=st.duration,
                             output=os.path.abspath(output) if output else None)
     if st.steps is not None:
         warn_coarse_scan_steps(timed.scan_period, st.duration, st.steps, summary.notes)
         note_image_motion(timed, st.t_start, st.duration, st.steps, summary)
     meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,
-                     seed_mode=st.seed_mode, stepping=st.as_meta())
+                     seed_mode=st.seed_mode, stepping=st.as_meta(),
+                     sample_allocation=allocation.as_meta() if allocation else None)
     meta.update(extra_meta or {})
     checkpoints = checkpoints_for(output, fmt, meta, checkpoint_s, resume)
     sink = Sink(output, fmt, width, height, meta, count=summary.count,
@@ -309,7 +327,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     bar = _progress_bar(st.duration) if progress else None
     wall0 = time.perf_counter()
     try:
-        loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints)
+        loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation)
         stream = loop.finish(loop.run(), meta, wall0)
     except BaseException:
         sink.abort()

@@ -37,6 +37,7 @@ class RenderSummary:
     writer_wait_s: float = 0.0  # the render thread's time blocked on the writer: > 0 means the disk set the pace
     image_motion_px_per_step: dict | None = None  # scan and objects, pixels per step (uniform stepping)
     timing_limit: dict | None = None            # what limits timestamp accuracy, with both estimates (us)
+    sample_allocation: dict | None = None       # samples where they matter: the split and its check
     width: int = 0
     height: int = 0
     output: str | None = None
@@ -94,8 +95,16 @@ def run_metadata(timed: TimedScene, integ, **run) -> dict:
             "height": timed.film_size[1], "duration_us": int(round(run["duration"] * 1e6)),
             "t_start_us": int(round(run["t_start"] * 1e6)), "optics": optics,
             "pixel_model": integ.pixel_model_metadata(), "spp": run["spp"], "seed": run["seed"],
-            "seed_mode": run["seed_mode"], "stepping": run["stepping"], "scene": timed.describe(),
+            "seed_mode": run["seed_mode"], "sampler": _sampler(timed), "stepping": run["stepping"],
+            "sample_allocation": run.get("sample_allocation"),
+            "scene": timed.describe(),
             "command": " ".join(sys.argv) if sys.argv and sys.argv[0] else None}
+
+
+def _sampler(timed: TimedScene) -> dict:
+    """The sensor's sampler and why it is the one (the scene's own, chosen, or the default: scene/sampler.py)."""
+    sampler = timed.sensor.sampler()
+    return {"type": sampler.class_name(), "chosen_by": timed.sampler_choice}
 
 
 def _sensor_id(timed: TimedScene) -> str:
