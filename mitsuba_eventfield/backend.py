@@ -39,6 +39,8 @@ def quiet_mitsuba_log(enable: bool = True) -> bool:
     appenders that were there before. Idempotent; Mitsuba's logger is shared by all variants. Returns whether
     the quiet log was on before the call."""
     global _saved_appenders
+    if not isinstance(enable, (bool, int)):          # "no" would be truthy: refuse rather than guess
+        raise EventFieldError(f"quiet_mitsuba_log: enable = {enable!r}: expected True or False")
     logger = mi.logger()
     was_quiet = _saved_appenders is not None
     if logger is None or bool(enable) == was_quiet:
@@ -72,6 +74,9 @@ def available_backends() -> dict:
 
 def choose_variant(variant: str | None = None, color: bool = False) -> str:
     """Return the variant to use. ``variant`` is an explicit override ('llvm_ad_rgb', 'cuda', 'llvm', ...)."""
+    if variant is not None and not isinstance(variant, str):
+        raise EventFieldError(f"variant = {variant!r}: expected a variant name ('llvm_ad_mono', 'cuda', 'llvm', ...) "
+                              "or None")
     mode = "rgb" if color else "mono"
     compiled = set(mi.variants())
     backends = available_backends()

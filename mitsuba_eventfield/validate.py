@@ -58,6 +58,40 @@ def positive(value, name: str, integer: bool = False, error=ConfigError):
     return number(value, name, 0, integer=integer, lo_open=True, strict=True, error=error)
 
 
+def instance(value, kinds, name: str, hint: str = "", error=ConfigError):
+    """``value`` if it is one of ``kinds`` (a type or tuple of types); else ``error`` naming ``name``, the
+    expected and the given type (``hint``: where the right thing comes from, e.g. "ef.read_events")."""
+    if not isinstance(value, kinds):
+        names = " or ".join(k.__name__ for k in (kinds if isinstance(kinds, tuple) else (kinds,)))
+        raise error(f"{name}: expected {names}{f' ({hint})' if hint else ''}, got {type(value).__name__}")
+    return value
+
+
+def file_path(value, name: str, error=ConfigError) -> str:
+    """A file path given as text or ``os.PathLike`` (not None, a number or a file descriptor), as ``str``."""
+    if not isinstance(value, (str, os.PathLike)) or not os.fspath(value):
+        raise error(f"{name} = {value!r}: expected a file path (text)")
+    return str(os.fspath(value))
+
+
+def array(value, name: str, ndim, min_len: int = 1, error=ConfigError):
+    """``value`` as a finite float64 NumPy array with ``ndim`` dimensions (a number or tuple of allowed
+    numbers) and at least ``min_len`` entries along each axis."""
+    import numpy as np
+    allowed = ndim if isinstance(ndim, tuple) else (ndim,)
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise error(f"{name}: expected a numeric array, got {type(value).__name__}") from None
+    if a.ndim not in allowed or min(a.shape, default=min_len) < min_len:
+        dims = " or ".join(f"{d}-D" for d in allowed)
+        least = f" with at least {min_len} entr{'y' if min_len == 1 else 'ies'} along each axis" if min_len else ""
+        raise error(f"{name}: shape {a.shape}: expected a {dims} array{least}")
+    if not np.all(np.isfinite(a)):
+        raise error(f"{name}: contains NaN or infinite values")
+    return a
+
+
 def describe_range(lo, hi, lo_open=False) -> str:
     left = "(" if lo_open else "["
     return f"{left}{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"

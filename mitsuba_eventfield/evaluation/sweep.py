@@ -66,6 +66,9 @@ class SweepTable:
 
 
 def grid(over: dict) -> list:
+    if not isinstance(over, dict) or not over:
+        raise EventFieldError(f"sweep: over = {over!r}: give a dict of parameter -> list of values, e.g. "
+                              "{'render.spp': [4, 16]}")
     for name, values in over.items():
         if not name.startswith(_PREFIXES):
             raise EventFieldError(f"sweep parameter {name!r}: must start with one of {', '.join(_PREFIXES)}")
@@ -108,6 +111,10 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
     if not isinstance(scene, (str, os.PathLike)) or not os.path.isfile(scene):
         raise EventFieldError(f"sweep: {scene!r} is not a scene file (workers load the scene by path)")
     scene = os.path.abspath(os.fspath(scene))
+    if base is not None and (not isinstance(base, dict) or any(not str(k).startswith(_PREFIXES) for k in base)):
+        raise EventFieldError(f"sweep: base = {base!r}: give a dict whose keys start with {', '.join(_PREFIXES)}")
+    if isinstance(processes, bool) or not isinstance(processes, int) or processes < 1:
+        raise EventFieldError(f"sweep: processes = {processes!r}: allowed range is whole numbers >= 1")
     points = [dict(base or {}, **p) for p in grid(over)]
     done, todo = {}, []
     if out_dir:

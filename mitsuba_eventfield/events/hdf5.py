@@ -9,17 +9,31 @@ import os
 import numpy as np
 
 from ..atomic import check_writable, remove_stale_partials, temporary_name
-from ..errors import EventFieldError
+from ..errors import ConfigError, EventFieldError
+from ..validate import number
 from .disk import DISK_MARGIN, HEADER_BYTES, GuardedFile, _disk_full, _free_bytes, _no_space, check_space
-from .stream import EventStream
+from .stream import MAX_SENSOR, EventStream
 
 H5_FORMAT_VERSION = 1
 H5_GZIP_LEVEL = 1   # deflate level: 2-4x faster to write than level 4+, within 15% of their size (docs/design.md)
 H5_BYTES_PER_EVENT = 13        # x, y uint16 + t int64 + p uint8
+H5_COMPRESSIONS = ("gzip", "lzf", None)
 
 
 def _json(meta: dict) -> str:
     return json.dumps(meta, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o), sort_keys=True)
+
+
+def _check_options(width, height, chunk, compression, level) -> None:
+    """The writer's arguments, refused (ConfigError naming them) before any file is created."""
+    for name, value in (("width", width), ("height", height)):
+        number(value, f"event file: {name}", 0, MAX_SENSOR, integer=True, strict=True)
+    number(chunk, "event file: chunk", 1, 10_000_000, integer=True, strict=True)
+    if compression not in H5_COMPRESSIONS:
+        raise ConfigError(f"event file: compression = {compression!r}: allowed "
+                          + ", ".join(map(repr, H5_COMPRESSIONS)))
+    if compression == "gzip" and level is not None:
+        number(level, "event file: level", 0, 9, integer=True, strict=True)
 
 
 class H5EventWriter:
@@ -32,6 +46,7 @@ class H5EventWriter:
 
     def __init__(self, path: str, width: int, height: int, meta: dict | None = None, chunk: int = 1 << 16,
                  compression: str | None = "gzip", level: int | None = H5_GZIP_LEVEL, shuffle: bool = True):
+        _check_options(width, height, chunk, compression, level)
         self.path = check_writable(path, "event file")
         remove_stale_partials(self.path)
         self.tmp = temporary_name(self.path)

@@ -29,6 +29,7 @@ import numpy as np
 
 from .._version import __version__
 from ..errors import EventFieldError
+from ..validate import file_path, instance
 from .aedat import read_aedat4, write_aedat4  # noqa: F401  (re-exported)
 from .disk import DISK_MARGIN, HEADER_BYTES, WRITE_CHUNK, BadFile, GuardedFile, check_space, disk_errors  # noqa: F401
 from .hdf5 import H5_BYTES_PER_EVENT, H5_GZIP_LEVEL, H5EventWriter, _json, read_h5  # noqa: F401
@@ -57,6 +58,8 @@ def write_events(path: str, events: EventStream, fmt: str | None = None) -> str:
     """Write a whole stream; the format follows the extension (.h5/.hdf5, .npz, .txt, .aedat4, .raw = EVT 3.0,
     .dat) or ``fmt`` (evt2, evt2.1, evt3 for a RAW file of that version). RAW, DAT and text keep no metadata.
     HDF5, npz, text and AEDAT4 go through the same chunk writers a render streams to (``streaming.py``)."""
+    path = file_path(path, "write_events: path")
+    instance(events, EventStream, "write_events: events", "ef.read_events, ef.render_events, ef.EventStream")
     fmt = format_of(path, fmt)
     meta = dict(events.meta)
     meta.setdefault("package_version", __version__)
@@ -134,6 +137,7 @@ def read_events(path: str, fmt: str | None = None) -> EventStream:
     its header does not). A missing, empty, truncated or foreign file raises ``EventFieldError`` with one line
     naming the file and the problem. AEDAT4 is decoded by faery (in-process; dv-processing when faery is not
     installed), RAW and DAT by faery."""
+    path = file_path(path, "read_events: path")
     if not os.path.isfile(path):
         raise EventFieldError(f"{path}: no such event file")
     fmt = format_of(path, fmt)

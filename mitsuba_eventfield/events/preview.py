@@ -4,8 +4,17 @@ from __future__ import annotations
 import numpy as np
 
 from ..atomic import atomic_output
-from ..errors import EventFieldError
+from ..errors import ConfigError, EventFieldError
+from ..validate import file_path, finite, instance, number, positive
 from .stream import EventStream
+
+
+def _check_window(events, t0_us, t1_us, where: str) -> None:
+    """An EventStream and a time window [t0, t1) of finite microseconds (either end None: open)."""
+    instance(events, EventStream, f"{where}: events", "ef.read_events, ef.render_events")
+    t0, t1 = (None if v is None else finite(v, f"{where}: {n}") for v, n in ((t0_us, "t0_us"), (t1_us, "t1_us")))
+    if t0 is not None and t1 is not None and t1 < t0:
+        raise ConfigError(f"{where}: t1_us = {t1_us!r} is before t0_us = {t0_us!r}: the window must have t0 <= t1")
 
 
 def event_frame_rgb(events: EventStream, t0_us=None, t1_us=None, saturation: int | None = None) -> np.ndarray:
@@ -14,6 +23,9 @@ def event_frame_rgb(events: EventStream, t0_us=None, t1_us=None, saturation: int
     Colour strength is the net count (ON - OFF) over ``saturation`` (default: the 99th percentile of the
     non-zero |net| counts, at least 1). Pixels whose events cancel are drawn light grey.
     """
+    _check_window(events, t0_us, t1_us, "event_frame_rgb")
+    if saturation is not None:
+        saturation = positive(saturation, "event_frame_rgb: saturation")
     win = events.time_window(t0_us, t1_us)
     net = win.signed_counts().astype(np.float64)
     if saturation is None:
@@ -31,10 +43,11 @@ def event_frame_rgb(events: EventStream, t0_us=None, t1_us=None, saturation: int
 
 def write_preview(path: str, events: EventStream, t0_us=None, t1_us=None, scale: int = 1) -> str:
     import cv2
+    path = file_path(path, "write_preview: path")
     if not path.lower().endswith(".png"):
         raise EventFieldError(f"{path}: preview must be a .png file")
-    from ..validate import number
     scale = number(scale, "scale", 1, 64, integer=True)
+    _check_window(events, t0_us, t1_us, "write_preview")
     if events.width == 0 or events.height == 0:
         raise EventFieldError("cannot preview a 0x0 sensor")
     img = event_frame_rgb(events, t0_us, t1_us)

@@ -11,6 +11,25 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
+from ..validate import number
+
+
+MAX_SENSOR = 65536         # x, y are uint16
+
+
+def _column(values, name: str, dtype) -> np.ndarray:
+    """One of x, y, t, p as a 1-D array of ``dtype``: refused (ConfigError) when not numbers, not 1-D, not
+    finite, or (x, y) negative, rather than wrapped around or failing inside NumPy."""
+    a = values if isinstance(values, np.ndarray) and values.dtype == dtype else np.asarray(values)
+    if a.dtype == dtype and a.ndim == 1:
+        return np.ascontiguousarray(a)
+    if a.ndim != 1 or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+        raise ConfigError(f"event stream: {name} must be a 1-D array of numbers (got shape {a.shape}, {a.dtype})")
+    if len(a) and np.issubdtype(a.dtype, np.inexact) and not np.all(np.isfinite(a)):
+        raise ConfigError(f"event stream: {name} contains NaN or infinite values")
+    if len(a) and name in "xy" and a.min() < 0:
+        raise ConfigError(f"event stream: {name} = {a.min()}: coordinates must be >= 0")
+    return np.ascontiguousarray(a, dtype=dtype)
 
 
 @dataclass
@@ -24,11 +43,10 @@ class EventStream:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        self.x = np.ascontiguousarray(self.x, dtype=np.uint16)
-        self.y = np.ascontiguousarray(self.y, dtype=np.uint16)
-        self.t = np.ascontiguousarray(self.t, dtype=np.int64)
-        self.p = np.ascontiguousarray(self.p, dtype=np.int8)
-        self.width, self.height = int(self.width), int(self.height)
+        self.x, self.y = _column(self.x, "x", np.uint16), _column(self.y, "y", np.uint16)
+        self.t, self.p = _column(self.t, "t", np.int64), _column(self.p, "p", np.int8)
+        self.width = int(number(self.width, "event stream: width", 0, MAX_SENSOR, integer=True, strict=True))
+        self.height = int(number(self.height, "event stream: height", 0, MAX_SENSOR, integer=True, strict=True))
         n = len(self.t)
         if not (len(self.x) == len(self.y) == len(self.p) == n):
             raise ConfigError(f"event stream: x, y, t, p must have one length (got {len(self.x)}, {len(self.y)}, {n}, {len(self.p)})")

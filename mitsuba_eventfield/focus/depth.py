@@ -44,7 +44,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..lightfield.model import LightField
 from .measures import (IMAGE_MEASURES, focus_measure,  # noqa: F401  (focus_measure, refine_peak: re-exported)
-                       parabola_offset, refine_peak)
+                       check_window, parabola_offset, refine_peak)
 from .refocus import aligned_views, check_lightfield, depth_planes, refocus
 
 MEASURES = IMAGE_MEASURES + ("variance",)
@@ -95,6 +95,7 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
     check_lightfield(lf, "depth_from_focus")
     if measure not in MEASURES:
         raise ConfigError(f"depth_from_focus: unknown focus measure {measure!r}; allowed: {', '.join(MEASURES)}")
+    window = check_window(window, "depth_from_focus")
     zs = depth_planes(near, far, planes)
     inv = 1.0 / zs
     vol = _volume(lf, zs, measure, window)                     # (D, H, W)

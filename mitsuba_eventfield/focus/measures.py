@@ -10,12 +10,22 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from ..errors import ConfigError
+from ..validate import array, number
+
 IMAGE_MEASURES = ("sml", "tenengrad")
+MAX_WINDOW = 255      # pixels: the box a focus measure is averaged over
+
+
+def check_window(window, where: str) -> int:
+    """The focus measure's averaging box: a whole number of pixels in [1, MAX_WINDOW]."""
+    return int(number(window, f"{where}: window", 1, MAX_WINDOW, integer=True, strict=True))
 
 
 def focus_measure(img: np.ndarray, measure: str = "sml", window: int = 7) -> np.ndarray:
     """Per-pixel focus of one image (H, W), aggregated over a ``window`` x ``window`` box."""
-    img = np.asarray(img, dtype=np.float32)
+    img = array(img, "focus_measure: img", 2).astype(np.float32)
+    window = check_window(window, "focus_measure")
     if measure == "sml":
         kx = np.array([[0, 0, 0], [-1, 2, -1], [0, 0, 0]], np.float32)
         m = np.abs(cv2.filter2D(img, -1, kx)) + np.abs(cv2.filter2D(img, -1, kx.T))
@@ -23,7 +33,7 @@ def focus_measure(img: np.ndarray, measure: str = "sml", window: int = 7) -> np.
         gx, gy = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3)
         m = gx * gx + gy * gy
     else:
-        raise ValueError(f"unknown focus measure {measure!r}; allowed: {', '.join(IMAGE_MEASURES)}")
+        raise ConfigError(f"focus_measure: unknown focus measure {measure!r}; allowed: {', '.join(IMAGE_MEASURES)}")
     return cv2.boxFilter(m, -1, (window, window), normalize=True, borderType=cv2.BORDER_REFLECT)
 
 

@@ -27,6 +27,7 @@ on views from events a weaker one moves by a threshold step per event, and the s
 from __future__ import annotations
 
 import math
+import numbers
 import warnings
 
 import cv2
@@ -34,7 +35,8 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..lightfield.model import LightField
-from .measures import focus_measure, refine_peak
+from ..validate import MAX_PLANES, finite, number
+from .measures import IMAGE_MEASURES, focus_measure, refine_peak
 
 MOTION_LIMIT_PX = 2.0       # module docstring: content moving more than this over the views is flagged
 MOTION_MIN_VIEWS = 12       # fewer views: motion is not measured (``view_motion``)
@@ -203,6 +205,31 @@ def check_lightfield(lf, where: str) -> None:
                           f"got {type(lf).__name__}")
 
 
+def _pair(value, name: str):
+    """A number or (x, y) pair of finite numbers, as given (a float or a float tuple)."""
+    if np.iterable(value) and not isinstance(value, str):
+        items = list(value)
+        if len(items) != 2:
+            raise ConfigError(f"{name} = {value!r}: expected a number or an (x, y) pair")
+        return tuple(finite(v, name) for v in items)
+    return finite(value, name)
+
+
+def _check_refocus(depth, alpha, motion):
+    """refocus's depth (> 0, math.inf allowed) or alpha (a number or (x, y)), and motion ((vx, vy) px/s)."""
+    if alpha is None:
+        if depth is None or isinstance(depth, bool) or not isinstance(depth, numbers.Real) or not depth > 0:
+            raise ConfigError(f"refocus: depth = {depth!r}: must be > 0 (math.inf for infinity), or give alpha")
+        depth = float(depth)
+    else:
+        alpha = _pair(alpha, "refocus: alpha")
+    if motion is not None:
+        if isinstance(motion, str) or not np.iterable(motion):
+            raise ConfigError(f"refocus: motion = {motion!r}: expected (vx, vy) in pixels per second")
+        motion = _pair(motion, "refocus: motion")
+    return depth, alpha, motion
+
+
 def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None,
             on_motion: str = "warn") -> np.ndarray:
     """The light field refocused at ``depth`` (scene units; math.inf allowed) or at the disparity slope
@@ -213,8 +240,7 @@ def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None,
     ``MOTION_LIMIT_PX`` over the views (``view_motion``; module docstring): "warn" (``MotionBlurWarning``),
     "raise" (ConfigError) or "ignore"."""
     check_lightfield(lf, "refocus")
-    if alpha is None and not (depth is not None and depth > 0):
-        raise ConfigError(f"refocus: depth = {depth!r}: must be > 0 (math.inf for infinity), or give alpha")
+    depth, alpha, motion = _check_refocus(depth, alpha, motion)
     if on_motion not in ON_MOTION:
         raise ConfigError(f"refocus: on_motion = {on_motion!r}: allowed {', '.join(ON_MOTION)}")
     if on_motion != "ignore" and motion is None and alpha is None:
@@ -242,13 +268,17 @@ def _refocus_warped(lf: LightField, depth: float, motion=None) -> np.ndarray:
 
 def depth_planes(near: float, far: float, count: int) -> np.ndarray:
     """``count`` depths from near to far, uniform in inverse depth (uniform in disparity)."""
-    if not (0 < near < far) or count < 2:
-        raise ConfigError(f"depth planes: need 0 < near ({near}) < far ({far}) and count ({count}) >= 2")
+    near, far = finite(near, "depth planes: near"), finite(far, "depth planes: far")
+    count = number(count, "depth planes: count", 2, MAX_PLANES, integer=True, strict=True)
+    if not 0 < near < far:
+        raise ConfigError(f"depth planes: need 0 < near ({near}) < far ({far})")
     return 1.0 / np.linspace(1.0 / near, 1.0 / far, count)
 
 
 def focal_stack(lf: LightField, depths, motion=None, on_motion: str = "warn") -> np.ndarray:
     """(D, H, W[, C]) refocused images, one per depth (moving content checked once, at the first depth)."""
+    check_lightfield(lf, "focal_stack")
+    depths = _depth_list(depths, "focal_stack: depths")
     return np.stack([refocus(lf, float(z), motion=motion, on_motion=on_motion if i == 0 else "ignore")
                      for i, z in enumerate(depths)])
 
@@ -278,6 +308,35 @@ def _best_depth(lf, depths, roi, measure, motion):
     return refine_peak(1.0 / depths, scores, k)
 
 
+def _depth_list(depths, name: str) -> np.ndarray:
+    """One or more depths, each > 0 (math.inf allowed)."""
+    if isinstance(depths, (str, bytes)) or not np.iterable(depths) or not len(depths):
+        raise ConfigError(f"{name} = {depths!r}: expected one or more depths > 0")
+    return np.array([number(z, name, 0, lo_open=True, strict=True) if z != math.inf else math.inf for z in depths])
+
+
+def _check_track(lightfields, depths, roi, measure, smooth):
+    """track_focus's arguments: light fields (one or more), depths (at least two), an ROI inside the views,
+    an image focus measure, smoothing in [0, 1)."""
+    lightfields = list(lightfields) if np.iterable(lightfields) else lightfields
+    if not isinstance(lightfields, list) or not lightfields:
+        raise ConfigError(f"track_focus: lightfields = {lightfields!r}: expected one or more LightField")
+    for lf in lightfields:
+        check_lightfield(lf, "track_focus")
+    depths = _depth_list(depths, "track_focus: depths")
+    h, w = lightfields[0].shape
+    if isinstance(roi, str) or not np.iterable(roi) or len(roi) != 4:
+        raise ConfigError(f"track_focus: roi = {roi!r}: expected (x0, y0, x1, y1) pixels")
+    roi = tuple(int(number(v, "track_focus: roi", 0, integer=True, strict=True)) for v in roi)
+    if not (roi[0] < roi[2] <= w and roi[1] < roi[3] <= h):
+        raise ConfigError(f"track_focus: roi = {roi}: need 0 <= x0 < x1 <= {w} and 0 <= y0 < y1 <= {h}")
+    if measure not in IMAGE_MEASURES:
+        raise ConfigError(f"track_focus: measure = {measure!r}; allowed: {', '.join(IMAGE_MEASURES)}")
+    if not 0 <= finite(smooth, "track_focus: smooth") < 1:
+        raise ConfigError(f"track_focus: smooth = {smooth!r}: allowed range is [0, 1)")
+    return lightfields, depths, roi
+
+
 def track_focus(lightfields, depths, roi, measure: str = "tenengrad", smooth: float = 0.0, follow: bool = False,
                 compensate_motion: bool = True):
     """Refocus a sequence of light fields on the object inside ``roi`` = (x0, y0, x1, y1) pixels as it moves in
@@ -291,9 +350,7 @@ def track_focus(lightfields, depths, roi, measure: str = "tenengrad", smooth: fl
     over a scan period otherwise smear a fast object, and its motion biases the depth (it correlates with the
     scan's position over the period). Returns (depths chosen, refocused images, ROIs, image velocities px/s).
     """
-    lightfields = list(lightfields)
-    depths = np.asarray(depths, dtype=np.float64)
-    roi = tuple(int(v) for v in roi)
+    lightfields, depths, roi = _check_track(lightfields, depths, roi, measure, smooth)
     rois, inverse, images = [], [], []
     for lf in lightfields:                       # pass 1: where the object is, and its depth without motion
         if follow and images:

@@ -15,12 +15,16 @@ How views align (``LightField.alignments``):
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import ConfigError
+from ..events.stream import EventStream
 from ..optics.galvo import GalvoGeometry, scan_image_path_px
 from ..optics.scan import curve_from_dict, scan_period
+from ..validate import MAX_VIEWS, array, finite, instance, number
 from . import reconstruct
 from .views import extract_views
 
@@ -64,16 +68,19 @@ class LightField:
     cache: dict = field(default_factory=dict, repr=False, compare=False)   # derived data (refocus spectra)
 
     def __post_init__(self):
-        self.views = np.asarray(self.views, dtype=np.float64)
-        self.positions = np.asarray(self.positions, dtype=np.float64).reshape(-1, 2)
-        self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
+        self.views = array(self.views, "LightField: views", (3, 4))
+        self.positions = array(self.positions, "LightField: positions", (1, 2), min_len=0)
+        if self.positions.size % 2:
+            raise ConfigError(f"LightField: positions of shape {self.positions.shape}: expected (K, 2)")
+        self.positions = self.positions.reshape(-1, 2)
+        self.times = array(self.times, "LightField: times", (0, 1), min_len=0).reshape(-1)
         if not (len(self.views) == len(self.positions) == len(self.times)):
-            raise ValueError("views, positions and times must have one length")
-        if not np.all(np.isfinite(self.views)):
-            raise ValueError("light field views contain NaN or infinite values")
+            raise ConfigError(f"LightField: views, positions and times must have one length (got {len(self.views)}, "
+                              f"{len(self.positions)}, {len(self.times)})")
+        instance(self.disparity, Disparity, "LightField: disparity")
         if self.galvo is not None and (self.galvo.width, self.galvo.height) != tuple(self.shape[::-1]):
-            raise ValueError(f"galvo geometry is for {self.galvo.width}x{self.galvo.height} pixels, the views are "
-                             f"{self.shape[1]}x{self.shape[0]}")
+            raise ConfigError(f"galvo geometry is for {self.galvo.width}x{self.galvo.height} pixels, the views are "
+                              f"{self.shape[1]}x{self.shape[0]}")
 
     @property
     def shape(self):
@@ -114,8 +121,15 @@ class LightField:
                           dict(self.meta), self.galvo)
 
 
-def _exp(log_frames):
-    return np.exp(np.asarray(log_frames, dtype=np.float64))
+def _floats(values, name: str) -> np.ndarray:
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name}: expected a numeric array, got {type(values).__name__}") from None
+
+
+def _exp(log_frames, name: str = "from_galvo: log_frames"):
+    return np.exp(_floats(log_frames, name))
 
 
 def galvo_geometry(optics: dict, width: int, height: int) -> GalvoGeometry:
@@ -131,9 +145,12 @@ def galvo_paraxial_disparity(geometry: GalvoGeometry) -> Disparity:
 def from_galvo(log_frames, times, optics: dict, meta: dict | None = None) -> LightField:
     """A light field from galvo frames (log intensity, e.g. reconstructed) at known times: each frame is the view
     at the scan position (optical angles) of its time."""
-    curve = curve_from_dict(optics["scan"], where="event metadata")
-    ax, ay = curve.angles(np.asarray(times, dtype=np.float64))
-    frames = _exp(log_frames)
+    frames, times = _exp(log_frames), array(times, "from_galvo: times", 1)
+    if frames.ndim not in (3, 4) or len(times) != len(frames):
+        raise ConfigError(f"from_galvo: log_frames of shape {frames.shape} and {len(times)} times: expected "
+                          "(K, H, W) or (K, H, W, C) frames, one time per frame")
+    curve = curve_from_dict(_galvo_scan(optics, "from_galvo"), where="event metadata")
+    ax, ay = curve.angles(times)
     geometry = galvo_geometry(optics, frames.shape[2], frames.shape[1])
     return LightField(frames, np.stack([2 * ax, 2 * ay], axis=-1), times, galvo_paraxial_disparity(geometry),
                       "galvo", dict(meta or {}), geometry)
@@ -148,28 +165,55 @@ def galvo_steps_per_period(optics: dict, width: int, height: int | None = None, 
 
 def galvo_view_times(optics: dict, t_period_start: float, views: int) -> np.ndarray:
     """``views`` instants evenly spread over the scan period that starts at ``t_period_start``."""
-    return t_period_start + (np.arange(views) + 0.5) * scan_period(optics["scan"]) / views
+    scan = _galvo_scan(optics, "galvo_view_times")
+    t_period_start = finite(t_period_start, "galvo_view_times: t_period_start")
+    views = int(number(views, "galvo_view_times: views", 1, MAX_VIEWS, integer=True, strict=True))
+    return t_period_start + (np.arange(views) + 0.5) * scan_period(scan) / views
+
+
+def _galvo_scan(optics, where: str) -> dict:
+    """The scan record of galvo optics metadata (``events.meta["optics"]``); ConfigError for anything else."""
+    instance(optics, dict, f"{where}: optics", "an event stream's meta['optics']")
+    if optics.get("design") != "galvo" or not isinstance(optics.get("scan"), dict):
+        raise ConfigError(f"{where}: the optics metadata describes no galvo scan (optics.design is "
+                          f"{optics.get('design')!r}; expected 'galvo' with a scan record)")
+    return optics["scan"]
 
 
 def galvo_period_starts(events, periods=None) -> dict:
     """{period index: start time in seconds} for the whole scan periods of a galvo stream (all, or the indices
     ``periods``, each checked against the stream)."""
-    period = scan_period(events.meta["optics"]["scan"])
+    period = scan_period(_galvo_scan(events.meta.get("optics", {}), "scan periods"))
     t0 = events.meta.get("t_start_us", 0) * 1e-6
     n_periods = int(math.floor(events.duration_us * 1e-6 / period + 1e-9))   # whole periods only
+    if periods is not None and (isinstance(periods, (str, bytes)) or not np.iterable(periods)):
+        raise ConfigError(f"periods = {periods!r}: expected a list of scan period indices")
     wanted = range(n_periods) if periods is None else periods
     for p in wanted:
-        if not 0 <= p < n_periods:
-            raise ValueError(f"scan period {p} is not in the stream: allowed 0..{n_periods - 1} "
-                             f"({n_periods} whole periods of {period * 1e3:g} ms)")
+        if isinstance(p, bool) or not isinstance(p, numbers.Integral) or not 0 <= p < n_periods:
+            raise ConfigError(f"scan period {p} is not in the stream: allowed 0..{n_periods - 1} "
+                              f"({n_periods} whole periods of {period * 1e3:g} ms)")
     return {p: t0 + p * period for p in wanted}
 
 
 def galvo_lightfields(events, views: int = 32, method: str = "direct", periods=None, **method_kw):
     """Sliding light fields from a galvo stream, one per scan period: reconstruct ``views`` frames per period
-    (``method`` of ``reconstruct``) and place each at its scan position. Yields LightField objects."""
-    optics = events.meta["optics"]
+    (``method`` of ``reconstruct``) and place each at its scan position. Yields LightField objects; bad
+    arguments are refused at the call, before the first one is asked for."""
+    instance(events, EventStream, "galvo_lightfields: events", "ef.read_events, ef.render_events")
+    optics = events.meta.get("optics", {})
+    _galvo_scan(optics, "galvo_lightfields")
+    views = int(number(views, "galvo_lightfields: views", 1, MAX_VIEWS, integer=True, strict=True))
+    if method not in reconstruct.methods():
+        raise ConfigError(f"galvo_lightfields: method = {method!r}; allowed: {', '.join(reconstruct.methods())}")
     starts = galvo_period_starts(events, periods)
+    if not starts:
+        raise ConfigError(f"galvo_lightfields: no scan period to reconstruct (the stream lasts "
+                          f"{events.duration_us * 1e-3:g} ms, periods = {periods!r})")
+    return _galvo_lightfields(events, optics, starts, views, method, method_kw)
+
+
+def _galvo_lightfields(events, optics, starts, views, method, method_kw):
     wanted = list(starts)
     all_times = np.concatenate([galvo_view_times(optics, starts[p], views) for p in wanted])
     frames = reconstruct.reconstruct(events, all_times, method, **method_kw)
@@ -180,8 +224,9 @@ def galvo_lightfields(events, views: int = 32, method: str = "direct", periods=N
 
 def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool = True) -> LightField:
     """A light field from one kaleidoscope/microlens film image (log or linear): its n x n extracted views."""
-    frame = np.asarray(log_or_linear_frame, dtype=np.float64)
-    stack = extract_views(_exp(frame) if log else frame, optics)
+    frame = _floats(log_or_linear_frame, "from_spatial: frame")
+    time = finite(time, "from_spatial: time")
+    stack = extract_views(np.exp(frame) if log else frame, optics)
     h, w = stack.images.shape[1:3]
     return LightField(stack.images, stack.positions, np.full(len(stack.images), time),
                       Disparity.for_spatial(optics, w, h), optics["design"], {"ij": stack.ij.tolist()})
@@ -210,5 +255,5 @@ def from_events(events, period: int = 0, views: int = 32, time: float | None = N
         t = t0 + events.duration_us * 1e-6 if time is None else time
         frame = reconstruct.reconstruct(events, [t], method, **kw)[0]
         return from_spatial(frame, optics, time=t, log=True)
-    raise ValueError("the stream's metadata describes no light-field optics (optics.design is "
+    raise ConfigError("the stream's metadata describes no light-field optics (optics.design is "
                      f"{design!r}; expected galvo, kaleidoscope or microlens)")

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..events.stream import EventStream
 
 _METHODS = {}
@@ -152,7 +153,7 @@ def reconstruct(events: EventStream, times, method: str = "direct", **kw):
     """Log-intensity frames of ``events`` at ``times`` (seconds) by a registered method."""
     from ..validate import check_allocation
     if method not in _METHODS:
-        raise ValueError(f"unknown reconstruction method {method!r}; available: {', '.join(methods())}")
+        raise ConfigError(f"unknown reconstruction method {method!r}; available: {', '.join(methods())}")
     n = np.size(times)
     # a few float64 frames per requested time (the result plus the methods' working copies)
     check_allocation(3 * 8.0 * n * events.width * events.height,

@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..events.stream import EventStream
+from ..validate import instance, number
 
 
 @dataclass
@@ -24,20 +26,39 @@ class ViewStack:
     ij: np.ndarray
     positions: np.ndarray
 
+    def __post_init__(self):
+        self.images = np.asarray(self.images)
+        self.ij, self.positions = np.asarray(self.ij), np.asarray(self.positions, dtype=np.float64)
+        if self.images.ndim not in (3, 4) or not len(self.images):
+            raise ConfigError(f"ViewStack: images shape {self.images.shape}: expected (K, h, w) or (K, h, w, C) "
+                              "with K >= 1")
+        k = len(self.images)
+        if self.ij.shape != (k, 2) or self.positions.shape != (k, 2):
+            raise ConfigError(f"ViewStack: ij {self.ij.shape} and positions {self.positions.shape} must both be "
+                              f"({k}, 2), one row per image")
+
     def view(self, i: int, j: int) -> np.ndarray:
         k = int(np.nonzero((self.ij[:, 0] == i) & (self.ij[:, 1] == j))[0][0])
         return self.images[k]
 
 
-def _layout(optics: dict):
+def _layout(optics: dict, where: str):
+    instance(optics, dict, f"{where}: optics", "an event stream's meta['optics']")
     if optics.get("design") not in ("kaleidoscope", "microlens") or "views" not in optics:
-        raise ValueError("the metadata describes no kaleidoscope or microlens layout (optics.design)")
+        raise ConfigError(f"{where}: the metadata describes no kaleidoscope or microlens layout (optics.design "
+                          f"is {optics.get('design')!r})")
     return optics["design"], optics["views"]
 
 
 def extract_views(frame: np.ndarray, optics: dict, margin: int = 0) -> ViewStack:
     """Split a film image (H, W[, C]) into its views; ``margin`` crops pixels off each tile edge (seams)."""
-    design, views = _layout(optics)
+    design, views = _layout(optics, "extract_views")
+    frame = np.asarray(frame)
+    if frame.ndim not in (2, 3) or not frame.size or not np.issubdtype(frame.dtype, np.number):
+        raise ConfigError(f"extract_views: frame of shape {frame.shape} ({frame.dtype}): expected a film image "
+                          "(H, W) or (H, W, C) of numbers")
+    most = (min(min(v["tile"][2:4]) for v in views) - 1) // 2 if design == "kaleidoscope" else None
+    margin = int(number(margin, "extract_views: margin", 0, most, integer=True, strict=True))
     out = []
     for v in views:
         if design == "kaleidoscope":
@@ -57,7 +78,7 @@ def extract_views(frame: np.ndarray, optics: dict, margin: int = 0) -> ViewStack
 
 def view_of_pixel(x, y, optics: dict):
     """Per pixel: (view index k, x and y in that view's unflipped coordinates)."""
-    design, views = _layout(optics)
+    design, views = _layout(optics, "view_of_pixel")
     x, y = np.asarray(x, np.int64), np.asarray(y, np.int64)
     n = optics["n"]
     if design == "kaleidoscope":
@@ -74,8 +95,9 @@ def view_of_pixel(x, y, optics: dict):
 
 def split_events(events: EventStream) -> list:
     """One EventStream per view (same order as the metadata's views), in unflipped view coordinates."""
+    instance(events, EventStream, "split_events: events", "ef.read_events, ef.render_events")
     optics = events.meta.get("optics", {})
-    design, views = _layout(optics)
+    design, views = _layout(optics, "split_events")
     k, vx, vy = view_of_pixel(events.x, events.y, optics)
     if design == "kaleidoscope":
         w, h = views[0]["tile"][2], views[0]["tile"][3]

@@ -371,6 +371,9 @@ def curve_to_dict(curve: ScanCurve, bandwidth_hz: float = 0.0, damping: float = 
 def curve_from_dict(d: dict, where: str = "scan") -> ScanCurve:
     """The curve a ``curve_to_dict`` record describes. Records without a galvo model were written before the
     models existed, under the ideal mirror's 10 degree travel: they are read that way."""
+    if not isinstance(d, dict):
+        raise ConfigError(f"{where}: expected a scan record (a dict with 'curve', 'frequency', ...), "
+                          f"got {type(d).__name__}")
     d = dict(d)
     name = d.pop("curve", None)
     return make_curve(name, max_angle_deg=d.pop("max_angle_deg", DEFAULT_MAX_ANGLE_DEG),
@@ -385,7 +388,8 @@ def event_angles(events, actual: bool = True):
     """
     optics = events.meta.get("optics", {})
     if optics.get("design") != "galvo" or "scan" not in optics:
-        raise ValueError("the event stream's metadata describes no galvo scan (optics.design != 'galvo')")
+        raise ConfigError("event_angles: the event stream's metadata describes no galvo scan "
+                          "(optics.design != 'galvo')")
     d = dict(optics["scan"])
     if not actual:
         d.pop("bandwidth_hz", None), d.pop("damping", None)

@@ -117,6 +117,13 @@ class Motion:
     source: str | None = None
     raw: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        where = self.source or "Motion"
+        if not isinstance(self.objects, dict) or not all(isinstance(o, ObjectMotion) for o in self.objects.values()):
+            raise ConfigError(f"{where}: objects must map object ids to ObjectMotion (parse_motion builds them)")
+        if self.duration is not None:
+            self.duration = _positive(self.duration, where, "duration")
+
     @property
     def is_static(self) -> bool:
         return all(o.is_static for o in self.objects.values())
@@ -129,6 +136,8 @@ def motion_path_for(scene_path: str) -> str:
 
 
 def load_motion(path: str) -> Motion:
+    if not isinstance(path, (str, os.PathLike)):     # open(5) would read and close file descriptor 5
+        raise ConfigError(f"load_motion: path = {path!r}: expected a motion file path (.motion.toml)")
     try:
         with open(path, "rb") as f:
             raw = tomllib.load(f)
@@ -141,6 +150,9 @@ def load_motion(path: str) -> Motion:
 
 def parse_motion(raw: dict, source: str = "<motion>") -> Motion:
     """Validate a motion description (the TOML as a dict); every error names the file and the key."""
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: motion must be a table (dict) with version, duration and [objects.<id>], "
+                          f"got {type(raw).__name__}")
     _check_keys(raw, _TOP_KEYS, source, "")
     version = raw.get("version", 1)
     if version != 1:

@@ -33,6 +33,12 @@ class TimedScene:
     """A loaded Mitsuba scene whose objects follow a :class:`~mitsuba_eventfield.motion.Motion` in time."""
 
     def __init__(self, scene, motion: Motion | None = None, path: str | None = None):
+        if not isinstance(scene, mi.Scene):
+            raise EventFieldError(f"TimedScene: scene must be a loaded mi.Scene (load_scene loads files), got "
+                                  f"{type(scene).__name__}")
+        if motion is not None and not isinstance(motion, Motion):
+            raise EventFieldError(f"TimedScene: motion must be a Motion or None (load_motion / parse_motion make "
+                                  f"one), got {type(motion).__name__}")
         self.scene = scene
         self.motion = motion
         self.path = path
@@ -175,6 +181,9 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
         motion = load_motion(os.fspath(motion))
     elif isinstance(motion, dict):
         motion = parse_motion(motion)
+    elif motion is not None and not isinstance(motion, Motion):
+        raise EventFieldError(f"load_scene: motion = {motion!r}: expected 'auto', None, a motion file path, a dict "
+                              "or a Motion")
     timed = TimedScene(scene, motion, path)
     timed.sampler_choice = sampler_choice
     return timed
