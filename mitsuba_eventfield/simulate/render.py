@@ -24,6 +24,7 @@ from ..scene.timed import TimedScene, load_scene
 from ..validate import available_memory, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
 from . import sample_allocation
+from .frames import FrameRenderer
 from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
 from .image_motion import note_image_motion
@@ -99,6 +100,7 @@ class _Loop:
         if allocation is not None:                       # noise where it counts: in the pixels that change
             self.limit.spp = allocation.spp_changing
         self.width, self.height = timed.film_size
+        self.renderer = FrameRenderer(integ.inner, st.spp, (self.width, self.height), allocation, summary.notes)
         self.reuse = None if st.steps is None or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
         self.cache = []                                  # log-brightness frames of one period, for reuse
@@ -130,12 +132,8 @@ class _Loop:
             self.cache.append(frame)
 
     def render_frame(self, seed: int) -> None:
-        """Render the scene as it is now and stage the frame in the event integrator: every pixel at the render's
-        spp, or (``allocation``) more samples where the brightness changes (``sample_allocation.py``)."""
-        if self.allocation is None:
-            mi.render(self.timed.scene, integrator=self.integ, seed=seed, spp=self.st.spp)
-        else:
-            self.integ.stage(self.allocation.render(self.timed.scene, self.timed.sensor, self.integ.inner, seed))
+        """Render the scene as it is now and stage the frame in the event integrator (``frames.FrameRenderer``)."""
+        self.integ.stage(self.renderer.render(self.timed, seed))
 
     def run(self) -> int:
         """All steps; returns how many."""
@@ -267,6 +265,17 @@ class _Loop:
         return stream
 
 
+def _new_summary(timed, st: Stepping, output) -> RenderSummary:
+    """The render's summary before it starts, with the notes the stepping alone decides (coarse steps)."""
+    width, height = timed.film_size
+    summary = RenderSummary(width=width, height=height, duration_s=st.duration,
+                            output=os.path.abspath(output) if output else None)
+    if st.steps is not None:
+        warn_coarse_scan_steps(timed.scan_period, st.duration, st.steps, summary.notes)
+        note_image_motion(timed, st.t_start, st.duration, st.steps, summary)
+    return summary
+
+
 def _progress_bar(duration):
     from tqdm import tqdm
     return tqdm(total=round(duration * 1e3, 6), unit="ms", unit_scale=False, desc="rendering", file=sys.stderr,
@@ -311,11 +320,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel)
     integ.reset()
     allocation = None if spp_changing is None else sample_allocation.plan(timed, st, integ, spp_changing)
-    summary = RenderSummary(width=width, height=height, duration_s=st.duration,
-                            output=os.path.abspath(output) if output else None)
-    if st.steps is not None:
-        warn_coarse_scan_steps(timed.scan_period, st.duration, st.steps, summary.notes)
-        note_image_motion(timed, st.t_start, st.duration, st.steps, summary)
+    summary = _new_summary(timed, st, output)
     meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,
                      seed_mode=st.seed_mode, stepping=st.as_meta(),
                      sample_allocation=allocation.as_meta() if allocation else None)
@@ -364,6 +369,8 @@ def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
     inner = integ.inner if is_event_integrator(integ) else integ
     frames = []
     times = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    if times.size == 0:
+        raise EventFieldError("render_frames: times is empty: give at least one time in seconds")
     if not np.isfinite(times).all():
         raise EventFieldError(f"render_frames: times must be finite seconds (got {times[~np.isfinite(times)][0]})")
     for t in times:
