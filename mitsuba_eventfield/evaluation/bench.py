@@ -74,9 +74,9 @@ MEASURES = {   # key: (label, higher is better)
     "timing_median_us": ("timestamp error, median (us)", False),
     "timing_p99_us": ("timestamp error, 99th percentile (us)", False),
     "refocus_psnr_db": ("refocus PSNR on textured pixels (dB)", True),
-    "depth_error": ("depth from focus, median relative error against Mitsuba's depth", False),
-    "rate_error": ("event-rate error |rate / reference - 1|", False),
-    "interval_ks": ("inter-event interval distribution, KS distance to the reference", False),
+    "depth_error": ("depth error vs Mitsuba's (median, relative)", False),
+    "rate_error": ("event-rate error |ratio - 1|", False),
+    "interval_ks": ("event intervals, KS distance", False),
 }
 ANALYTIC_C, ANALYTIC_DURATION = 0.1, 0.01
 # the timed renders run on one thread: on the shared 2-core machine, with another process holding a core, two
