@@ -43,7 +43,7 @@ class AccuracyLimit:
         integ, st = loop.integ, loop.st
         self.frames.append(integ.log_prev.numpy())
         loop.timed.set_time(t_start)
-        loop.render_frame(st.seed + 1)
+        loop.render_frame(st.seed + 1, once=True)
         other = integ.staged.numpy()
         integ.staged = integ.staged_intensity = None          # not a step: nothing is committed
         self.sigma = np.abs(self.frames[0] - other) / math.sqrt(2)

@@ -42,10 +42,12 @@ class FrameRenderer:
         self.notes = notes if notes is not None else []
         self.frozen = None if allocation is not None else frozen_render(inner, spp, size[0] * size[1] * spp)
 
-    def render(self, timed, seed: int):
+    def render(self, timed, seed: int, once: bool = False):
+        """``once``: a frame outside the stepping (the accuracy-limit probe with another seed): traced, not
+        recorded, so that the frozen steps are not recorded again for it."""
         if self.allocation is not None:
             return self.allocation.render(timed.scene, timed.sensor, self.inner, seed)
-        if self.frozen is not None:
+        if self.frozen is not None and not once:
             try:
                 return self.frozen(timed.scene, timed.sensor, dr.opaque(mi.UInt32, seed))
             except RuntimeError as e:               # Dr.Jit refused to record this scene: trace every step

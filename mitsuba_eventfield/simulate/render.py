@@ -131,9 +131,9 @@ class _Loop:
             integ.staged = frame                         # commit() uses the evaluated frame: no second evaluation
             self.cache.append(frame)
 
-    def render_frame(self, seed: int) -> None:
+    def render_frame(self, seed: int, once: bool = False) -> None:
         """Render the scene as it is now and stage the frame in the event integrator (``frames.FrameRenderer``)."""
-        self.integ.stage(self.renderer.render(self.timed, seed))
+        self.integ.stage(self.renderer.render(self.timed, seed, once))
 
     def run(self) -> int:
         """All steps; returns how many."""
