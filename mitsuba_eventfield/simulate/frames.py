@@ -1,6 +1,7 @@
-"""How a step's frame is rendered: ``mi.render`` (traced at every call), the same render frozen with ``dr.freeze``
-for small frames (recorded once, replayed), or samples where they matter (``sample_allocation``). One home, so
-that the time-stepping loop and the accuracy-limit probe render frames the same way."""
+"""How a step's frame is rendered: ``mi.render`` frozen with ``dr.freeze`` (recorded once, replayed), ``mi.render``
+traced at every call (``EVENTFIELD_FREEZE=0``, or a scene Dr.Jit cannot record), or samples where they matter
+(``sample_allocation``). One home, so that the time-stepping loop and the accuracy-limit probe render frames the
+same way."""
 from __future__ import annotations
 
 import os
@@ -10,37 +11,37 @@ from .. import backend
 mi, dr = backend.mi, backend.dr
 
 FREEZE_ENV = "EVENTFIELD_FREEZE"
-FREEZE_MAX_SAMPLES = 32_768      # frames of at most this many samples (W x H x spp) are rendered frozen
 
 
-def frozen_render(inner, spp: int, samples: int):
-    """The radiance render of one step as a Dr.Jit frozen function (``dr.freeze``), for small frames only; None
-    otherwise or with ``EVENTFIELD_FREEZE=0``.
+def frozen_render(inner, spp: int):
+    """The radiance render of one step as a Dr.Jit frozen function (``dr.freeze``); None with
+    ``EVENTFIELD_FREEZE=0``.
 
-    ``mi.render`` traces the integrator again at every call (about 3 ms on the CPU even when every kernel is
+    ``mi.render`` traces the integrator again at every call (about 2-3 ms on the CPU even when every kernel is
     cached); a frozen function records the kernels once and replays them with the step's new inputs (the scene's
     moved shapes, the sensor's time, the seed), bit for bit the same frame (tests/simulate/test_frozen_render.py,
-    every design). Measured per frame on the 2-core CPU (4 spp, steady state, plain -> frozen): fan 48x36
-    2.8 -> 1.15 ms, 96x72 4.0 -> 3.0 ms, 173x130 7.2 -> 8.5 ms; demo 173x130 10.5 -> 14.4 ms, 346x260 34 -> 53 ms.
-    The replay costs more than the trace saves above about 100x75 pixels at 4 spp, hence ``FREEZE_MAX_SAMPLES``
-    (not measured on a GPU). Scenes whose kernels Dr.Jit refuses to record (nested virtual calls, e.g. textured
-    area emitters) are traced every step, with a note (``_Loop.render_frame``)."""
-    if os.environ.get(FREEZE_ENV, "1") == "0" or samples > FREEZE_MAX_SAMPLES:
+    every design). Measured per frame on the 2-core CPU (4 spp, steady state, traced -> frozen): fan 48x36
+    2.8 -> 0.8 ms, 96x72 4.0 -> 2.0 ms, 173x130 7.2 -> 5.2 ms, 346x260 20.6 -> 18.2 ms; demo 346x260 34.8 -> 32.2 ms.
+    The recorded function calls ``mi.render``, not the integrator's ``render`` directly: the latter's first call
+    in a process rounded differently from its later ones (one timestamp moved by 1 us), ``mi.render`` does not.
+    Scenes whose kernels Dr.Jit refuses to record (a virtual call on an object that is not among the inputs,
+    e.g. textured area emitters) are traced every step, with a note. Not measured on a GPU."""
+    if os.environ.get(FREEZE_ENV, "1") == "0":
         return None
 
     @dr.freeze
     def render(scene, sensor, seed):     # every object the kernels read is an input, so it is traversed
-        return inner.render(scene, sensor, seed, spp, True, True)
+        return mi.render(scene, sensor=sensor, integrator=inner, seed=seed, spp=spp)
     return render
 
 
 class FrameRenderer:
     """Renders the scene as it is now into a radiance tensor (H, W, C) for the event integrator to stage."""
 
-    def __init__(self, inner, spp: int, size, allocation=None, notes: list | None = None):
+    def __init__(self, inner, spp: int, allocation=None, notes: list | None = None):
         self.inner, self.spp, self.allocation = inner, spp, allocation
         self.notes = notes if notes is not None else []
-        self.frozen = None if allocation is not None else frozen_render(inner, spp, size[0] * size[1] * spp)
+        self.frozen = None if allocation is not None else frozen_render(inner, spp)
 
     def render(self, timed, seed: int, once: bool = False):
         """``once``: a frame outside the stepping (the accuracy-limit probe with another seed): traced, not
@@ -57,4 +58,4 @@ class FrameRenderer:
                 why = " ".join(str(e.__cause__ or e).split()).split("validate(): ")[-1].split(". ")[0][:160]
                 self.notes.append(f"the step's render could not be frozen, so it is traced at every step "
                                   f"(Dr.Jit: {why})")
-        return self.inner.render(timed.scene, timed.sensor, seed, self.spp, True, True)
+        return mi.render(timed.scene, sensor=timed.sensor, integrator=self.inner, seed=seed, spp=self.spp)

@@ -100,7 +100,7 @@ class _Loop:
         if allocation is not None:                       # noise where it counts: in the pixels that change
             self.limit.spp = allocation.spp_changing
         self.width, self.height = timed.film_size
-        self.renderer = FrameRenderer(integ.inner, st.spp, (self.width, self.height), allocation, summary.notes)
+        self.renderer = FrameRenderer(integ.inner, st.spp, allocation, summary.notes)
         self.reuse = None if st.steps is None or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
         self.cache = []                                  # log-brightness frames of one period, for reuse

@@ -40,12 +40,6 @@ def _render(name, freeze: bool, monkeypatch, recordings: list):
                             **args)
 
 
-def test_large_frames_are_traced_not_frozen():
-    """Above FREEZE_MAX_SAMPLES the replay costs more than the trace it saves (frames.py docstring)."""
-    assert frames.frozen_render(None, 4, frames.FREEZE_MAX_SAMPLES + 1) is None
-    assert frames.frozen_render(None, 4, frames.FREEZE_MAX_SAMPLES) is not None
-
-
 @pytest.mark.parametrize("name", list(SCENES))
 def test_frozen_steps_give_the_same_events(name, monkeypatch):
     recordings = []
