@@ -57,17 +57,25 @@ def matplotlib_null():
     return NullFormatter()
 
 
+def _finish(fig, title, path):
+    """Title, layout, and the PNG written by the project's one figure writer (atomic, then closed)."""
+    from mitsuba_eventfield.images import save_figure
+    fig.suptitle(title)
+    fig.tight_layout()
+    save_figure(fig, path, "failure chart")
+
+
 def _figure(ncols=2):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, ncols, figsize=(6.2 * ncols, 4.4))
-    return plt, fig, axes
+    return fig, axes
 
 
 def chart_refocus(sweep, path):
     from mitsuba_eventfield.focus.refocus import MOTION_LIMIT_PX
-    plt, fig, (a, b) = _figure()
+    fig, (a, b) = _figure()
     rows = sorted(sweep.rows, key=lambda r: r["value"])
     x = [r["value"] for r in rows]
     a.plot(x, [r["error"] for r in rows], "-", color="0.6", lw=1, zorder=0)
@@ -84,14 +92,11 @@ def chart_refocus(sweep, path):
     for ax in (a, b):
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="best")
-    fig.suptitle("Refocus vs object speed (exact views, 96x72, 24 views, card at 0.5 m)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, "Refocus vs object speed (exact views, 96x72, 24 views, card at 0.5 m)", path)
 
 
 def chart_depth(sweep, path):
-    plt, fig, (a, b) = _figure()
+    fig, (a, b) = _figure()
     rows = sorted(sweep.rows, key=lambda r: r["value"])
     x = [r["value"] for r in rows]
     a.plot(x, [r["error_all_pixels"] for r in rows], "s--", color="0.5", ms=5,
@@ -121,14 +126,11 @@ def chart_depth(sweep, path):
         ax.xaxis.set_minor_formatter(matplotlib_null())
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8, loc=where, ncol=2 if ax is a else 1)
-    fig.suptitle("Depth from focus vs texture contrast (events + start frame, tenengrad, 0.3-3 m)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, "Depth from focus vs texture contrast (events + start frame, tenengrad, 0.3-3 m)", path)
 
 
 def chart_depth_range(sweep, path):
-    plt, fig, (a, b) = _figure()
+    fig, (a, b) = _figure()
     rows = sorted(sweep.rows, key=lambda r: r["value"])
     x = [r["value"] for r in rows]
     card = float(sweep.unit.split("card at ")[1].split(" m")[0])
@@ -150,14 +152,11 @@ def chart_depth_range(sweep, path):
         ax.set(xlabel="nearest depth searched (m)")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8, loc="center left" if ax is b else "lower right", ncol=1)
-    fig.suptitle("Depth from focus vs depth range (the card nearer than the range searched)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, "Depth from focus vs depth range (the card nearer than the range searched)", path)
 
 
 def chart_calibration(sweep, path):
-    plt, fig, axes = _figure()
+    fig, axes = _figure()
     sources = list(dict.fromkeys(r["frames"] for r in sweep.rows))
     top = max([r["error"] or 0 for r in sweep.rows] + [r.get("unguarded_error") or 0 for r in sweep.rows])
     for ax, source in zip(axes, sources):
@@ -183,15 +182,12 @@ def chart_calibration(sweep, path):
         ax.xaxis.set_minor_formatter(matplotlib_null())
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8, loc="upper left")
-    fig.suptitle("Galvo calibration vs pixel noise (patch at the centre, 24 frames, 3 seeds per rate)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, "Galvo calibration vs pixel noise (patch at the centre, 24 frames, 3 seeds per rate)", path)
 
 
 def chart_reconstruction(sweep, path):
     from mitsuba_eventfield.focus.galvo_periods import MAX_OUTLIERS
-    plt, fig, (a, b) = _figure()
+    fig, (a, b) = _figure()
     rows = sorted(sweep.rows, key=lambda r: r["value"])
     x = [r["value"] for r in rows]
     near = rows[0]["near_searched"]
@@ -212,10 +208,7 @@ def chart_reconstruction(sweep, path):
         ax.legend(fontsize=8, loc="best")
     a.set(ylabel="start-image log error (RMS)", title="(a) image error (textured pixels)")
     b.set(ylabel="share / relative error", title="(b) what the period reports, and its depth map")
-    fig.suptitle("Events-only reconstruction vs depth range (one period, 24 views, wall at 1.5 m)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, "Events-only reconstruction vs depth range (one period, 24 views, wall at 1.5 m)", path)
 
 
 CHARTS = {"refocus": chart_refocus, "depth": chart_depth, "depth_range": chart_depth_range,

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..scene.timed import load_scene
 from ..simulate.render import render_events, render_frames
 from .result import AppResult
@@ -75,6 +76,17 @@ class HDRComparison(AppResult):
         return figure(self, path)
 
 
+def load_static_scan(scene_path: str, defines: dict | None = None):
+    """(timed scene, scan period) of a static scene seen through a periodic galvo scan: what an HDR light field
+    from one scan period needs (the scan alone moves the image, so one period of events sees everything)."""
+    timed = load_scene(scene_path, **(defines or {}))
+    if not timed.is_static:
+        raise ConfigError(f"{scene_path}: the HDR light field from one scan period needs a static scene")
+    if not timed.scan_period:
+        raise ConfigError(f"{scene_path}: needs a galvo sensor with a periodic scan")
+    return timed, timed.scan_period
+
+
 def compare(scene_path: str, defines: dict | None = None, depth: float = math.inf, steps_per_period: int = 64,
             samples: int = 16, spp: int = 4, progress: bool = False) -> HDRComparison:
     """Render one scan period of events of a static galvo scene, reconstruct its HDR log image and score it and
@@ -82,12 +94,7 @@ def compare(scene_path: str, defines: dict | None = None, depth: float = math.in
     1 - pivot / depth); ``samples``: views the galvo solver uses."""
     from ..lightfield.reconstruct import galvo_start_image
     from ..plugins.pixel_model import linlog_np
-    timed = load_scene(scene_path, **(defines or {}))
-    if not timed.is_static:
-        raise ValueError(f"{scene_path}: HDR reconstruction from the scan alone needs a static scene")
-    period = timed.scan_period
-    if not period:
-        raise ValueError(f"{scene_path}: needs a galvo sensor with a periodic scan")
+    timed, period = load_static_scan(scene_path, defines)
     t0 = time.perf_counter()
     events = render_events(timed, period, steps=steps_per_period, spp=spp, progress=progress)
     t1 = time.perf_counter()

@@ -46,10 +46,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
-from ..scene import bundled_scene, load_scene
+from ..scene import bundled_scene
 from ..simulate.render import render_events, render_frames
 from ..validate import MAX_SPP, MAX_STEPS, MAX_VIEWS, number
-from .hdr import LDR_BITS, WELL_EXPOSED, ldr_codes, ldr_exposures, ldr_to_linear, scene_argument
+from .hdr import LDR_BITS, WELL_EXPOSED, ldr_codes, ldr_exposures, ldr_to_linear, load_static_scan, scene_argument
 from .result import AppResult
 
 DEFAULT_SCENE = bundled_scene("hdr_depth/hdr_depth.xml")
@@ -196,12 +196,7 @@ def lightfield(scene_path: str | None = None, defines: dict | None = None, depth
     from .slomorf import focus_check
     depths, views, solver_depth, steps, samples, spp = _check(depths, views, solver_depth, steps, samples, spp)
     scene_path = scene_path or DEFAULT_SCENE
-    timed = load_scene(scene_path, **(defines or {}))
-    if not timed.is_static:
-        raise ConfigError(f"{scene_path}: the HDR light field from one scan period needs a static scene")
-    period = timed.scan_period
-    if not period:
-        raise ConfigError(f"{scene_path}: needs a galvo sensor with a periodic scan")
+    timed, period = load_static_scan(scene_path, defines)
     optics = timed.sensor.optics_metadata()
     steps = steps or max(2 * views, galvo_steps_per_period(optics, *timed.film_size, 1.0))
     t0 = time.perf_counter()
