@@ -58,7 +58,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import event_fill, host_events, pixel_model, pixel_state
+from mitsuba_eventfield.plugins import event_batch, event_fill, host_events, pixel_model, pixel_state, pixel_step
 
 from ._per_variant import per_variant, subclass
 
@@ -298,6 +298,17 @@ class _EventIntegratorMethods:
         self._advance(step)
         return events
 
+    @property
+    def batchable(self) -> bool:
+        """True when :meth:`commit_frames` can take this pixel model many frames per kernel."""
+        return event_batch.batchable(self)
+
+    def commit_frames(self, log_frames, times, base_us: int = 0):
+        """The events of several frames at once (``event_batch.commit_frames``): ``log_frames`` holds
+        ``len(times) - 1`` log-brightness frames, frame-major, at ``times[1:]``; ``times[0]`` is the last
+        committed instant. The same events as that many :meth:`commit_device` calls, in fewer kernels."""
+        return event_batch.commit_frames(self, log_frames, times, base_us)
+
     def _pixel_step(self, log_in, intensity, duration: float) -> dict:
         """One step of every pixel, evaluated in one Dr.Jit kernel: photoreceptor low-pass, leak, threshold
         jitter, crossing counts and shot noise. Returns the step's arrays by name."""
@@ -308,28 +319,17 @@ class _EventIntegratorMethods:
         if cfg.cutoff_hz or cfg.leak_rate_hz or cfg.shot_noise_hz:
             dt = mi.Float(duration)
             dr.make_opaque(dt)                  # a new literal per step would recompile the kernel
-        log_now = log_in
-        if cfg.cutoff_hz:
-            alpha = pixel_model.lowpass_alpha(dr, intensity, dt, cfg.cutoff_hz, cfg.bright_intensity,
-                                              cfg.cutoff_min_fraction)
-            log_now = self.log_prev + alpha * (log_in - self.log_prev)
-        offset = self.offset
-        if cfg.leak_rate_hz:
-            offset = offset - self.leak_rate * self.c_on * dt      # the reference sinks: ON events
         c_on, c_off = self.c_on, self.c_off
         if cfg.threshold_jitter:
             g = mi.warp.square_to_std_normal(mi.Point2f(self.rng.next_float32(), self.rng.next_float32()))
             c_on = dr.maximum(c_on + cfg.threshold_jitter * g.x, self.c_on * 0.1)
             c_off = dr.maximum(c_off + cfg.threshold_jitter * g.y, self.c_off * 0.1)
-        log_ref = pixel_model.reference_level(dr, mi.Float, self.anchor, self.k_on, self.k_off, self.c_on,
-                                              self.c_off)
-        if offset is not None:
-            log_ref = log_ref + offset
-        n = pixel_model.count_crossings(dr, mi.Int32, log_now, log_ref, c_on, c_off)
-        n_on, n_off = dr.maximum(n, 0), dr.maximum(-n, 0)
-        k_on, k_off = self.k_on + n_on, self.k_off + n_off
+        lv = pixel_step.advance(self, self.log_prev, self.k_on, self.k_off, self.offset, log_in, intensity, dt,
+                                c_on, c_off)
+        n, k_on, k_off, log_now, log_ref, offset = lv.n, lv.k_on, lv.k_off, lv.log_now, lv.log_ref, lv.offset
         if cfg.threshold_jitter:                # the reference moved by the jittered thresholds
-            offset = offset + mi.Float(n_on) * (c_on - self.c_on) - mi.Float(n_off) * (c_off - self.c_off)
+            offset = offset + mi.Float(dr.maximum(n, 0)) * (c_on - self.c_on) \
+                - mi.Float(dr.maximum(-n, 0)) * (c_off - self.c_off)
         todo = [n, k_on, k_off, log_now, log_ref]
         if cfg.threshold_jitter:                # gathered below: evaluate here, in the one kernel
             todo += [c_on, c_off]

@@ -13,12 +13,14 @@ import math
 import os
 import time
 
+import numpy as np
+
 from .. import backend
 from .._version import __version__
 from ..atomic import check_writable
 from ..errors import EventFieldError
 from ..events.io import format_of
-from ..plugins import pixel_model
+from ..plugins import event_batch, pixel_model
 from ..validate import positive
 from .frame_sources import FrameSource, from_array, open_frames
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
@@ -43,17 +45,21 @@ def pixel_integrator(preset: str = "ideal", pixel: dict | None = None, threshold
 def events_from_frames(frames, times=None, *, fps: float | None = None, preset: str = "ideal",
                        pixel: dict | None = None, threshold: float | None = None, srgb: bool = False,
                        output: str | None = None, fmt: str | None = None, progress: bool = False,
-                       event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, meta: dict | None = None):
+                       event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, meta: dict | None = None,
+                       frames_per_kernel: int | None = None):
     """Events of a frame sequence through the event pixel model.
 
     ``frames``: a (T, H, W[, C]) array (intensity: floats linear, integers scaled by their maximum), a path
     (folder of images, ``.npz`` with ``frames`` and ``times``, or a video), or a ``FrameSource``. ``times``:
     seconds per frame (arrays), or ``fps``. ``preset`` / ``pixel`` / ``threshold``: the pixel model, as for
     :func:`render_events`. ``srgb=True`` decodes gamma-encoded frames to linear light first.
+    ``frames_per_kernel``: frames the pixel model takes per kernel where it can (``event_batch``; the events
+    are the same, only the speed changes); None picks by film size and backend.
 
     Returns the :class:`EventStream` (``output`` None) or, writing to ``output``, the :class:`RenderSummary`.
     """
     backend.ensure_variant()
+    group = None if frames_per_kernel is None else positive(frames_per_kernel, "frames_per_kernel", integer=True)
     source = frames if isinstance(frames, FrameSource) else \
         open_frames(frames, fps, srgb) if isinstance(frames, (str, os.PathLike)) else \
         from_array(frames, times, fps, srgb)
@@ -69,7 +75,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
                 buffer_mb=positive(event_buffer_mb, "event_buffer_mb"))
     wall0 = time.perf_counter()
     try:
-        t_first, t_last = _feed(source, integ, sink, summary, progress)
+        t_first, t_last = _feed(source, integ, sink, summary, progress, group)
         summary.duration_s = t_last - t_first
         tw = time.perf_counter()
         sink.drain()
@@ -85,34 +91,40 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     return summary if output else stream
 
 
-def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progress: bool):
-    """Every frame through the pixel: the first sets the references, each later one ends a step."""
+def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progress: bool,
+          frames_per_kernel: int | None):
+    """Every frame through the pixel: the first sets the references, each later one ends a step. Pixel models
+    that allow it take ``frames_per_kernel`` frames per kernel (``event_batch``; same events)."""
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=source.count, unit="frame", desc="converting")
-    linlog = integ.config.linlog_threshold
-    t_first = t_prev = None
+    group = frames_per_kernel or event_batch.default_frames_per_kernel(source.width * source.height)
+    batched = integ.batchable      # even one frame a kernel: its per-pixel fill beats the per-step search
+    pending, times = [], []
+    t_first = t_prev = t_last_committed = None
     try:
         for t, frame in source.frames():
-            t0 = time.perf_counter()
             if frame.shape != (source.height, source.width):
                 raise EventFieldError(f"{source.name}: frame size {frame.shape[1]}x{frame.shape[0]} differs from "
-                                 f"{source.width}x{source.height}")
-            integ.stage_log(pixel_model.linlog(dr, mi.Float(frame.ravel()), linlog), (source.width, source.height))
+                                      f"{source.width}x{source.height}")
             if t_prev is not None and not t > t_prev:
                 raise EventFieldError(f"{source.name}: frame times must increase ({t} s after {t_prev} s)")
-            events = integ.commit_events(t_prev if t_prev is not None else t, t)
-            summary.events_s += time.perf_counter() - t0
-            if t_prev is not None:
-                tw = time.perf_counter()
-                sink.add_step(events, complete_until_us=int(math.floor(t * 1e6)))
-                summary.write_s += time.perf_counter() - tw
-                summary.steps += 1
+            if batched and t_first is not None:
+                pending.append(frame)
+                times.append(t)
+                if len(pending) == group:
+                    _commit_group(integ, sink, summary, pending, [t_last_committed] + times)
+                    t_last_committed, pending, times = t, [], []
+            else:
+                _commit_one(integ, sink, summary, frame, t_prev, t, source)
+                t_last_committed = t
             t_first = t if t_first is None else t_first
             t_prev = t
             if bar is not None:
                 bar.update(1)
+        if pending:
+            _commit_group(integ, sink, summary, pending, [t_last_committed] + times)
     finally:
         if bar is not None:
             bar.close()
@@ -120,3 +132,26 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
         raise EventFieldError(f"{source.name}: fewer than 2 frames: no step to make events from")
     return t_first, t_prev
 
+
+def _commit_one(integ, sink: Sink, summary: RenderSummary, frame, t_prev, t, source: FrameSource) -> None:
+    t0 = time.perf_counter()
+    integ.stage_log(pixel_model.linlog(dr, mi.Float(frame.ravel()), integ.config.linlog_threshold),
+                    (source.width, source.height))
+    events = integ.commit_events(t_prev if t_prev is not None else t, t)
+    summary.events_s += time.perf_counter() - t0
+    if t_prev is not None:
+        tw = time.perf_counter()
+        sink.add_step(events, complete_until_us=int(math.floor(t * 1e6)))
+        summary.write_s += time.perf_counter() - tw
+        summary.steps += 1
+
+
+def _commit_group(integ, sink: Sink, summary: RenderSummary, frames: list, times: list) -> None:
+    t0 = time.perf_counter()
+    log = pixel_model.linlog(dr, mi.Float(np.stack(frames).ravel()), integ.config.linlog_threshold)
+    events = integ.commit_frames(log, times)
+    summary.events_s += time.perf_counter() - t0
+    tw = time.perf_counter()
+    sink.add_step(events, complete_until_us=int(math.floor(times[-1] * 1e6)))
+    summary.write_s += time.perf_counter() - tw
+    summary.steps += len(frames)

@@ -1,0 +1,125 @@
+"""Many frames per kernel (``event_batch``) against the host path (NumPy expansion, one step at a time): the
+same events bit for bit, for every pixel model it takes, whatever the chunking; the models it must not take
+are refused; and the converter's results do not depend on how it groups frames."""
+import math
+
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.plugins.event_fill import time_order
+
+W, H = 37, 23          # a width that is no power of two: the fill splits pixels into x and y
+
+BATCHABLE = {
+    "ideal": {},
+    "asymmetric": {"threshold_on": 0.15, "threshold_off": 0.25},
+    "mismatch-leak-lowpass-clock": {"threshold_sigma": 0.03, "leak_rate_hz": 50.0, "cutoff_hz": 200.0,
+                                    "timestamp_resolution_us": 50.0, "seed": 3},
+}
+NOT_BATCHABLE = {
+    "jitter": {"threshold_jitter": 0.02},
+    "refractory": {"refractory_s": 4e-4},
+    "shot-noise": {"shot_noise_hz": 300.0},
+    "readout-cap": {"readout_cap": 3e5},
+}
+
+
+def _integrator(**pixel):
+    import mitsuba as mi
+    return mi.load_dict({"type": "eventfield", **pixel})
+
+
+def _frames(steps=23, seed=1):
+    """Log frames with up to ~8 crossings a pixel a step, and uneven frame intervals."""
+    rng = np.random.default_rng(seed)
+    base = rng.random(W * H) * 2
+    frames = [(base + np.sin(0.3 * s + 0.01 * np.arange(W * H)) * 1.5 * rng.random()).astype(np.float32)
+              for s in range(steps + 1)]
+    times = np.concatenate([[0.0], np.cumsum(1e-3 * (1 + rng.random(steps)))])
+    return frames, times
+
+
+def _host_events(pixel, frames, times, base_us):
+    import mitsuba as mi
+    integ, parts = _integrator(**pixel), []
+    for i, frame in enumerate(frames):
+        integ.stage_log(mi.Float(frame), (W, H))
+        t0, t1 = (times[i - 1] if i else times[0]), times[i]
+        x, y, ts, p = integ.commit(t0, t1)
+        t_us = np.rint(ts * 1e6).astype(np.int64) + base_us
+        order = time_order(t_us, int(math.floor(t0 * 1e6)) + base_us)
+        parts.append(integ.readout(x[order], y[order], t_us[order], p[order]))
+    return [np.concatenate([q[c] for q in parts]) for c in range(4)]
+
+
+def _batched_events(pixel, frames, times, chunk, base_us):
+    import mitsuba as mi
+    integ, parts = _integrator(**pixel), []
+    integ.stage_log(mi.Float(frames[0]), (W, H))
+    assert integ.commit_events(times[0], times[0]).count == 0 and integ.batchable
+    for a in range(1, len(frames), chunk):
+        b = min(a + chunk, len(frames))
+        ev = integ.commit_frames(mi.Float(np.concatenate(frames[a:b])), times[a - 1:b], base_us=base_us)
+        parts.append(ev.numpy())
+    return [np.concatenate([q[c] for q in parts]) for c in range(4)], integ
+
+
+@pytest.mark.parametrize("pixel", BATCHABLE.values(), ids=BATCHABLE.keys())
+@pytest.mark.parametrize("chunk", [1, 3, 7, 30])
+def test_batched_events_bit_identical_to_the_host_path(pixel, chunk):
+    frames, times = _frames()
+    base_us = 1_000_000 if pixel == {} else 0
+    expected = _host_events(pixel, frames, times, base_us)
+    got, integ = _batched_events(pixel, frames, times, chunk, base_us)
+    assert len(expected[2]) > 20 * W * H // 2            # a real workload: about a crossing a pixel a step
+    for a, b in zip(expected, got):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert np.bincount(got[0].astype(np.int64) + W * got[1].astype(np.int64)).max() > 23     # multi-crossings
+    # the state after the chunks is the state after the steps: the next frame fires the same events
+    host = _integrator(**pixel)
+    import mitsuba as mi
+    for i, frame in enumerate(frames):
+        host.stage_log(mi.Float(frame), (W, H))
+        host.commit(times[i - 1] if i else times[0], times[i])
+    for name in ("log_prev", "k_on", "k_off", "offset"):
+        if getattr(host, name) is not None:
+            assert np.array_equal(getattr(host, name).numpy(), getattr(integ, name).numpy()), name
+
+
+@pytest.mark.parametrize("pixel", NOT_BATCHABLE.values(), ids=NOT_BATCHABLE.keys())
+def test_models_with_per_step_draws_or_event_state_are_not_batched(pixel):
+    import mitsuba as mi
+    integ = _integrator(**pixel)
+    integ.stage_log(mi.Float(np.zeros(W * H, np.float32)), (W, H))
+    integ.commit_events(0.0, 0.0)
+    assert not integ.batchable
+    with pytest.raises(ValueError, match="one frame at a time"):
+        integ.commit_frames(mi.Float(np.zeros(W * H, np.float32)), [0.0, 1e-3])
+
+
+def test_a_still_chunk_fires_nothing_and_a_wrong_size_is_refused():
+    import mitsuba as mi
+    integ = _integrator()
+    integ.stage_log(mi.Float(np.ones(W * H, np.float32)), (W, H))
+    integ.commit_events(0.0, 0.0)
+    assert integ.commit_frames(mi.Float(np.ones(3 * W * H, np.float32)), [0.0, 1e-3, 2e-3, 3e-3]).count == 0
+    with pytest.raises(ValueError, match="values for 2 frames"):
+        integ.commit_frames(mi.Float(np.ones(3 * W * H, np.float32)), [0.0, 1e-3, 2e-3])
+
+
+def test_converter_events_do_not_depend_on_grouping():
+    """Frames to events through the converter: one frame a kernel, five, all of them, the host path and the
+    per-step device path agree bit for bit."""
+    frames, times = _frames(steps=17, seed=4)
+    stack = np.exp(np.stack(frames).reshape(-1, H, W))
+    runs = [ef.events_from_frames(stack, times, frames_per_kernel=k) for k in (1, 5, 64)]
+    assert len(runs[0]) > 5000 and all(r.equals(runs[0]) for r in runs[1:])
+    from mitsuba_eventfield.plugins.event_batch import one_frame_a_step
+    from mitsuba_eventfield.plugins.event_integrator import host_path
+    with host_path():
+        assert ef.events_from_frames(stack, times).equals(runs[0])
+    with one_frame_a_step():
+        assert ef.events_from_frames(stack, times).equals(runs[0])
+    with pytest.raises(ef.ConfigError, match="frames_per_kernel"):
+        ef.events_from_frames(stack, times, frames_per_kernel=0)
