@@ -31,16 +31,27 @@ from mitsuba_eventfield.plugins import event_fill, pixel_model, pixel_step
 
 
 # Lane-steps (pixels x frames) per kernel by backend. CPU: the chunk's events must stay in cache for the sort
-# (benchmarks/bench_v2e.py at 346x260: 4 frames 1.7x faster than 1, 8 frames slower than 4). CUDA: enough
+# (346x260 and 640x480, 2 kHz stack: 2-4 frames a kernel best, 1.2x one frame; 16 frames 0.6x). CUDA: enough
 # lanes to fill the GPU and few launches per frame (not measured on a GPU yet).
-LANE_STEPS = {"llvm": 360_000, "cuda": 16_000_000}
+LANE_STEPS = {"llvm": 600_000, "cuda": 16_000_000}
 MAX_FRAMES_PER_KERNEL = 64
 
 
-def default_frames_per_kernel(n_pix: int) -> int:
-    """Frames per kernel for a film of ``n_pix`` pixels on the active backend (see ``LANE_STEPS``)."""
+def default_frames_per_kernel(n_pix: int, frame_interval_s: float) -> int:
+    """Frames per kernel for a film of ``n_pix`` pixels on the active backend (``LANE_STEPS``), but never so
+    many that the chunk's time span needs more radix passes than one frame does (the sort key is microseconds
+    from the chunk's start, ``event_fill.RADIX_BITS`` per pass: at 2 kHz, 4 frames sort in one pass, 6 in two,
+    which costs more than the fewer launches save)."""
     lanes = LANE_STEPS["cuda" if mi.variant().startswith("cuda") else "llvm"]
-    return int(max(1, min(MAX_FRAMES_PER_KERNEL, round(lanes / n_pix))))
+    frames = int(max(1, min(MAX_FRAMES_PER_KERNEL, round(lanes / n_pix))))
+    while frames > 1 and _passes(frames * frame_interval_s) > _passes(frame_interval_s):
+        frames -= 1
+    return frames
+
+
+def _passes(span_s: float) -> int:
+    bits = max(1, (int(np.ceil(span_s * 1e6)) + 3).bit_length())
+    return -(-bits // event_fill.RADIX_BITS)
 
 
 _disabled = [False]
@@ -65,11 +76,12 @@ def batchable(integ) -> bool:
         not (cfg.threshold_jitter or cfg.shot_noise_hz or cfg.refractory_s or cfg.readout_cap)
 
 
-def commit_frames(integ, log_frames, times, base_us: int = 0) -> event_fill.DeviceEvents:
+def commit_frames(integ, log_frames, times, base_us: int = 0, intensity=None) -> event_fill.DeviceEvents:
     """Events of the steps from ``times[0]`` (the pixels' current instant) through ``B = len(times) - 1``
     frames: ``log_frames`` is a Float of ``B x N`` log brightnesses (frame-major), frame ``b`` the brightness
-    at ``times[b + 1]`` seconds. Advances the integrator's state; returns the chunk's events time-sorted on
-    the device, as :meth:`EventIntegrator.commit_device` would over the same steps."""
+    at ``times[b + 1]`` seconds. ``intensity``: the frames' radiance where it is known (a render's), for the
+    low-pass; otherwise recovered from the log brightness, as the per-step kernel does. Advances the
+    integrator's state; returns the chunk's events time-sorted on the device, as per-step commits would."""
     n_pix = integ.size[0] * integ.size[1]
     times = np.asarray(times, np.float64)
     steps = len(times) - 1
@@ -78,11 +90,11 @@ def commit_frames(integ, log_frames, times, base_us: int = 0) -> event_fill.Devi
     if integ.log_prev is None or dr.width(log_frames) != steps * n_pix or steps < 1:
         raise ValueError(f"commit_frames: {dr.width(log_frames)} values for {steps} frames of {n_pix} pixels "
                          "(after a first frame has set the pixels)")
-    levels, n_all, ref_all = _pixel_loop(integ, log_frames, times, steps, n_pix)
+    levels, n_all, ref_all = _pixel_loop(integ, log_frames, intensity, times, steps, n_pix)
     return _fill(integ, levels, n_all, ref_all, times, steps, n_pix, base_us)
 
 
-def _pixel_loop(integ, log_frames, times, steps: int, n_pix: int):
+def _pixel_loop(integ, log_frames, intensity_frames, times, steps: int, n_pix: int):
     """Every pixel through the steps in one kernel. Returns ``levels`` ((B + 1) x N: the brightness before
     the first step, then after each), the crossing counts and the reference levels (B x N each)."""
     cfg = integ.config
@@ -100,7 +112,10 @@ def _pixel_loop(integ, log_frames, times, steps: int, n_pix: int):
         idx = b * n_opaque + lane
         log_in = dr.gather(mi.Float, log_frames, idx)
         dt = dr.gather(mi.Float, dts, b) if needs_dt else None
-        intensity = pixel_model.linlog_inverse(dr, log_in, integ.linlog_threshold) if cfg.cutoff_hz else None
+        intensity = None
+        if cfg.cutoff_hz:
+            intensity = dr.gather(mi.Float, intensity_frames, idx) if intensity_frames is not None else \
+                pixel_model.linlog_inverse(dr, log_in, integ.linlog_threshold)
         lv = pixel_step.advance(integ, log_prev, k_on, k_off, offset[0] if has_offset else None, log_in,
                                 intensity, dt, integ.c_on, integ.c_off)
         dr.scatter(n_all, lv.n, idx)
@@ -136,7 +151,7 @@ def _fill(integ, levels, n_all, ref_all, times, steps: int, n_pix: int, base_us:
     base_d, start_d = event_fill._opaque(base_us, mi.Int64), event_fill._opaque(start_us, mi.Int64)
     key_out, word_out = dr.empty(mi.UInt32, total), dr.empty(mi.UInt32, total)
     y = pixel // w_opaque
-    xy = (pixel - y * w_opaque) | (y << 16)
+    xy = event_fill.pack_xy(pixel - y * w_opaque, y)
     c_on, c_off = mi.Float64(integ.c_on), mi.Float64(integ.c_off)
 
     def step_body(step):
@@ -176,7 +191,6 @@ def _sorted(key, word, total: int, start_d, key_bound: int, resolution_us: float
     if resolution_us:              # the sensor clock, after ordering by true time (as the per-step path)
         res = event_fill._opaque(resolution_us, mi.Float64)
         t_us = mi.Int64(dr.floor(mi.Float64(t_us) / res) * res)
-    x, y = word & 0xFFFF, (word >> 16) & 0x7FFF
-    p = dr.select((word >> 31) != 0, mi.Int32(1), mi.Int32(-1))
-    dr.eval(x, y, t_us, p)
-    return event_fill.DeviceEvents(x, y, t_us, p, count=total)
+    xy, p = word & 0x7FFFFFFF, event_fill.polarity((word >> 31) != 0)
+    dr.eval(xy, t_us, p)
+    return event_fill.DeviceEvents(xy, t_us, p, count=total)

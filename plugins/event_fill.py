@@ -19,6 +19,7 @@ render can keep many steps on the device and move them in one chunk.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 
 import drjit as dr
@@ -28,9 +29,9 @@ import numpy as np
 
 @dataclass
 class DeviceEvents:
-    """One or more steps' events on the device, time-sorted: x, y (UInt32), t (Int64 us), p (Int32 +1/-1)."""
-    x: object
-    y: object
+    """One or more steps' events on the device, time-sorted: ``xy`` (UInt32, x | y << 16), t (Int64 us), p
+    (Int8 +1/-1). x and y share a word so that the host receives them as 16-bit halves without conversion."""
+    xy: object
     t: object
     p: object
     count: int
@@ -38,11 +39,17 @@ class DeviceEvents:
     noise_events: int = 0            # shot-noise events kept in this step
 
     def numpy(self):
-        """(x uint16, y uint16, t int64 us, p int8) NumPy arrays: the one device-to-host copy."""
+        """(x uint16, y uint16, t int64 us, p int8) NumPy arrays. On the CPU these are views of the Dr.Jit
+        arrays (no copy; x and y strided halves of ``xy``); from a GPU, one device-to-host copy."""
         if self.count == 0:
             return (np.empty(0, np.uint16), np.empty(0, np.uint16), np.empty(0, np.int64), np.empty(0, np.int8))
-        return (self.x.numpy().astype(np.uint16), self.y.numpy().astype(np.uint16), self.t.numpy(),
-                self.p.numpy().astype(np.int8))
+        xy = self.xy.numpy()
+        if sys.byteorder == "little":
+            halves = xy.view(np.uint16)
+            x, y = halves[0::2], halves[1::2]
+        else:
+            x, y = (xy & 0xFFFF).astype(np.uint16), (xy >> 16).astype(np.uint16)
+        return x, y, self.t.numpy(), self.p.numpy()
 
     @staticmethod
     def concat(parts: list["DeviceEvents"]) -> "DeviceEvents":
@@ -50,9 +57,27 @@ class DeviceEvents:
         parts = [q for q in parts if q.count]
         if len(parts) <= 1:
             return parts[0] if parts else empty()
-        cols = [concat_arrays([getattr(q, k) for q in parts], type(getattr(parts[0], k))) for k in "xytp"]
+        cols = [concat_arrays([getattr(q, k) for q in parts], type(getattr(parts[0], k))) for k in ("xy", "t", "p")]
         dr.eval(*cols)
         return DeviceEvents(*cols, count=sum(q.count for q in parts))
+
+    @staticmethod
+    def host_columns(parts: list["DeviceEvents"]):
+        """The parts joined on the host: (x, y, t, p) NumPy arrays, each one copy of the parts' views (on the
+        CPU this skips the device-side join, a copy the host would repeat)."""
+        cols = [q.numpy() for q in parts if q.count] or [empty().numpy()]
+        return tuple(np.concatenate([c[i] for c in cols]) for i in range(4))
+
+
+def pack_xy(x, y):
+    """x | y << 16: the ``DeviceEvents.xy`` word (x < 65536, y < 65536)."""
+    return x | (y << 16)
+
+
+def polarity(on):
+    """Int8 +1 where ``on``, -1 elsewhere: the ``DeviceEvents.p`` column."""
+    i8 = dr.int8_array_t(mi.Int32)
+    return dr.select(on, i8(1), i8(-1))
 
 
 def concat_arrays(arrays: list, cls):
@@ -95,7 +120,7 @@ def time_order(t_us: np.ndarray, step_start_us: int) -> np.ndarray:
 
 
 def empty_columns():
-    return mi.UInt32(), mi.UInt32(), mi.Int64(), mi.Int32()
+    return mi.UInt32(), mi.Int64(), dr.int8_array_t(mi.Int32)()
 
 
 def empty() -> DeviceEvents:
@@ -261,6 +286,6 @@ def _time_sorted(pixel, t_s, sign, width: int, t0: float, t1: float, base_us: in
         res = _opaque(resolution_us, mi.Float64)
         t_us = mi.Int64(dr.floor(mi.Float64(t_us) / res) * res)
     w = _opaque(width, mi.UInt32)
-    out.x, out.y, out.t, out.p = pixel % w, pixel // w, t_us, sign
-    dr.eval(out.x, out.y, out.t, out.p)
+    out.xy, out.t, out.p = pack_xy(pixel % w, pixel // w), t_us, polarity(sign > 0)
+    dr.eval(out.xy, out.t, out.p)
     return out

@@ -99,7 +99,7 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=source.count, unit="frame", desc="converting")
-    group = frames_per_kernel or event_batch.default_frames_per_kernel(source.width * source.height)
+    group = frames_per_kernel
     batched = integ.batchable      # even one frame a kernel: its per-pixel fill beats the per-step search
     pending, times = [], []
     t_first = t_prev = t_last_committed = None
@@ -111,6 +111,7 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
             if t_prev is not None and not t > t_prev:
                 raise EventFieldError(f"{source.name}: frame times must increase ({t} s after {t_prev} s)")
             if batched and t_first is not None:
+                group = group or event_batch.default_frames_per_kernel(source.width * source.height, t - t_first)
                 pending.append(frame)
                 times.append(t)
                 if len(pending) == group:

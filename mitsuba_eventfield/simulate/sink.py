@@ -17,6 +17,11 @@ DEFAULT_EVENT_BUFFER_MB = 64.0
 DEVICE_BYTES_PER_EVENT = 20          # x, y (UInt32), t (Int64), p (Int32) while an event waits on the device
 
 
+def _cpu() -> bool:
+    import mitsuba as mi
+    return not mi.variant().startswith("cuda")
+
+
 def buffer_events(buffer_mb: float) -> int:
     """Events a device buffer of ``buffer_mb`` MiB holds (at least one step's worth is always kept)."""
     return max(1, int(buffer_mb * (1 << 20) / DEVICE_BYTES_PER_EVENT))
@@ -60,8 +65,15 @@ class Sink:
     def flush_device(self) -> None:
         if not self.device_parts and self.until is None:
             return
-        host = DeviceEvents.concat(self.device_parts).numpy()
-        until, self.device_parts, self.device_events, self.until = self.until, [], 0, None
+        parts, until = self.device_parts, self.until
+        self.device_parts, self.device_events, self.until = [], 0, None
+        if _cpu() and self.writer is None:      # in memory on the CPU: keep the parts' views, join once at the end
+            for part in parts:
+                self._add_host(*part.numpy(), until)
+            return
+        # on the CPU the device is the host: join the parts' views once there; from a GPU join them on the
+        # device first, so that one copy crosses
+        host = DeviceEvents.host_columns(parts) if _cpu() else DeviceEvents.concat(parts).numpy()
         self._add_host(*host, until)
 
     def add_step(self, events, complete_until_us: int) -> None:
