@@ -1,17 +1,20 @@
-"""Events of one step, made on the device: count, prefix sum, fill, timestamps and time order in Dr.Jit.
+"""Events made on the device: count, prefix sum, fill, timestamps and time order in Dr.Jit, for one step
+(:func:`crossing_events`, with the refractory period and shot noise) or many (``event_batch``), through one
+fill (:func:`fill`).
 
 The host twin is ``pixel_model.expand_crossings`` (NumPy, over the compressed firing pixels); this module gives
 the same events, bit for bit, without leaving the backend (LLVM or CUDA):
 
-1. count: every pixel's number of crossings ``|n|`` is already known from the step's kernel;
-2. prefix sum: an inclusive scan of the counts gives each pixel's slot range in the event array, and its last
-   entry is the step's event total (the one scalar the host reads per step, to size the arrays);
-3. fill: event ``i`` finds its pixel by a binary search over the scan (the first pixel whose inclusive sum
-   exceeds ``i``) and its crossing number ``k = i - start(pixel) + 1``;
+1. count: every (step, pixel) lane's number of crossings ``|n|`` is known from the pixel kernel (a refractory
+   period keeps a closed-form subset of them: ``_refractory_plan``);
+2. prefix sum: an inclusive scan of the counts gives each lane's slot range in the event array, and its last
+   entry is the chunk's event total (the one scalar the host reads, to size the arrays);
+3. fill: one lane a pixel loops over its steps and writes its own crossings into its slot range (no event
+   searches for its pixel: a binary search per event was 2x slower on the CPU);
 4. timestamps: crossing ``k`` sits at level ``ref + sign k C``; its time is where the step's linear segment
    meets that level, computed in float64 in the same operation order as the host twin, then rounded to integer
    microseconds (``dr.round``: ties to even, as ``np.rint``): float32 would lose microseconds after ~16 s;
-5. order: a stable sort by timestamp keeps equal times in (pixel, k) order, the host twin's order.
+5. order: a stable radix sort by microsecond keeps equal times in slot order: (step, pixel, k), then noise.
 
 Events stay as Dr.Jit arrays (:class:`DeviceEvents`); the caller decides when they cross to the host, so a
 render can keep many steps on the device and move them in one chunk.
@@ -190,12 +193,6 @@ def _refractory_plan(size, tk, last, period):
     return first, stride, kept, new_last, first_kept
 
 
-def _search(ends, n_pix, total):
-    """(slot, pixel) of every output slot: the first pixel whose inclusive count sum exceeds the slot."""
-    slot = dr.arange(mi.UInt32, total)
-    return slot, dr.binary_search(0, n_pix - 1, lambda i: dr.gather(mi.UInt32, ends, i) <= slot)
-
-
 def _read(values) -> list:
     """Up to four device scalars as Python ints, in one array: one device-to-host copy (the step's only sync)."""
     packed = dr.zeros(mi.UInt32, 4)
@@ -243,49 +240,123 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
     ends = dr.prefix_reduce(dr.ReduceOp.Add, kept, exclusive=False)        # inclusive scan: slot ends
     totals = [dr.gather(mi.UInt32, ends, n_pix - 1), dr.sum(size)]
     if hit is not None:
-        noise_ends = dr.prefix_reduce(dr.ReduceOp.Add, mi.UInt32(hit), exclusive=False)
-        totals += [dr.gather(mi.UInt32, noise_ends, n_pix - 1), dr.sum(mi.UInt32(noise[0]))]
+        totals += [dr.sum(mi.UInt32(hit)), dr.sum(mi.UInt32(noise[0]))]
     if refractory is not None:
         refractory.last_emit = new_last
     total, raw, noise_kept, noise_hits = _read(totals)
     stats = dict(refractory_dropped=(raw - total) + (noise_hits - noise_kept), noise_events=noise_kept)
     if total + noise_kept == 0:
         return DeviceEvents(*empty_columns(), count=0, **stats)
-    pixel, t_s, sign = mi.UInt32(), mi.Float64(), mi.Int32()
+    crossings = Crossings(n, kept, log_prev, log_now, log_ref, c_on, c_off, np.array([t0, t1]), width, n_pix,
+                          first if refractory is not None else None, stride if refractory is not None else None)
+    shot = ShotNoise(hit, nt, u_pol < 0.5, noise_kept) if noise_kept else None
+    return fill(crossings, ends, total, base_us, resolution_us, shot, stats)
+
+
+@dataclass
+class Crossings:
+    """A chunk's crossings for :func:`fill`, one lane per (step b, pixel p) at ``b N + p`` (frame-major: the
+    slot order): the signed count ``n`` (Int32) and how many become events ``kept`` (UInt32: ``|n|`` unless a
+    refractory period drops some), the log brightness ``before`` and ``after`` the step and the reference
+    level ``ref`` it compared against (Float), per pixel the thresholds it used, the steps' boundaries (B + 1
+    seconds), the film width and pixel count, and for a refractory pixel the kept crossings' ranks
+    ``first + j stride`` (Float64 per lane; None: every crossing, rank j)."""
+    n: object
+    kept: object
+    before: object
+    after: object
+    ref: object
+    c_on: object
+    c_off: object
+    times: np.ndarray
+    width: int
+    n_pix: int
+    first: object = None
+    stride: object = None
+
+
+@dataclass
+class ShotNoise:
+    """One step's kept shot-noise events for :func:`fill`: per pixel ``hit`` (Bool), time ``t`` (Float64 s),
+    polarity ``on`` (Bool), and how many hit."""
+    hit: object
+    t: object
+    on: object
+    count: int
+
+
+def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float = 0.0,
+         noise: ShotNoise | None = None, stats: dict | None = None) -> DeviceEvents:
+    """The events of ``cr`` (``ends``: inclusive prefix sum of ``kept``; ``total``: its last entry), then the
+    noise events, time-sorted, with timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor
+    clock ``resolution_us`` when > 0. One lane a pixel loops over the steps and writes its own crossings into
+    its slot range (the fill of esim_torch's count / prefix-sum / fill), two words an event: the sort key
+    (microseconds from the chunk's first one) and x | y << 16 | ON << 31, so no event searches for its pixel
+    or divides by the width, and the sort moves 8 bytes an event. Noise events take the slots after every
+    crossing, in pixel order, so equal times keep crossings first."""
+    steps, count = len(cr.times) - 1, total + (noise.count if noise else 0)
+    if count == 0:
+        return DeviceEvents(*empty_columns(), count=0, **(stats or {}))
+    start_us = int(math.floor(cr.times[0] * 1e6)) + int(base_us) - 1
+    base_d, start_d = _opaque(base_us, mi.Int64), _opaque(start_us, mi.Int64)
+    key_out, word_out = dr.empty(mi.UInt32, count), dr.empty(mi.UInt32, count)
+    pixel = dr.arange(mi.UInt32, cr.n_pix)
+    n_d, w_d = _opaque(cr.n_pix, mi.UInt32), _opaque(cr.width, mi.UInt32)
+    y = pixel // w_d
+    xy = pack_xy(pixel - y * w_d, y)
+
+    def key_of(t_s):        # as the per-step sort keyed a step: microseconds from the chunk's first, minus one
+        return mi.UInt32(mi.Int64(dr.round(t_s * 1e6)) + base_d - start_d)
+
     if total:
-        slot, pixel = _search(ends, n_pix, total)
-        j = mi.Float64(slot - (dr.gather(mi.UInt32, ends, pixel) - dr.gather(mi.UInt32, kept, pixel)))
-        rank = dr.gather(mi.Float64, first, pixel) + j * dr.gather(mi.Float64, stride, pixel) \
-            if refractory is not None else j
-        sign = dr.gather(mi.Int32, sign_d, pixel)
-        at = [dr.gather(mi.Float64, a, pixel) for a in f64]
-        t_s = _crossing_time(mi.Int64(rank) + 1, sign, *at, dr.gather(mi.Float64, step_d, pixel), t0_d, t1_d)
-    if noise_kept:
-        _, npix = _search(noise_ends, n_pix, noise_kept)
-        pixel = concat_arrays([pixel, npix], mi.UInt32)
-        t_s = concat_arrays([t_s, dr.gather(mi.Float64, nt, npix)], mi.Float64)
-        sign = concat_arrays([sign, dr.select(dr.gather(mi.Float, u_pol, npix) < 0.5, mi.Int32(1), mi.Int32(-1))],
-                             mi.Int32)
-    return _time_sorted(pixel, t_s, sign, width, t0, t1, base_us, resolution_us,
-                        DeviceEvents(*empty_columns(), count=total + noise_kept, **stats))
-
-
-def _time_sorted(pixel, t_s, sign, width: int, t0: float, t1: float, base_us: int, resolution_us: float,
-                 out: DeviceEvents) -> DeviceEvents:
-    """The step's events (pixel, seconds, polarity, in slot order) as ``out``'s columns: microseconds, time
-    order, sensor clock, x and y."""
-    t_us = mi.Int64(dr.round(t_s * 1e6)) + _opaque(base_us, mi.Int64)
-    # stable: equal times keep (pixel, k) order, noise after crossings. The key is the offset from the step's
-    # first microsecond, so its range is the step's length in microseconds, known here without asking the device
-    start_us = int(math.floor(t0 * 1e6)) + int(base_us) - 1
-    key = mi.UInt32(t_us - _opaque(start_us, mi.Int64))
-    dr.eval(pixel, t_us, sign, key)     # one kernel; left lazy, the gathers below would redo the binary search
-    order = stable_order(key, int(math.ceil((t1 - t0) * 1e6)) + 3)
-    pixel, t_us, sign = (dr.gather(type(a), a, order) for a in (pixel, t_us, sign))
+        _fill_crossings(cr, ends, steps, pixel, n_d, xy, key_of, key_out, word_out)
+    if noise is not None:
+        slot = dr.prefix_reduce(dr.ReduceOp.Add, mi.UInt32(noise.hit), exclusive=True) + _opaque(total, mi.UInt32)
+        on_bit = dr.select(noise.on, mi.UInt32(1 << 31), mi.UInt32(0))
+        dr.scatter(key_out, key_of(noise.t), slot, noise.hit)
+        dr.scatter(word_out, xy | on_bit, slot, noise.hit)
+    dr.eval(key_out, word_out)
+    order = stable_order(key_out, int(math.ceil((cr.times[-1] - cr.times[0]) * 1e6)) + 3)
+    key, word = dr.gather(mi.UInt32, key_out, order), dr.gather(mi.UInt32, word_out, order)
+    t_us = mi.Int64(key) + start_d
     if resolution_us:              # the sensor clock, after ordering by true time (as the host's readout)
         res = _opaque(resolution_us, mi.Float64)
         t_us = mi.Int64(dr.floor(mi.Float64(t_us) / res) * res)
-    w = _opaque(width, mi.UInt32)
-    out.xy, out.t, out.p = pack_xy(pixel % w, pixel // w), t_us, polarity(sign > 0)
-    dr.eval(out.xy, out.t, out.p)
-    return out
+    xy, p = word & 0x7FFFFFFF, polarity((word >> 31) != 0)
+    dr.eval(xy, t_us, p)
+    return DeviceEvents(xy, t_us, p, count=count, **(stats or {}))
+
+
+def _fill_crossings(cr: Crossings, ends, steps: int, pixel, n_d, xy, key_of, key_out, word_out) -> None:
+    """The crossings' two words into their slots: one lane a pixel, looping over the steps, then over its
+    kept crossings there (symbolic loops: one kernel)."""
+    t_d = mi.Float64(cr.times)
+    c_on, c_off = mi.Float64(cr.c_on), mi.Float64(cr.c_off)
+
+    def step_body(step):
+        lane = step * n_d + pixel
+        kept = dr.gather(mi.UInt32, cr.kept, lane)
+        start = dr.gather(mi.UInt32, ends, lane) - kept
+        n = dr.gather(mi.Int32, cr.n, lane)
+        on = n > 0
+        sign = dr.select(on, mi.Int32(1), mi.Int32(-1))
+        word = xy | dr.select(on, mi.UInt32(1 << 31), mi.UInt32(0))
+        segment = (mi.Float64(dr.gather(mi.Float, cr.before, lane)), mi.Float64(dr.gather(mi.Float, cr.after, lane)),
+                   mi.Float64(dr.gather(mi.Float, cr.ref, lane)), dr.select(on, c_on, c_off),
+                   dr.gather(mi.Float64, t_d, step), dr.gather(mi.Float64, t_d, step + 1))
+        ranked = cr.first is not None
+        first = dr.gather(mi.Float64, cr.first, lane) if ranked else None
+        stride = dr.gather(mi.Float64, cr.stride, lane) if ranked else None
+
+        def crossing_body(j):
+            rank = first + mi.Float64(j) * stride if ranked else mi.Float64(j)
+            t_s = _crossing_time(mi.Int64(rank) + 1, sign, *segment)
+            dr.scatter(key_out, key_of(t_s), start + j)
+            dr.scatter(word_out, word, start + j)
+            return (j + 1,)
+
+        dr.while_loop((dr.zeros(mi.UInt32, cr.n_pix),), lambda j: j < kept, crossing_body)
+        return (step + 1,)
+
+    bound = _opaque(steps, mi.UInt32)
+    dr.while_loop((dr.zeros(mi.UInt32, cr.n_pix),), lambda step: step < bound, step_body)

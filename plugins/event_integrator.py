@@ -277,12 +277,7 @@ class _EventIntegratorMethods:
         """:meth:`commit` and the clock of :meth:`readout` on the device (count, prefix sum, fill, refractory
         selection, shot noise, sort): the step's events, time-sorted, with integer microsecond timestamps
         ``rint(t 1e6) + base_us`` (clock-quantised), as ``event_fill.DeviceEvents``. Bit-identical to the host
-        path. The readout cap is not applied here (:meth:`commit_events` does). Pixel models without per-step
-        draws or refractory state take ``event_batch``'s fill (one frame, the converter's kernel)."""
-        if self.log_prev is not None and self.staged is not None and event_batch.batchable(self):
-            log_in, intensity = self.staged, self.staged_intensity
-            self.staged = self.staged_intensity = None
-            return event_batch.commit_frames(self, log_in, [t0, t1], base_us, intensity=intensity)
+        path. The readout cap is not applied here (:meth:`commit_events` does)."""
         step = self._take_staged(t1 - t0, "commit_device()")
         if step is None:
             return event_fill.empty()

@@ -99,8 +99,7 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=source.count, unit="frame", desc="converting")
-    group = frames_per_kernel
-    batched = integ.batchable      # even one frame a kernel: its per-pixel fill beats the per-step search
+    group, batched = frames_per_kernel, integ.batchable
     pending, times = [], []
     t_first = t_prev = t_last_committed = None
     try:
@@ -110,8 +109,9 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
                                       f"{source.width}x{source.height}")
             if t_prev is not None and not t > t_prev:
                 raise EventFieldError(f"{source.name}: frame times must increase ({t} s after {t_prev} s)")
-            if batched and t_first is not None:
-                group = group or event_batch.default_frames_per_kernel(source.width * source.height, t - t_first)
+            if batched and t_first is not None and group is None:     # the first interval sets the default
+                group = event_batch.default_frames_per_kernel(source.width * source.height, t - t_first)
+            if batched and t_first is not None and group > 1:     # one frame a kernel: the per-step kernel
                 pending.append(frame)
                 times.append(t)
                 if len(pending) == group:
