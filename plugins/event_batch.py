@@ -69,10 +69,9 @@ def one_frame_a_step():
 
 
 def batchable(integ) -> bool:
-    """True when ``integ``'s pixel model can take many frames per kernel (see the module docstring) and its
-    film is under 32,768 rows (the fill packs y into 15 bits)."""
+    """True when ``integ``'s pixel model can take many frames per kernel (see the module docstring)."""
     cfg = integ.config
-    return not _disabled[0] and integ.device_resident and (integ.size is None or integ.size[1] < 1 << 15) and \
+    return not _disabled[0] and integ.device_resident and \
         not (cfg.threshold_jitter or cfg.shot_noise_hz or cfg.refractory_s or cfg.readout_cap)
 
 

@@ -123,3 +123,18 @@ def test_converter_events_do_not_depend_on_grouping():
         assert ef.events_from_frames(stack, times).equals(runs[0])
     with pytest.raises(ef.ConfigError, match="frames_per_kernel"):
         ef.events_from_frames(stack, times, frames_per_kernel=0)
+
+
+def test_films_beyond_the_packed_coordinates_are_refused_before_any_event():
+    """Events carry x | y << 16 | ON << 31 in one word on the device: 32,768 rows fit, 32,769 do not."""
+    import mitsuba as mi
+    ok = _integrator()
+    ok.stage_log(mi.Float(np.zeros(1 << 15, np.float32)), (1, 1 << 15))
+    assert ok.commit_events(0.0, 0.0).count == 0
+    ok.stage_log(mi.Float(np.full(1 << 15, 1.0, np.float32)), (1, 1 << 15))
+    ev = ok.commit_events(0.0, 1e-3).numpy()
+    assert len(ev[1]) == 5 << 15 and ev[1].max() == (1 << 15) - 1 and (ev[3] == 1).all()   # 5 ON crossings a pixel
+    tall = _integrator()
+    tall.stage_log(mi.Float(np.zeros((1 << 15) + 1, np.float32)), (1, (1 << 15) + 1))
+    with pytest.raises(ValueError, match="at most 65536 x 32768"):
+        tall.commit_events(0.0, 0.0)
