@@ -12,9 +12,10 @@ frames at once:
 
 The events equal, bit for bit, those of ``B`` calls of ``EventIntegrator.commit_device`` joined in order: the
 same float operations in the same order, and a stable sort keyed by time over slots in (step, pixel,
-crossing) order is the per-step order concatenated (a step's times never pass the next step's start, the
-per-step clipping of the interpolation fraction to [0, 1] bounds them, and rounding to microseconds keeps
-that order). Pixel models that draw random numbers per step (threshold jitter, shot noise) or keep
+crossing) order is the per-step order concatenated (a step's times never pass the next step's start: the
+interpolation fraction is clipped to [0, 1] and rounding to microseconds keeps order; the one exception is a
+float64 ``t0 + 1.0 (t1 - t0)`` one ulp above ``t1`` where ``t1`` is exactly half a microsecond, which the
+per-step concatenation would leave out of order and the chunk sorts). Pixel models that draw random numbers per step (threshold jitter, shot noise) or keep
 per-event state (refractory period, readout cap) are not batched: ``batchable`` says so and the caller steps
 them one frame at a time.
 """
@@ -75,12 +76,12 @@ def batchable(integ) -> bool:
         not (cfg.threshold_jitter or cfg.shot_noise_hz or cfg.refractory_s or cfg.readout_cap)
 
 
-def commit_frames(integ, log_frames, times, base_us: int = 0, intensity=None) -> event_fill.DeviceEvents:
+def commit_frames(integ, log_frames, times, base_us: int = 0) -> event_fill.DeviceEvents:
     """Events of the steps from ``times[0]`` (the pixels' current instant) through ``B = len(times) - 1``
     frames: ``log_frames`` is a Float of ``B x N`` log brightnesses (frame-major), frame ``b`` the brightness
-    at ``times[b + 1]`` seconds. ``intensity``: the frames' radiance where it is known (a render's), for the
-    low-pass; otherwise recovered from the log brightness, as the per-step kernel does. Advances the
-    integrator's state; returns the chunk's events time-sorted on the device, as per-step commits would."""
+    at ``times[b + 1]`` seconds (the low-pass recovers the radiance from it, as the per-step kernel does for a
+    staged log frame). Advances the integrator's state; returns the chunk's events time-sorted on the device,
+    as per-step commits would."""
     n_pix = integ.size[0] * integ.size[1]
     times = np.asarray(times, np.float64)
     steps = len(times) - 1
@@ -89,11 +90,11 @@ def commit_frames(integ, log_frames, times, base_us: int = 0, intensity=None) ->
     if integ.log_prev is None or dr.width(log_frames) != steps * n_pix or steps < 1:
         raise ValueError(f"commit_frames: {dr.width(log_frames)} values for {steps} frames of {n_pix} pixels "
                          "(after a first frame has set the pixels)")
-    before, after, n_all, ref_all = _pixel_loop(integ, log_frames, intensity, times, steps, n_pix)
+    before, after, n_all, ref_all = _pixel_loop(integ, log_frames, times, steps, n_pix)
     return _fill(integ, before, after, n_all, ref_all, times, steps, n_pix, base_us)
 
 
-def _pixel_loop(integ, log_frames, intensity_frames, times, steps: int, n_pix: int):
+def _pixel_loop(integ, log_frames, times, steps: int, n_pix: int):
     """Every pixel through the steps in one kernel. Returns, per (step, pixel) lane (frame-major), the log
     brightness before and after the step, the crossing count and the reference level."""
     cfg = integ.config
@@ -110,10 +111,7 @@ def _pixel_loop(integ, log_frames, intensity_frames, times, steps: int, n_pix: i
         idx = b * n_opaque + lane
         log_in = dr.gather(mi.Float, log_frames, idx)
         dt = dr.gather(mi.Float, dts, b) if needs_dt else None
-        intensity = None
-        if cfg.cutoff_hz:
-            intensity = dr.gather(mi.Float, intensity_frames, idx) if intensity_frames is not None else \
-                pixel_model.linlog_inverse(dr, log_in, integ.linlog_threshold)
+        intensity = pixel_model.linlog_inverse(dr, log_in, integ.linlog_threshold) if cfg.cutoff_hz else None
         lv = pixel_step.advance(integ, log_prev, k_on, k_off, offset[0] if has_offset else None, log_in,
                                 intensity, dt, integ.c_on, integ.c_off)
         dr.scatter(n_all, lv.n, idx)

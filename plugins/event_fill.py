@@ -72,8 +72,18 @@ class DeviceEvents:
         return tuple(np.concatenate([c[i] for c in cols]) for i in range(4))
 
 
+MAX_WIDTH, MAX_HEIGHT = 1 << 16, 1 << 15     # x in 16 bits, y in 15: pack_xy, and the fill keeps bit 31 for ON
+
+
+def film_limit_error(width: int, height: int) -> str | None:
+    """Why a film is too large for device events (None when it fits)."""
+    if width > MAX_WIDTH or height > MAX_HEIGHT:
+        return f"{width}x{height} pixels: events hold at most {MAX_WIDTH} x {MAX_HEIGHT} (x and y share a word)"
+    return None
+
+
 def pack_xy(x, y):
-    """x | y << 16: the ``DeviceEvents.xy`` word (x < 65536, y < 65536)."""
+    """x | y << 16: the ``DeviceEvents.xy`` word (x < 65536; y < 32768, as the fill keeps bit 31 for ON)."""
     return x | (y << 16)
 
 
@@ -299,14 +309,17 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
         return DeviceEvents(*empty_columns(), count=0, **(stats or {}))
     start_us = int(math.floor(cr.times[0] * 1e6)) + int(base_us) - 1
     base_d, start_d = _opaque(base_us, mi.Int64), _opaque(start_us, mi.Int64)
-    key_out, word_out = dr.empty(mi.UInt32, count), dr.empty(mi.UInt32, count)
+    key_bound = int(math.ceil((cr.times[-1] - cr.times[0]) * 1e6)) + 3
+    # a span of 2^32 us (71.6 minutes: time-lapse frames) does not fit the 32-bit key: 64 bits, Dr.Jit's sort
+    key_type = mi.UInt32 if key_bound < 1 << 32 else mi.UInt64
+    key_out, word_out = dr.empty(key_type, count), dr.empty(mi.UInt32, count)
     pixel = dr.arange(mi.UInt32, cr.n_pix)
     n_d, w_d = _opaque(cr.n_pix, mi.UInt32), _opaque(cr.width, mi.UInt32)
     y = pixel // w_d
     xy = pack_xy(pixel - y * w_d, y)
 
     def key_of(t_s):        # as the per-step sort keyed a step: microseconds from the chunk's first, minus one
-        return mi.UInt32(mi.Int64(dr.round(t_s * 1e6)) + base_d - start_d)
+        return key_type(mi.Int64(dr.round(t_s * 1e6)) + base_d - start_d)
 
     if total:
         _fill_crossings(cr, ends, steps, pixel, n_d, xy, key_of, key_out, word_out)
@@ -316,8 +329,8 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
         dr.scatter(key_out, key_of(noise.t), slot, noise.hit)
         dr.scatter(word_out, xy | on_bit, slot, noise.hit)
     dr.eval(key_out, word_out)
-    order = stable_order(key_out, int(math.ceil((cr.times[-1] - cr.times[0]) * 1e6)) + 3)
-    key, word = dr.gather(mi.UInt32, key_out, order), dr.gather(mi.UInt32, word_out, order)
+    order = stable_order(key_out, key_bound) if key_type is mi.UInt32 else dr.argsort(key_out)   # both stable
+    key, word = dr.gather(key_type, key_out, order), dr.gather(mi.UInt32, word_out, order)
     t_us = mi.Int64(key) + start_d
     if resolution_us:              # the sensor clock, after ordering by true time (as the host's readout)
         res = _opaque(resolution_us, mi.Float64)
@@ -349,7 +362,8 @@ def _fill_crossings(cr: Crossings, ends, steps: int, pixel, n_d, xy, key_of, key
         stride = dr.gather(mi.Float64, cr.stride, lane) if ranked else None
 
         def crossing_body(j):
-            rank = first + mi.Float64(j) * stride if ranked else mi.Float64(j)
+            # j = 0 is the first kept rank itself: a lone kept crossing may have an infinite stride (0 x inf)
+            rank = dr.select(j == 0, first, first + mi.Float64(j) * stride) if ranked else mi.Float64(j)
             t_s = _crossing_time(mi.Int64(rank) + 1, sign, *segment)
             dr.scatter(key_out, key_of(t_s), start + j)
             dr.scatter(word_out, word, start + j)

@@ -176,8 +176,9 @@ class _EventIntegratorMethods:
 
     # ---------------------------------------------------------------- events
     def _init_state(self, log_now, width, height):
-        if width > 1 << 16 or height > 1 << 15:     # event_fill packs x | y << 16 | ON << 31 in one word
-            raise ValueError(f"film {width}x{height}: the event pixel takes at most 65536 x 32768 pixels")
+        too_large = event_fill.film_limit_error(width, height)    # checked up front by the facades too
+        if too_large:
+            raise ValueError(f"film {too_large}")
         cfg, n_pix = self.config, width * height
         rng = np.random.default_rng(cfg.seed)
         self.size = (width, height)

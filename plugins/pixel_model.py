@@ -220,15 +220,18 @@ def refractory_crossings(pixel, t, last_emit, period):
     multi = size > 1
     spacing = np.where(multi, t[np.minimum(start + 1, n - 1)] - t0g, 1.0)
     wait = last_emit[gp] + period - t0g                     # > 0: the first crossing is too early
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"):
         first_multi = np.maximum(0, np.ceil(wait / spacing - 1e-9))
     first = np.where(multi, np.nan_to_num(first_multi, nan=0.0, neginf=0.0), np.where(wait <= 0, 0, 1))
-    stride = np.where(multi, np.maximum(1, np.ceil(period / spacing - 1e-9)), 1)
+    with np.errstate(divide="ignore"):      # crossings at one instant (spacing 0): infinite stride, one kept
+        stride = np.where(multi, np.maximum(1, np.ceil(period / spacing - 1e-9)), 1)
     rank = np.arange(n) - np.repeat(start, size)
     f_r, s_r = np.repeat(first, size), np.repeat(stride, size)
     keep = (rank >= f_r) & (((rank - f_r) % s_r) == 0)
     kept_groups = first < size
-    last_idx = start + first + stride * np.floor((size - 1 - first) / stride)
+    finite = np.isfinite(stride)
+    last_idx = start + first + np.where(finite, stride * np.floor((size - 1 - first) / np.where(finite, stride, 1)),
+                                        0)
     last_emit[gp[kept_groups]] = t[last_idx[kept_groups].astype(np.int64)]
     first_kept = np.where(kept_groups, t[np.minimum(start + first, n - 1).astype(np.int64)], np.inf)
     return keep, (gp, first_kept)

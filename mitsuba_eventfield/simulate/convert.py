@@ -20,7 +20,7 @@ from .._version import __version__
 from ..atomic import check_writable
 from ..errors import EventFieldError
 from ..events.io import format_of
-from ..plugins import event_batch, pixel_model
+from ..plugins import event_batch, event_fill, pixel_model
 from ..validate import positive
 from .frame_sources import FrameSource, from_array, open_frames
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
@@ -63,6 +63,9 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     source = frames if isinstance(frames, FrameSource) else \
         open_frames(frames, fps, srgb) if isinstance(frames, (str, os.PathLike)) else \
         from_array(frames, times, fps, srgb)
+    too_large = event_fill.film_limit_error(source.width, source.height)
+    if too_large:
+        raise EventFieldError(f"{source.name}: {too_large}")
     if output:
         check_writable(output, "event file")
         format_of(output, fmt)
@@ -112,7 +115,7 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
             if batched and t_first is not None and group is None:     # the first interval sets the default
                 group = event_batch.default_frames_per_kernel(source.width * source.height, t - t_first)
             if batched and t_first is not None and group > 1:     # one frame a kernel: the per-step kernel
-                pending.append(frame)
+                pending.append(np.array(frame, np.float32))     # a copy: a source may reuse its buffer
                 times.append(t)
                 if len(pending) == group:
                     _commit_group(integ, sink, summary, pending, [t_last_committed] + times)

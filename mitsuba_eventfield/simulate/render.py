@@ -20,6 +20,7 @@ from .. import backend
 from ..atomic import check_writable
 from ..errors import EventFieldError
 from ..events.io import format_of
+from ..plugins.event_fill import film_limit_error
 from ..scene.timed import TimedScene, load_scene
 from ..validate import available_memory, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
@@ -42,7 +43,11 @@ MAX_WAVEFRONT = 2**32 - 1
 
 
 def check_memory(width: int, height: int, spp: int, where: str = "film") -> int:
-    """Refuse a frame whose render buffers cannot fit; return the estimated bytes."""
+    """Refuse a frame whose render buffers cannot fit, or whose events cannot be held; return the estimated
+    bytes."""
+    too_large = film_limit_error(width, height)
+    if too_large:
+        raise EventFieldError(f"{where}: {too_large}")
     samples = width * height * spp
     if samples > MAX_WAVEFRONT:
         raise EventFieldError(f"{where}: {width}x{height} pixels x {spp} spp = {samples} samples per frame exceeds "

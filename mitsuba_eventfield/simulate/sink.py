@@ -14,7 +14,7 @@ from ..plugins.event_fill import DeviceEvents
 from .checkpoint import SegmentWriter
 
 DEFAULT_EVENT_BUFFER_MB = 64.0
-DEVICE_BYTES_PER_EVENT = 20          # x, y (UInt32), t (Int64), p (Int32) while an event waits on the device
+DEVICE_BYTES_PER_EVENT = 13          # xy (UInt32), t (Int64), p (Int8) while an event waits on the device
 
 
 def _cpu() -> bool:

@@ -9,6 +9,8 @@ import pytest
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.plugins.event_fill import time_order
 
+from conftest import DEMO
+
 W, H = 37, 23          # a width that is no power of two: the fill splits pixels into x and y
 
 BATCHABLE = {
@@ -90,10 +92,12 @@ def test_batched_events_bit_identical_to_the_host_path(pixel, chunk):
 @pytest.mark.parametrize("pixel", NOT_BATCHABLE.values(), ids=NOT_BATCHABLE.keys())
 def test_models_with_per_step_draws_or_event_state_are_not_batched(pixel):
     import mitsuba as mi
+    from mitsuba_eventfield.plugins.event_integrator import device_path
     integ = _integrator(**pixel)
     integ.stage_log(mi.Float(np.zeros(W * H, np.float32)), (W, H))
     integ.commit_events(0.0, 0.0)
-    assert not integ.batchable
+    with device_path():     # on the CPU refractory and noise models take the host path anyway: not the reason
+        assert integ.device_resident and not integ.batchable
     with pytest.raises(ValueError, match="one frame at a time"):
         integ.commit_frames(mi.Float(np.zeros(W * H, np.float32)), [0.0, 1e-3])
 
@@ -108,12 +112,23 @@ def test_a_still_chunk_fires_nothing_and_a_wrong_size_is_refused():
         integ.commit_frames(mi.Float(np.ones(3 * W * H, np.float32)), [0.0, 1e-3, 2e-3])
 
 
-def test_converter_events_do_not_depend_on_grouping():
+def test_converter_events_do_not_depend_on_grouping(monkeypatch):
     """Frames to events through the converter: one frame a kernel, five, all of them, the host path and the
-    per-step device path agree bit for bit."""
+    per-step device path agree bit for bit; the groups are what was asked (17 steps: 1 + 3 x 5 + 2 frames)."""
+    from mitsuba_eventfield.plugins import event_batch
     frames, times = _frames(steps=17, seed=4)
     stack = np.exp(np.stack(frames).reshape(-1, H, W))
-    runs = [ef.events_from_frames(stack, times, frames_per_kernel=k) for k in (1, 5, 64)]
+    groups, real = [], event_batch.commit_frames
+
+    def counted(integ, log_frames, times_, base_us=0):
+        groups.append(len(times_) - 1)
+        return real(integ, log_frames, times_, base_us)
+    monkeypatch.setattr(event_batch, "commit_frames", counted)
+    runs = []
+    for k, expected in ((1, []), (5, [5, 5, 5, 2]), (64, [17])):
+        groups.clear()
+        runs.append(ef.events_from_frames(stack, times, frames_per_kernel=k))
+        assert groups == expected
     assert len(runs[0]) > 5000 and all(r.equals(runs[0]) for r in runs[1:])
     from mitsuba_eventfield.plugins.event_batch import one_frame_a_step
     from mitsuba_eventfield.plugins.event_integrator import host_path
@@ -125,16 +140,71 @@ def test_converter_events_do_not_depend_on_grouping():
         ef.events_from_frames(stack, times, frames_per_kernel=0)
 
 
-def test_films_beyond_the_packed_coordinates_are_refused_before_any_event():
-    """Events carry x | y << 16 | ON << 31 in one word on the device: 32,768 rows fit, 32,769 do not."""
+@pytest.mark.parametrize("size", [(1, 1 << 15), (1 << 16, 1)], ids=["32768 rows", "65536 columns"])
+def test_films_at_the_packed_coordinates_keep_x_y_and_polarity(size):
+    """Events carry x | y << 16 | ON << 31 in one word on the device: the largest x and y come back, with
+    both polarities (OFF must not touch the y bits), on the per-step and the batched path."""
     import mitsuba as mi
-    ok = _integrator()
-    ok.stage_log(mi.Float(np.zeros(1 << 15, np.float32)), (1, 1 << 15))
-    assert ok.commit_events(0.0, 0.0).count == 0
-    ok.stage_log(mi.Float(np.full(1 << 15, 1.0, np.float32)), (1, 1 << 15))
-    ev = ok.commit_events(0.0, 1e-3).numpy()
-    assert len(ev[1]) == 5 << 15 and ev[1].max() == (1 << 15) - 1 and (ev[3] == 1).all()   # 5 ON crossings a pixel
+    n = size[0] * size[1]
+    for chunk in (None, 2):
+        integ = _integrator()
+        integ.stage_log(mi.Float(np.zeros(n, np.float32)), size)
+        assert integ.commit_events(0.0, 0.0).count == 0
+        up, down = np.full(n, 1.0, np.float32), np.full(n, -1.0, np.float32)    # 5 ON, then 10 OFF a pixel
+        if chunk:
+            x, y, t, p = integ.commit_frames(mi.Float(np.concatenate([up, down])), [0.0, 1e-3, 2e-3]).numpy()
+        else:
+            parts = []
+            for frame, t1 in ((up, 1e-3), (down, 2e-3)):
+                integ.stage_log(mi.Float(frame), size)
+                parts.append(integ.commit_events(t1 - 1e-3, t1).numpy())
+            x, y, t, p = (np.concatenate([q[c] for q in parts]) for c in range(4))
+        assert len(t) == 15 * n and (p[:5 * n] == 1).all() and (p[5 * n:] == -1).all()
+        assert x.max() == size[0] - 1 and y.max() == size[1] - 1
+        assert np.array_equal(np.bincount(x.astype(np.int64) + size[0] * y.astype(np.int64)), np.full(n, 15))
+
+
+def test_films_beyond_the_packed_coordinates_are_refused_before_any_event(tmp_path):
+    import mitsuba as mi
     tall = _integrator()
     tall.stage_log(mi.Float(np.zeros((1 << 15) + 1, np.float32)), (1, (1 << 15) + 1))
     with pytest.raises(ValueError, match="at most 65536 x 32768"):
         tall.commit_events(0.0, 0.0)
+    out = tmp_path / "tall.h5"
+    with pytest.raises(ef.EventFieldError, match="frames: 1x32769 pixels: events hold at most 65536 x 32768"):
+        ef.events_from_frames(np.ones((2, (1 << 15) + 1, 1), np.float32), fps=100.0, output=str(out))
+    with pytest.raises(ef.EventFieldError, match="film: 1x32769 pixels: events hold at most"):
+        ef.render_events(ef.load_scene(DEMO, width=1, height=(1 << 15) + 1), 0.01, steps=2, output=str(out))
+    assert not out.exists()
+
+
+def test_time_lapse_spans_beyond_32_bit_microseconds():
+    """Frames an hour apart: a chunk spans more than 2^32 us, so the sort key takes 64 bits; timestamps and
+    order equal the host path's (one step at a time, int64 sort) whatever the grouping."""
+    frames, _ = _frames(steps=5, seed=6)
+    times = np.arange(6) * 3600.0
+    expected = _host_events({}, frames, times, 0)
+    assert expected[2].max() > 1 << 32
+    for chunk in (1, 2, 5):
+        got, _ = _batched_events({}, frames, times, chunk, 0)
+        for a, b in zip(expected, got):
+            assert np.array_equal(a, b)
+
+
+def test_device_events_join_on_the_device_and_on_the_host():
+    """``DeviceEvents.concat`` (a GPU's join before the copy) and ``host_columns`` (the CPU's) give the same
+    columns as the parts one after the other."""
+    import mitsuba as mi
+    from mitsuba_eventfield.plugins.event_fill import DeviceEvents
+    frames, times = _frames(steps=4, seed=2)
+    integ, parts = _integrator(), []
+    integ.stage_log(mi.Float(frames[0]), (W, H))
+    integ.commit_events(times[0], times[0])
+    for i in range(1, 5):
+        integ.stage_log(mi.Float(frames[i]), (W, H))
+        parts.append(integ.commit_events(times[i - 1], times[i]))
+    expected = [np.concatenate([q.numpy()[c] for q in parts]) for c in range(4)]
+    for joined in (DeviceEvents.concat(parts).numpy(), DeviceEvents.host_columns(parts)):
+        for a, b in zip(expected, joined):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert len(expected[0]) > W * H
