@@ -39,13 +39,14 @@ MAX_FRAMES_PER_KERNEL = 64
 
 
 def default_frames_per_kernel(n_pix: int, frame_interval_s: float) -> int:
-    """Frames per kernel for a film of ``n_pix`` pixels on the active backend (``LANE_STEPS``), but never so
-    many that the chunk's time span needs more radix passes than one frame does (the sort key is microseconds
-    from the chunk's start, ``event_fill.RADIX_BITS`` per pass: at 2 kHz, 4 frames sort in one pass, 6 in two,
-    which costs more than the fewer launches save)."""
-    lanes = LANE_STEPS["cuda" if mi.variant().startswith("cuda") else "llvm"]
-    frames = int(max(1, min(MAX_FRAMES_PER_KERNEL, round(lanes / n_pix))))
-    while frames > 1 and _passes(frames * frame_interval_s) > _passes(frame_interval_s):
+    """Frames per kernel for a film of ``n_pix`` pixels on the active backend (``LANE_STEPS``). On the CPU
+    never so many that the chunk's time span needs more radix passes than one frame does (the sort key is
+    microseconds from the chunk's start, ``event_fill.RADIX_BITS`` per pass: at 2 kHz, 4 frames sort in one
+    pass, 6 in two, which costs more than the fewer launches save there; on a GPU a pass is cheap next to the
+    launches and syncs batching saves)."""
+    cuda = mi.variant().startswith("cuda")
+    frames = int(max(1, min(MAX_FRAMES_PER_KERNEL, round(LANE_STEPS["cuda" if cuda else "llvm"] / n_pix))))
+    while not cuda and frames > 1 and _passes(frames * frame_interval_s) > _passes(frame_interval_s):
         frames -= 1
     return frames
 
