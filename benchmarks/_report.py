@@ -2,7 +2,9 @@
 import json
 import os
 
-RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+# EVENTFIELD_RESULTS_DIR sends them elsewhere (a GPU session collects them under its $OUT: gpu_session.sh)
+RESULTS = os.environ.get("EVENTFIELD_RESULTS_DIR") or os.path.join(os.path.dirname(os.path.abspath(__file__)),
+                                                                   "results")
 os.makedirs(RESULTS, exist_ok=True)
 
 
