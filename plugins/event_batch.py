@@ -15,9 +15,9 @@ same float operations in the same order, and a stable sort keyed by time over sl
 crossing) order is the per-step order concatenated (a step's times never pass the next step's start: the
 interpolation fraction is clipped to [0, 1] and rounding to microseconds keeps order; the one exception is a
 float64 ``t0 + 1.0 (t1 - t0)`` one ulp above ``t1`` where ``t1`` is exactly half a microsecond, which the
-per-step concatenation would leave out of order and the chunk sorts). Pixel models that draw random numbers per step (threshold jitter, shot noise) or keep
-per-event state (refractory period, readout cap) are not batched: ``batchable`` says so and the caller steps
-them one frame at a time.
+per-step concatenation would leave out of order and the chunk sorts). Pixel models that draw random numbers
+per step (threshold jitter, shot noise) or keep per-event state (refractory period, readout cap) are not
+batched: ``batchable`` says so and the caller steps them one frame at a time.
 """
 from __future__ import annotations
 
@@ -83,11 +83,10 @@ def commit_frames(integ, log_frames, times, base_us: int = 0) -> event_fill.Devi
     at ``times[b + 1]`` seconds (the low-pass recovers the radiance from it, as the per-step kernel does for a
     staged log frame). Advances the integrator's state; returns the chunk's events time-sorted on the device,
     as per-step commits would."""
-    n_pix = integ.size[0] * integ.size[1]
-    times = np.asarray(times, np.float64)
-    steps = len(times) - 1
     if not batchable(integ):
         raise ValueError("commit_frames: this pixel model steps one frame at a time (event_batch.batchable)")
+    times = np.asarray(times, np.float64)
+    steps, n_pix = len(times) - 1, integ.size[0] * integ.size[1] if integ.size else 0
     if integ.log_prev is None or dr.width(log_frames) != steps * n_pix or steps < 1:
         raise ValueError(f"commit_frames: {dr.width(log_frames)} values for {steps} frames of {n_pix} pixels "
                          "(after a first frame has set the pixels)")

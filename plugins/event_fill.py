@@ -204,7 +204,7 @@ def _refractory_plan(size, tk, last, period):
 
 
 def _read(values) -> list:
-    """Up to four device scalars as Python ints, in one array: one device-to-host copy (the step's only sync)."""
+    """Up to four device scalars as Python ints, in one array: one device-to-host copy (the chunk's only sync)."""
     packed = dr.zeros(mi.UInt32, 4)
     for i, v in enumerate(values):
         dr.scatter(packed, v, mi.UInt32(i))
@@ -318,7 +318,9 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
     y = pixel // w_d
     xy = pack_xy(pixel - y * w_d, y)
 
-    def key_of(t_s):        # as the per-step sort keyed a step: microseconds from the chunk's first, minus one
+    # the key is microseconds from the chunk's first (minus one), so its range is the chunk's length, known
+    # here without asking the device
+    def key_of(t_s):
         return key_type(mi.Int64(dr.round(t_s * 1e6)) + base_d - start_d)
 
     if total:
