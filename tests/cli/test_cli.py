@@ -51,7 +51,9 @@ BAD = {
     "negative_duration": (lambda d: [DEMO, "--duration", "-1"], "argument --duration: '-1': allowed range is (0, 3600]"),
     "unwritable_output": (lambda d: [DEMO, "-o", "/nonexistent_dir/x.h5"], "/nonexistent_dir does not exist"),
     "huge_resolution": (lambda d: [DEMO, "-D", "width=200000", "-D", "height=200000"], "200000x200000"),
-    "over_memory": (lambda d: [DEMO, "-D", "width=60000", "-D", "height=60000", "--spp", "1"], "GiB of render buffers"),
+    "over_memory": (lambda d: [DEMO, "-D", "width=60000", "-D", "height=30000", "--spp", "2"], "GiB of render buffers"),
+    "beyond_event_coordinates": (lambda d: [DEMO, "-D", "width=70000", "-D", "height=4"],
+                                 "70000x4 pixels: events hold at most 65536 x 32768"),
 }
 
 
@@ -62,7 +64,7 @@ def test_bad_input_one_line_error_no_output(tmp_path, case):
     out = tmp_path / "out.h5"
     if "-o" not in args:
         args += ["-o", str(out)]
-    small = case not in ("huge_resolution", "over_memory") and args[0] in (DEMO, GALVO)
+    small = case not in ("huge_resolution", "over_memory", "beyond_event_coordinates") and args[0] in (DEMO, GALVO)
     args += ["-D", "width=32", "-D", "height=24"] if small else []
     before = set(os.listdir(tmp_path))
     r = run("render", *args, "--quiet")
