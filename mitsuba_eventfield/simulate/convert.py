@@ -103,7 +103,7 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
         from tqdm import tqdm
         bar = tqdm(total=source.count, unit="frame", desc="converting")
     group, batched = frames_per_kernel, integ.batchable
-    pending, times = [], []
+    pending, times = None, []      # the group's frames, copied into one buffer (a source may reuse its own)
     t_first = t_prev = t_last_committed = None
     try:
         for t, frame in source.frames():
@@ -115,11 +115,13 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
             if batched and t_first is not None and group is None:     # the first interval sets the default
                 group = event_batch.default_frames_per_kernel(source.width * source.height, t - t_first)
             if batched and t_first is not None and group > 1:     # one frame a kernel: the per-step kernel
-                pending.append(np.array(frame, np.float32))     # a copy: a source may reuse its buffer
+                if pending is None:
+                    pending = np.empty((group, source.height, source.width), np.float32)
+                pending[len(times)] = frame
                 times.append(t)
-                if len(pending) == group:
+                if len(times) == group:
                     _commit_group(integ, sink, summary, pending, [t_last_committed] + times)
-                    t_last_committed, pending, times = t, [], []
+                    t_last_committed, times = t, []
             else:
                 _commit_one(integ, sink, summary, frame, t_prev, t, source)
                 t_last_committed = t
@@ -127,8 +129,8 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
             t_prev = t
             if bar is not None:
                 bar.update(1)
-        if pending:
-            _commit_group(integ, sink, summary, pending, [t_last_committed] + times)
+        if times:
+            _commit_group(integ, sink, summary, pending[:len(times)], [t_last_committed] + times)
     finally:
         if bar is not None:
             bar.close()
@@ -150,9 +152,9 @@ def _commit_one(integ, sink: Sink, summary: RenderSummary, frame, t_prev, t, sou
         summary.steps += 1
 
 
-def _commit_group(integ, sink: Sink, summary: RenderSummary, frames: list, times: list) -> None:
+def _commit_group(integ, sink: Sink, summary: RenderSummary, frames: np.ndarray, times: list) -> None:
     t0 = time.perf_counter()
-    log = pixel_model.linlog(dr, mi.Float(np.stack(frames).ravel()), integ.config.linlog_threshold)
+    log = pixel_model.linlog(dr, mi.Float(frames.ravel()), integ.config.linlog_threshold)
     events = integ.commit_frames(log, times)
     summary.events_s += time.perf_counter() - t0
     tw = time.perf_counter()
