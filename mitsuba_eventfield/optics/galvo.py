@@ -93,17 +93,19 @@ def project_point(xp, p, theta_x, theta_y, d1, s, focal_px, width, height):
 
 
 # ------------------------------------------------------------------ views of a plane: homographies
-def _rotation_about(axis: str, angle: float, pivot_z: float) -> np.ndarray:
-    """4 x 4 rigid rotation about the axis through (0, 0, pivot_z) along x or y (``rotate_about_x``/``_y``)."""
-    c, s = math.cos(angle), math.sin(angle)
-    m = np.eye(4)
-    if axis == "y":
-        m[0, 0], m[0, 2], m[2, 0], m[2, 2] = c, s, -s, c
-    else:
-        m[1, 1], m[1, 2], m[2, 1], m[2, 2] = c, s, -s, c
-    shift, back = np.eye(4), np.eye(4)
-    shift[2, 3], back[2, 3] = -pivot_z, pivot_z
-    return back @ m @ shift
+def _rotation_about(axis: str, angle, pivot_z: float) -> np.ndarray:
+    """4 x 4 rigid rotation about the axis through (0, 0, pivot_z) along x or y (``rotate_about_x``/``_y``);
+    an array of angles gives a stack (..., 4, 4), so a whole scan is one NumPy expression."""
+    angle = np.asarray(angle, np.float64)
+    c, s = np.cos(angle), np.sin(angle)
+    m = np.zeros(angle.shape + (4, 4))
+    m[..., 3, 3] = 1.0
+    i, j, k = (0, 2, 1) if axis == "y" else (1, 2, 0)     # the rotated pair (i, j) and the fixed axis k
+    m[..., i, i], m[..., i, j], m[..., j, i], m[..., j, j], m[..., k, k] = c, s, -s, c, 1.0
+    # about the pivot: z -> z - pivot, rotate, z -> z + pivot (only the translation column changes)
+    m[..., :3, 3] = -pivot_z * m[..., :3, 2]
+    m[..., 2, 3] += pivot_z
+    return m
 
 
 @dataclass(frozen=True)
@@ -132,14 +134,16 @@ class GalvoGeometry:
         return GalvoGeometry(self.width, self.height, self.focal_px, pivot_x, pivot_y, gain_x, gain_y)
 
     # ---------------------------------------------------------- the exact model
-    def _scene_to_view(self, theta_x: float, theta_y: float) -> np.ndarray:
-        """4 x 4 rigid transform taking a camera-frame point to where the rest camera sees it in this view."""
-        return (_rotation_about("y", -2.0 * self.gain_x * theta_x, self.pivot_x)
-                @ _rotation_about("x", -2.0 * self.gain_y * theta_y, self.pivot_y))
+    def _scene_to_view(self, theta_x, theta_y) -> np.ndarray:
+        """4 x 4 rigid transform taking a camera-frame point to where the rest camera sees it in this view
+        (a stack of them for arrays of angles)."""
+        return (_rotation_about("y", -2.0 * self.gain_x * np.asarray(theta_x, np.float64), self.pivot_x)
+                @ _rotation_about("x", -2.0 * self.gain_y * np.asarray(theta_y, np.float64), self.pivot_y))
 
-    def homography(self, theta_x: float, theta_y: float, depth: float) -> np.ndarray:
+    def homography(self, theta_x, theta_y, depth: float) -> np.ndarray:
         """3 x 3 map from reference-view pixels (continuous, top-left origin) to the pixels of the view at
-        mechanical angles (theta_x, theta_y), for points on the plane z = ``depth`` (math.inf allowed)."""
+        mechanical angles (theta_x, theta_y), for points on the plane z = ``depth`` (math.inf allowed); arrays of
+        angles give a stack (N, 3, 3)."""
         f, w, h = self.focal_px, self.width, self.height
         if math.isinf(depth):          # directions: the plane at infinity
             lift = np.array([[-1 / f, 0, w / (2 * f)], [0, -1 / f, h / (2 * f)], [0, 0, 1], [0, 0, 0]])
@@ -148,7 +152,7 @@ class GalvoGeometry:
             lift = np.array([[-z / f, 0, z * w / (2 * f)], [0, -z / f, z * h / (2 * f)], [0, 0, z], [0, 0, 1]])
         project = np.array([[-f, 0, w / 2, 0], [0, -f, h / 2, 0], [0, 0, 1, 0]])
         m = project @ self._scene_to_view(theta_x, theta_y) @ lift
-        return m / m[2, 2]
+        return m / m[..., 2:3, 2:3]
 
     def array_homography(self, theta_x: float, theta_y: float, depth: float) -> np.ndarray:
         """``homography`` in array indices (pixel centres at integers), as OpenCV's warps expect."""
@@ -170,11 +174,8 @@ class GalvoGeometry:
         tx, ty = np.atleast_1d(np.asarray(theta_x, np.float64)), np.atleast_1d(np.asarray(theta_y, np.float64))
         px = self.width / 2 if x is None else float(x)
         py = self.height / 2 if y is None else float(y)
-        out = np.empty((len(tx), 2))
-        for k, (a, b) in enumerate(zip(tx, ty)):
-            q = self.homography(float(a), float(b), depth) @ (px, py, 1.0)
-            out[k] = q[0] / q[2] - px, q[1] / q[2] - py
-        return out
+        q = self.homography(tx, ty, depth) @ np.array([px, py, 1.0])          # (N, 3), all angles at once
+        return np.stack([q[:, 0] / q[:, 2] - px, q[:, 1] / q[:, 2] - py], axis=1)
 
     # ---------------------------------------------------------- first order
     def paraxial_disparity(self):
