@@ -46,6 +46,14 @@ def lightfields(events, timed, views: int, start: str = "events", spp: int = 4, 
     return lfs, solved
 
 
+def reuse_for(start: str) -> bool:
+    """``render_events(reuse=...)`` for a capture with this ``start``: with ``frame`` the frame at t = 0
+    (``render_frames``, Mitsuba's own render) must share the event render's samples, so every pixel is rendered
+    that way (the static-pixel split draws other samples: simulate/static_pixels.py). Every event render that
+    must match the capture's (``scan_frequency``'s readout-capped one) uses this too."""
+    return start != "frame"
+
+
 def capture(scene_path: str, defines: dict | None = None, periods: int | None = None, views: int = 40,
             start: str = "events", px_per_step: float = 1.0, spp: int = 4, progress: bool = False,
             truth_views: bool = True, depth_range=None, truth_spp: int = 64) -> Capture:
@@ -79,7 +87,8 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     width, height = (int(v) for v in timed.sensor.film().size())
     steps = periods * max(2 * views, galvo_steps_per_period(optics, width, height, px_per_step))
     t0 = time.perf_counter()
-    events = render_events(timed, periods * period, steps=steps, spp=spp, progress=progress)
+    events = render_events(timed, periods * period, steps=steps, spp=spp, progress=progress,
+                           reuse=reuse_for(start))
     t1 = time.perf_counter()
     lfs, solved = lightfields(events, timed, views, start, spp, depth_range)
     t2 = time.perf_counter()

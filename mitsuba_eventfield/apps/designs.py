@@ -40,6 +40,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..scene import bundled_scene, load_scene
+from ..scene.coverage import shape_masks
 from ..simulate.render import render_events, render_frames
 from ..validate import MAX_SPP, MAX_VIEWS, number
 from .designs_outputs import compare_figure, compare_report, grid_figure, grid_report, write_compare, write_grid
@@ -75,17 +76,6 @@ def scaled_motion(scene_path: str, speed: float) -> dict:
         for key in obj.get("keyframes", []):
             key["t"] = float(key["t"]) / speed
     return raw
-
-
-def shape_masks(timed, t: float, sensor=None) -> dict:
-    """{shape id: bool (H, W)}: the pixels each shape covers at time ``t``, from Mitsuba's ``shape_index`` AOV
-    through ``sensor`` (default: the scene's own)."""
-    from ..backend import dr, mi
-    timed.set_time(t)
-    aov = mi.load_dict({"type": "aov", "aovs": "s:shape_index"})
-    index = np.array(mi.render(timed.scene, sensor=timed.sensor if sensor is None else sensor, integrator=aov,
-                               spp=1))[..., 0]
-    return {s.id(): index == float(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0]) for s in timed.scene.shapes()}
 
 
 def _regions(masks: dict, moving_ids) -> dict:

@@ -294,7 +294,7 @@ def sweep(scene: str | None = None, frequencies=FREQUENCIES, planes: dict | None
     ``scene``: a galvo scene whose scan frequency is its ``frequency`` XML default (default: the bundled fan at
     160 x 120); ``defines``: its other XML defaults."""
     from ..evaluation.truth import truth_depth
-    from .capture import capture, lightfields
+    from .capture import capture, lightfields, reuse_for
     fan = scene is None
     scene = bundled_scene(SCENE) if fan else scene
     defines = {**({"width": 160, "height": 120} if fan else {}), **(defines or {})}
@@ -321,7 +321,7 @@ def sweep(scene: str | None = None, frequencies=FREQUENCIES, planes: dict | None
         if pixel:
             t0 = time.perf_counter()
             ev = render_events(cap.timed, n / f, steps=cap.events.meta["stepping"]["steps"], spp=spp, pixel=pixel,
-                               progress=progress)
+                               progress=progress, reuse=reuse_for(start))
             t1 = time.perf_counter()
             capped_lfs = lightfields(ev, cap.timed, views, start, spp)[0]   # as capture builds its own
             seconds["render_events"] += t1 - t0

@@ -61,6 +61,9 @@ def _add_render(sub) -> None:
                    help="samples where they matter: pixels whose brightness changes during the render (found by "
                         "probe renders) get N samples per step, the others --spp")
     r.add_argument("--seed", type=num(0, 2**31 - 1, integer=True), default=0, help="sampler seed (default 0)")
+    r.add_argument("--no-reuse", action="store_true",
+                   help="render every pixel at every step (default: a static scene renders one scan period; a "
+                        "moving one renders the pixels moving objects cannot change once per period)")
     r.add_argument("--independent-seeds", action="store_true",
                    help="new seed every step (Monte-Carlo noise then fires events; for comparisons only)")
     r.add_argument("--threshold", type=num(0, 10, lo_open=True),
@@ -182,7 +185,7 @@ def run_render(a) -> int:
         threshold_on=a.threshold_on, threshold_off=a.threshold_off, linlog_threshold=a.linlog_threshold,
         output=a.output, progress=not a.quiet, preset=a.preset, pixel=pixel_overrides(a.pixel), extra_meta=extra,
         event_buffer_mb=a.event_buffer_mb, checkpoint_s=a.checkpoint_every, resume=a.resume,
-        spp_changing=a.spp_changing)
+        spp_changing=a.spp_changing, reuse=not a.no_reuse)
     print(summary.format())
     if a.preview and os.path.splitext(a.output)[1].lower() != ".txt":
         _render_preview(a)

@@ -100,13 +100,15 @@ class TimedScene:
         raise EventFieldError(f"{src}: objects.{name}: the scene {self.path or ''} has no movable object with "
                               f"id '{name}' (movable ids: {', '.join(self.movable_ids()) or 'none'})")
 
-    def set_time(self, t: float) -> None:
-        """Move every object to its pose at time ``t`` (seconds)."""
+    def set_time(self, t: float, view_time: float | None = None) -> None:
+        """Move every object to its pose at time ``t`` (seconds); the view (a scanning sensor) to its phase at
+        ``view_time`` when given (objects and view at different instants: ``static_pixels`` casts each pose
+        from one scan phase), else at ``t``."""
         self.time = float(t)
         if not self._bindings and not self._sensor_times:
             return
         for key, node in self._sensor_times:
-            self.params[key] = mi.Float(node.phase_time(self.time))
+            self.params[key] = mi.Float(node.phase_time(self.time if view_time is None else float(view_time)))
         moved = []                     # (parameter key, new vertex array) of every moving mesh
         for b in self._bindings:
             m = self.motion.objects[b.name].matrix(self.time)

@@ -1,6 +1,7 @@
 """How a step's frame is rendered: ``mi.render`` frozen with ``dr.freeze`` (recorded once, replayed), ``mi.render``
-traced at every call (``EVENTFIELD_FREEZE=0``, or a scene Dr.Jit cannot record), or samples where they matter
-(``sample_allocation``). One home, so that the time-stepping loop and the accuracy-limit probe render frames the
+traced at every call (``EVENTFIELD_FREEZE=0``, or a scene Dr.Jit cannot record), samples where they matter
+(``sample_allocation``), or the dynamic pixels with the static ones from a one-period cache (``static_pixels``).
+One home, so that the time-stepping loop and the accuracy-limit probe render frames the
 same way."""
 from __future__ import annotations
 
@@ -38,16 +39,19 @@ def frozen_render(inner, spp: int):
 class FrameRenderer:
     """Renders the scene as it is now into a radiance tensor (H, W, C) for the event integrator to stage."""
 
-    def __init__(self, inner, spp: int, allocation=None, notes: list | None = None):
-        self.inner, self.spp, self.allocation = inner, spp, allocation
+    def __init__(self, inner, spp: int, allocation=None, notes: list | None = None, static=None):
+        self.inner, self.spp, self.allocation, self.static = inner, spp, allocation, static
         self.notes = notes if notes is not None else []
         self.frozen = None if allocation is not None else frozen_render(inner, spp)
 
-    def render(self, timed, seed: int, once: bool = False):
+    def render(self, timed, seed: int, once: bool = False, step: int | None = None):
         """``once``: a frame outside the stepping (the accuracy-limit probe with another seed): traced, not
-        recorded, so that the frozen steps are not recorded again for it."""
+        recorded, so that the frozen steps are not recorded again for it. ``step``: the step's index from the
+        render's start (the static-pixel split needs its place in the scan period)."""
         if self.allocation is not None:
             return self.allocation.render(timed.scene, timed.sensor, self.inner, seed)
+        if self.static is not None and not once:
+            return self.static.render(timed, self.inner, seed, step)
         if self.frozen is not None and not once:
             try:
                 return self.frozen(timed.scene, timed.sensor, dr.opaque(mi.UInt32, seed))

@@ -24,7 +24,7 @@ from ..plugins.event_fill import film_limit_error
 from ..scene.timed import TimedScene, load_scene
 from ..validate import available_memory, positive
 from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
-from . import sample_allocation
+from . import sample_allocation, static_pixels
 from .frames import FrameRenderer
 from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
@@ -105,7 +105,10 @@ class _Loop:
         if allocation is not None:                       # noise where it counts: in the pixels that change
             self.limit.spp = allocation.spp_changing
         self.width, self.height = timed.film_size
-        self.renderer = FrameRenderer(integ.inner, st.spp, allocation, summary.notes)
+        # a moving scene under a periodic scan: the pixels no moving object can change rendered once a period
+        self.static = None if not reuse or allocation is not None or checkpoints is not None else \
+            static_pixels.plan(timed, st, integ, summary.notes)
+        self.renderer = FrameRenderer(integ.inner, st.spp, allocation, summary.notes, self.static)
         self.reuse = None if st.steps is None or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
         self.cache = []                                  # log-brightness frames of one period, for reuse
@@ -125,7 +128,8 @@ class _Loop:
         t0 = time.perf_counter()
         self.timed.set_time(t)
         t1 = time.perf_counter()
-        self.render_frame(self.st.seed if self.st.seed_mode == "fixed" else self.st.seed + step_index)
+        self.render_frame(self.st.seed if self.st.seed_mode == "fixed" else self.st.seed + step_index,
+                          step=step_index)
         dr.sync_thread()
         t2 = time.perf_counter()
         summary.motion_s += t1 - t0
@@ -136,9 +140,9 @@ class _Loop:
             integ.staged = frame                         # commit() uses the evaluated frame: no second evaluation
             self.cache.append(frame)
 
-    def render_frame(self, seed: int, once: bool = False) -> None:
+    def render_frame(self, seed: int, once: bool = False, step: int | None = None) -> None:
         """Render the scene as it is now and stage the frame in the event integrator (``frames.FrameRenderer``)."""
-        self.integ.stage(self.renderer.render(self.timed, seed, once))
+        self.integ.stage(self.renderer.render(self.timed, seed, once, step))
 
     def run(self) -> int:
         """All steps; returns how many."""
@@ -246,6 +250,8 @@ class _Loop:
         summary.steps = steps
         summary.dropped_readout, summary.dropped_refractory = integ.readout_dropped(), integ.refractory_dropped
         self.limit.note(summary)
+        if self.static is not None:
+            summary.static_pixels = self.static.note(min(integ.threshold_on, integ.threshold_off), summary.notes)
         if self.allocation is not None and integ.k_on is not None:
             summary.sample_allocation = dict(self.allocation.as_meta(),
                                              **self.allocation.check((integ.k_on + integ.k_off).numpy(), summary.notes))
@@ -298,11 +304,11 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   resume: bool = False, px_per_step: float = 1.0, spp_changing: int | None = None):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
-    Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (format by extension;
-    HDF5, npz, text, AEDAT4 in chunks, RAW, DAT at the end) and returns a :class:`RenderSummary` (also in
-    ``stream.meta["render"]``).
-    ``reuse``: when the scene is static and the view periodic (galvo scan, or a fixed camera), render one
-    period and feed its frames again (identical events, much faster); False renders every step.
+    Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (by extension: HDF5,
+    npz, text, AEDAT4 in chunks, RAW, DAT at the end) and returns a :class:`RenderSummary` (``meta["render"]``).
+    ``reuse``: a static scene under a periodic view renders one period and feeds its frames again; a moving
+    one renders the pixels no moving object can change once per period (``static_pixels.py``); False: every
+    pixel at every step.
     ``adaptive``: False (``steps`` uniform steps), True, "motion" or "log-change" (``stepping``: by the known
     image motion, at most ``px_per_step`` pixels per step, or by the per-pixel log change). ``preset``
     ("ideal", "davis346", "prophesee_gen4") and ``pixel`` (PixelConfig fields, e.g. ``{"refractory_s": 1e-4,

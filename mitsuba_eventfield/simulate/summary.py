@@ -38,6 +38,7 @@ class RenderSummary:
     image_motion_px_per_step: dict | None = None  # scan and objects, pixels per step (uniform stepping)
     timing_limit: dict | None = None            # what limits timestamp accuracy, with both estimates (us)
     sample_allocation: dict | None = None       # samples where they matter: the split and its check
+    static_pixels: dict | None = None           # pixels rendered once a scan period: the split and its check
     width: int = 0
     height: int = 0
     output: str | None = None
