@@ -14,11 +14,11 @@ Which pixels are dynamic (``plan``):
   the image shifts from that phase to every other, at infinity, where a two-mirror scan shifts most: at a finite
   depth the shifts are those scaled towards zero, inside the hull) and by the largest image motion between
   pose samples plus one pixel (a pixel partly covered).
-* **Shadows and reflections, probed.** ``PROBE_TIMES`` object times at each of ``PROBE_PHASES`` scan phases,
-  all at ``PROBE_SPP`` samples with one seed: a pixel outside the direct mask whose log brightness spans more
-  than ``CHANGE_OF_C`` x C across the object times of one phase is dynamic too, dilated by the objects' image
-  motion between two probe periods (a shadow moves about as its object does), at most ``MAX_PROBE_DILATE_PX``.
-  Sampled, not bounded: hence the check.
+* **Shadows and reflections, probed.** The other pixels rendered at ``PROBE_SPP`` samples (one seed) at every
+  pose sample ``PROBE_STEP_PX`` of image motion apart, from the same scan phase: a pixel whose log brightness
+  spans more than ``CHANGE_OF_C`` x C across them (3 x 3 median: shadows are coherent, sample flicker is not)
+  is dynamic too, dilated like the direct mask (scan hull, and the objects' image motion between two probes:
+  a shadow moves about as its object does). Sampled, not bounded: hence the check.
 * **The check.** At ``CHECKS`` instants after the first period the static pixels are rendered at ``CHECK_SPP``
   with one seed, at that instant and at the same scan phase in the first period, and compared: the largest log
   difference and the share of static pixels beyond ``CHANGE_OF_C`` x C go into the summary and the metadata,
@@ -50,12 +50,15 @@ mi, dr = backend.mi, backend.dr
 
 POSE_STEP_PX = 2.0           # image motion between two pose samples of the direct mask
 MAX_POSES = 2048
-PROBE_PHASES, PROBE_TIMES, PROBE_SPP = 4, 3, 64     # spp: a square and a power of two (every sampler)
+PROBE_STEP_PX, PROBE_SPP = 8.0, 16     # shadow probes: every 8 px of object motion; spp a power of 4 (every sampler)
 CHANGE_OF_C = 0.5            # probes and check: a log change this many thresholds counts
 CHECKS, CHECK_SPP = 3, 64
 CHECK_SHARE = 1e-3           # the check warns above this share of static pixels changed
-MAX_PROBE_DILATE_PX = 8      # probe finds spread by at most this (the check measures what that misses)
 MAX_DYNAMIC_SHARE = 0.85     # above it, two wavefronts cost more than the reuse saves
+# The masks cost 200-300 frames (pose AOVs, shadow probes) and each later period saves (1 - dynamic share)
+# frames a step: measured on the fan (76 % dynamic, 32 steps a period) and the dart (61 %, 40 steps), the
+# split lost to rendering every pixel over 6-10 periods and broke even over 50; so it waits for 25 periods.
+MIN_PERIODS = 25
 CACHE_MEMORY_SHARE = 0.25    # of the available memory, for one period of static frames
 
 
@@ -201,9 +204,42 @@ def _scan_kernel(timed, times_in_period, view_time):
     return kernel
 
 
-def _direct_mask(timed, st, steps_per_period):
-    """Pixels a moving shape can cover, bounded (module docstring); None when some moving object is not a
-    shape that the shape-index AOV sees (an instance, the sensor)."""
+def _grow(mask, kernel, gap_px):
+    """``mask`` dilated by the scan (``kernel``) and by ``gap_px`` plus one pixel."""
+    import cv2
+    grow = int(math.ceil(gap_px)) + 1
+    mask = cv2.dilate(mask.astype(np.uint8), kernel)
+    return cv2.dilate(mask, np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)) > 0, grow
+
+
+def _shadow_probes(timed, st, times, covered, inner, threshold, linlog):
+    """Pixels outside ``covered`` whose log brightness spans more than CHANGE_OF_C x C across the objects'
+    poses at ``times`` (shadows, reflections), all seen from the render's first scan phase, same samples."""
+    import cv2
+
+    from ..plugins import pixel_model
+    height, width = covered.shape
+    rest = np.flatnonzero(~covered.ravel())
+    pixels = mi.UInt32(rest.astype(np.uint32))
+    low = high = None
+    for t in times:
+        timed.set_time(float(t), view_time=st.t_start)
+        frame = render_pixels(timed.scene, timed.sensor, inner, pixels, PROBE_SPP, st.seed, (width, height))
+        log = pixel_model.linlog_np(frame.numpy()[rest] / PROBE_SPP, linlog)
+        low, high = (log, log.copy()) if low is None else (np.minimum(low, log), np.maximum(high, log))
+    timed.set_time(st.t_start)
+    span = np.zeros(width * height, np.float32)
+    span[rest] = high - low
+    # a 3 x 3 median keeps a shadow (coherent over pixels) and drops single pixels that a few of their samples'
+    # shading rays hitting a blade flicker (at 16 spp, 2 of 16 blocked is 0.13 in log: the fan's wall)
+    span = cv2.medianBlur(span.reshape(height, width), 3)
+    return span > CHANGE_OF_C * threshold
+
+
+def _dynamic_masks(timed, st, steps_per_period, inner, threshold, linlog):
+    """(direct mask, its dilation, shadow mask, its dilation, poses), all cast from the render's first scan
+    phase (module docstring); None when some moving object is not a shape the shape-index AOV sees (an
+    instance, the sensor)."""
     import cv2
 
     from ..scene.coverage import shape_masks
@@ -218,45 +254,15 @@ def _direct_mask(timed, st, steps_per_period):
         masks = shape_masks(timed, float(t), view_time=st.t_start)
         hit = np.logical_or.reduce([masks[n] for n in moving])
         covered = hit if covered is None else covered | hit
+    every = max(1, int(PROBE_STEP_PX // POSE_STEP_PX))
+    # the probes skip the pixels the shapes partly cover (where the one AOV sample missed the shape)
+    footprint = cv2.dilate(covered.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    found = _shadow_probes(timed, st, list(times[::every]) + [times[-1]], footprint, inner, threshold, linlog)
     step = st.duration / st.steps
     kernel = _scan_kernel(timed, st.t_start + step * np.arange(steps_per_period), st.t_start)
-    covered = cv2.dilate(covered.astype(np.uint8), kernel) > 0
-    grow = int(math.ceil(gap_px)) + 1
-    covered = cv2.dilate(covered.astype(np.uint8), np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)) > 0
-    return covered, grow, len(times)
-
-
-def _probed(timed, st, inner, steps_per_period, dynamic, threshold, linlog):
-    """Pixels outside ``dynamic`` whose log brightness changes with the objects' pose at a fixed scan phase
-    (probe periods spread evenly over the render), dilated by the objects' image motion between two probe
-    periods plus one pixel (a shadow moves about as its object does), and that motion."""
-    import cv2
-
-    from ..plugins import pixel_model
-    from .image_motion import object_displacements
-    height, width = dynamic.shape
-    rest = np.flatnonzero(~dynamic.ravel())
-    pixels = mi.UInt32(rest.astype(np.uint32))
-    n_periods = int(round(st.steps / steps_per_period))
-    periods = np.unique(np.linspace(0, n_periods - 1, min(PROBE_TIMES, n_periods)).round().astype(int))
-    step = st.duration / st.steps
-    found = np.zeros(width * height, bool)
-    for j in (np.arange(PROBE_PHASES) * steps_per_period) // PROBE_PHASES:
-        low = high = None
-        for m in periods:
-            timed.set_time(st.t_start + (int(j) + int(m) * steps_per_period) * step)
-            frame = render_pixels(timed.scene, timed.sensor, inner, pixels, PROBE_SPP, st.seed, (width, height))
-            log = pixel_model.linlog_np(frame.numpy()[rest] / PROBE_SPP, linlog)
-            low, high = (log, log.copy()) if low is None else (np.minimum(low, log), np.maximum(high, log))
-        found[rest[(high - low) > CHANGE_OF_C * threshold]] = True
-    timed.set_time(st.t_start)
-    gaps = object_displacements(timed, st.t_start + periods * steps_per_period * step)
-    grow = int(math.ceil(float(gaps.max()))) + 1 if gaps is not None and gaps.size else 1
-    grow = min(grow, MAX_PROBE_DILATE_PX)    # a spinning fan moves 150 px between probes: the check covers the rest
-    if not found.any():
-        return found.reshape(height, width), grow
-    kernel = np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)
-    return cv2.dilate(found.reshape(height, width).astype(np.uint8), kernel) > 0, grow
+    direct, grow = _grow(covered, kernel, gap_px)
+    shadows, probe_grow = _grow(found, kernel, gap_px * every)
+    return direct, grow, shadows, probe_grow, len(times)
 
 
 def plan(timed, st, integ, notes: list) -> StaticPixels | None:
@@ -269,20 +275,23 @@ def plan(timed, st, integ, notes: list) -> StaticPixels | None:
     k = int(round(per_period))     # whole steps per period: step i and i + k see the same scan phase
     if k < 1 or abs(per_period - k) > 1e-6 * k or st.steps < 2 * k:
         return None                                   # steps off the scan's phase grid, or under two periods
+    if st.steps < MIN_PERIODS * k:
+        notes.append(f"static pixels not reused: {st.steps / k:g} scan periods are too few to pay for the masks "
+                     f"(at least {MIN_PERIODS})")
+        return None
     t0 = time.perf_counter()
     width, height = timed.film_size
     if k * width * height * 4 > CACHE_MEMORY_SHARE * available_memory():
         notes.append(f"static pixels not reused: one period of frames ({k} steps) needs more than "
                      f"{100 * CACHE_MEMORY_SHARE:g} % of the available memory")
         return None
-    direct = _direct_mask(timed, st, k)
-    if direct is None:
+    threshold = min(integ.threshold_on, integ.threshold_off)
+    masks = _dynamic_masks(timed, st, k, integ.inner, threshold, integ.linlog_threshold)
+    if masks is None:
         notes.append("static pixels not reused: a moving object is not a shape the shape-index AOV sees")
         return None
-    covered, grow, poses = direct
-    threshold = min(integ.threshold_on, integ.threshold_off)
-    probed, probe_grow = _probed(timed, st, integ.inner, k, covered, threshold, integ.linlog_threshold)
-    dynamic = covered | probed
+    covered, grow, shadows, probe_grow, poses = masks
+    dynamic = covered | shadows
     if dynamic.mean() > MAX_DYNAMIC_SHARE:
         notes.append(f"static pixels not reused: moving objects can change {100 * dynamic.mean():.0f} % of the "
                      f"pixels (more than {100 * MAX_DYNAMIC_SHARE:g} %)")

@@ -38,7 +38,8 @@ SCENE = """<?xml version="1.0"?>
     <sensor type="galvo" id="camera">
         <float name="fov" value="45"/><float name="mirror_distance" value="0.1"/>
         <float name="mirror_separation" value="0.01"/><string name="curve" value="circle"/>
-        <float name="frequency" value="250"/><float name="amplitude" value="2"/>  <!-- 6 px of scan radius: more than the pose dilation -->
+        <!-- 6 px of scan radius: more than the pose dilation -->
+        <float name="frequency" value="250"/><float name="amplitude" value="2"/>
         <transform name="to_world"><lookat origin="0, 0, 0" target="0, 0, 1" up="0, 1, 0"/></transform>
         <film type="hdrfilm"><integer name="width" value="{w}"/><integer name="height" value="{h}"/>
             <rfilter type="box"/></film>
@@ -55,6 +56,12 @@ SCENE = """<?xml version="1.0"?>
     </shape>
 </scene>
 """
+
+
+@pytest.fixture(autouse=True)
+def few_periods_pay(monkeypatch):
+    """The tests render four periods (tiny films): the split is taken from two on, as its logic allows."""
+    monkeypatch.setattr(sp, "MIN_PERIODS", 2)
 
 
 @pytest.fixture(scope="module")
@@ -119,13 +126,14 @@ def test_reused_static_pixels_give_the_events_of_rendering_them_every_step(ball_
 def test_the_check_warns_when_a_moving_shadow_was_taken_as_static(ball_scene, monkeypatch):
     timed = ef.load_scene(ball_scene["lit"])
     probed = ef.render_events(timed, DURATION, steps=STEPS).meta["render"]
-    assert probed["static_pixels"]["probe_dilate_px"] > 1           # the shadow was found and spread
     assert probed["static_pixels"]["check_changed_share"] <= sp.CHECK_SHARE
     assert not any(n.startswith("warning") and "static" in n for n in probed["notes"])
-    monkeypatch.setattr(sp, "_probed", lambda timed, st, inner, k, dynamic, *a: (np.zeros_like(dynamic), 0))
+    monkeypatch.setattr(sp, "_shadow_probes", lambda timed, st, times, covered, *a: np.zeros_like(covered))
     blind = ef.render_events(timed, DURATION, steps=STEPS).meta["render"]
     assert blind["static_pixels"]["check_changed_share"] > sp.CHECK_SHARE
     assert any(n.startswith("warning") and "taken as static" in n for n in blind["notes"])
+    # the probes found the shadow's path: their mask holds more than the ball's own
+    assert probed["static_pixels"]["dynamic_share"] > blind["static_pixels"]["dynamic_share"] + 0.05
 
 
 def test_the_split_is_declined_when_it_cannot_pay(ball_scene, monkeypatch):
@@ -133,6 +141,11 @@ def test_the_split_is_declined_when_it_cannot_pay(ball_scene, monkeypatch):
     st = stepping(timed, PERIOD, 20, False, 0.5, None, None, 4, 0, "fixed", 0.0, 1.0)
     integ = _event_integrator(timed, None, None, None, None)
     assert sp.plan(timed, st, integ, []) is None                     # one period: nothing to reuse
+    monkeypatch.setattr(sp, "MIN_PERIODS", 5)
+    notes = []
+    st = stepping(timed, DURATION, STEPS, False, 0.5, None, None, 4, 0, "fixed", 0.0, 1.0)
+    assert sp.plan(timed, st, integ, notes) is None and "too few to pay" in notes[0]   # 4 periods < 5
+    monkeypatch.setattr(sp, "MIN_PERIODS", 2)
     st = stepping(timed, DURATION, STEPS + 1, False, 0.5, None, None, 4, 0, "fixed", 0.0, 1.0)
     assert sp.plan(timed, st, integ, []) is None                     # steps off the scan's phase grid
     monkeypatch.setattr(sp, "MAX_DYNAMIC_SHARE", 0.01)
