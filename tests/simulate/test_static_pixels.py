@@ -162,3 +162,12 @@ def test_the_command_line_says_so_and_no_reuse_turns_it_off(ball_scene, tmp_path
         render = ef.read_events(str(out)).meta["render"]
         assert (render["static_pixels"] is not None) == expect
         assert ("static pixels reused" in capsys.readouterr().out) == expect
+
+
+def test_the_frozen_coverage_is_the_traced_one(ball_scene):
+    from mitsuba_eventfield.scene.coverage import covered_over_time
+    timed = ef.load_scene(ball_scene["emitting"])
+    times = np.linspace(0.0, DURATION, 9)
+    frozen = covered_over_time(timed, times, ["ball"], view_time=0.001)
+    traced = np.logical_or.reduce([shape_masks(timed, float(t), view_time=0.001)["ball"] for t in times])
+    assert frozen.sum() > 50 and np.array_equal(frozen, traced)
