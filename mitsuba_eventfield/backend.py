@@ -127,3 +127,29 @@ def ensure_variant(color: bool = False) -> str:
     if _active is not None and mi.variant() == _active:
         return _active
     return set_variant(color=color)
+
+
+class FrozenOrTraced:
+    """``fn`` as a Dr.Jit frozen function (``dr.freeze``: recorded once, replayed), traced from then on when
+    Dr.Jit refuses to record it (a virtual call on an object that is not among the inputs, e.g. a textured
+    area emitter); ``refused`` then says why, in one line. Feed one instance one input layout only: a replay
+    does not redo the host-side arithmetic of its recording (docs/design.md, static pixels)."""
+
+    def __init__(self, fn):
+        self.fn, self.frozen, self.refused = fn, dr.freeze(fn), None
+
+    @property
+    def n_recordings(self) -> int:
+        """How many times Dr.Jit recorded the function (bounded, then replayed: tests/simulate/test_frozen_render.py)."""
+        return self.frozen.n_recordings
+
+    def __call__(self, *args):
+        if self.refused is None:
+            try:
+                return self.frozen(*args)
+            except RuntimeError as e:
+                if "frozen function" not in str(e):
+                    raise
+                why = " ".join(str(e.__cause__ or e).split()).split("validate(): ")[-1].split(". ")[0][:160]
+                self.refused = why or "refused"
+        return self.fn(*args)

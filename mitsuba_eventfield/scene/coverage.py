@@ -34,21 +34,12 @@ def covered_over_time(timed, times, ids, view_time: float | None = None) -> np.n
     faster than tracing it (3.4 against 10.4 ms at 346x260); one function, one sensor and film, so the sizes its
     recording holds stay right."""
     aov = _aov()
-
-    @dr.freeze
-    def index_image(scene, sensor):
-        return mi.render(scene, sensor=sensor, integrator=aov, spp=1)
+    index_image = backend.FrozenOrTraced(lambda scene, sensor: mi.render(scene, sensor=sensor, integrator=aov, spp=1))
     wanted = [_index(s) for s in timed.scene.shapes() if s.id() in set(ids)]
     covered = None
     for t in times:
         timed.set_time(float(t), view_time)
-        try:
-            image = index_image(timed.scene, timed.sensor)
-        except RuntimeError as e:          # a scene Dr.Jit cannot record: traced, as shape_masks does
-            if "frozen function" not in str(e):
-                raise
-            index_image = lambda scene, sensor: mi.render(scene, sensor=sensor, integrator=aov, spp=1)  # noqa: E731
-            image = index_image(timed.scene, timed.sensor)
+        image = index_image(timed.scene, timed.sensor)
         hit = np.isin(np.array(image)[..., 0], wanted)
         covered = hit if covered is None else covered | hit
     return covered

@@ -30,10 +30,9 @@ def frozen_render(inner, spp: int):
     if os.environ.get(FREEZE_ENV, "1") == "0":
         return None
 
-    @dr.freeze
     def render(scene, sensor, seed):     # every object the kernels read is an input, so it is traversed
         return mi.render(scene, sensor=sensor, integrator=inner, seed=seed, spp=spp)
-    return render
+    return backend.FrozenOrTraced(render)
 
 
 class FrameRenderer:
@@ -53,13 +52,10 @@ class FrameRenderer:
         if self.static is not None and not once:
             return self.static.render(timed, self.inner, seed, step)
         if self.frozen is not None and not once:
-            try:
-                return self.frozen(timed.scene, timed.sensor, dr.opaque(mi.UInt32, seed))
-            except RuntimeError as e:               # Dr.Jit refused to record this scene: trace every step
-                if "frozen function" not in str(e):
-                    raise
-                self.frozen = None
-                why = " ".join(str(e.__cause__ or e).split()).split("validate(): ")[-1].split(". ")[0][:160]
+            frame = self.frozen(timed.scene, timed.sensor, dr.opaque(mi.UInt32, seed))
+            if self.frozen.refused is not None:     # Dr.Jit refused to record this scene: traced every step
                 self.notes.append(f"the step's render could not be frozen, so it is traced at every step "
-                                  f"(Dr.Jit: {why})")
+                                  f"(Dr.Jit: {self.frozen.refused})")
+                self.frozen = None
+            return frame
         return mi.render(timed.scene, sensor=timed.sensor, integrator=self.inner, seed=seed, spp=self.spp)

@@ -82,7 +82,7 @@ class StaticPixels:
         self.pixels_static = mi.UInt32(np.flatnonzero(~flat).astype(np.uint32))
         self.cache = {}              # in-period step index -> the static pixels' sample sums (flat film)
         self.checks = []
-        self._frozen = {}            # "dynamic" / "static" -> its frozen wavefront (None: traced)
+        self._frozen = {}            # "dynamic" / "static" -> its wavefront (backend.FrozenOrTraced)
 
     @property
     def dynamic_share(self) -> float:
@@ -98,19 +98,9 @@ class StaticPixels:
         pixels = self.pixels_dynamic if which == "dynamic" else self.pixels_static
         if which not in self._frozen:
             spp, size = self.spp, self.size
-
-            @dr.freeze
-            def wavefront(scene, sensor, pixels, seed):
-                return render_pixels(scene, sensor, inner, pixels, spp, seed, size)
-            self._frozen[which] = wavefront
-        if self._frozen[which] is not None:
-            try:
-                return self._frozen[which](timed.scene, timed.sensor, pixels, dr.opaque(mi.UInt32, seed))
-            except RuntimeError as e:
-                if "frozen function" not in str(e):
-                    raise
-                self._frozen[which] = None
-        return render_pixels(timed.scene, timed.sensor, inner, pixels, self.spp, seed, self.size)
+            self._frozen[which] = backend.FrozenOrTraced(
+                lambda scene, sensor, pixels, seed: render_pixels(scene, sensor, inner, pixels, spp, seed, size))
+        return self._frozen[which](timed.scene, timed.sensor, pixels, dr.opaque(mi.UInt32, seed))
 
     def render(self, timed, inner, seed: int, step: int):
         """The frame of step ``step`` (counted from the render's start) as an (H, W, 1) tensor."""
