@@ -1,11 +1,12 @@
 """Where a render's events go: memory, or an event file. Steps made on the device are kept there until a chunk
 of about ``buffer_events`` has gathered (one device-to-host copy per chunk, not per step); chunks are written
 (HDF5, npz, text, AEDAT4: ``events.streaming``) by a background thread (``events.writer``) while the next steps
-render. Camera recordings (RAW, DAT) are written at the end."""
+render. Camera recordings (RAW, DAT) are written at the end. In memory, each chunk is copied into one
+``events.buffer.EventBuffer`` as it leaves the device buffer, so the engine's arrays are freed and reused (no
+join at the end, and a peak of one copy of the events)."""
 from __future__ import annotations
 
-import numpy as np
-
+from ..events.buffer import EventBuffer
 from ..events.io import format_of, write_events
 from ..events.streaming import STREAMED, open_writer
 from ..events.stream import EventStream
@@ -40,7 +41,7 @@ class Sink:
             self.writer = BackgroundWriter(SegmentWriter(output, width, height, meta, segments))
         elif self.fmt in STREAMED:       # HDF5, npz, text, AEDAT4: written while rendering
             self.writer = BackgroundWriter(open_writer(output, self.fmt, width, height, meta))
-        self.parts = []
+        self.memory = EventBuffer() if self.writer is None else None     # the in-memory result
         self.count = count or (lambda p: None)
         self.capacity = buffer_events(buffer_mb)
         self.device_parts, self.device_events, self.until = [], 0, None
@@ -67,12 +68,12 @@ class Sink:
             return
         parts, until = self.device_parts, self.until
         self.device_parts, self.device_events, self.until = [], 0, None
-        if _cpu() and self.writer is None:      # in memory on the CPU: keep the parts' views, join once at the end
+        if _cpu() and self.writer is None:      # in memory on the CPU: each part's views copied into the buffer
             for part in parts:
                 self._add_host(*part.numpy(), until)
             return
-        # on the CPU the device is the host: join the parts' views once there; from a GPU join them on the
-        # device first, so that one copy crosses
+        # to a writer on the CPU (the device is the host): join the parts' views once there; from a GPU join
+        # them on the device first, so that one copy crosses
         host = DeviceEvents.host_columns(parts) if _cpu() else DeviceEvents.concat(parts).numpy()
         self._add_host(*host, until)
 
@@ -93,7 +94,7 @@ class Sink:
         if self.writer is not None:
             self.writer.append(x, y, t, p, complete_until_us)
         elif len(t):
-            self.parts.append((x, y, t, p))
+            self.memory.append(x, y, t, p)
 
     def wait_for_writer(self) -> None:
         """Everything buffered moved out and written, the writer kept for more (a checkpoint)."""
@@ -108,10 +109,9 @@ class Sink:
             self.writer.drain()
 
     def stream(self, meta):
-        if not self.parts:
+        if not len(self.memory):
             return EventStream.empty(self.width, self.height, meta)
-        return EventStream(*(np.concatenate([part[i] for part in self.parts]) for i in range(4)),
-                           self.width, self.height, meta)
+        return EventStream(*self.memory.take(), self.width, self.height, meta)
 
     def finish(self, end_us, meta):
         self.drain()
