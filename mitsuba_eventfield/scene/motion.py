@@ -246,8 +246,15 @@ def _vector(value, source, where):
 
 
 def _rotation_matrix(axis, angle):
-    from scipy.spatial.transform import Rotation
-    return Rotation.from_rotvec(np.asarray(axis) * angle).as_matrix()
+    """The rotation by the rotation vector ``axis * angle`` (Rodrigues' formula: SciPy's ``Rotation`` took
+    0.1 ms a call, and a render asks for a spin's matrix several times a step)."""
+    rotvec = np.asarray(axis, np.float64) * angle
+    theta = math.sqrt(float(rotvec @ rotvec))
+    if theta == 0.0:
+        return np.eye(3)
+    kx, ky, kz = rotvec / theta
+    k = np.array([[0.0, -kz, ky], [kz, 0.0, -kx], [-ky, kx, 0.0]])
+    return np.eye(3) + math.sin(theta) * k + (1.0 - math.cos(theta)) * (k @ k)
 
 
 def _about_point(rotation3, point):
