@@ -50,15 +50,17 @@ mi, dr = backend.mi, backend.dr
 
 POSE_STEP_PX = 2.0           # image motion between two pose samples of the direct mask
 MAX_POSES = 2048
-PROBE_STEP_PX, PROBE_SPP = 8.0, 16     # shadow probes: every 8 px of object motion; spp a power of 4 (every sampler)
+PROBE_STEP_PX, PROBE_SPP = 16.0, 16    # shadow probes: every 16 px of object motion; spp a power of 4 (every sampler)
 CHANGE_OF_C = 0.5            # probes and check: a log change this many thresholds counts
 CHECKS, CHECK_SPP = 3, 64
 CHECK_SHARE = 1e-3           # the check warns above this share of static pixels changed
 MAX_DYNAMIC_SHARE = 0.85     # above it, two wavefronts cost more than the reuse saves
-# The masks cost 200-300 frames (pose AOVs, shadow probes) and each later period saves (1 - dynamic share)
-# frames a step: measured on the fan (76 % dynamic, 32 steps a period) and the dart (61 %, 40 steps), the
-# split lost to rendering every pixel over 6-10 periods and broke even over 50; so it waits for 25 periods.
-MIN_PERIODS = 25
+# The masks cost about 200 frames (pose AOVs, shadow probes) and each later period saves (1 - dynamic share)
+# frames a step. Measured (benchmarks/results/fan_steps.md): the fan (78 % dynamic, 32 steps a period, masks
+# 3.45 s) saves 92 ms a period, so it breaks even after ~38 periods (190 against 178 s per simulated second
+# over 25 periods, 176 against 181 over 50); the dart (62 %, 40 steps, masks 1.25 s) after ~21. So it waits
+# for 40 periods, where neither loses.
+MIN_PERIODS = 40
 CACHE_MEMORY_SHARE = 0.25    # of the available memory, for one period of static frames
 
 
