@@ -9,6 +9,7 @@ drops the messages that are expected and say nothing to our users.
 """
 from __future__ import annotations
 
+import gc
 import sys
 
 from . import _llvm
@@ -145,6 +146,11 @@ class FrozenOrTraced:
 
     def __call__(self, *args):
         if self.refused is None:
+            # Python's cycle collector must not run inside a recording or replay: it may destroy Mitsuba and
+            # Dr.Jit objects left in cycles by earlier code (a failed render's traceback), and one such destructor
+            # aborted the process there (the full test suite, in mi.render under dr.freeze: "Garbage-collecting")
+            collecting = gc.isenabled()
+            gc.disable()
             try:
                 return self.frozen(*args)
             except RuntimeError as e:
@@ -152,4 +158,7 @@ class FrozenOrTraced:
                     raise
                 why = " ".join(str(e.__cause__ or e).split()).split("validate(): ")[-1].split(". ")[0][:160]
                 self.refused = why or "refused"
+            finally:
+                if collecting:
+                    gc.enable()
         return self.fn(*args)

@@ -57,3 +57,27 @@ def test_frozen_steps_give_the_same_events(name, monkeypatch):
     # moved scene: Dr.Jit makes a changed literal opaque and records again), then replayed: measured 3 (demo) to 7
     # (adaptive, whose ~1600 frames all replay after the fifth); a recording per frame would be 40 or more
     assert recordings[0] is not None and recordings[0] <= 8 and recordings[1] is None
+
+
+def test_no_cycle_collection_inside_a_frozen_call():
+    """Python's cycle collector is paused while a frozen function records (and replays): a destructor it ran
+    there aborted the whole process (docs/design.md, "Frozen frames"). The traced fallback runs with it on."""
+    import gc
+
+    import drjit as dr
+    import mitsuba as mi
+
+    from mitsuba_eventfield import backend
+    seen = []
+
+    def doubled(x):
+        seen.append(gc.isenabled())
+        return x * 2
+
+    frozen = backend.FrozenOrTraced(doubled)
+    assert gc.isenabled()
+    out = frozen(mi.Float([1.0, 2.0]))
+    assert seen == [False] and gc.isenabled() and out.numpy().tolist() == [2.0, 4.0]
+    frozen.refused = "for the test"                                # the traced fallback
+    frozen(dr.arange(mi.Float, 3))
+    assert seen == [False, True] and gc.isenabled()
