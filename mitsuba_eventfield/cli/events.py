@@ -63,7 +63,8 @@ def _add_render(sub) -> None:
     r.add_argument("--seed", type=num(0, 2**31 - 1, integer=True), default=0, help="sampler seed (default 0)")
     r.add_argument("--no-reuse", action="store_true",
                    help="render every pixel at every step (default: a static scene renders one scan period; a "
-                        "moving one renders the pixels moving objects cannot change once per period)")
+                        "moving one, over enough scan periods to pay for its masks, renders the pixels moving objects "
+                        "cannot change once per period)")
     r.add_argument("--independent-seeds", action="store_true",
                    help="new seed every step (Monte-Carlo noise then fires events; for comparisons only)")
     r.add_argument("--threshold", type=num(0, 10, lo_open=True),
