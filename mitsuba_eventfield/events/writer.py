@@ -3,12 +3,47 @@
 The render thread hands time-sorted chunks to :class:`BackgroundWriter`; a bounded queue keeps host memory
 flat (at most ``depth`` chunks wait), and the time the render spends blocked on a full queue is the measure of
 whether the disk (or the compression) is the bottleneck: ``wait_s`` near zero means it kept up.
+
+A bounded queue alone did not keep memory flat. The chunks (megabytes each) are made on the render thread and
+freed on the writer's, and glibc's malloc raises its mmap threshold each time such a block is freed, up to 32 MB.
+The chunks then come from the heap, where blocks freed by another thread fragment it: the fan (346x260, to HDF5)
+peaked at 342 MB over 0.05 s and 421 MB over 0.5 s (1.23x). With the threshold held at 1 MiB
+(:func:`hold_mmap_threshold`) every chunk is its own mapping, given back when freed: 300 and 312 MB (1.04x), in
+98.7 against 96.8 s over 0.5 s (benchmarks/results/memory.md; within the run-to-run spread).
 """
 from __future__ import annotations
 
+import ctypes
+import os
 import queue
+import sys
 import threading
 import time
+
+MMAP_THRESHOLD = 1 << 20          # bytes: larger blocks are mapped on their own and unmapped when freed
+_M_MMAP_THRESHOLD = -3            # mallopt's parameter number (malloc.h)
+# the environment's own malloc tuning (glibc reads these at start-up) is the user's choice and is left alone
+_MALLOC_ENV = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_PAD_", "MALLOC_MMAP_MAX_")
+_held: bool | None = None
+
+
+def hold_mmap_threshold() -> bool:
+    """Fix glibc's mmap threshold at :data:`MMAP_THRESHOLD` for this process (once; it stays: glibc has no way
+    back to the adaptive threshold). True when it holds; False where there is no glibc ``mallopt`` (macOS,
+    Windows, musl) or the environment tunes malloc itself. Process-wide, like any allocator setting: what it
+    costs the rest of a program is a page fault per first touch of a large block, which reuse from the heap
+    would have saved."""
+    global _held
+    if _held is None:
+        _held = False
+        if sys.platform.startswith("linux") and not any(k in os.environ for k in _MALLOC_ENV):
+            try:
+                mallopt = ctypes.CDLL(None).mallopt
+            except (OSError, AttributeError):
+                return False
+            mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+            _held = mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1
+    return _held
 
 
 class BackgroundWriter:
@@ -18,6 +53,7 @@ class BackgroundWriter:
     after it are dropped and ``abort`` removes the partial file."""
 
     def __init__(self, writer, depth: int = 2):
+        hold_mmap_threshold()                 # chunks freed on another thread must not fragment the heap
         self.writer = writer
         self.queue: queue.Queue = queue.Queue(maxsize=max(1, int(depth)))
         self.error: BaseException | None = None

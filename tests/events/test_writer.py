@@ -1,0 +1,48 @@
+"""The background writer's hold on glibc's mmap threshold (events/writer.py): a freed multi-megabyte chunk must
+not leave the next one on the heap, where chunks freed on the writer's thread fragment it."""
+import os
+import subprocess
+import sys
+
+import pytest
+
+CHILD = r"""
+import sys
+import numpy as np
+from mitsuba_eventfield.events import writer
+
+def resident_mb():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+import os
+held = writer.hold_mmap_threshold() if sys.argv[1] == "hold" else None
+big = np.ones(16 << 20, np.uint8)      # a mapping; freeing it raises an adaptive threshold to 16 MB
+del big
+before = resident_mb()
+chunk = np.ones(8 << 20, np.uint8)     # an 8 MB chunk: on the heap under the raised threshold, else mapped
+del chunk
+print(held, resident_mb() - before)
+"""
+
+
+def _run(mode, **env):
+    r = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, check=True,
+                       env={**os.environ, **env})
+    held, kept_mb = r.stdout.split()[-2:]
+    return held, float(kept_mb)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or os.environ.get("MALLOC_MMAP_THRESHOLD_") is not None,
+                    reason="glibc's mallopt on Linux, with the environment not tuning malloc itself")
+def test_a_freed_chunk_is_given_back_once_the_threshold_is_held():
+    held, kept_mb = _run("hold")
+    assert held == "True"
+    assert kept_mb < 1.0                  # its own mapping, unmapped when freed
+    # the adaptive threshold keeps the same chunk resident on the heap: what the hold is for
+    assert _run("adaptive")[1] > 6.0
+
+
+def test_the_environments_malloc_tuning_is_left_alone():
+    held, _ = _run("hold", MALLOC_MMAP_THRESHOLD_="2097152")
+    assert held == "False"
