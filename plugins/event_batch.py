@@ -30,19 +30,19 @@ import numpy as np
 from mitsuba_eventfield.plugins import event_fill, pixel_model, pixel_step
 
 
-# Lane-steps (pixels x frames) per kernel by backend. CPU: the chunk's events must stay in cache for the sort
-# (2 kHz stack, converter throughput against one frame a step: 346x260 4 frames 1.16x, 16 frames 0.7x; 640x480
-# 2 frames 1.03x), so batching gains little there; one frame takes the per-step kernel. CUDA: enough lanes to
-# fill the GPU and few launches and syncs per frame, which is where batching is for (not measured on a GPU).
-LANE_STEPS = {"llvm": 600_000, "cuda": 16_000_000}
+# Lane-steps (pixels x frames) per kernel by backend. CPU: the chunk's events must stay in cache (converter, 2 kHz
+# stack, 346x260, best of 4 warm runs, Mpix-steps/s by frames a kernel: 1: 89, 2: 95, 3: 98, 4: 96, 5: 97, 6: 92,
+# 7: 80, 8: 80; 640x480: 1: 93, 2: 82, 3: 84), so about four 346x260 frames. CUDA: enough lanes to fill the GPU
+# and few launches and syncs per frame, which is where batching is for (not measured on a GPU).
+LANE_STEPS = {"llvm": 360_000, "cuda": 16_000_000}
 MAX_FRAMES_PER_KERNEL = 64
 
 
 def default_frames_per_kernel(n_pix: int, frame_interval_s: float) -> int:
     """Frames per kernel for a film of ``n_pix`` pixels on the active backend (``LANE_STEPS``). On the CPU
     never so many that the chunk's time span needs more radix passes than one frame does (the sort key is
-    microseconds from the chunk's start, ``event_fill.RADIX_BITS`` per pass: at 2 kHz, 4 frames sort in one
-    pass, 6 in two, which costs more than the fewer launches save there; on a GPU a pass is cheap next to the
+    microseconds from the chunk's start, up to ``event_fill.PASS_BITS`` per pass: 2^20 us, about a second, in
+    one; a second pass costs more than the fewer launches save there; on a GPU a pass is cheap next to the
     launches and syncs batching saves)."""
     cuda = mi.variant().startswith("cuda")
     frames = int(max(1, min(MAX_FRAMES_PER_KERNEL, round(LANE_STEPS["cuda" if cuda else "llvm"] / n_pix))))
@@ -53,7 +53,7 @@ def default_frames_per_kernel(n_pix: int, frame_interval_s: float) -> int:
 
 def _passes(span_s: float) -> int:
     bits = max(1, (int(np.ceil(span_s * 1e6)) + 3).bit_length())
-    return -(-bits // event_fill.RADIX_BITS)
+    return -(-bits // event_fill.PASS_BITS["llvm"])
 
 
 _disabled = [False]
