@@ -9,7 +9,7 @@ the same events, bit for bit, without leaving the backend (LLVM or CUDA):
    period keeps a closed-form subset of them: ``_refractory_plan``);
 2. prefix sum: an inclusive scan of the counts gives each lane's slot range in the event array, and its last
    entry is the chunk's event total (the one scalar the host reads, to size the arrays);
-3. fill: one lane a pixel loops over its steps and writes its own crossings into its slot range (no event
+3. fill: one lane a pixel writes its own crossings of each step into its slot range (no event
    searches for its pixel: a binary search per event was 2x slower on the CPU);
 4. timestamps: crossing ``k`` sits at level ``ref + sign k C``; its time is where the step's linear segment
    meets that level, computed in float64 in the same operation order as the host twin, then rounded to integer
@@ -272,12 +272,13 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
 
 @dataclass
 class Crossings:
-    """A chunk's crossings for :func:`fill`, one lane per (step b, pixel p) at ``b N + p`` (frame-major: the
-    slot order): the signed count ``n`` (Int32) and how many become events ``kept`` (UInt32: ``|n|`` unless a
-    refractory period drops some), the log brightness ``before`` and ``after`` the step and the reference
-    level ``ref`` it compared against (Float), per pixel the thresholds it used, the steps' boundaries (B + 1
-    seconds), the film width and pixel count, and for a refractory pixel the kept crossings' ranks
-    ``first + j stride`` (Float64 per lane; None: every crossing, rank j)."""
+    """One step's crossings for :func:`fill`, one lane a pixel: the signed count ``n`` (Int32) and how many
+    become events ``kept`` (UInt32: ``|n|`` unless a refractory period drops some), the log brightness
+    ``before`` and ``after`` the step and the reference level ``ref`` it compared against (Float), per pixel
+    the thresholds it used, the step's boundaries (t0, t1 seconds), the film width and pixel count, and for a
+    refractory pixel the kept crossings' ranks ``first + j stride`` (Float64 per lane; None: every crossing,
+    rank j). Any object with ``times``, ``width``, ``n_pix`` and this ``write`` can be filled (``event_batch``
+    recomputes a chunk's crossings instead of storing them)."""
     n: object
     kept: object
     before: object
@@ -290,6 +291,37 @@ class Crossings:
     n_pix: int
     first: object = None
     stride: object = None
+
+    def write(self, ends, xy, key_of, key_out, word_out) -> None:
+        """The crossings' two words into their slots (``ends``: inclusive prefix sum of ``kept``)."""
+        t0, t1 = (_opaque(float(t), mi.Float64) for t in self.times)
+        kept = self.kept
+        write_crossings(self.n, kept, ends - kept, self.before, self.after, self.ref, self.c_on, self.c_off, t0,
+                        t1, xy, key_of, key_out, word_out, self.first, self.stride)
+
+
+def write_crossings(n, kept, start, before, after, ref, c_on, c_off, t0, t1, xy, key_of, key_out, word_out,
+                    first=None, stride=None) -> None:
+    """One step of every lane: its ``kept`` crossings (signed count ``n``, on the segment ``before`` ->
+    ``after`` from level ``ref`` between ``t0`` and ``t1`` seconds) as two words each into slots ``start``,
+    ``start + 1``, ...: the key ``key_of(t)`` and ``xy | ON << 31``. Ranks ``first + j stride`` for a
+    refractory pixel, else j. A symbolic loop over each lane's crossings (inside a caller's loop: one kernel)."""
+    on = n > 0
+    sign = dr.select(on, mi.Int32(1), mi.Int32(-1))
+    word = xy | dr.select(on, mi.UInt32(1 << 31), mi.UInt32(0))
+    step = dr.select(on, mi.Float64(c_on), mi.Float64(c_off))
+    segment = (mi.Float64(before), mi.Float64(after), mi.Float64(ref), step, t0, t1)
+    ranked = first is not None
+
+    def crossing_body(j):
+        # j = 0 is the first kept rank itself: a lone kept crossing may have an infinite stride (0 x inf)
+        rank = dr.select(j == 0, first, first + mi.Float64(j) * stride) if ranked else mi.Float64(j)
+        t_s = _crossing_time(mi.Int64(rank) + 1, sign, *segment)
+        dr.scatter(key_out, key_of(t_s), start + j)
+        dr.scatter(word_out, word, start + j)
+        return (j + 1,)
+
+    dr.while_loop((dr.zeros(mi.UInt32, dr.width(xy)),), lambda j: j < kept, crossing_body)
 
 
 @dataclass
@@ -306,12 +338,12 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
          noise: ShotNoise | None = None, stats: dict | None = None) -> DeviceEvents:
     """The events of ``cr`` (``ends``: inclusive prefix sum of ``kept``; ``total``: its last entry), then the
     noise events, time-sorted, with timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor
-    clock ``resolution_us`` when > 0. One lane a pixel loops over the steps and writes its own crossings into
-    its slot range (the fill of esim_torch's count / prefix-sum / fill), two words an event: the sort key
+    clock ``resolution_us`` when > 0. ``cr.write`` has one lane a pixel write its own crossings into its slot
+    range (the fill of esim_torch's count / prefix-sum / fill), two words an event: the sort key
     (microseconds from the chunk's first one) and x | y << 16 | ON << 31, so no event searches for its pixel
     or divides by the width, and the sort moves 8 bytes an event. Noise events take the slots after every
     crossing, in pixel order, so equal times keep crossings first."""
-    steps, count = len(cr.times) - 1, total + (noise.count if noise else 0)
+    count = total + (noise.count if noise else 0)
     if count == 0:
         return DeviceEvents(*empty_columns(), count=0, **(stats or {}))
     start_us = int(math.floor(cr.times[0] * 1e6)) + int(base_us) - 1
@@ -321,7 +353,7 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
     key_type = mi.UInt32 if key_bound < 1 << 32 else mi.UInt64
     key_out, word_out = dr.empty(key_type, count), dr.empty(mi.UInt32, count)
     pixel = dr.arange(mi.UInt32, cr.n_pix)
-    n_d, w_d = _opaque(cr.n_pix, mi.UInt32), _opaque(cr.width, mi.UInt32)
+    w_d = _opaque(cr.width, mi.UInt32)
     y = pixel // w_d
     xy = pack_xy(pixel - y * w_d, y)
 
@@ -331,7 +363,7 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
         return key_type(mi.Int64(dr.round(t_s * 1e6)) + base_d - start_d)
 
     if total:
-        _fill_crossings(cr, ends, steps, pixel, n_d, xy, key_of, key_out, word_out)
+        cr.write(ends, xy, key_of, key_out, word_out)
     if noise is not None:
         slot = dr.prefix_reduce(dr.ReduceOp.Add, mi.UInt32(noise.hit), exclusive=True) + _opaque(total, mi.UInt32)
         on_bit = dr.select(noise.on, mi.UInt32(1 << 31), mi.UInt32(0))
@@ -347,39 +379,3 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
     xy, p = word & 0x7FFFFFFF, polarity((word >> 31) != 0)
     dr.eval(xy, t_us, p)
     return DeviceEvents(xy, t_us, p, count=count, **(stats or {}))
-
-
-def _fill_crossings(cr: Crossings, ends, steps: int, pixel, n_d, xy, key_of, key_out, word_out) -> None:
-    """The crossings' two words into their slots: one lane a pixel, looping over the steps, then over its
-    kept crossings there (symbolic loops: one kernel)."""
-    t_d = mi.Float64(cr.times)
-    c_on, c_off = mi.Float64(cr.c_on), mi.Float64(cr.c_off)
-
-    def step_body(step):
-        lane = step * n_d + pixel
-        kept = dr.gather(mi.UInt32, cr.kept, lane)
-        start = dr.gather(mi.UInt32, ends, lane) - kept
-        n = dr.gather(mi.Int32, cr.n, lane)
-        on = n > 0
-        sign = dr.select(on, mi.Int32(1), mi.Int32(-1))
-        word = xy | dr.select(on, mi.UInt32(1 << 31), mi.UInt32(0))
-        segment = (mi.Float64(dr.gather(mi.Float, cr.before, lane)), mi.Float64(dr.gather(mi.Float, cr.after, lane)),
-                   mi.Float64(dr.gather(mi.Float, cr.ref, lane)), dr.select(on, c_on, c_off),
-                   dr.gather(mi.Float64, t_d, step), dr.gather(mi.Float64, t_d, step + 1))
-        ranked = cr.first is not None
-        first = dr.gather(mi.Float64, cr.first, lane) if ranked else None
-        stride = dr.gather(mi.Float64, cr.stride, lane) if ranked else None
-
-        def crossing_body(j):
-            # j = 0 is the first kept rank itself: a lone kept crossing may have an infinite stride (0 x inf)
-            rank = dr.select(j == 0, first, first + mi.Float64(j) * stride) if ranked else mi.Float64(j)
-            t_s = _crossing_time(mi.Int64(rank) + 1, sign, *segment)
-            dr.scatter(key_out, key_of(t_s), start + j)
-            dr.scatter(word_out, word, start + j)
-            return (j + 1,)
-
-        dr.while_loop((dr.zeros(mi.UInt32, cr.n_pix),), lambda j: j < kept, crossing_body)
-        return (step + 1,)
-
-    bound = _opaque(steps, mi.UInt32)
-    dr.while_loop((dr.zeros(mi.UInt32, cr.n_pix),), lambda step: step < bound, step_body)

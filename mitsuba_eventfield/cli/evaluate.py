@@ -9,13 +9,14 @@ from .args import add_defines, defines, num
 
 
 def add_parsers(sub) -> None:
+    from ..evaluation.bench import SUITE
+    suite = ",".join(s.name for s in SUITE)
     bn = sub.add_parser("bench", help="speed against accuracy of a render's levers (spp, sampler, steps, seeds, "
-                                      "adaptive) on four scenes, or one: chart + tables")
-    bn.add_argument("scene", nargs="?", help="one scene file instead of the suite (analytic, demo, fan galvo, "
-                                             "kaleidoscope grid: about 5 minutes on 2 cores)")
+                                      f"adaptive) on the suite's {len(SUITE)} scenes, or one: chart + tables")
+    bn.add_argument("scene", nargs="?", help=f"one scene file instead of the suite ({suite})")
     bn.add_argument("-o", "--output", default="out/bench",
                     help="output directory: bench_suite.png/.md/.csv/.json (one scene: bench_<name>.*)")
-    bn.add_argument("--scenes", help="suite scenes to run, comma-separated (default: analytic,demo,fan,kaleidoscope)")
+    bn.add_argument("--scenes", help=f"suite scenes to run, comma-separated (default: all: {suite})")
     bn.add_argument("--settings", help="settings to run, comma-separated keys (default: all; see the table in "
                                        "mitsuba_eventfield.evaluation.bench.SETTINGS)")
     bn.add_argument("--seeds", type=num(1, 20, integer=True),

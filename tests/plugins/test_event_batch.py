@@ -211,12 +211,14 @@ def test_device_events_join_on_the_device_and_on_the_host():
 
 
 def test_default_grouping_keeps_one_radix_pass_on_the_cpu():
-    """The default frames per kernel: about LANE_STEPS lane-steps, capped at 64, and on the CPU never a
-    chunk whose span needs more radix passes than one frame (2^20 us a pass: at 30 fps 31 frames fit one)."""
+    """The default frames per kernel: about LANE_STEPS lane-steps, at least 3, capped at 64, and on the CPU
+    never a chunk whose span needs more radix passes than one frame (2^20 us a pass: at 30 fps 31 frames fit
+    one; 0.4 s frames: 2)."""
     from mitsuba_eventfield.plugins import event_batch
     assert event_batch.default_frames_per_kernel(346 * 260, 1 / 2000) == 4
     assert event_batch.default_frames_per_kernel(346 * 260, 1 / 30) == 4
     assert event_batch.default_frames_per_kernel(32 * 24, 1 / 30) == 31        # more would need a second pass
     assert event_batch.default_frames_per_kernel(32 * 24, 2.0) == 64           # one frame takes two already
     assert event_batch.default_frames_per_kernel(64 * 48, 1e-5) == 64
-    assert event_batch.default_frames_per_kernel(1280 * 720, 1 / 2000) == 1
+    assert event_batch.default_frames_per_kernel(1280 * 720, 1 / 2000) == 3     # the fewest
+    assert event_batch.default_frames_per_kernel(1280 * 720, 0.4) == 2           # 3 would need a second pass
