@@ -27,16 +27,27 @@ _MALLOC_ENV = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_P
 _held: bool | None = None
 
 
+def _startup_environment() -> set:
+    """Names in the environment this process started with: what glibc read. ``os.environ`` may have gained
+    names since (a Dask LocalCluster's nannies leave ``MALLOC_TRIM_THRESHOLD_`` in their parent's, for the
+    workers they spawn), which this process's malloc never saw."""
+    try:
+        with open("/proc/self/environ", "rb") as f:
+            return {item.split(b"=", 1)[0].decode(errors="replace") for item in f.read().split(b"\0") if item}
+    except OSError:
+        return set(os.environ)
+
+
 def hold_mmap_threshold() -> bool:
     """Fix glibc's mmap threshold at :data:`MMAP_THRESHOLD` for this process (once; it stays: glibc has no way
     back to the adaptive threshold). True when it holds; False where there is no glibc ``mallopt`` (macOS,
-    Windows, musl) or the environment tunes malloc itself. Process-wide, like any allocator setting: what it
+    Windows, musl) or the environment the process started with tunes malloc itself. Process-wide, like any allocator setting: what it
     costs the rest of a program is a page fault per first touch of a large block, which reuse from the heap
     would have saved."""
     global _held
     if _held is None:
         _held = False
-        if sys.platform.startswith("linux") and not any(k in os.environ for k in _MALLOC_ENV):
+        if sys.platform.startswith("linux") and not _startup_environment().intersection(_MALLOC_ENV):
             try:
                 mallopt = ctypes.CDLL(None).mallopt
             except (OSError, AttributeError):

@@ -26,9 +26,12 @@ print(held, resident_mb() - before)
 """
 
 
-def _run(mode, **env):
-    r = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, check=True,
-                       env={**os.environ, **env})
+def _run(mode, code=CHILD, **env):
+    """The child under this environment, less any malloc tuning it inherited (a Dask LocalCluster started by an
+    earlier test leaves MALLOC_TRIM_THRESHOLD_ in this process's os.environ), plus ``env``."""
+    inherited = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    r = subprocess.run([sys.executable, "-c", code, mode], capture_output=True, text=True, check=True,
+                       env={**inherited, **env})
     held, kept_mb = r.stdout.split()[-2:]
     return held, float(kept_mb)
 
@@ -46,3 +49,11 @@ def test_a_freed_chunk_is_given_back_once_the_threshold_is_held():
 def test_the_environments_malloc_tuning_is_left_alone():
     held, _ = _run("hold", MALLOC_MMAP_THRESHOLD_="2097152")
     assert held == "False"
+
+
+def test_malloc_tuning_set_after_start_up_is_not_the_environments():
+    """glibc read its tuning when the process started; a name os.environ gains later (Dask's nannies set
+    MALLOC_TRIM_THRESHOLD_ in their parent for the workers they spawn) did not tune this process's malloc."""
+    later = "import os, sys\nos.environ['MALLOC_TRIM_THRESHOLD_'] = '65536'\n" + CHILD
+    held, kept_mb = _run("hold", code=later)
+    assert held == "True" and kept_mb < 1.0
