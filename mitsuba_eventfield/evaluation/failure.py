@@ -11,7 +11,8 @@ beyond the sweep's ``tolerance`` is ``silent``: the failure this module is there
   pixels against Mitsuba's depth, and their share. Light field: events plus a rendered frame at t = 0 (the
   ``eventfield depth --start-frame`` path; the frame is extra information the method sees). Flag: confidence.
 * ``depth_range_sweep``: depth range. The card nearer than the nearest depth searched used to read as that
-  depth, confidently; flag: confidence (``focus.depth.beyond_range``).
+  depth, or as a ghost inside the range when searched from twice its depth, confidently; flag: confidence
+  (``focus.depth.beyond_range``).
 * ``calibration_sweep``: pixel noise rate (shot noise, Hz per pixel). The galvo patch calibration from frames
   reconstructed from the events (events only, the CLI default; and with a rendered start frame), scale error
   against the mirror geometry (``failure_scene.exact_scales``). Refusal: ``CalibrationError``.
@@ -191,7 +192,7 @@ def depth_range_sweep(nears=(0.3, 0.4, 0.45, 0.48, 0.52, 0.55, 0.6, 0.7, 0.8, 1.
                       contrast: float = 0.5, far: float = 3.0, planes: int = 24,
                       measure: str = "tenengrad") -> FailureSweep:
     """The card at ``card_depth`` searched from each of ``nears``: nearer than the card, it is measured; beyond
-    it, its focus peaks at the nearest plane and rises past it (``focus.depth.beyond_range``)."""
+    it, a plane beyond the range outfocuses every plane inside it (``focus.depth.beyond_range``)."""
     from ..focus.depth import depth_from_focus
     lf, z, _ = depth_case(contrast, card_depth=card_depth)
     card = scored_pixels(card_depth) & (z < 0.5 * (card_depth + fs.WALL_DEPTH))

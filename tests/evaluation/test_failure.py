@@ -52,6 +52,12 @@ def test_depth_from_focus_flags_texture_below_the_threshold_and_depths_beyond_th
     assert dm.confident_share(mask=card) < 0.05                          # measured 0.001
     inside = depth_from_focus(lf, 0.3, 3.0, 24, "tenengrad")
     assert inside.at_limit[card].mean() < 0.01 and inside.confident_share(mask=card) > 0.95   # 0 and 1.0
+    # searched from twice its depth: the curve peaks on a ghost inside the range (1.0 m and beyond, a 100 %
+    # error), which a plane beyond the range (the card's own 0.5 m) outfocuses
+    ghost = depth_from_focus(lf, 1.0, 3.0, 24, "tenengrad")
+    assert np.median(np.abs(ghost.depth[card] / z[card] - 1)) > 0.5     # measured 1.18
+    assert ghost.at_limit[card].mean() > 0.95                            # measured 0.999 (0.37 before)
+    assert ghost.confident_share(mask=card) < 0.05                       # measured 0.001 (0.63 before)
 
 
 def test_calibration_refuses_noisy_frames_instead_of_a_wrong_fit():
