@@ -388,7 +388,7 @@ def run_scene(spec: BenchScene, settings=None, seeds=SEEDS, log=print) -> list:
                 runs.setdefault(cfg["key"], []).append(
                     {"scene": spec.name, "setting": cfg["key"], "label": label(cfg, spec.steps), "seed": seed,
                      "wall_s": wall + extra.get("plan_s", 0.0), "events": len(ev), "steps": ev.meta["render"]["steps"],
-                     "spp": cfg["spp"], **extra, **scorer.score(ev)})
+                     "spp": cfg["spp"], "px_per_step": _px_per_step(ev), **extra, **scorer.score(ev)})
         for cfg, _ in planned:
             rows += runs[cfg["key"]]
             last = runs[cfg["key"]][-1]
@@ -398,6 +398,14 @@ def run_scene(spec: BenchScene, settings=None, seeds=SEEDS, log=print) -> list:
         for r in rows:
             r["reference_wall_s"] = scorer.reference_wall
     return rows
+
+
+def _px_per_step(ev) -> float | None:
+    """The largest image motion of one step the render noted (the scan's or the objects'; None where unknown,
+    e.g. adaptive steps or the kaleidoscope)."""
+    motion = (ev.meta.get("render") or {}).get("image_motion_px_per_step") or {}
+    values = [v for v in motion.values() if v is not None]
+    return max(values) if values else None
 
 
 def run(specs=None, settings=None, seeds=SEEDS, log=print) -> list:

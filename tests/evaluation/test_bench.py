@@ -62,6 +62,12 @@ def test_one_galvo_scene_from_the_command_line(tmp_path, capsys):
     assert s["16spp"]["count_error"] < s["1spp"]["count_error"] / 3           # measured 0.19 against 1.9
     assert s["16spp"]["refocus_psnr_db"] > s["1spp"]["refocus_psnr_db"] + 5  # measured 23 against 5.7 dB
     assert {p.name for p in out.iterdir()} >= {"bench_fan.png", "bench_fan.md", "bench_fan.csv", "bench_fan_runs.csv"}
+    # each run carries its image motion a step: the scan's path over a period (galvo geometry) / 32 steps
+    from mitsuba_eventfield.optics.galvo import scan_image_path_px
+    from mitsuba_eventfield.scene import load_scene
+    optics = load_scene(FAN, width=24, height=18).sensor.optics_metadata()
+    expected = scan_image_path_px(optics, 24, 18) / 32
+    assert expected > 0.05 and all(abs(r["px_per_step"] / expected - 1) < 1e-6 for r in saved["runs"])
 
 
 @pytest.mark.parametrize("args, message", [
