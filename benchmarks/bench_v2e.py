@@ -26,7 +26,8 @@ v2e's python: $EVENTFIELD_V2E_PYTHON (default /work/v2e-venv/bin/python); withou
 this prints one line and exits 0. v2e is not on PyPI: its source (github.com/SensorsINI/v2e, 1.5.1) installed
 ``--no-deps`` into a virtualenv with a CPU torch wheel and what ``v2ecore.emulator`` imports (numpy,
 opencv-python-headless, h5py, engineering-notation, tqdm, scikit-image, matplotlib, argcomplete, easygui,
-screeninfo, numba, dv-processing) is what was measured.  Usage: ./run bench v2e   (or python benchmarks/bench_v2e.py [--quick])
+screeninfo, numba, dv-processing) is what was measured.
+Usage: ./run bench v2e   (or python benchmarks/bench_v2e.py [--quick])
 """
 import json
 import os

@@ -1,6 +1,5 @@
 """Speed against accuracy: the levers of a render (samples, sampler, samples where they matter, steps, seeds,
-adaptive steps) on a suite of scenes, each scored by an error that is well conditioned, against an exact or
-converged reference.
+adaptive steps) on a suite of scenes, each scored by a well-conditioned error against an exact or converged reference.
 
 The suite (``SUITE``; tiny films, so that the default run, 5 seeds per setting, takes about 15 minutes on 2 cores):
 
@@ -45,6 +44,7 @@ from ..backend import ensure_variant, set_variant
 from ..errors import ConfigError
 from ..scene.bundled import bundled_scene
 from ..simulate.auto import load_with_sampler, plan
+from ..simulate.image_motion import largest_px_per_step
 from ..simulate.render import render_events, render_frames
 from . import analytic as an
 
@@ -64,6 +64,8 @@ SETTINGS = [
     {"key": "indep16", "spp": 16, "sampler": "independent"},
     {"key": "seeds", "spp": 4, "seed_mode": "independent"},
     {"key": "adaptive", "spp": 4, "adaptive": True},
+    {"key": "motion0.5", "spp": 4, "adaptive": True, "px_per_step": 0.5},   # by image motion alone (else log
+    {"key": "motion1", "spp": 4, "adaptive": True, "px_per_step": 1.0},     # change): bench_resolution.py
     {"key": "auto20us", "spp": 0, "auto": 20e-6},    # eventfield render --auto --timing-accuracy 20us
 ]
 DEFAULT_KEY = "default"
@@ -111,7 +113,9 @@ def label(cfg: dict, base_steps: int) -> str:
     if cfg.get("auto"):
         return f"auto, --timing-accuracy {cfg['auto'] * 1e6:g}us (plan time included)"
     if cfg.get("adaptive"):
-        return f"{cfg['spp']} spp, adaptive (steps no longer than 1/{base_steps})"
+        px = cfg.get("px_per_step")
+        return f"{cfg['spp']} spp, " + (f"steps by image motion ({px:g} px each)" if px else
+                                       f"adaptive (steps no longer than 1/{base_steps})")
     text = f"{cfg['spp']} spp" + (f" {cfg['sampler']}" if cfg.get("sampler") else "")
     if cfg.get("spp_changing"):
         text += f" ({cfg['spp_changing']} where it changes)"
@@ -326,8 +330,9 @@ def _render(path, spec: BenchScene, cfg: dict, seed: int, warm: bool = False):
     kw = dict(spp=cfg["spp"], seed=seed, seed_mode=cfg.get("seed_mode", "fixed"), spp_changing=cfg.get("spp_changing"))
     if spec.preset is not None:                  # each seed its own noise draws too (the reference: seed 0)
         kw.update(preset=spec.preset, pixel={"seed": seed})
-    if cfg.get("adaptive"):
-        kw.update(adaptive=True, max_log_change=0.5, max_step=spec.duration / spec.steps)
+    if cfg.get("adaptive"):          # by image motion alone at px_per_step, or capped at the default's step
+        kw.update(adaptive=True, max_log_change=0.5, **({"px_per_step": cfg["px_per_step"]} if "px_per_step" in cfg
+                                                         else {"max_step": spec.duration / spec.steps}))
     else:
         kw.update(steps=max(1, int(round(spec.steps * cfg.get("steps_factor", 1)))))
     import drjit as dr
@@ -388,7 +393,7 @@ def run_scene(spec: BenchScene, settings=None, seeds=SEEDS, log=print) -> list:
                 runs.setdefault(cfg["key"], []).append(
                     {"scene": spec.name, "setting": cfg["key"], "label": label(cfg, spec.steps), "seed": seed,
                      "wall_s": wall + extra.get("plan_s", 0.0), "events": len(ev), "steps": ev.meta["render"]["steps"],
-                     "spp": cfg["spp"], "px_per_step": _px_per_step(ev), **extra, **scorer.score(ev)})
+                     "spp": cfg["spp"], "px_per_step": largest_px_per_step(ev.meta), **extra, **scorer.score(ev)})
         for cfg, _ in planned:
             rows += runs[cfg["key"]]
             last = runs[cfg["key"]][-1]
@@ -398,14 +403,6 @@ def run_scene(spec: BenchScene, settings=None, seeds=SEEDS, log=print) -> list:
         for r in rows:
             r["reference_wall_s"] = scorer.reference_wall
     return rows
-
-
-def _px_per_step(ev) -> float | None:
-    """The largest image motion of one step the render noted (the scan's or the objects'; None where unknown,
-    e.g. adaptive steps or the kaleidoscope)."""
-    motion = (ev.meta.get("render") or {}).get("image_motion_px_per_step") or {}
-    values = [v for v in motion.values() if v is not None]
-    return max(values) if values else None
 
 
 def run(specs=None, settings=None, seeds=SEEDS, log=print) -> list:

@@ -41,9 +41,9 @@ def _startup_environment() -> set:
 def hold_mmap_threshold() -> bool:
     """Fix glibc's mmap threshold at :data:`MMAP_THRESHOLD` for this process (once; it stays: glibc has no way
     back to the adaptive threshold). True when it holds; False where there is no glibc ``mallopt`` (macOS,
-    Windows, musl) or the environment the process started with tunes malloc itself. Process-wide, like any allocator setting: what it
-    costs the rest of a program is a page fault per first touch of a large block, which reuse from the heap
-    would have saved."""
+    Windows, musl) or the environment the process started with tunes malloc itself. Process-wide, like any
+    allocator setting: what it costs the rest of a program is a page fault per first touch of a large block,
+    which reuse from the heap would have saved."""
     global _held
     if _held is None:
         _held = False

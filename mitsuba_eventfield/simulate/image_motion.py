@@ -152,3 +152,11 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
         summary.notes.append(f"steps coarser than the image motion: per step {what} (more than "
                              f"{MAX_PX_PER_STEP:g} px: events between rendered instants are interpolated, not "
                              f"resolved); --steps {need} keeps it under {MAX_PX_PER_STEP:g} px")
+
+
+def largest_px_per_step(meta: dict) -> float | None:
+    """The largest image motion of one step an event file's metadata records (``note_image_motion``: the scan's
+    or the objects'); None where the render noted none (adaptive steps, unknown motion)."""
+    motion = (meta.get("render") or {}).get("image_motion_px_per_step") or {}
+    values = [v for v in motion.values() if v is not None]
+    return max(values) if values else None

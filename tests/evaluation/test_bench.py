@@ -107,3 +107,9 @@ def test_depth_and_stochastic_measures_order_the_samples(monkeypatch):
     # Monte-Carlo noise adds events to a noisy pixel's own: fewer samples, a rate further from the reference
     assert s["demo_davis346", "16spp"]["rate_error"] < s["demo_davis346", "1spp"]["rate_error"]
     assert 0 <= s["demo_davis346", "16spp"]["interval_ks"] < s["demo_davis346", "1spp"]["interval_ks"]
+
+
+def test_every_setting_has_its_own_style_in_the_chart():
+    """No two settings share colour and marker (the palette must grow with SETTINGS)."""
+    styles = [(bench_chart._style(s["key"])["color"], bench_chart._style(s["key"])["marker"]) for s in bench.SETTINGS]
+    assert len(set(styles)) == len(styles)
