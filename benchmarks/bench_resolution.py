@@ -38,7 +38,8 @@ def main():
           f"One 4 ms scan period of `scenes/fan/fan.xml` (250 Hz circle), {len(SEEDS)} seeds a setting, each size "
           "against its own reference (256 multi-jittered spp, 400 steps). Wall time: the render's, one thread, "
           "fastest seed. px per step: the largest image motion of one step (the scan's, from the galvo "
-          "geometry; for steps placed by image motion, their bound). Error: per-pixel event-count error (L1, "
+          "geometry; for steps placed by image motion, their bound on the scan's and the blades' motion "
+          "together, about twice the scan's alone at the same steps). Error: per-pixel event-count error (L1, "
           "relative), mean over seeds; refocus: PSNR of the period refocused at 0.6 m on textured pixels.", "",
           "| film | setting | steps | px per step | wall s | event-count error | refocus PSNR (dB) | fewest count "
           "errors at 4 spp |", "|---|---|---|---|---|---|---|---|"]
@@ -74,7 +75,7 @@ def _chart(summary, rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from mitsuba_eventfield.images import save_figure
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fig, ax = plt.subplots(figsize=(7.5, 4.6), layout="constrained")
     for (w, h), colour in zip(SIZES, ("tab:blue", "tab:orange", "tab:green")):
         name = f"fan {w}x{h}"
         px = {r["setting"]: _px(r) for r in rows if r["scene"] == name}
@@ -88,8 +89,8 @@ def _chart(summary, rows, path):
         ax.plot([px[s["setting"]] for s in motion], [s["count_error"] for s in motion], "D", color=colour,
                 markerfacecolor="none", markersize=9)
     ax.set_xscale("log")
-    ax.set_xlabel("image motion of one step (px); star: 100 uniform steps; diamonds: steps by image "
-                  "motion")
+    ax.set_xlabel("image motion of one step, px\nlines: the scan's, uniform steps (star: 100); diamonds: steps "
+                  "placed by image motion (scan + blades, at most this)", fontsize=8)
     ax.set_ylabel("per-pixel event-count error vs converged")
     ax.set_title("The fan, one scan period: fewest errors near 0.5-1 px a step")
     ax.grid(alpha=0.3, which="both")
