@@ -69,8 +69,9 @@ def _px(row) -> float:
 
 
 def _chart(summary, rows, path):
-    """Count error against the image motion of one step (the scan's), a line per film size: the sizes' optima
-    line up in pixels per step, not in steps."""
+    """Count error against the image motion of one step, a line per film size for uniform steps (the scan's
+    motion) and markers for steps placed by image motion (their bound): the optima line up in pixels a step,
+    not in steps."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
