@@ -2,9 +2,11 @@
 250 Hz circle, one 4 ms scan period, 4 spp) at three film sizes, each against its own converged reference
 (``evaluation.bench``: 256 multi-jittered spp, 4x the steps; per-pixel event-count error, 2 seeds).
 
-Why: the suite runs tiny films (48x36), where 25 steps per period beat the default 100 (fewer steps, fewer
-Monte-Carlo noise events). The same steps move a larger film's image further per step (pixels scale with the
-film), so the steps a render needs grow with resolution; this measures where the default sits as the film grows.
+Why: the suite runs tiny films (48x36), where 25 steps per period beat 100 (fewer steps, fewer Monte-Carlo
+noise events). The same steps move a larger film's image further per step (pixels scale with the film), so the
+steps a render needs grow with resolution; this measures where uniform step counts, steps placed by image motion
+and the default (uniform steps as many as the image motion needs, ``stepping.default_steps``) sit as the film
+grows.
 
 Writes benchmarks/results/resolution.{md,json,png}. About 10 minutes on 2 cores (the 173x130 reference is most).
 Usage: ./run bench resolution   (--chart-only: redraw the chart from resolution.json)
@@ -18,7 +20,7 @@ sys.path.insert(0, HERE)
 from _report import RESULTS, write_results  # noqa: E402
 
 SIZES = ((48, 36), (96, 72), (173, 130))
-SETTINGS = ("steps/4", "steps/2", "default", "steps*2", "16spp/2", "motion0.5", "motion1")
+SETTINGS = ("steps/4", "steps/2", "steps*1", "steps*2", "16spp/2", "default", "motion0.5", "motion1")
 SEEDS = (1, 2)
 
 
@@ -37,9 +39,9 @@ def main():
     md = ["# Resolution as a lever: the fan at three film sizes", "",
           f"One 4 ms scan period of `scenes/fan/fan.xml` (250 Hz circle), {len(SEEDS)} seeds a setting, each size "
           "against its own reference (256 multi-jittered spp, 400 steps). Wall time: the render's, one thread, "
-          "fastest seed. px per step: the largest image motion of one step (the scan's, from the galvo "
-          "geometry; for steps placed by image motion, their bound on the scan's and the blades' motion "
-          "together, about twice the scan's alone at the same steps). Error: per-pixel event-count error (L1, "
+          "fastest seed. px per step: the image motion of one step, the scan's (galvo geometry) and the blades' "
+          "(projected bounds) together; for steps placed by image motion, their bound. Error: per-pixel "
+          "event-count error (L1, "
           "relative), mean over seeds; refocus: PSNR of the period refocused at 0.6 m on textured pixels.", "",
           "| film | setting | steps | px per step | wall s | event-count error | refocus PSNR (dB) | fewest count "
           "errors at 4 spp |", "|---|---|---|---|---|---|---|---|"]
@@ -69,9 +71,9 @@ def _px(row) -> float:
 
 
 def _chart(summary, rows, path):
-    """Count error against the image motion of one step, a line per film size for uniform steps (the scan's
-    motion) and markers for steps placed by image motion (their bound): the optima line up in pixels a step,
-    not in steps."""
+    """Count error against the image motion of one step (scan and blades), a line per film size for the
+    uniform ladder, a star for the default and diamonds for steps placed by image motion (their bound): the
+    optima line up in pixels a step, not in steps."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -81,17 +83,17 @@ def _chart(summary, rows, path):
         name = f"fan {w}x{h}"
         px = {r["setting"]: _px(r) for r in rows if r["scene"] == name}
         uniform = sorted((s for s in summary if s["scene"] == name and s["spp"] == 4
-                          and not s["setting"].startswith("motion")), key=lambda s: px[s["setting"]])
+                          and s["setting"].startswith("steps")), key=lambda s: px[s["setting"]])
         ax.plot([px[s["setting"]] for s in uniform], [s["count_error"] for s in uniform], "o-", color=colour,
                 label=f"{w}x{h}, 4 spp, 25-200 uniform steps")
-        d = next(s for s in uniform if s["setting"] == "default")
+        d = next(s for s in summary if s["scene"] == name and s["setting"] == "default")
         ax.plot([px["default"]], [d["count_error"]], "*", color=colour, markersize=14)
         motion = [s for s in summary if s["scene"] == name and s["setting"].startswith("motion")]
         ax.plot([px[s["setting"]] for s in motion], [s["count_error"] for s in motion], "D", color=colour,
                 markerfacecolor="none", markersize=9)
     ax.set_xscale("log")
-    ax.set_xlabel("image motion of one step, px\nlines: the scan's, uniform steps (star: 100); diamonds: steps "
-                  "placed by image motion (scan + blades, at most this)", fontsize=8)
+    ax.set_xlabel("image motion of one step (scan + blades), px\nlines: uniform steps; star: the default "
+                  "(uniform, as many as the motion needs); diamonds: steps placed by image motion", fontsize=8)
     ax.set_ylabel("per-pixel event-count error vs converged")
     ax.set_title("The fan, one scan period: fewest errors near 0.5-1 px a step")
     ax.grid(alpha=0.3, which="both")

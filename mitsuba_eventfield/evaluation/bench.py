@@ -26,13 +26,15 @@ time, from the fastest seed's run, which is the one plotted, to the slowest: oth
 wall time is the render's (kernels compiled beforehand, on one thread: ``THREADS``), as a ratio to the fastest
 setting of the scene.
 The Pareto front of each measure (no other setting both faster and more accurate: fastest seeds' times, mean
-errors) and the default (what ``eventfield render`` does unasked: 4 spp, 100 uniform steps, a fixed seed, the
-scene's sampler) are marked in the chart; ``bench_chart`` also says which settings beat the default beyond the
-noise. Each scene's ``auto20us`` setting is planned by ``simulate/auto.py`` (its planning time counts).
+errors) and the default (what ``eventfield render`` does unasked: 4 spp, uniform steps as many as the image
+motion needs, ``stepping.default_steps``, a fixed seed, the scene's sampler) are marked in the chart;
+``bench_chart`` also says which settings beat the default beyond the noise. Settings that name no steps take
+the default's rule at their own spp and sampler (as ``--spp 16`` does); the ladder of 25-400 uniform steps
+(1/4-4 x ``BenchScene.steps``) holds everything else at the default's. Each scene's ``auto20us`` setting is
+planned by ``simulate/auto.py`` (its planning time counts).
 """
 from __future__ import annotations
 
-import math
 import os
 import tempfile
 import time
@@ -47,6 +49,8 @@ from ..simulate.auto import load_with_sampler, plan
 from ..simulate.image_motion import largest_px_per_step
 from ..simulate.render import render_events, render_frames
 from . import analytic as an
+from .analytic_scene import (ANALYTIC_C, ANALYTIC_DURATION, analytic_score,  # noqa: F401 (re-exported)
+                             analytic_velocity, write_analytic_scene)
 
 # the levers; "key" names a setting on the command line (--settings)
 SETTINGS = [
@@ -56,6 +60,7 @@ SETTINGS = [
     {"key": "64spp", "spp": 64},
     {"key": "steps/4", "spp": 4, "steps_factor": 0.25},
     {"key": "steps/2", "spp": 4, "steps_factor": 0.5},
+    {"key": "steps*1", "spp": 4, "steps_factor": 1},            # eventfield render's default until 2026-11
     {"key": "steps*2", "spp": 4, "steps_factor": 2},
     {"key": "steps*4", "spp": 4, "steps_factor": 4},
     {"key": "16spp/2", "spp": 16, "steps_factor": 0.5},
@@ -80,7 +85,6 @@ MEASURES = {   # key: (label, higher is better)
     "rate_error": ("event-rate error |ratio - 1|", False),
     "interval_ks": ("event intervals, KS distance", False),
 }
-ANALYTIC_C, ANALYTIC_DURATION = 0.1, 0.01
 # the timed renders run on one thread: on the shared 2-core machine, with another process holding a core, two
 # threads took 0.82-0.88 s for a render one thread did in 0.44-0.47 s (demo, 48x36, 4 spp, 100 steps), and the
 # two-thread times of one setting varied 2x between seeds as other work came and went
@@ -92,7 +96,7 @@ class BenchScene:
     name: str
     path: str | None                  # None: the analytic scene (written to a temporary folder)
     duration: float
-    steps: int = 100                  # the default setting's uniform steps (eventfield render's default)
+    steps: int = 100                  # the uniform-step ladder's 1 x (steps*1; 1/4 to 4 x this)
     defines: dict = field(default_factory=dict)
     refocus_depth: float | None = None   # galvo: also score refocus at this depth
     depth_range: tuple | None = None     # galvo: also score depth from focus over (near, far) metres
@@ -109,7 +113,7 @@ SUITE = (BenchScene("analytic", None, ANALYTIC_DURATION, defines={"height": 48})
 
 
 def label(cfg: dict, base_steps: int) -> str:
-    """A setting in words, with its real numbers: '4 spp, 100 steps (default)'."""
+    """A setting in words, with its real numbers: '4 spp, 25 steps'; '4 spp, steps by image motion (default)'."""
     if cfg.get("auto"):
         return f"auto, --timing-accuracy {cfg['auto'] * 1e6:g}us (plan time included)"
     if cfg.get("adaptive"):
@@ -119,7 +123,8 @@ def label(cfg: dict, base_steps: int) -> str:
     text = f"{cfg['spp']} spp" + (f" {cfg['sampler']}" if cfg.get("sampler") else "")
     if cfg.get("spp_changing"):
         text += f" ({cfg['spp_changing']} where it changes)"
-    text += f", {max(1, round(base_steps * cfg.get('steps_factor', 1)))} steps"
+    text += (f", {max(1, round(base_steps * cfg['steps_factor']))} steps" if "steps_factor" in cfg
+             else ", uniform steps by image motion")
     if cfg.get("seed_mode") == "independent":
         text += ", new seed per step"
     return text + (" (default)" if cfg["key"] == DEFAULT_KEY else "")
@@ -144,88 +149,6 @@ def pick_scenes(names=None) -> list:
     if bad or not names:
         raise ConfigError(f"bench scenes {','.join(bad) or '(none)'}: choose from {', '.join(known)}")
     return [s for s in SUITE if s.name in names]
-
-
-ANALYTIC_XML = """<?xml version="1.0"?>
-<!-- The analytic scene (evaluation/analytic.py): a sinusoidal emitter at z = {d} seen by a pinhole. -->
-<scene version="3.0.0">
-    <default name="height" value="{h}"/>  <!-- every row sees the same sinusoid: rows only add pixels -->
-    <integrator type="eventfield">
-        <float name="threshold" value="{c}"/>
-        <integrator type="path"><integer name="max_depth" value="1"/></integrator>
-    </integrator>
-    <sensor type="perspective">
-        <float name="fov" value="{fov}"/>
-        <string name="fov_axis" value="x"/>
-        <transform name="to_world"><lookat origin="0, 0, 0" target="0, 0, 1" up="0, 1, 0"/></transform>
-        <film type="hdrfilm">
-            <integer name="width" value="{w}"/>
-            <integer name="height" value="$height"/>
-            <rfilter type="box"/>
-        </film>
-    </sensor>
-    <shape type="rectangle" id="plane">
-        <transform name="to_world">
-            <rotate y="1" angle="180"/>
-            <scale x="{half}" y="{half}" z="1"/>
-            <translate z="{d}"/>
-        </transform>
-        <emitter type="area">
-            <texture type="bitmap" name="radiance">
-                <string name="filename" value="analytic_texture.exr"/>
-                <boolean name="raw" value="true"/>
-                <string name="filter_type" value="bilinear"/>
-                <string name="wrap_mode" value="clamp"/>
-            </texture>
-        </emitter>
-    </shape>
-</scene>
-"""
-
-
-def analytic_velocity(duration: float = ANALYTIC_DURATION, steps: int = 100) -> float:
-    """Plane speed (world units per second) that moves the image half a pixel per step of ``steps``."""
-    return 0.5 * an.PIX / (duration / steps)
-
-
-def write_analytic_scene(folder: str, velocity: float, duration: float = ANALYTIC_DURATION,
-                         threshold: float = ANALYTIC_C) -> str:
-    """The analytic scene as files in ``folder`` (XML, its texture as EXR, its motion TOML), with Mitsuba's
-    default sampler, so that it renders and plans like any scene file; returns the XML path. Its pixels are
-    ``an.scene_dict``'s (same texture, geometry and film); ``-D height=N`` (even) adds rows, which see the same
-    sinusoid (the plane faces the camera, so a column maps to one plane x) and are scored by
-    :func:`analytic_score`."""
-    import mitsuba as mi
-    os.makedirs(folder, exist_ok=True)
-    u = -1 + (np.arange(an.TEX_N) + 0.5) * (2 / an.TEX_N)
-    tex = (an.A + an.B * np.sin(2 * np.pi * (-an.PLANE_HALF * u) / an.LAM)).astype(np.float32)
-    mi.Bitmap(np.tile(tex, (2, 1))[..., None]).write(os.path.join(folder, "analytic_texture.exr"))
-    path = os.path.join(folder, "analytic.xml")
-    with open(path, "w") as f:
-        f.write(ANALYTIC_XML.format(c=threshold, fov=repr(an.FOV), w=an.WIDTH, h=an.HEIGHT,
-                                    half=repr(an.PLANE_HALF), d=repr(an.D)))
-    with open(os.path.join(folder, "analytic.motion.toml"), "w") as f:
-        f.write(f"version = 1\nduration = {duration!r}\n\n[objects.plane]\nvelocity = [{velocity!r}, 0.0, 0.0]\n")
-    return path
-
-
-def analytic_score(ev, truth) -> dict:
-    """``an.score`` over a film of any even height: every pair of rows against the exact events of one pair."""
-    from ..events.stream import EventStream
-    if ev.width != an.WIDTH or ev.height % an.HEIGHT:
-        raise ConfigError(f"analytic scene: a {ev.width}x{ev.height} film; expected {an.WIDTH} columns and an "
-                          f"even number of rows")
-    diffs, errors, y = [], [], ev.y.astype(np.int64)
-    for row in range(0, ev.height, an.HEIGHT):
-        sel = (y >= row) & (y < row + an.HEIGHT)
-        s = an.score(EventStream(ev.x[sel], y[sel] - row, ev.t[sel], ev.p[sel], an.WIDTH, an.HEIGHT), truth)
-        diffs.append(s["count_diff"])
-        errors.append(s["timing_errors_us"])
-    err = np.concatenate(errors)
-    n_true = ev.height * sum(len(e) for e in truth)
-    return {"count_error": float(np.abs(np.concatenate(diffs)).sum() / max(n_true, 1)),
-            "timing_median_us": float(np.median(err)) if len(err) else math.nan,
-            "timing_p99_us": float(np.percentile(err, 99)) if len(err) else math.nan}
 
 
 def _pixel_counts(ev) -> np.ndarray:
@@ -333,8 +256,8 @@ def _render(path, spec: BenchScene, cfg: dict, seed: int, warm: bool = False):
     if cfg.get("adaptive"):          # by image motion alone at px_per_step, or capped at the default's step
         kw.update(adaptive=True, max_log_change=0.5, **({"px_per_step": cfg["px_per_step"]} if "px_per_step" in cfg
                                                          else {"max_step": spec.duration / spec.steps}))
-    else:
-        kw.update(steps=max(1, int(round(spec.steps * cfg.get("steps_factor", 1)))))
+    elif "steps_factor" in cfg:                  # else the render's default steps (stepping.default_steps)
+        kw.update(steps=max(1, int(round(spec.steps * cfg["steps_factor"]))))
     import drjit as dr
     previous = dr.thread_count()
     dr.set_thread_count(THREADS)               # only around the renders: Mitsuba's EXR input and output hang on it

@@ -21,20 +21,31 @@ import numpy as np
 MIN_STEPS = 3
 
 
+def noise_map(timed, spp: int, seed: int, t: float) -> np.ndarray:
+    """Per-pixel Monte-Carlo noise in log brightness at time ``t``: two seeds' renders (``seed``, ``seed + 1``)
+    differ by |a - b|, sqrt 2 times one render's spread."""
+    from .render import render_frames
+    a, b = (render_frames(timed, [t], spp=spp, seed=s)[0] for s in (seed, seed + 1))
+    return np.abs(a - b) / math.sqrt(2)
+
+
 class AccuracyLimit:
     """Collects the frames the estimates need while the render runs; :meth:`note` writes the verdict."""
 
     def __init__(self, dt: float, spp: int, active: bool = True):
         self.dt, self.spp, self.active = dt, spp, active
-        self.frames, self.sigma = [], None
+        self.frames, self.sigma, self.probed = [], None, None
 
     @classmethod
-    def for_stepping(cls, st) -> "AccuracyLimit":
+    def for_stepping(cls, st, sigma: np.ndarray | None = None) -> "AccuracyLimit":
         """Active for uniform, fixed-seed renders of at least MIN_STEPS steps; otherwise every method does
-        nothing (adaptive steps and independent seeds have no single step or frozen noise to speak of)."""
+        nothing (adaptive steps and independent seeds have no single step or frozen noise to speak of).
+        ``sigma``: the noise map already measured (``noise_map``, by ``stepping.default_steps``): not again."""
         uniform = not st.adaptive and st.steps is not None
-        return cls(st.duration / st.steps if uniform else 0.0, st.spp,
-                   active=uniform and st.seed_mode == "fixed" and st.steps >= MIN_STEPS)
+        limit = cls(st.duration / st.steps if uniform else 0.0, st.spp,
+                    active=uniform and st.seed_mode == "fixed" and st.steps >= MIN_STEPS)
+        limit.probed = sigma
+        return limit
 
     def first_frame(self, loop, t_start: float) -> None:
         """Keep the first frame (the pixels' initial brightness) and render it again with another seed."""
@@ -42,6 +53,9 @@ class AccuracyLimit:
             return
         integ, st = loop.integ, loop.st
         self.frames.append(integ.log_prev.numpy())
+        if self.probed is not None:
+            self.sigma = self.probed
+            return
         loop.timed.set_time(t_start)
         loop.render_frame(st.seed + 1, once=True)
         other = integ.staged.numpy()

@@ -40,7 +40,7 @@ import numpy as np
 from ..backend import set_variant
 from ..errors import ConfigError
 from ..scene.timed import load_scene
-from .accuracy_limit import AccuracyLimit
+from .accuracy_limit import AccuracyLimit, noise_map
 from .render import render_frames
 
 NOISE_SHARE = 0.6          # of a requested timing accuracy, the part Monte-Carlo noise may take
@@ -137,12 +137,6 @@ def _own_sampler(timed) -> str:
     return {"lowdiscrepancy": "ldsampler"}.get(name, name)
 
 
-def _sigma_map(timed, spp: int) -> np.ndarray:
-    """Per-pixel Monte-Carlo noise in log brightness as accuracy_limit measures it: two seeds of one frame."""
-    a, b = (render_frames(timed, [0.0], spp=spp, seed=s)[0] for s in (0, 1))
-    return np.abs(a - b) / math.sqrt(2)
-
-
 def _estimate(frames, sigma, dt, spp) -> dict | None:
     """accuracy_limit's estimate (noise_us, steps_us) from three frames ``dt`` apart and a noise map."""
     lim = AccuracyLimit(dt, spp)
@@ -157,7 +151,7 @@ def _noise_model(scene, frames, dt, probe_spp) -> dict | None:
     points = []
     for factor in PROBES:
         spp = probe_spp * factor
-        sigma = _sigma_map(scene, spp)
+        sigma = noise_map(scene, spp, 0, 0.0)
         est = _estimate(frames, sigma, dt, spp)
         if est is None:
             return None

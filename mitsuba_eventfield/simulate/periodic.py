@@ -1,32 +1,12 @@
 """Periodic views in the time-stepping loop: a static scene under a periodic scan (or a fixed camera) repeats
 its frames every period, and an ideal pixel whose state comes back repeats its events. These helpers decide
-when that is exact, and flag scans cut into too few steps."""
+when that is exact. (Steps too coarse for a scan: ``image_motion.note_image_motion``.)"""
 from __future__ import annotations
-
-import math
-import sys
 
 import numpy as np
 
 from ..scene.timed import TimedScene
 from ..validate import available_memory
-
-MIN_STEPS_PER_SCAN_PERIOD = 16
-
-
-def warn_coarse_scan_steps(period, duration, steps, notes):
-    """A scan period cut into a handful of steps misses events: measured on the fan (250 Hz circle), 4 steps per
-    period give 29 % fewer events than a converged run, 80 steps still 7.7 % fewer. Say so, in the summary (and so
-    in the metadata) and on stderr, instead of returning a silently poor result."""
-    if not period:
-        return
-    per_period = steps * period / duration
-    if per_period < MIN_STEPS_PER_SCAN_PERIOD:
-        need = int(math.ceil(MIN_STEPS_PER_SCAN_PERIOD * duration / period))
-        note = (f"warning: only {per_period:.3g} steps per {period * 1e3:g} ms scan period (fewer than "
-                f"{MIN_STEPS_PER_SCAN_PERIOD}): events are missed; use --steps {need} or more")
-        notes.append(note)
-        print(f"eventfield: {note}", file=sys.stderr)
 
 
 def period_blocks(steps_events):

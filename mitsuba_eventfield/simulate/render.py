@@ -23,13 +23,13 @@ from ..events.io import format_of
 from ..plugins.event_fill import film_limit_error
 from ..scene.timed import TimedScene, load_scene
 from ..validate import available_memory, positive
-from .periodic import period_blocks, phase_grid, reuse_plan, warn_coarse_scan_steps
+from .periodic import period_blocks, phase_grid, reuse_plan
 from . import sample_allocation, static_pixels
 from .frames import FrameRenderer
 from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
 from .image_motion import note_image_motion
-from .stepping import SEED_MODES, Stepping, stepping  # noqa: F401  (SEED_MODES: re-exported)
+from .stepping import SEED_MODES, Stepping, default_steps, stepping  # noqa: F401  (SEED_MODES: re-exported)
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary, run_metadata
 
@@ -98,10 +98,10 @@ class _Loop:
     integrator, orders and reads out the step's events and hands them to the sink."""
 
     def __init__(self, timed, integ, st: Stepping, sink, summary, bar, reuse: bool, checkpoints=None,
-                 allocation=None):
+                 allocation=None, noise=None):
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
         self.checkpoints, self.allocation = checkpoints, allocation
-        self.limit = AccuracyLimit.for_stepping(st)      # what limits timing accuracy: steps or noise
+        self.limit = AccuracyLimit.for_stepping(st, noise)   # what limits timing accuracy: steps or noise
         if allocation is not None:                       # noise where it counts: in the pixels that change
             self.limit.spp = allocation.spp_changing
         self.width, self.height = timed.film_size
@@ -282,7 +282,6 @@ def _new_summary(timed, st: Stepping, output) -> RenderSummary:
     summary = RenderSummary(width=width, height=height, duration_s=st.duration,
                             output=os.path.abspath(output) if output else None)
     if st.steps is not None:
-        warn_coarse_scan_steps(timed.scan_period, st.duration, st.steps, summary.notes)
         note_image_motion(timed, st.t_start, st.duration, st.steps, summary)
     return summary
 
@@ -291,6 +290,18 @@ def _progress_bar(duration):
     from tqdm import tqdm
     return tqdm(total=round(duration * 1e3, 6), unit="ms", unit_scale=False, desc="rendering", file=sys.stderr,
                 bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} ms sim [{elapsed}<{remaining}]{postfix}")
+
+
+def _steps_and_samples(timed, st: Stepping, integ, spp_changing):
+    """(stepping, noise map or None, sample allocation or None): the default steps where none were asked for
+    (``stepping.default_steps``, which measures the noise map the accuracy-limit note then reuses), and where
+    ``spp_changing`` is given the pixels that get more samples."""
+    integ.reset()
+    noise = None
+    if st.needs_default_steps:
+        st, noise = default_steps(st, timed, integ, probe_spp=spp_changing)
+    allocation = None if spp_changing is None else sample_allocation.plan(timed, st, integ, spp_changing)
+    return st, noise, allocation
 
 
 def render_events(scene, duration: float | None = None, *, steps: int | None = None, adaptive=False,
@@ -309,6 +320,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     ``reuse``: a static scene under a periodic view renders one period and feeds its frames again; a moving
     one renders the pixels no moving object can change once per period (``static_pixels.py``); False: every
     pixel at every step.
+    ``steps``: uniform steps; default: as many as the known image motion needs (``stepping.default_steps``).
     ``adaptive``: False (``steps`` uniform steps), True, "motion" or "log-change" (``stepping``: by the known
     image motion, at most ``px_per_step`` pixels per step, or by the per-pixel log change). ``preset``
     ("ideal", "davis346", "prophesee_gen4") and ``pixel`` (PixelConfig fields, e.g. ``{"refractory_s": 1e-4,
@@ -329,8 +341,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
         check_writable(output, "event file")
         format_of(output, fmt)
     integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel)
-    integ.reset()
-    allocation = None if spp_changing is None else sample_allocation.plan(timed, st, integ, spp_changing)
+    st, noise, allocation = _steps_and_samples(timed, st, integ, spp_changing)
     summary = _new_summary(timed, st, output)
     meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,
                      seed_mode=st.seed_mode, stepping=st.as_meta(),
@@ -343,7 +354,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     bar = _progress_bar(st.duration) if progress else None
     wall0 = time.perf_counter()
     try:
-        loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation)
+        loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation, noise)
         stream = loop.finish(loop.run(), meta, wall0)
     except BaseException:
         sink.abort()

@@ -105,15 +105,17 @@ def test_version(capsys):
 
 
 def test_coarse_scan_steps_are_flagged(tmp_path, capsys):
-    """4 steps per 4 ms scan period miss events: the summary and the file's metadata say so."""
+    """4 steps per 4 ms scan period move the image more than a pixel a step: stderr, the summary and the
+    file's metadata say so, with the steps that suffice (which then say nothing)."""
     import mitsuba_eventfield as ef
     out = str(tmp_path / "coarse.h5")
     assert cli.main(["render", GALVO, "-o", out, *SMALL, "--duration", "0.008", "--steps", "8", "--quiet"]) == 0
-    assert "only 4 steps per 4 ms scan period" in capsys.readouterr().err
-    notes = ef.read_events(out).meta["render"]["notes"]
-    assert any("use --steps 32 or more" in n for n in notes)
-    assert cli.main(["render", GALVO, "-o", out, *SMALL, "--duration", "0.008", "--steps", "32", "--quiet"]) == 0
-    assert "steps per" not in capsys.readouterr().err
+    assert "steps coarser than the image motion: per step the scan" in capsys.readouterr().err
+    notes = [n for n in ef.read_events(out).meta["render"]["notes"] if "steps coarser" in n]
+    need = int(notes[0].split("--steps ")[1].split()[0])
+    assert 8 < need <= 32
+    assert cli.main(["render", GALVO, "-o", out, *SMALL, "--duration", "0.008", "--steps", str(need), "--quiet"]) == 0
+    assert "steps coarser" not in capsys.readouterr().err
 
 
 def _render_process(out, *extra):

@@ -89,8 +89,8 @@ def test_moving_objects_add_to_the_scan():
 
 
 def test_unknown_motion_falls_back_or_refuses():
-    timed = ef.load_scene(GRID_K, views_px=48)                     # kaleidoscope: no single pinhole to project
-    assert motion_schedule(timed, 0.0, 0.002) is None
+    timed = ef.load_scene(GRID_K, views_px=48, motion={"objects": {"camera": {"velocity": [0.1, 0, 0]}}})
+    assert motion_schedule(timed, 0.0, 0.002) is None               # a moving sensor: its motion is not projected
     ev = ef.render_events(timed, 0.002, adaptive=True, min_step=1e-4, max_step=5e-4)
     assert ev.meta["stepping"]["criterion"] == "log change"
     with pytest.raises(EventFieldError, match="not known before rendering"):

@@ -1,0 +1,111 @@
+"""The steps a render takes unasked (issue 18: defaults chosen by measurement, ``stepping.default_steps``):
+uniform steps sized by the image motion known before rendering, checked against the analytic scene's exact
+events, rendered image shifts, the galvo phase grid and the scene's own motion."""
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.evaluation import analytic as an
+from mitsuba_eventfield.evaluation import bench
+from mitsuba_eventfield.scene import bundled_scene
+from mitsuba_eventfield.simulate import image_motion
+from mitsuba_eventfield.simulate.stepping import MIN_DEFAULT_STEPS, UNKNOWN_MOTION_STEPS
+
+DEMO = bundled_scene("demo/demo.xml")
+
+
+def _chosen(ev):
+    st = ev.meta["stepping"]
+    assert st["mode"] == "uniform"
+    return st["chosen"]
+
+
+def test_kaleidoscope_views_move_as_pinholes_at_their_subapertures():
+    """The grid's image motion the stepping predicts for every kaleidoscope view against the shift measured
+    by phase correlation between two rendered frames 20 ms apart (centre and corner view, 64 px tiles)."""
+    timed = ef.load_scene(bundled_scene("moving_grid/kaleidoscope.xml"), views_px=192)
+    timed.set_time(0.0)
+    predicted = image_motion.object_displacements(timed, np.linspace(0.0, 0.02, 21)).sum()
+    frames = ef.render_frames(timed, [0.0, 0.02], spp=16, log=False).astype(np.float32)
+    for row, col in ((1, 1), (0, 0), (2, 1)):
+        tile = np.s_[row * 64:(row + 1) * 64, col * 64:(col + 1) * 64]
+        (dx, dy), _ = cv2.phaseCorrelate(frames[0][tile], frames[1][tile])
+        assert math.hypot(dx, dy) == pytest.approx(predicted, rel=0.05), (row, col)
+    assert predicted == pytest.approx(2.8, rel=0.05)        # 0.5 m/s at 1 m through a 13 deg view of 64 px
+
+
+def test_low_noise_scene_takes_half_pixel_steps_and_meets_its_exact_events(tmp_path):
+    """The analytic scene (4 spp noise 0.035 C): 0.5 px a step, which its speed makes 100 steps, and the
+    events' count error against the closed form within 1 % (at 1 px a step it is 3.8 %)."""
+    velocity = bench.analytic_velocity()
+    path = bench.write_analytic_scene(str(tmp_path), velocity)
+    ev = ef.render_events(ef.load_scene(path, height=48))     # 48 rows of the same sinusoid: the bench's film
+    chosen = _chosen(ev)
+    assert chosen["by"] == "image motion" and chosen["px_per_step"] == 0.5
+    assert chosen["noise_over_threshold"] < 0.25
+    assert ev.meta["render"]["steps"] == 100
+    assert ev.meta["render"]["image_motion_px_per_step"]["objects"] <= 0.5 + 1e-6
+    truth = an.truth_events(velocity, bench.ANALYTIC_DURATION, bench.ANALYTIC_C)
+    assert bench.analytic_score(ev, truth)["count_error"] < 0.01
+    assert ev.meta["render"]["timing_limit"] is not None      # the probe's noise map serves the limit note too
+
+
+def test_noisy_scene_takes_one_pixel_steps_until_samples_quiet_the_noise():
+    """The demo at 4 spp (noise 0.40 C): 1 px a step; at 64 spp the noise is small and the steps halve. The
+    objects' motion per step, computed independently for the steps taken, stays under each bound."""
+    timed = ef.load_scene(DEMO, width=48, height=36)
+    noisy = ef.render_events(timed, 0.05, spp=4)
+    quiet = ef.render_events(timed, 0.05, spp=64)
+    a, b = _chosen(noisy), _chosen(quiet)
+    assert a["px_per_step"] == 1.0 and a["noise_over_threshold"] >= 0.25
+    assert b["px_per_step"] == 0.5 and b["noise_over_threshold"] < 0.25
+    for ev, bound in ((noisy, 1.0), (quiet, 0.5)):
+        steps = ev.meta["render"]["steps"]
+        assert image_motion.object_px_per_step(timed, 0.0, 0.05, steps) <= bound * 1.001
+        assert image_motion.object_px_per_step(timed, 0.0, 0.05, steps - 1) > bound * 0.95   # not more than needed
+    assert quiet.meta["render"]["steps"] == pytest.approx(2 * noisy.meta["render"]["steps"], abs=1)
+
+
+def test_galvo_default_steps_keep_the_phase_grid_and_reuse_periods():
+    """Under a periodic scan the default is a whole number of steps per period, so a static scene's later
+    periods are fed from the first (reused) and the bound holds for scan and blades together."""
+    timed = ef.load_scene(bundled_scene("galvo_static/galvo_static.xml"), width=48, height=36)
+    period = timed.scan_period
+    ev = ef.render_events(timed, 3 * period)
+    steps = ev.meta["render"]["steps"]
+    assert steps % 3 == 0 and steps >= MIN_DEFAULT_STEPS
+    assert ev.meta["render"]["image_motion_px_per_step"]["scan"] <= _chosen(ev)["px_per_step"] * 1.05
+    assert ev.meta["render"]["reused_steps"] + ev.meta["render"]["copied_steps"] >= 2 * steps // 3
+    fan = ef.load_scene(bundled_scene("fan/fan.xml"), width=48, height=36)
+    ev = ef.render_events(fan, 2 * fan.scan_period)
+    chosen, motion = _chosen(ev), ev.meta["render"]["image_motion_px_per_step"]
+    assert ev.meta["render"]["steps"] % 2 == 0
+    assert motion["scan"] + motion["objects"] <= chosen["px_per_step"] * 1.05
+
+
+def test_unknown_motion_takes_the_fixed_default(tmp_path):
+    """A moving sensor: nothing projects its motion, so neither the default nor adaptive stepping pretends to
+    know it (the default takes 100 steps, adaptive falls back to the log change)."""
+    timed = ef.load_scene(DEMO, motion={"objects": {"camera": {"velocity": [0.5, 0, 0]}}}, width=32, height=24)
+    times = np.linspace(0.0, 0.01, 5)
+    assert image_motion.image_displacements(timed, times) is None
+    assert image_motion.motion_schedule(timed, 0.0, 0.01) is None
+    ev = ef.render_events(timed, 0.01)
+    assert ev.meta["render"]["steps"] == UNKNOWN_MOTION_STEPS
+    assert "not known" in _chosen(ev)["by"]
+
+
+def test_low_pass_pixel_bounds_the_default_step():
+    """davis346's 300 Hz photoreceptor: no default step longer than 1 / (pi 300 Hz), 1.06 ms."""
+    timed = ef.load_scene(DEMO, width=32, height=24)
+    ev = ef.render_events(timed, 0.02, preset="davis346")
+    assert ev.meta["render"]["steps"] >= math.ceil(0.02 * math.pi * 300) == 19
+    assert _chosen(ev)["steps_for_lowpass"] == 19
+
+
+def test_explicit_steps_are_untouched():
+    ev = ef.render_events(ef.load_scene(DEMO, width=32, height=24), 0.01, steps=7)
+    assert ev.meta["stepping"] == {"mode": "uniform", "steps": 7} and ev.meta["render"]["steps"] == 7
