@@ -69,7 +69,7 @@ def object_displacements(timed: TimedScene, times) -> np.ndarray | None:
         lo, hi = np.array(box.min).ravel(), np.array(box.max).ravel()
         corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         now = np.linalg.inv(obj.matrix(timed.time))          # the shape sits at its pose of the scene's time
-        world = np.stack([(obj.matrix(t) @ now @ corners.T).T for t in times])      # (n+1, 8, 4)
+        world = np.einsum("tij,kj->tki", obj.matrices(times) @ now, corners)      # (n+1, 8, 4)
         for world_to_cam, focal in cameras:
             cam = world @ world_to_cam.T
             z = np.where(np.abs(cam[..., 2]) > 1e-9, cam[..., 2], 1e-9)
@@ -120,9 +120,7 @@ def image_displacements(timed: TimedScene, times) -> np.ndarray | None:
     scan = scan_displacements(timed, times) if period else np.zeros(n)
     moving = timed.motion is not None and not timed.is_static
     objects = object_displacements(timed, times) if moving else np.zeros(n)
-    if scan is None or objects is None:
-        return None
-    return scan + objects
+    return None if scan is None or objects is None else scan + objects
 
 
 def _motion_times(timed: TimedScene, t_start: float, duration: float) -> np.ndarray:
@@ -133,8 +131,8 @@ def _motion_times(timed: TimedScene, t_start: float, duration: float) -> np.ndar
 
 
 def largest_image_speed(timed: TimedScene, t_start: float, duration: float) -> float | None:
-    """The fastest the image moves anywhere during the render, pixels per second (scan plus objects); 0.0 when
-    nothing moves; None when some motion is not known (``image_displacements``)."""
+    """The fastest the image moves anywhere during the render, pixels per second (scan plus objects, sampled
+    as ``motion_schedule`` samples them); 0.0 when nothing moves; None when some motion is not known."""
     times = _motion_times(timed, t_start, duration)
     timed.set_time(t_start)            # the shapes' bounds at the render's start: the same answer on every call
     d = image_displacements(timed, times)
@@ -186,23 +184,34 @@ def scan_px_per_step(timed: TimedScene, duration: float, steps: int) -> float | 
     return scan_image_path_px(sensor.optics_metadata(), width, height) * (duration / steps) / period
 
 
-def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps: int, summary) -> None:
+def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps: int, summary,
+                      chosen: dict | None = None) -> None:
     """Record the image motion per step in the summary (and so the metadata), and warn (a note, and on stderr)
     when the scan's and the objects' together are more than :data:`MAX_PX_PER_STEP` pixels. This is the one
     coarse-step check, galvo or not: a fixed count of steps per scan period (the fan lost 29 % of its events
-    at 4 a period, 346x260) says nothing at another film size or scan amplitude; the pixels a step do."""
+    at 4 a period, 346x260) says nothing at another film size or scan amplitude; the pixels a step do.
+    ``chosen``: the default steps' reasons (``stepping.default_steps``): steps it made coarser than a pixel
+    because Monte-Carlo noise limits the render are noted with that reason, not warned about."""
     scan = scan_px_per_step(timed, duration, steps)
     objects = object_px_per_step(timed, t_start, duration, steps)
     summary.image_motion_px_per_step = {"scan": scan, "objects": objects}
     worst = (scan or 0.0) + (objects or 0.0)            # a point on a moving object moves by both
-    if worst > MAX_PX_PER_STEP * (1 + 1e-9):
-        what = " and ".join(f"the {k} {v:.3g} px" for k, v in (("scan", scan), ("objects", objects)) if v)
-        need = int(math.ceil(steps * worst / MAX_PX_PER_STEP))
-        note = (f"warning: steps coarser than the image motion: per step {what} (more than {MAX_PX_PER_STEP:g} "
-                f"px: events between rendered instants are interpolated, not resolved, and missed); --steps {need} "
-                f"keeps it under {MAX_PX_PER_STEP:g} px")
-        summary.notes.append(note)
-        print(f"eventfield: {note}", file=sys.stderr)
+    if worst <= MAX_PX_PER_STEP * (1 + 1e-9):
+        return
+    what = " and ".join(f"the {k} {v:.3g} px" for k, v in (("scan", scan), ("objects", objects)) if v)
+    allowed = (chosen or {}).get("px_per_step") or MAX_PX_PER_STEP
+    if worst <= allowed * (1 + 1e-6):
+        summary.notes.append(f"steps of up to {worst:.3g} px of image motion (per step {what}), chosen because "
+                             f"Monte-Carlo noise ({chosen['noise_over_threshold']:.2g} C) limits this render: "
+                             "finer steps would add noise events, not accuracy; with more samples (e.g. --spp 16) "
+                             "the default steps are finer")
+        return
+    need = int(math.ceil(steps * worst / MAX_PX_PER_STEP))
+    note = (f"warning: steps coarser than the image motion: per step {what} (more than {MAX_PX_PER_STEP:g} "
+            f"px: events between rendered instants are interpolated, not resolved, and missed); --steps {need} "
+            f"keeps it under {MAX_PX_PER_STEP:g} px")
+    summary.notes.append(note)
+    print(f"eventfield: {note}", file=sys.stderr)
 
 
 def largest_px_per_step(meta: dict) -> float | None:

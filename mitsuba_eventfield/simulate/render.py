@@ -282,7 +282,7 @@ def _new_summary(timed, st: Stepping, output) -> RenderSummary:
     summary = RenderSummary(width=width, height=height, duration_s=st.duration,
                             output=os.path.abspath(output) if output else None)
     if st.steps is not None:
-        note_image_motion(timed, st.t_start, st.duration, st.steps, summary)
+        note_image_motion(timed, st.t_start, st.duration, st.steps, summary, st.chosen)
     return summary
 
 

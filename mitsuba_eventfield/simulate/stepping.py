@@ -126,22 +126,24 @@ def stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_ste
 # uniform steps (so that a periodic scan keeps its phase grid: period reuse, static pixels) as many as keep the
 # fastest known image motion (scan plus objects) under FINE_PX_PER_STEP pixels a step, or NOISY_PX_PER_STEP
 # where Monte-Carlo noise is large against the threshold. The analytic scene (noise 0.035 C at 4 spp): 0.5 px a
-# step 0.7 % event-count error and 41 us p99 timing, 1 px 3.8 % and 125 us. The demo and the fan at 4 spp
-# (noise 0.40 C and 0.48 C): every step re-samples the noise of the pixels the motion sweeps, and 1 px a step
-# has fewer count errors than 0.5 px (demo 0.66 against 0.90, fan 0.18 against 0.23).
-FINE_PX_PER_STEP, NOISY_PX_PER_STEP = 0.5, 1.0
+# step 0.7 % event-count error and 41 us p99 timing, 1 px 3.8 % and 125 us. Noisy renders (4 spp; the demo
+# 0.40 C, the fan 0.48 C): every step re-samples the noise of the pixels the motion sweeps, and the per-pixel
+# count error falls from 0.5 to 2 px a step (fan 48x36 0.22 / 0.18 / 0.16, 96x72 0.14 / 0.12 / 0.11, demo
+# 0.89 / 0.66 / 0.48; the fan at 346x260 is best at 1.3-2.6 px), then rises (demo 3 px 0.50, fan 2.7 px 0.18);
+# at 2 px the timing error is still about the noise's (the accuracy-limit note: fan 217 us noise, 97 us step).
+FINE_PX_PER_STEP, NOISY_PX_PER_STEP = 0.5, 2.0
 NOISE_LIMITED = 0.25       # median Monte-Carlo noise in log brightness, as a fraction of the smaller threshold:
 #                            two independent draws differ by more than C in ~0.5 % of pixels at 0.25 C
 UNKNOWN_MOTION_STEPS = 100  # motion not known before rendering (aperiodic view, moving sensor)
-MIN_DEFAULT_STEPS = 10     # a slow scene still gets a few instants: a pixel's state (leak, refractory) is
-#                            stepped per instant, and the accuracy-limit note needs three
+MIN_DEFAULT_STEPS = 3      # the accuracy-limit note needs three frames; a slow scene needs no more (the
+#                            kaleidoscope grid, 0.9 px in 20 ms at 4 spp: count error 0.49 at 1 step, 0.95 at 10)
 
 
 def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> tuple:
     """(``st`` with ``steps`` chosen, the noise map it measured or None): the steps an unasked render takes.
 
     As many uniform steps as keep the fastest known image motion (``image_motion.largest_image_speed``) under
-    0.5 px a step, or 1 px when the first instant's Monte-Carlo noise (two seeds at ``probe_spp``, default the
+    0.5 px a step, or 2 px when the first instant's Monte-Carlo noise (two seeds at ``probe_spp``, default the
     render's spp; ``accuracy_limit.noise_map``) has a median of at least NOISE_LIMITED x C; with a low-pass
     pixel (``cutoff_hz``) also no step longer than two of its time constants, 1 / (pi f_c) (davis346, 300 Hz,
     on the demo: 100 steps of 1 ms scored as 400 did, 25 of 4 ms worse: event-rate error 0.47 against 0.43);

@@ -19,6 +19,19 @@ def test_velocity_and_spin_poses():
     assert np.allclose(pb[:3], [1.0, 1.0, 0.75])
 
 
+def test_poses_over_an_array_of_times_match_one_by_one():
+    """``matrices`` (closed form over all times) against ``matrix`` at each time, for velocity, a spin about an
+    unnormalised axis, and keyframes combined with both; the spin also against the closed form above."""
+    m = ef.parse_motion({"objects": {"o": {
+        "velocity": [0.3, -1.0, 2.0], "spin": {"rpm": 137, "axis": [1, 2, 2], "center": [0.5, 0, -1]},
+        "keyframes": [{"t": 0.0, "translate": [0, 0, 0]}, {"t": 0.2, "translate": [1, 0, 0], "rotate": [10, 0, 30]}]}}})
+    obj = m.objects["o"]
+    times = np.linspace(-0.1, 0.4, 41)
+    assert np.allclose(obj.matrices(times), np.stack([obj.matrix(t) for t in times]), atol=1e-12)
+    spin = ef.parse_motion({"objects": {"b": {"spin": {"rpm": 60, "axis": [0, 0, 1], "center": [1, 0, 0]}}}})
+    assert np.allclose((spin.objects["b"].matrices([0.25])[0] @ [2, 0, 0, 1])[:3], [1.0, 1.0, 0.0])
+
+
 @pytest.mark.parametrize("interp", ["linear", "cubic", "step"])
 def test_keyframes(interp):
     m = ef.parse_motion({"objects": {"k": {"interpolation": interp, "keyframes": [
