@@ -20,7 +20,7 @@ sys.path.insert(0, HERE)
 from _report import RESULTS, write_results  # noqa: E402
 
 SIZES = ((48, 36), (96, 72), (173, 130))
-SETTINGS = ("steps/4", "steps/2", "steps*1", "steps*2", "16spp/2", "default", "motion0.5", "motion1")
+SETTINGS = ("steps/4", "steps/2", "steps*1", "steps*2", "16spp/2", "default", "motion0.5", "motion1", "motion2")
 SEEDS = (1, 2)
 
 
@@ -95,7 +95,7 @@ def _chart(summary, rows, path):
     ax.set_xlabel("image motion of one step (scan + blades), px\nlines: uniform steps; star: the default "
                   "(uniform, as many as the motion needs); diamonds: steps placed by image motion", fontsize=8)
     ax.set_ylabel("per-pixel event-count error vs converged")
-    ax.set_title("The fan, one scan period: fewest errors near 0.5-1 px a step")
+    ax.set_title("The fan, one scan period at 4 spp: fewest count errors near 2 px a step")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     save_figure(fig, path)

@@ -71,6 +71,7 @@ SETTINGS = [
     {"key": "adaptive", "spp": 4, "adaptive": True},
     {"key": "motion0.5", "spp": 4, "adaptive": True, "px_per_step": 0.5},   # by image motion alone (else log
     {"key": "motion1", "spp": 4, "adaptive": True, "px_per_step": 1.0},     # change): bench_resolution.py
+    {"key": "motion2", "spp": 4, "adaptive": True, "px_per_step": 2.0},
     {"key": "auto20us", "spp": 0, "auto": 20e-6},    # eventfield render --auto --timing-accuracy 20us
 ]
 DEFAULT_KEY = "default"

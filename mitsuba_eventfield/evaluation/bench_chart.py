@@ -19,8 +19,8 @@ from .sweep import SweepTable
 
 # one colour and marker per setting, the same in every panel (the default: a large red star)
 _COLOURS = ["#1f77b4", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf", "#ff7f0e",
-            "#393b79", "#637939", "#843c39", "#000000", "#e7ba52", "#6b6ecf", "#ad494a", "#8c6d31"]
-_MARKERS = ["o", "s", "D", "v", "^", "<", ">", "P", "X", "h", "p", "d", "H", "8", "1", "2", "3"]
+            "#393b79", "#637939", "#843c39", "#000000", "#e7ba52", "#6b6ecf", "#ad494a", "#8c6d31", "#e6550d"]
+_MARKERS = ["o", "s", "D", "v", "^", "<", ">", "P", "X", "h", "p", "d", "H", "8", "1", "2", "3", "4"]
 
 
 def _style(key: str) -> dict:

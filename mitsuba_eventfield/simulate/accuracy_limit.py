@@ -21,12 +21,26 @@ import numpy as np
 MIN_STEPS = 3
 
 
-def noise_map(timed, spp: int, seed: int, t: float) -> np.ndarray:
+def noise_map(timed, spp: int, seed: int, t: float, integ=None):
     """Per-pixel Monte-Carlo noise in log brightness at time ``t``: two seeds' renders (``seed``, ``seed + 1``)
-    differ by |a - b|, sqrt 2 times one render's spread."""
-    from .render import render_frames
-    a, b = (render_frames(timed, [t], spp=spp, seed=s)[0] for s in (seed, seed + 1))
-    return np.abs(a - b) / math.sqrt(2)
+    differ by |a - b|, sqrt 2 times one render's spread.
+
+    With ``integ`` (the render's event integrator) the frames are rendered by its inner integrator and taken to
+    log through its own pixel (``stage``), and the result is (map, the radiance at ``seed``): the render's first
+    frame, which the time-stepping loop stages instead of rendering it again (``stepping.default_steps``)."""
+    if integ is None:
+        from .render import render_frames
+        a, b = (render_frames(timed, [t], spp=spp, seed=s)[0] for s in (seed, seed + 1))
+        return np.abs(a - b) / math.sqrt(2)
+    from .. import backend
+    timed.set_time(t)
+    frames, logs = [], []
+    for s in (seed, seed + 1):
+        frames.append(backend.mi.render(timed.scene, sensor=timed.sensor, integrator=integ.inner, seed=s, spp=spp))
+        integ.stage(frames[-1])
+        logs.append(integ.staged.numpy())
+    integ.staged = integ.staged_intensity = None          # a probe, not a step: nothing is committed
+    return np.abs(logs[0] - logs[1]) / math.sqrt(2), frames[0]
 
 
 class AccuracyLimit:

@@ -101,7 +101,8 @@ class _Loop:
                  allocation=None, noise=None):
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
         self.checkpoints, self.allocation = checkpoints, allocation
-        self.limit = AccuracyLimit.for_stepping(st, noise)   # what limits timing accuracy: steps or noise
+        sigma, first = noise if noise is not None else (None, None)   # stepping.default_steps' probe
+        self.limit = AccuracyLimit.for_stepping(st, sigma)   # what limits timing accuracy: steps or noise
         if allocation is not None:                       # noise where it counts: in the pixels that change
             self.limit.spp = allocation.spp_changing
         self.width, self.height = timed.film_size
@@ -109,6 +110,8 @@ class _Loop:
         self.static = None if not reuse or allocation is not None or checkpoints is not None else \
             static_pixels.plan(timed, st, integ, summary.notes)
         self.renderer = FrameRenderer(integ.inner, st.spp, allocation, summary.notes, self.static)
+        # the probe's frame is the first step's frame (same seed, instant and spp) where every pixel is rendered
+        self.first_frame = first if allocation is None and self.static is None else None
         self.reuse = None if st.steps is None or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
         self.cache = []                                  # log-brightness frames of one period, for reuse
@@ -142,6 +145,10 @@ class _Loop:
 
     def render_frame(self, seed: int, once: bool = False, step: int | None = None) -> None:
         """Render the scene as it is now and stage the frame in the event integrator (``frames.FrameRenderer``)."""
+        if step == 0 and self.first_frame is not None:
+            frame, self.first_frame = self.first_frame, None
+            self.integ.stage(frame)
+            return
         self.integ.stage(self.renderer.render(self.timed, seed, once, step))
 
     def run(self) -> int:
@@ -293,8 +300,8 @@ def _progress_bar(duration):
 
 
 def _steps_and_samples(timed, st: Stepping, integ, spp_changing):
-    """(stepping, noise map or None, sample allocation or None): the default steps where none were asked for
-    (``stepping.default_steps``, which measures the noise map the accuracy-limit note then reuses), and where
+    """(stepping, probe or None, sample allocation or None): the default steps where none were asked for
+    (``stepping.default_steps``, whose probe, a noise map and the first frame, the loop then reuses), and where
     ``spp_changing`` is given the pixels that get more samples."""
     integ.reset()
     noise = None

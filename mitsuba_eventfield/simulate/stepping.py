@@ -135,12 +135,15 @@ FINE_PX_PER_STEP, NOISY_PX_PER_STEP = 0.5, 2.0
 NOISE_LIMITED = 0.25       # median Monte-Carlo noise in log brightness, as a fraction of the smaller threshold:
 #                            two independent draws differ by more than C in ~0.5 % of pixels at 0.25 C
 UNKNOWN_MOTION_STEPS = 100  # motion not known before rendering (aperiodic view, moving sensor)
-MIN_DEFAULT_STEPS = 3      # the accuracy-limit note needs three frames; a slow scene needs no more (the
-#                            kaleidoscope grid, 0.9 px in 20 ms at 4 spp: count error 0.49 at 1 step, 0.95 at 10)
+MIN_DEFAULT_STEPS = 1      # a slow scene needs no more: the kaleidoscope grid (0.9 px in 20 ms, 4 spp) has
+#                            count error 0.49 at 1 step, 0.56 at 2, 0.68 at 3, 0.95 at 10 (under 3 steps the
+#                            accuracy-limit note, which needs three frames, is not made)
 
 
 def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> tuple:
-    """(``st`` with ``steps`` chosen, the noise map it measured or None): the steps an unasked render takes.
+    """(``st`` with ``steps`` chosen, the probe or None): the steps an unasked render takes. The probe, when
+    the noise was measured: (noise map, the first instant's radiance at the render's seed), for the
+    accuracy-limit note and the loop's first frame, which then cost no render of their own.
 
     As many uniform steps as keep the fastest known image motion (``image_motion.largest_image_speed``) under
     0.5 px a step, or 2 px when the first instant's Monte-Carlo noise (two seeds at ``probe_spp``, default the
@@ -160,9 +163,9 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> t
     for_filter = int(math.ceil(st.duration * math.pi * cutoff - 1e-9)) if cutoff else 0
     floor = max(MIN_DEFAULT_STEPS, for_filter)
     fine = int(math.ceil(speed * st.duration / FINE_PX_PER_STEP * (1 - 1e-9)))
-    sigma, noise, bound = None, None, FINE_PX_PER_STEP
+    sigma, first, noise, bound = None, None, None, FINE_PX_PER_STEP
     if fine > floor:                       # the bound decides: is the noise large against the threshold?
-        sigma = noise_map(timed, probe_spp or st.spp, st.seed, st.t_start)
+        sigma, first = noise_map(timed, probe_spp or st.spp, st.seed, st.t_start, integ)
         noise = float(np.median(sigma)) / min(integ.threshold_on, integ.threshold_off)
         bound = NOISY_PX_PER_STEP if noise >= NOISE_LIMITED else FINE_PX_PER_STEP
     for_motion = int(math.ceil(speed * st.duration / bound * (1 - 1e-9)))
@@ -175,4 +178,4 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> t
     chosen = {"by": "image motion", "px_per_step": bound, "largest_image_speed_px_per_s": speed,
               "noise_over_threshold": noise, "steps_for_motion": for_motion, "steps_for_lowpass": for_filter,
               "min_steps": MIN_DEFAULT_STEPS, "steps": steps, "probe_s": time.perf_counter() - t0}
-    return replace(st, steps=steps, chosen=chosen), sigma
+    return replace(st, steps=steps, chosen=chosen), (sigma, first) if sigma is not None else None

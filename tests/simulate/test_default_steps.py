@@ -35,6 +35,9 @@ def test_kaleidoscope_views_move_as_pinholes_at_their_subapertures():
         (dx, dy), _ = cv2.phaseCorrelate(frames[0][tile], frames[1][tile])
         assert math.hypot(dx, dy) == pytest.approx(predicted, rel=0.05), (row, col)
     assert predicted == pytest.approx(2.8, rel=0.05)        # 0.5 m/s at 1 m through a 13 deg view of 64 px
+    # the suite's 20 px views at 4 spp (noise 0.46 C, 2 px a step): the grid's 0.9 px take one step, no floor
+    small = ef.render_events(ef.load_scene(bundled_scene("moving_grid/kaleidoscope.xml"), views_px=60), 0.02)
+    assert small.meta["render"]["steps"] == 1 and _chosen(small)["by"] == "image motion"
 
 
 def test_low_noise_scene_takes_half_pixel_steps_and_meets_its_exact_events(tmp_path):
@@ -51,6 +54,11 @@ def test_low_noise_scene_takes_half_pixel_steps_and_meets_its_exact_events(tmp_p
     truth = an.truth_events(velocity, bench.ANALYTIC_DURATION, bench.ANALYTIC_C)
     assert bench.analytic_score(ev, truth)["count_error"] < 0.01
     assert ev.meta["render"]["timing_limit"] is not None      # the probe's noise map serves the limit note too
+    # the probe's first frame, staged as the first step's, is the frame the loop would have rendered: the
+    # events are bit for bit those of asking for the same 100 steps
+    same = ef.render_events(ef.load_scene(path, height=48), steps=100)
+    for a in "xytp":
+        assert np.array_equal(getattr(ev, a), getattr(same, a))
 
 
 def test_noisy_scene_takes_two_pixel_steps_until_samples_quiet_the_noise():
