@@ -24,7 +24,8 @@ def add_parsers(sub) -> None:
     bn.add_argument("--duration", type=num(0, MAX_DURATION_S, lo_open=True),
                     help="one scene: simulated seconds (default: `duration` of its motion file)")
     bn.add_argument("--steps", type=num(1, MAX_STEPS, integer=True), default=100,
-                    help="one scene: uniform steps of the default setting (default 100, as eventfield render)")
+                    help="one scene: the 1x of the uniform-step ladder, 1/4 to 4x (default 100; the default "
+                         "setting takes the render's own steps)")
     add_defines(bn, help_text="one scene: value of an XML <default name=...> parameter, e.g. -D width=64 "
                               "(repeatable)")
     bn.add_argument("--refocus-depth", type=num(0, lo_open=True),
