@@ -10,7 +10,7 @@
   Lissajous scan or a passing object gets short steps only while it lasts. This is what "where change
   happens" means for events: interpolating log brightness between instants is exact while an edge moves
   less than a pixel;
-* adaptive by log change (``"log-change"``, and ``True`` where the motion is not known, e.g. the kaleidoscope):
+* adaptive by log change (``"log-change"``, and ``True`` where the motion is not known, e.g. a moving sensor):
   after each step the next is sized so the largest per-pixel log change stays under ``max_log_change`` x C.
   Global: one sharp moving edge anywhere sets every step (under a galvo scan that is ~100x the steps of the
   motion criterion, docs/design.md).
