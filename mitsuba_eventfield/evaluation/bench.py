@@ -254,7 +254,7 @@ def _render(path, spec: BenchScene, cfg: dict, seed: int, warm: bool = False):
     kw = dict(spp=cfg["spp"], seed=seed, seed_mode=cfg.get("seed_mode", "fixed"), spp_changing=cfg.get("spp_changing"))
     if spec.preset is not None:                  # each seed its own noise draws too (the reference: seed 0)
         kw.update(preset=spec.preset, pixel={"seed": seed})
-    if cfg.get("adaptive"):          # by image motion alone at px_per_step, or capped at the default's step
+    if cfg.get("adaptive"):          # by image motion alone at px_per_step, or no step longer than 1/spec.steps
         kw.update(adaptive=True, max_log_change=0.5, **({"px_per_step": cfg["px_per_step"]} if "px_per_step" in cfg
                                                          else {"max_step": spec.duration / spec.steps}))
     elif "steps_factor" in cfg:                  # else the render's default steps (stepping.default_steps)

@@ -305,6 +305,8 @@ def _steps_and_samples(timed, st: Stepping, integ, spp_changing):
     ``spp_changing`` is given the pixels that get more samples."""
     integ.reset()
     noise = None
+    if spp_changing is not None:
+        spp_changing = sample_allocation.checked_spp_changing(spp_changing)
     if st.needs_default_steps:
         st, noise = default_steps(st, timed, integ, probe_spp=spp_changing)
     allocation = None if spp_changing is None else sample_allocation.plan(timed, st, integ, spp_changing)

@@ -123,14 +123,20 @@ def _dilation_px(timed, times) -> int:
     return min(MAX_DILATE_PX, int(math.ceil(worst)) + 1)
 
 
+def checked_spp_changing(spp_changing) -> int:
+    """``spp_changing`` validated (a whole number in [1, MAX_SPP]), before anything renders with it."""
+    spp_changing = positive(spp_changing, "spp_changing", integer=True)
+    if spp_changing > MAX_SPP:
+        raise EventFieldError(f"spp_changing = {spp_changing}: allowed range is [1, {MAX_SPP}]")
+    return spp_changing
+
+
 def plan(timed, st, integ, spp_changing: int, probes: int = PROBES) -> SampleAllocation:
     """Probe renders at the render's ``spp``: which pixels change by more than CHANGE_OF_C x C."""
     import cv2
 
     from ..plugins import pixel_model
-    spp_changing = positive(spp_changing, "spp_changing", integer=True)
-    if spp_changing > MAX_SPP:
-        raise EventFieldError(f"spp_changing = {spp_changing}: allowed range is [1, {MAX_SPP}]")
+    spp_changing = checked_spp_changing(spp_changing)
     width, height = timed.film_size
     sensor, inner = timed.scene.sensors()[0], integ.inner
     times = np.linspace(st.t_start, st.t_start + st.duration, probes)

@@ -18,7 +18,6 @@
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -135,6 +134,8 @@ FINE_PX_PER_STEP, NOISY_PX_PER_STEP = 0.5, 2.0
 NOISE_LIMITED = 0.25       # median Monte-Carlo noise in log brightness, as a fraction of the smaller threshold:
 #                            two independent draws differ by more than C in ~0.5 % of pixels at 0.25 C
 UNKNOWN_MOTION_STEPS = 100  # motion not known before rendering (aperiodic view, moving sensor)
+SHOT_NOISE_PER_STEP = 0.1  # a noisy pixel's chance of a shot-noise event in one step, at most (two in a step
+#                            would be one event: a Poisson draw has two or more in 0.5 % of steps at 0.1)
 MIN_DEFAULT_STEPS = 1      # a slow scene needs no more: the kaleidoscope grid (0.9 px in 20 ms, 4 spp) has
 #                            count error 0.49 at 1 step, 0.56 at 2, 0.68 at 3, 0.95 at 10 (under 3 steps the
 #                            accuracy-limit note, which needs three frames, is not made)
@@ -151,19 +152,23 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> t
     pixel (``cutoff_hz``) also no step longer than two of its time constants, 1 / (pi f_c): the filter is
     stepped with its input held over a step (davis346, 300 Hz, on the demo: 95 steps of 1.05 ms against 12 gave
     inter-event intervals 0.042 against 0.063 KS at 16 spp, 0.016 against 0.083 at 64; at 4 spp the render's
-    noise hides it);
-    at least MIN_DEFAULT_STEPS; under a periodic scan a whole number per period. Where the motion is not known
+    noise hides it); with shot noise, steps short enough that a pixel fires one in a step with a probability of
+    at most SHOT_NOISE_PER_STEP; at least MIN_DEFAULT_STEPS; under a periodic scan a whole number per period. Where the motion is not known
     before rendering, UNKNOWN_MOTION_STEPS. Why is recorded in ``Stepping.chosen`` (the metadata)."""
     from .accuracy_limit import noise_map
     from .image_motion import largest_image_speed
-    t0 = time.perf_counter()
     speed = largest_image_speed(timed, st.t_start, st.duration)
     if speed is None:
         chosen = {"by": "default for motion not known before rendering", "steps": UNKNOWN_MOTION_STEPS}
         return replace(st, steps=UNKNOWN_MOTION_STEPS, chosen=chosen), None
-    cutoff = float(getattr(integ.config, "cutoff_hz", 0.0) or 0.0)
-    for_filter = int(math.ceil(st.duration * math.pi * cutoff - 1e-9)) if cutoff else 0
-    floor = max(MIN_DEFAULT_STEPS, for_filter)
+    pixel = integ.config
+    floors = {"minimum": MIN_DEFAULT_STEPS,
+              "low-pass pixel": int(math.ceil(st.duration * math.pi * pixel.cutoff_hz - 1e-9)),
+              # shot noise fires at most one event a pixel a step, with probability rate x dt (the Poisson mean
+              # while that is at most 1): keep it under SHOT_NOISE_PER_STEP
+              "shot noise": int(math.ceil(st.duration * pixel.shot_noise_hz * max(1.0, pixel.shot_noise_bright_factor)
+                                          / SHOT_NOISE_PER_STEP - 1e-9))}
+    floor = max(floors.values())
     fine = int(math.ceil(speed * st.duration / FINE_PX_PER_STEP * (1 - 1e-9)))
     sigma, first, noise, bound = None, None, None, FINE_PX_PER_STEP
     if fine > floor:                       # the bound decides: is the noise large against the threshold?
@@ -172,12 +177,14 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> t
         bound = NOISY_PX_PER_STEP if noise >= NOISE_LIMITED else FINE_PX_PER_STEP
     for_motion = int(math.ceil(speed * st.duration / bound * (1 - 1e-9)))
     steps = max(floor, for_motion)
+    decided_by = "image motion" if for_motion >= floor else max(floors, key=floors.get)
     period = timed.scan_period
-    periods = st.duration / period if period else 0.0
-    if periods >= 1 and abs(periods - round(periods)) < 1e-9 * periods:   # the scan's phase grid
-        steps = int(math.ceil(steps / round(periods))) * round(periods)
-    steps = min(steps, MAX_STEPS)
-    chosen = {"by": "image motion", "px_per_step": bound, "largest_image_speed_px_per_s": speed,
-              "noise_over_threshold": noise, "steps_for_motion": for_motion, "steps_for_lowpass": for_filter,
-              "min_steps": MIN_DEFAULT_STEPS, "steps": steps, "probe_s": time.perf_counter() - t0}
+    periods = round(st.duration / period) if period else 0
+    if periods >= 1 and abs(st.duration / period - periods) < 1e-9 * periods:     # the scan's phase grid
+        steps = min(int(math.ceil(steps / periods)), max(1, MAX_STEPS // periods)) * periods
+    steps = min(steps, MAX_STEPS)          # the coarse-step note says so if this binds
+    chosen = {"by": decided_by, "px_per_step": bound if for_motion >= floor else None,
+              "largest_image_speed_px_per_s": speed, "noise_over_threshold": noise,
+              "steps_for_motion": for_motion, **{f"steps_for_{k.replace(' ', '_').replace('-', '')}": v
+                                                 for k, v in floors.items()}, "steps": steps}
     return replace(st, steps=steps, chosen=chosen), (sigma, first) if sigma is not None else None

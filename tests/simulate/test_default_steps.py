@@ -12,7 +12,7 @@ from mitsuba_eventfield.evaluation import analytic as an
 from mitsuba_eventfield.evaluation import bench
 from mitsuba_eventfield.scene import bundled_scene
 from mitsuba_eventfield.simulate import image_motion
-from mitsuba_eventfield.simulate.stepping import MIN_DEFAULT_STEPS, UNKNOWN_MOTION_STEPS
+from mitsuba_eventfield.simulate.stepping import UNKNOWN_MOTION_STEPS
 
 DEMO = bundled_scene("demo/demo.xml")
 
@@ -61,6 +61,25 @@ def test_low_noise_scene_takes_half_pixel_steps_and_meets_its_exact_events(tmp_p
         assert np.array_equal(getattr(ev, a), getattr(same, a))
 
 
+def test_the_probe_frames_are_the_first_step_and_the_accuracy_limit_frame(tmp_path, monkeypatch):
+    """A default render renders no more frames than asking for its steps: the loop renders its steps 1..N,
+    and neither the first frame (the probe's, at the render's seed) nor the accuracy-limit note's other seed."""
+    from mitsuba_eventfield.simulate.frames import FrameRenderer
+    path = bench.write_analytic_scene(str(tmp_path), bench.analytic_velocity())
+    real, calls = FrameRenderer.render, []
+
+    def counted(self, timed, seed, once=False, step=None):
+        calls.append((step, once))
+        return real(self, timed, seed, once, step)
+    monkeypatch.setattr(FrameRenderer, "render", counted)
+    ef.render_events(ef.load_scene(path), steps=100)
+    explicit, calls[:] = list(calls), []
+    ev = ef.render_events(ef.load_scene(path))
+    assert ev.meta["render"]["steps"] == 100 and ev.meta["render"]["timing_limit"] is not None
+    assert len(explicit) == 102 and (0, False) in explicit and any(once for _, once in explicit)
+    assert len(calls) == 100 and (0, False) not in calls and not any(once for _, once in calls)
+
+
 def test_noisy_scene_takes_two_pixel_steps_until_samples_quiet_the_noise():
     """The demo at 4 spp (noise 0.40 C): 2 px a step, said in a note (not a coarse-step warning); at 64 spp the
     noise is small and the steps are four times as many. The objects' motion per step, computed independently
@@ -88,8 +107,12 @@ def test_galvo_default_steps_keep_the_phase_grid_and_reuse_periods():
     period = timed.scan_period
     ev = ef.render_events(timed, 3 * period)
     steps = ev.meta["render"]["steps"]
-    assert steps % 3 == 0 and steps >= 3 * MIN_DEFAULT_STEPS
-    assert ev.meta["render"]["image_motion_px_per_step"]["scan"] <= _chosen(ev)["px_per_step"] * 1.05
+    chosen = _chosen(ev)
+    per_period = math.ceil(chosen["steps_for_motion"] / 3)               # rounded up to whole steps a period
+    assert steps == 3 * per_period and chosen["steps_for_motion"] > 3
+    assert chosen["steps_for_motion"] == math.ceil(chosen["largest_image_speed_px_per_s"] * 3 * period
+                                                   / chosen["px_per_step"] * (1 - 1e-9))
+    assert ev.meta["render"]["image_motion_px_per_step"]["scan"] <= chosen["px_per_step"] * 1.05
     assert ev.meta["render"]["reused_steps"] + ev.meta["render"]["copied_steps"] >= 2 * steps // 3
     fan = ef.load_scene(bundled_scene("fan/fan.xml"), width=48, height=36)
     ev = ef.render_events(fan, 2 * fan.scan_period)
@@ -115,7 +138,24 @@ def test_low_pass_pixel_bounds_the_default_step():
     timed = ef.load_scene(DEMO, width=32, height=24)
     ev = ef.render_events(timed, 0.02, preset="davis346")
     assert ev.meta["render"]["steps"] >= math.ceil(0.02 * math.pi * 300) == 19
-    assert _chosen(ev)["steps_for_lowpass"] == 19
+    assert _chosen(ev)["steps_for_lowpass_pixel"] == 19
+
+
+def test_shot_noise_keeps_its_rate_on_a_still_scene():
+    """Shot noise fires at most one event a pixel a step: a still scene (one step by its motion) at 20 Hz over
+    1 s takes steps of at most 0.1 events a pixel, and fires the Poisson rate (20 a pixel, within 5 %) instead of
+    one event a pixel."""
+    timed = ef.load_scene(DEMO, motion={"objects": {}}, width=16, height=12)
+    ev = ef.render_events(timed, 1.0, pixel={"shot_noise_hz": 20.0, "shot_noise_bright_factor": 1.0})
+    assert _chosen(ev)["by"] == "shot noise" and ev.meta["render"]["steps"] == 200
+    assert len(ev) / (16 * 12) == pytest.approx(20.0, rel=0.05)
+
+
+def test_long_galvo_renders_do_not_alias_the_scan():
+    """The fastest image motion of 25,000 scan periods is that of one (the samples are not capped)."""
+    timed = ef.load_scene(bundled_scene("galvo_static/galvo_static.xml"), width=48, height=36)
+    one = image_motion.largest_image_speed(timed, 0.0, timed.scan_period)
+    assert image_motion.largest_image_speed(timed, 0.0, 25_000 * timed.scan_period) == pytest.approx(one, rel=0.01)
 
 
 def test_explicit_steps_are_untouched():
