@@ -153,8 +153,9 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> t
     stepped with its input held over a step (davis346, 300 Hz, on the demo: 95 steps of 1.05 ms against 12 gave
     inter-event intervals 0.042 against 0.063 KS at 16 spp, 0.016 against 0.083 at 64; at 4 spp the render's
     noise hides it); with shot noise, steps short enough that a pixel fires one in a step with a probability of
-    at most SHOT_NOISE_PER_STEP; at least MIN_DEFAULT_STEPS; under a periodic scan a whole number per period. Where the motion is not known
-    before rendering, UNKNOWN_MOTION_STEPS. Why is recorded in ``Stepping.chosen`` (the metadata)."""
+    at most SHOT_NOISE_PER_STEP; at least MIN_DEFAULT_STEPS; under a periodic scan a whole number per period.
+    Where the motion is not known before rendering, UNKNOWN_MOTION_STEPS. Why is recorded in
+    ``Stepping.chosen`` (the metadata)."""
     from .accuracy_limit import noise_map
     from .image_motion import largest_image_speed
     speed = largest_image_speed(timed, st.t_start, st.duration)
