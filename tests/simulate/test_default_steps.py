@@ -161,3 +161,11 @@ def test_long_galvo_renders_do_not_alias_the_scan():
 def test_explicit_steps_are_untouched():
     ev = ef.render_events(ef.load_scene(DEMO, width=32, height=24), 0.01, steps=7)
     assert ev.meta["stepping"] == {"mode": "uniform", "steps": 7} and ev.meta["render"]["steps"] == 7
+
+
+@pytest.mark.parametrize("bad", [-4, 2.5, 10**7])
+def test_bad_spp_changing_is_refused_before_the_noise_probe_renders(bad):
+    """The default steps' noise probe renders at spp_changing: it is checked first, one line, nothing rendered."""
+    from mitsuba_eventfield.errors import EventFieldError
+    with pytest.raises(EventFieldError, match="spp_changing"):
+        ef.render_events(ef.load_scene(DEMO, width=32, height=24), 0.01, spp_changing=bad)
