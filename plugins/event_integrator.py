@@ -76,6 +76,7 @@ class _EventIntegratorMethods:
 
     def __init__(self, props: mi.Properties):
         mi.SamplingIntegrator.__init__(self, props)
+        self._pixels = pixel_state.PixelVariables()
         self.inner = None
         overrides = {}
         names = {f.name for f in fields(pixel_model.PixelConfig)} - {"preset"}
@@ -379,6 +380,9 @@ class _EventIntegratorMethods:
 
     def to_string(self):
         return f"EventIntegrator[preset={self.config.preset}, inner={self.inner}]"
+
+pixel_state.add_pixel_variables(_EventIntegratorMethods)
+
 
 def _define_class():
     return subclass(mi.SamplingIntegrator, _EventIntegratorMethods, "EventIntegrator")

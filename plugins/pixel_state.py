@@ -1,5 +1,6 @@
-"""The event pixels' state as plain NumPy arrays and numbers, and back: what a checkpoint saves
-(``simulate/checkpoint.py``) so that a resumed render makes the events of an uninterrupted one."""
+"""The event pixels' state: where it lives (``PixelVariables``), and as plain NumPy arrays and numbers, and back:
+what a checkpoint saves (``simulate/checkpoint.py``) so that a resumed render makes the events of an
+uninterrupted one."""
 from __future__ import annotations
 
 import json
@@ -10,6 +11,31 @@ import numpy as np
 
 STATE_ARRAYS = {"log_prev": "Float", "anchor": "Float", "k_on": "Int32", "k_off": "Int32", "c_on": "Float",
                 "c_off": "Float", "offset": "Float", "leak_rate": "Float"}
+
+
+class PixelVariables:
+    """Where the event integrator keeps its pixels' state (``PIXEL_VARIABLES``): a plain object, which Dr.Jit's
+    traversal of a Python plugin (every Dr.Jit array in its ``__dict__``, ``drjit.detail.traverse_py_cb_ro``)
+    does not enter. The frozen step render (``simulate/frames.py``) takes the scene, and so the integrator, as
+    an input: with the state in ``__dict__`` every state array was an input of every replay, and the first
+    commit (None -> arrays) changed the inputs' layout, so Dr.Jit recorded the render twice more per render
+    (about 3.5 ms each at 48x36: the demo's 12 steps took 40-45 ms, now 33-38)."""
+
+
+PIXEL_VARIABLES = ("size", "log_prev", "anchor", "k_on", "k_off", "offset", "c_on", "c_off", "staged",
+                   "staged_intensity", "staged_size", "rng", "leak_rate", "last_emit", "limiter")
+
+
+def _pixel_variable(name: str) -> property:
+    return property(lambda self: getattr(self._pixels, name, None),
+                    lambda self, value: setattr(self._pixels, name, value),
+                    doc=f"``{name}``, kept in ``PixelVariables`` (not traversed by frozen functions)")
+
+
+def add_pixel_variables(methods) -> None:
+    """Give the integrator's methods class a property per state variable, stored in ``self._pixels``."""
+    for name in PIXEL_VARIABLES:
+        setattr(methods, name, _pixel_variable(name))
 
 
 def get_state(integ) -> dict:

@@ -21,22 +21,30 @@ import numpy as np
 MIN_STEPS = 3
 
 
-def noise_map(timed, spp: int, seed: int, t: float, integ=None):
+def noise_map(timed, spp: int, seed: int, t: float, integ=None, frozen=None):
     """Per-pixel Monte-Carlo noise in log brightness at time ``t``: two seeds' renders (``seed``, ``seed + 1``)
     differ by |a - b|, sqrt 2 times one render's spread.
 
     With ``integ`` (the render's event integrator) the frames are rendered by its inner integrator and taken to
     log through its own pixel (``stage``), and the result is (map, the radiance at ``seed``): the render's first
-    frame, which the time-stepping loop stages instead of rendering it again (``stepping.default_steps``)."""
+    frame, which the time-stepping loop stages instead of rendering it again (``stepping.default_steps``).
+    ``frozen``: the loop's frozen step render (``frames.frozen_render``, at ``spp``): the probe's two frames are
+    its recording and first replay, so they cost what the loop's first two frames would have."""
     if integ is None:
         from .render import render_frames
         a, b = (render_frames(timed, [t], spp=spp, seed=s)[0] for s in (seed, seed + 1))
         return np.abs(a - b) / math.sqrt(2)
     from .. import backend
+    mi, dr = backend.mi, backend.dr
+
+    def render(s):
+        if frozen is not None:
+            return frozen(timed.scene, timed.sensor, dr.opaque(mi.UInt32, s))
+        return mi.render(timed.scene, sensor=timed.sensor, integrator=integ.inner, seed=s, spp=spp)
     timed.set_time(t)
     frames, logs = [], []
     for s in (seed, seed + 1):
-        frames.append(backend.mi.render(timed.scene, sensor=timed.sensor, integrator=integ.inner, seed=s, spp=spp))
+        frames.append(render(s))
         integ.stage(frames[-1])
         logs.append(integ.staged.numpy())
     integ.staged = integ.staged_intensity = None          # a probe, not a step: nothing is committed

@@ -64,6 +64,9 @@ def object_displacements(timed: TimedScene, times) -> np.ndarray | None:
     shapes = {s.id(): s for s in timed.scene.shapes()}
     if any(name not in shapes for name in timed.motion.objects):
         return None
+    views = len(cameras)
+    to_cams = np.concatenate([m.T for m, _ in cameras], axis=1)          # (4, 4V): every view in one product
+    focal = np.array([f for _, f in cameras])[:, None]
     worst = np.zeros(len(times) - 1)
     for name, obj in timed.motion.objects.items():
         box = shapes[name].bbox()
@@ -71,13 +74,13 @@ def object_displacements(timed: TimedScene, times) -> np.ndarray | None:
         corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         now = np.linalg.inv(obj.matrix(timed.time))          # the shape sits at its pose of the scene's time
         world = np.einsum("tij,kj->tki", obj.matrices(times) @ now, corners)      # (n+1, 8, 4)
-        for world_to_cam, focal in cameras:
-            cam = world @ world_to_cam.T
-            z = np.where(np.abs(cam[..., 2]) > 1e-9, cam[..., 2], 1e-9)
-            px = focal * cam[..., :2] / z[..., None]
-            ahead = (z[1:] > 0) & (z[:-1] > 0)               # (n, 8): both ends in front of the camera
-            step = np.where(ahead, np.linalg.norm(np.diff(px, axis=0), axis=-1), 0.0)
-            worst = np.maximum(worst, step.max(axis=1))
+        cam = (world.reshape(-1, 4) @ to_cams).reshape(len(times), 8, views, 4)
+        z = np.where(np.abs(cam[..., 2]) > 1e-9, cam[..., 2], 1e-9)
+        px = focal * cam[..., :2] / z[..., None]
+        ahead = (z[1:] > 0) & (z[:-1] > 0)                   # (n, 8, V): both ends in front of the camera
+        d = np.diff(px, axis=0)
+        step = np.where(ahead, np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2), 0.0)
+        worst = np.maximum(worst, step.max(axis=(1, 2)))
     return worst
 
 

@@ -25,7 +25,7 @@ from ..scene.timed import TimedScene, load_scene
 from ..validate import available_memory, positive
 from .periodic import period_blocks, phase_grid, reuse_plan
 from . import sample_allocation, static_pixels
-from .frames import FrameRenderer
+from .frames import FrameRenderer, frozen_render
 from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
 from .image_motion import note_image_motion
@@ -98,7 +98,7 @@ class _Loop:
     integrator, orders and reads out the step's events and hands them to the sink."""
 
     def __init__(self, timed, integ, st: Stepping, sink, summary, bar, reuse: bool, checkpoints=None,
-                 allocation=None, noise=None):
+                 allocation=None, noise=None, frozen=None):
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
         self.checkpoints, self.allocation = checkpoints, allocation
         sigma, first = noise if noise is not None else (None, None)   # stepping.default_steps' probe
@@ -109,7 +109,7 @@ class _Loop:
         # a moving scene under a periodic scan: the pixels no moving object can change rendered once a period
         self.static = None if not reuse or allocation is not None or checkpoints is not None else \
             static_pixels.plan(timed, st, integ, summary.notes)
-        self.renderer = FrameRenderer(integ.inner, st.spp, allocation, summary.notes, self.static)
+        self.renderer = FrameRenderer(integ.inner, st.spp, allocation, summary.notes, self.static, frozen)
         # the probe's frame is the first step's frame (same seed, instant and spp) where every pixel is rendered
         self.first_frame = first if allocation is None and self.static is None else None
         self.reuse = None if st.steps is None or not reuse or st.seed_mode != "fixed" else \
@@ -300,17 +300,18 @@ def _progress_bar(duration):
 
 
 def _steps_and_samples(timed, st: Stepping, integ, spp_changing):
-    """(stepping, probe or None, sample allocation or None): the default steps where none were asked for
-    (``stepping.default_steps``, whose probe, a noise map and the first frame, the loop then reuses), and where
-    ``spp_changing`` is given the pixels that get more samples."""
+    """(stepping, probe or None, sample allocation or None, frozen step render or None): the default steps
+    where none were asked for (``stepping.default_steps``: the loop reuses its probe, a noise map and the first
+    frame, and the frozen render it recorded), and with ``spp_changing`` the pixels that get more samples."""
     integ.reset()
-    noise = None
+    noise = frozen = None
     if spp_changing is not None:
         spp_changing = sample_allocation.checked_spp_changing(spp_changing)
     if st.needs_default_steps:
-        st, noise = default_steps(st, timed, integ, probe_spp=spp_changing)
+        frozen = frozen_render(integ.inner, st.spp) if spp_changing is None else None
+        st, noise = default_steps(st, timed, integ, probe_spp=spp_changing, frozen=frozen)
     allocation = None if spp_changing is None else sample_allocation.plan(timed, st, integ, spp_changing)
-    return st, noise, allocation
+    return st, noise, allocation, frozen
 
 
 def render_events(scene, duration: float | None = None, *, steps: int | None = None, adaptive=False,
@@ -350,7 +351,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
         check_writable(output, "event file")
         format_of(output, fmt)
     integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel)
-    st, noise, allocation = _steps_and_samples(timed, st, integ, spp_changing)
+    st, noise, allocation, frozen = _steps_and_samples(timed, st, integ, spp_changing)
     summary = _new_summary(timed, st, output)
     meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,
                      seed_mode=st.seed_mode, stepping=st.as_meta(),
@@ -363,7 +364,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     bar = _progress_bar(st.duration) if progress else None
     wall0 = time.perf_counter()
     try:
-        loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation, noise)
+        loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation, noise, frozen)
         stream = loop.finish(loop.run(), meta, wall0)
     except BaseException:
         sink.abort()

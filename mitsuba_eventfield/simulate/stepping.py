@@ -141,7 +141,7 @@ MIN_DEFAULT_STEPS = 1      # a slow scene needs no more: the kaleidoscope grid (
 #                            accuracy-limit note, which needs three frames, is not made)
 
 
-def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> tuple:
+def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, frozen=None) -> tuple:
     """(``st`` with ``steps`` chosen, the probe or None): the steps an unasked render takes. The probe, when
     the noise was measured: (noise map, the first instant's radiance at the render's seed), for the
     accuracy-limit note and the loop's first frame, which then cost no render of their own.
@@ -155,7 +155,7 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> t
     noise hides it); with shot noise, steps short enough that a pixel fires one in a step with a probability of
     at most SHOT_NOISE_PER_STEP; at least MIN_DEFAULT_STEPS; under a periodic scan a whole number per period.
     Where the motion is not known before rendering, UNKNOWN_MOTION_STEPS. Why is recorded in
-    ``Stepping.chosen`` (the metadata)."""
+    ``Stepping.chosen`` (the metadata). ``frozen``: the loop's frozen step render, which the probe records."""
     from .accuracy_limit import noise_map
     from .image_motion import largest_image_speed
     speed = largest_image_speed(timed, st.t_start, st.duration)
@@ -173,7 +173,7 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None) -> t
     fine = int(math.ceil(speed * st.duration / FINE_PX_PER_STEP * (1 - 1e-9)))
     sigma, first, noise, bound = None, None, None, FINE_PX_PER_STEP
     if fine > floor:                       # the bound decides: is the noise large against the threshold?
-        sigma, first = noise_map(timed, probe_spp or st.spp, st.seed, st.t_start, integ)
+        sigma, first = noise_map(timed, probe_spp or st.spp, st.seed, st.t_start, integ, frozen)
         noise = float(np.median(sigma)) / min(integ.threshold_on, integ.threshold_off)
         bound = NOISY_PX_PER_STEP if noise >= NOISE_LIMITED else FINE_PX_PER_STEP
     for_motion = int(math.ceil(speed * st.duration / bound * (1 - 1e-9)))
