@@ -54,18 +54,25 @@ def noise_map(timed, spp: int, seed: int, t: float, integ=None, frozen=None):
 class AccuracyLimit:
     """Collects the frames the estimates need while the render runs; :meth:`note` writes the verdict."""
 
-    def __init__(self, dt: float, spp: int, active: bool = True):
-        self.dt, self.spp, self.active = dt, spp, active
+    def __init__(self, dt, spp: int, active: bool = True):
+        """``dt``: the step, or the first two steps (d1, d2) of steps placed by the image motion."""
+        self.dts = tuple(dt) if isinstance(dt, (tuple, list)) else (dt, dt)
+        self.spp, self.active = spp, active
         self.frames, self.sigma, self.probed = [], None, None
 
     @classmethod
     def for_stepping(cls, st, sigma: np.ndarray | None = None) -> "AccuracyLimit":
-        """Active for uniform, fixed-seed renders of at least MIN_STEPS steps; otherwise every method does
-        nothing (adaptive steps and independent seeds have no single step or frozen noise to speak of).
-        ``sigma``: the noise map already measured (``noise_map``, by ``stepping.default_steps``): not again."""
-        uniform = not st.adaptive and st.steps is not None
-        limit = cls(st.duration / st.steps if uniform else 0.0, st.spp,
-                    active=uniform and st.seed_mode == "fixed" and st.steps >= MIN_STEPS)
+        """Active for fixed-seed renders of at least MIN_STEPS steps known before rendering (uniform, or placed
+        by the image motion); otherwise every method does nothing (log-change steps and independent seeds have
+        no steps or frozen noise to speak of). ``sigma``: the noise map already measured (``noise_map``, by
+        ``stepping.default_steps``): not again."""
+        if st.adaptive or (st.steps is None and st.schedule is None):
+            dts, steps = 0.0, 0
+        elif st.schedule is not None:
+            dts, steps = tuple(float(d) for d in np.diff(st.schedule[:3])), len(st.schedule) - 1
+        else:
+            dts, steps = st.duration / st.steps, st.steps
+        limit = cls(dts, st.spp, active=steps >= MIN_STEPS and st.seed_mode == "fixed")
         limit.probed = sigma
         return limit
 
@@ -92,14 +99,17 @@ class AccuracyLimit:
         if self.sigma is None or len(self.frames) < 3:
             return None
         l0, l1, l2 = self.frames
-        slope = np.abs(l1 - l0) / self.dt
+        d1, d2 = self.dts
+        slope = np.abs(l1 - l0) / d1
         active = slope > 0
         if not active.any():
             return None
         rate = float(np.median(slope[active]))
-        curvature = float(np.median(np.abs(l2 - 2 * l1 + l0)[active])) / self.dt ** 2
+        # the second divided difference (uniform steps: (l2 - 2 l1 + l0) / dt^2), and the first steps' length
+        curvature = float(np.median(np.abs((l2 - l1) / d2 - (l1 - l0) / d1)[active])) * 2 / (d1 + d2)
+        dt = (d1 + d2) / 2
         noise_us = float(np.median(self.sigma)) / rate * 1e6
-        steps_us = self.dt ** 2 * curvature / (8 * rate) * 1e6
+        steps_us = dt ** 2 * curvature / (8 * rate) * 1e6
         return {"limit": "Monte-Carlo noise" if noise_us > steps_us else "steps", "noise_us": noise_us,
                 "steps_us": steps_us, "spp": self.spp}
 

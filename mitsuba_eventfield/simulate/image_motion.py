@@ -64,23 +64,23 @@ def object_displacements(timed: TimedScene, times) -> np.ndarray | None:
     shapes = {s.id(): s for s in timed.scene.shapes()}
     if any(name not in shapes for name in timed.motion.objects):
         return None
-    views = len(cameras)
-    to_cams = np.concatenate([m.T for m, _ in cameras], axis=1)          # (4, 4V): every view in one product
-    focal = np.array([f for _, f in cameras])[:, None]
+    rows = np.stack([m for m, _ in cameras], axis=-1)        # (4, 4, V): camera x, y, z rows of every view
+    focal = np.array([f for _, f in cameras])
     worst = np.zeros(len(times) - 1)
     for name, obj in timed.motion.objects.items():
         box = shapes[name].bbox()
         lo, hi = np.array(box.min).ravel(), np.array(box.max).ravel()
         corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         now = np.linalg.inv(obj.matrix(timed.time))          # the shape sits at its pose of the scene's time
-        world = np.einsum("tij,kj->tki", obj.matrices(times) @ now, corners)      # (n+1, 8, 4)
-        cam = (world.reshape(-1, 4) @ to_cams).reshape(len(times), 8, views, 4)
-        z = np.where(np.abs(cam[..., 2]) > 1e-9, cam[..., 2], 1e-9)
-        px = focal * cam[..., :2] / z[..., None]
-        ahead = (z[1:] > 0) & (z[:-1] > 0)                   # (n, 8, V): both ends in front of the camera
-        d = np.diff(px, axis=0)
-        step = np.where(ahead, np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2), 0.0)
-        worst = np.maximum(worst, step.max(axis=(1, 2)))
+        world = np.einsum("tij,kj->tki", obj.matrices(times) @ now, corners).reshape(-1, 4)   # (n+1) x 8 points
+        # every view in one product per camera axis, contiguous (n+1, 8 V) arrays: 5 ms -> 1.5 ms for 9 views
+        x, y, z = ((world @ rows[axis]).reshape(len(times), -1) for axis in range(3))
+        z = np.where(np.abs(z) > 1e-9, z, 1e-9)
+        scale = np.tile(focal, 8) / z
+        u, v = x * scale, y * scale
+        ahead = (z[1:] > 0) & (z[:-1] > 0)                   # (n, 8 V): both ends in front of the camera
+        step = np.where(ahead, np.hypot(np.diff(u, axis=0), np.diff(v, axis=0)), 0.0)
+        worst = np.maximum(worst, step.max(axis=1))
     return worst
 
 
@@ -152,8 +152,17 @@ def largest_image_speed(timed: TimedScene, t_start: float, duration: float) -> f
     return worst / dt
 
 
+def sampled_motion(timed: TimedScene, t_start: float, duration: float) -> tuple:
+    """(instants, image displacement between consecutive ones or None where unknown): the motion a schedule
+    is placed by (``_motion_times``; for a render without a scan also what ``largest_image_speed`` samples)."""
+    times = _motion_times(timed, t_start, duration)
+    timed.set_time(t_start)            # the shapes' bounds at the render's start: the same answer on every call
+    return times, image_displacements(timed, times)
+
+
 def motion_schedule(timed: TimedScene, t_start: float, duration: float, px_per_step: float = MAX_PX_PER_STEP,
-                    max_step: float | None = None, min_step: float | None = None) -> np.ndarray | None:
+                    max_step: float | None = None, min_step: float | None = None,
+                    sampled: tuple | None = None) -> np.ndarray | None:
     """Render instants from ``t_start`` to ``t_start + duration`` such that the known image motion (scan plus
     moving objects, added: a point on a moving object moves by both) is at most ``px_per_step`` pixels between
     consecutive instants, no step longer than ``max_step`` or (unless the motion demands a finer grid than
@@ -161,10 +170,9 @@ def motion_schedule(timed: TimedScene, t_start: float, duration: float, px_per_s
     scene before a fixed view, or motion that is not known before rendering).
 
     The motion is sampled finely (``_motion_times``), its cumulative path is inverted at multiples of
-    ``px_per_step``: as many steps as the path needs, placed where it happens."""
-    times = _motion_times(timed, t_start, duration)
-    timed.set_time(t_start)            # the shapes' bounds at the render's start: the same answer on every call
-    d = image_displacements(timed, times)
+    ``px_per_step``: as many steps as the path needs, placed where it happens. ``sampled``: ``sampled_motion``'s
+    result where it is already known."""
+    times, d = sampled if sampled is not None else sampled_motion(timed, t_start, duration)
     if d is None or (timed.scan_period == 0.0 and timed.is_static):
         return None
     path = np.concatenate([[0.0], np.cumsum(d)])
@@ -197,16 +205,23 @@ def scan_px_per_step(timed: TimedScene, duration: float, steps: int) -> float | 
     return scan_image_path_px(sensor.optics_metadata(), width, height) * (duration / steps) / period
 
 
-def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps: int, summary,
-                      chosen: dict | None = None) -> None:
+def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps: int | None, summary,
+                      chosen: dict | None = None, schedule=None) -> None:
     """Record the image motion per step in the summary (and so the metadata), and warn (a note, and on stderr)
     when the scan's and the objects' together are more than :data:`MAX_PX_PER_STEP` pixels. This is the one
     coarse-step check, galvo or not: a fixed count of steps per scan period (the fan lost 29 % of its events
     at 4 a period, 346x260) says nothing at another film size or scan amplitude; the pixels a step do.
     ``chosen``: the default steps' reasons (``stepping.default_steps``): steps it made coarser than a pixel
-    because Monte-Carlo noise limits the render are noted with that reason, not warned about."""
-    scan = scan_px_per_step(timed, duration, steps)
-    objects = object_px_per_step(timed, t_start, duration, steps)
+    because Monte-Carlo noise limits the render are noted with that reason, not warned about. ``schedule``:
+    the instants of steps placed by the motion (``steps`` None): the largest motion between two of them."""
+    if schedule is not None:
+        steps = len(schedule) - 1
+        timed.set_time(t_start)        # the shapes' bounds at the render's start, as the schedule saw them
+        scan, objects = (None if d is None else float(d.max()) for d in
+                         (scan_displacements(timed, schedule), object_displacements(timed, schedule)))
+    else:
+        scan = scan_px_per_step(timed, duration, steps)
+        objects = object_px_per_step(timed, t_start, duration, steps)
     summary.image_motion_px_per_step = {"scan": scan, "objects": objects}
     worst = (scan or 0.0) + (objects or 0.0)            # a point on a moving object moves by both
     if worst <= MAX_PX_PER_STEP * (1 + 1e-9):

@@ -288,8 +288,8 @@ def _new_summary(timed, st: Stepping, output) -> RenderSummary:
     width, height = timed.film_size
     summary = RenderSummary(width=width, height=height, duration_s=st.duration,
                             output=os.path.abspath(output) if output else None)
-    if st.steps is not None:
-        note_image_motion(timed, st.t_start, st.duration, st.steps, summary, st.chosen)
+    if st.steps is not None or st.chosen:          # uniform steps, or the default's placed by the motion
+        note_image_motion(timed, st.t_start, st.duration, st.steps, summary, st.chosen, st.schedule)
     return summary
 
 

@@ -1,8 +1,9 @@
 """A render's time stepping, validated: uniform steps, or adaptive steps set by what moves.
 
 * uniform: ``steps`` equal steps;
-* the default (no ``steps``, not adaptive): uniform steps, as many as the known image motion needs
-  (``default_steps``; 100 where the motion is not known before rendering);
+* the default (no ``steps``, not adaptive): as many steps as the known image motion needs, uniform, or placed
+  by the motion where it varies and no scan needs uniform steps (``default_steps``; 100 where the motion is not
+  known before rendering);
 * adaptive by image motion (``adaptive=True`` where the motion is known, or ``"motion"``): the instants are
   placed before rendering so the image moves at most ``px_per_step`` pixels between two of them, from the
   motion that is known analytically (the galvo scan, the moving objects' projected bounds;
@@ -56,7 +57,8 @@ class Stepping:
     def as_meta(self) -> dict:
         if self.schedule is not None:
             return {"mode": "adaptive", "criterion": "image motion", "px_per_step": self.px_per_step,
-                    "steps": len(self.schedule) - 1, "max_step_s": self.max_step}
+                    "steps": len(self.schedule) - 1, "max_step_s": self.max_step,
+                    **({"chosen": self.chosen} if self.chosen else {})}
         if self.adaptive:
             return {"mode": "adaptive", "criterion": "log change", "max_log_change": self.max_log_change,
                     "min_step_s": self.min_step, "max_step_s": self.max_step}
@@ -134,6 +136,10 @@ FINE_PX_PER_STEP, NOISY_PX_PER_STEP = 0.5, 2.0
 NOISE_LIMITED = 0.25       # median Monte-Carlo noise in log brightness, as a fraction of the smaller threshold:
 #                            two independent draws differ by more than C in ~0.5 % of pixels at 0.25 C
 UNKNOWN_MOTION_STEPS = 100  # motion not known before rendering (aperiodic view, moving sensor)
+MIN_PLACED_STEP = 1e-6     # s: as adaptive stepping's default (no two instants closer, unless the motion needs it)
+PLACED_SAVING = 0.1        # steps placed by the motion (not uniform) where they save at least this fraction: the
+#                            demo's object motion slows down, and 2 px steps placed by it are 12 against 14
+#                            uniform, for the same count error (0.475 +- 0.023 against 0.492 +- 0.018, 5 seeds)
 SHOT_NOISE_PER_STEP = 0.1  # a noisy pixel's chance of a shot-noise event in one step, at most (two in a step
 #                            would be one event: a Poisson draw has two or more in 0.5 % of steps at 0.1)
 MIN_DEFAULT_STEPS = 1      # a slow scene needs no more: the kaleidoscope grid (0.9 px in 20 ms, 4 spp) has
@@ -146,46 +152,92 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     the noise was measured: (noise map, the first instant's radiance at the render's seed), for the
     accuracy-limit note and the loop's first frame, which then cost no render of their own.
 
-    As many uniform steps as keep the fastest known image motion (``image_motion.largest_image_speed``) under
-    0.5 px a step, or 2 px when the first instant's Monte-Carlo noise (two seeds at ``probe_spp``, default the
-    render's spp; ``accuracy_limit.noise_map``) has a median of at least NOISE_LIMITED x C; with a low-pass
-    pixel (``cutoff_hz``) also no step longer than two of its time constants, 1 / (pi f_c): the filter is
-    stepped with its input held over a step (davis346, 300 Hz, on the demo: 95 steps of 1.05 ms against 12 gave
-    inter-event intervals 0.042 against 0.063 KS at 16 spp, 0.016 against 0.083 at 64; at 4 spp the render's
-    noise hides it); with shot noise, steps short enough that a pixel fires one in a step with a probability of
-    at most SHOT_NOISE_PER_STEP; at least MIN_DEFAULT_STEPS; under a periodic scan a whole number per period.
-    Where the motion is not known before rendering, UNKNOWN_MOTION_STEPS. Why is recorded in
-    ``Stepping.chosen`` (the metadata). ``frozen``: the loop's frozen step render, which the probe records."""
+    The rule (docs/design.md, "Default steps"):
+
+    * as many steps as keep the fastest known image motion (scan plus objects) under 0.5 px a step, or 2 px
+      where the first instant's Monte-Carlo noise (two seeds at ``probe_spp``, default the render's spp;
+      ``accuracy_limit.noise_map``) has a median of at least NOISE_LIMITED x C;
+    * with a low-pass pixel (``cutoff_hz``) no step longer than two of its time constants, 1 / (pi f_c): the
+      filter is stepped with its input held over a step (davis346, 300 Hz, on the demo: 95 steps of 1.05 ms
+      against 12 gave inter-event intervals 0.042 against 0.063 KS at 16 spp, 0.016 against 0.083 at 64);
+      waived where the noise is large (at 4 spp, 0.40 C, 12 steps were closer to the reference in count, rate
+      and intervals: 0.55 / 0.34 / 0.161 against 0.60 / 0.43 / 0.164; ``chosen["waived_for_noise"]``);
+    * with shot noise, steps short enough that a pixel fires one in a step with a probability of at most
+      SHOT_NOISE_PER_STEP; at least MIN_DEFAULT_STEPS;
+    * under a periodic scan, uniform and a whole number per period (period reuse, static pixels); without
+      one, placed by the motion (``Stepping.schedule``, ``image_motion.motion_schedule``: each step at most
+      the bound) where that saves PLACED_SAVING of the uniform steps, i.e. where the motion varies;
+    * where the motion is not known before rendering, UNKNOWN_MOTION_STEPS.
+
+    Why is recorded in ``Stepping.chosen`` (the metadata). ``frozen``: the loop's frozen step render, which
+    the probe records."""
     from .accuracy_limit import noise_map
-    from .image_motion import largest_image_speed
-    speed = largest_image_speed(timed, st.t_start, st.duration)
+    speed, sampled = _fastest_motion(st, timed)
     if speed is None:
         chosen = {"by": "default for motion not known before rendering", "steps": UNKNOWN_MOTION_STEPS}
         return replace(st, steps=UNKNOWN_MOTION_STEPS, chosen=chosen), None
-    pixel = integ.config
-    floors = {"minimum": MIN_DEFAULT_STEPS,
-              "low-pass pixel": int(math.ceil(st.duration * math.pi * pixel.cutoff_hz - 1e-9)),
-              # shot noise fires at most one event a pixel a step, with probability rate x dt (the Poisson mean
-              # while that is at most 1): keep it under SHOT_NOISE_PER_STEP
-              "shot noise": int(math.ceil(st.duration * pixel.shot_noise_hz * max(1.0, pixel.shot_noise_bright_factor)
-                                          / SHOT_NOISE_PER_STEP - 1e-9))}
-    floor = max(floors.values())
+    floors = _floors(st, integ.config)
     fine = int(math.ceil(speed * st.duration / FINE_PX_PER_STEP * (1 - 1e-9)))
     sigma, first, noise, bound = None, None, None, FINE_PX_PER_STEP
-    if fine > floor:                       # the bound decides: is the noise large against the threshold?
+    if fine > max(v for k, v in floors.items() if k != "low-pass pixel"):   # is the noise large against C?
         sigma, first = noise_map(timed, probe_spp or st.spp, st.seed, st.t_start, integ, frozen)
         noise = float(np.median(sigma)) / min(integ.threshold_on, integ.threshold_off)
         bound = NOISY_PX_PER_STEP if noise >= NOISE_LIMITED else FINE_PX_PER_STEP
+    waived = ["low-pass pixel"] if noise is not None and noise >= NOISE_LIMITED else []
+    floor = max(v for k, v in floors.items() if k not in waived)
     for_motion = int(math.ceil(speed * st.duration / bound * (1 - 1e-9)))
     steps = max(floor, for_motion)
-    decided_by = "image motion" if for_motion >= floor else max(floors, key=floors.get)
+    decided_by = "image motion" if for_motion >= floor else max(floors, key=lambda k: -1 if k in waived else floors[k])
+    chosen = {"by": decided_by, "px_per_step": bound if for_motion >= floor else None,
+              "largest_image_speed_px_per_s": speed, "noise_over_threshold": noise,
+              "steps_for_motion": for_motion, **{f"steps_for_{k.replace(' ', '_').replace('-', '')}": v
+                                                 for k, v in floors.items()},
+              **({"waived_for_noise": waived} if waived else {})}
+    probe = (sigma, first) if sigma is not None else None
+    placed = _placed_by_motion(st, timed, bound, floor, for_motion, sampled) if for_motion > floor else None
+    if placed is not None:
+        return replace(st, schedule=tuple(placed), px_per_step=bound, max_step=st.duration / floor,
+                       min_step=min(MIN_PLACED_STEP, st.duration / floor),
+                       chosen=dict(chosen, placed="by image motion", steps=len(placed) - 1)), probe
     period = timed.scan_period
     periods = round(st.duration / period) if period else 0
     if periods >= 1 and abs(st.duration / period - periods) < 1e-9 * periods:     # the scan's phase grid
         steps = min(int(math.ceil(steps / periods)), max(1, MAX_STEPS // periods)) * periods
     steps = min(steps, MAX_STEPS)          # the coarse-step note says so if this binds
-    chosen = {"by": decided_by, "px_per_step": bound if for_motion >= floor else None,
-              "largest_image_speed_px_per_s": speed, "noise_over_threshold": noise,
-              "steps_for_motion": for_motion, **{f"steps_for_{k.replace(' ', '_').replace('-', '')}": v
-                                                 for k, v in floors.items()}, "steps": steps}
-    return replace(st, steps=steps, chosen=chosen), (sigma, first) if sigma is not None else None
+    return replace(st, steps=steps, chosen=dict(chosen, steps=steps)), probe
+
+
+def _fastest_motion(st: Stepping, timed) -> tuple:
+    """(the fastest image motion in px/s or None where unknown, ``image_motion.sampled_motion``'s samples or
+    None): without a scan the samples the steps may be placed by give the speed too; under a scan
+    ``largest_image_speed`` samples every period."""
+    from .image_motion import largest_image_speed, sampled_motion
+    if timed.scan_period != 0.0:
+        return largest_image_speed(timed, st.t_start, st.duration), None
+    sampled = sampled_motion(timed, st.t_start, st.duration)
+    times, d = sampled
+    return (None if d is None else float(d.max()) / (times[1] - times[0])), sampled
+
+
+def _floors(st: Stepping, pixel) -> dict:
+    """The fewest steps the pixel model needs, whatever the motion (``default_steps``)."""
+    return {"minimum": MIN_DEFAULT_STEPS,
+            "low-pass pixel": int(math.ceil(st.duration * math.pi * pixel.cutoff_hz - 1e-9)),
+            # shot noise fires at most one event a pixel a step, with probability rate x dt (the Poisson mean
+            # while that is at most 1): keep it under SHOT_NOISE_PER_STEP
+            "shot noise": int(math.ceil(st.duration * pixel.shot_noise_hz * max(1.0, pixel.shot_noise_bright_factor)
+                                        / SHOT_NOISE_PER_STEP - 1e-9))}
+
+
+def _placed_by_motion(st: Stepping, timed, bound: float, floor: int, uniform: int, sampled):
+    """The default's instants placed by the image motion (``image_motion.motion_schedule`` at ``bound`` px, no
+    step longer than the floors allow), where that saves at least PLACED_SAVING of the ``uniform`` steps the
+    fastest motion needs and no periodic scan needs a phase grid; else None (uniform steps)."""
+    from .image_motion import motion_schedule
+    if sampled is None:                    # a scan: uniform steps keep its phase grid (period reuse, static pixels)
+        return None
+    placed = motion_schedule(timed, st.t_start, st.duration, bound, st.duration / floor,
+                             min(MIN_PLACED_STEP, st.duration / floor), sampled)
+    if placed is None or len(placed) - 1 > min(MAX_STEPS, uniform * (1 - PLACED_SAVING)):
+        return None
+    return placed

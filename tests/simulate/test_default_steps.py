@@ -17,9 +17,11 @@ from mitsuba_eventfield.simulate.stepping import UNKNOWN_MOTION_STEPS
 DEMO = bundled_scene("demo/demo.xml")
 
 
-def _chosen(ev):
+def _chosen(ev, placed: bool = False):
+    """Why the default chose its steps; ``placed``: the steps are placed by the image motion (not uniform)."""
     st = ev.meta["stepping"]
-    assert st["mode"] == "uniform"
+    assert (st["mode"], st.get("criterion")) == (("adaptive", "image motion") if placed else ("uniform", None))
+    assert st["chosen"]["steps"] == ev.meta["render"]["steps"]
     return st["chosen"]
 
 
@@ -82,22 +84,27 @@ def test_the_probe_frames_are_the_first_step_and_the_accuracy_limit_frame(tmp_pa
 
 def test_noisy_scene_takes_two_pixel_steps_until_samples_quiet_the_noise():
     """The demo at 4 spp (noise 0.40 C): 2 px a step, said in a note (not a coarse-step warning); at 64 spp the
-    noise is small and the steps are four times as many. The objects' motion per step, computed independently
-    for the steps taken, stays under each bound, and one step fewer would not."""
+    noise is small and the steps are four times as many. The demo's objects slow down, so the steps are placed
+    by their motion: as many as the path the objects' image travels (projected here 20,000 times, independently
+    of the 1024 samples the stepping takes) needs at each bound, fewer than uniform steps at the fastest speed."""
     timed = ef.load_scene(DEMO, width=48, height=36)
     noisy = ef.render_events(timed, 0.05, spp=4)
     quiet = ef.render_events(timed, 0.05, spp=64)
-    a, b = _chosen(noisy), _chosen(quiet)
+    a, b = _chosen(noisy, placed=True), _chosen(quiet, placed=True)
     assert a["px_per_step"] == 2.0 and a["noise_over_threshold"] >= 0.25
     assert b["px_per_step"] == 0.5 and b["noise_over_threshold"] < 0.25
+    timed.set_time(0.0)
+    path = image_motion.object_displacements(timed, np.linspace(0.0, 0.05, 20_001)).sum()
     for ev, bound in ((noisy, 2.0), (quiet, 0.5)):
-        steps = ev.meta["render"]["steps"]
-        assert image_motion.object_px_per_step(timed, 0.0, 0.05, steps) <= bound * 1.001
-        assert image_motion.object_px_per_step(timed, 0.0, 0.05, steps - 1) > bound * 0.95   # not more than needed
+        steps, chosen = ev.meta["render"]["steps"], ev.meta["stepping"]["chosen"]
+        assert steps == pytest.approx(path / bound, abs=1.0)
+        assert steps <= 0.9 * chosen["steps_for_motion"]               # uniform steps at the fastest speed
+        assert ev.meta["render"]["image_motion_px_per_step"]["objects"] <= bound * 1.02
     assert quiet.meta["render"]["steps"] == pytest.approx(4 * noisy.meta["render"]["steps"], abs=3)
     notes = noisy.meta["render"]["notes"]
     assert any("chosen because Monte-Carlo noise" in n for n in notes)
     assert not any("steps coarser than the image motion" in n for n in notes)
+    assert quiet.meta["render"]["timing_limit"] is not None            # placed steps get the accuracy-limit note
 
 
 def test_galvo_default_steps_keep_the_phase_grid_and_reuse_periods():
@@ -133,12 +140,17 @@ def test_unknown_motion_takes_the_fixed_default(tmp_path):
     assert "not known" in _chosen(ev)["by"]
 
 
-def test_low_pass_pixel_bounds_the_default_step():
-    """davis346's 300 Hz photoreceptor: no default step longer than 1 / (pi 300 Hz), 1.06 ms."""
+def test_low_pass_pixel_bounds_the_default_step_unless_noise_hides_it():
+    """davis346's 300 Hz photoreceptor: no default step longer than 1 / (pi 300 Hz), 1.06 ms, where the render is
+    quiet (64 spp); at 4 spp (noise 0.4 C) the motion's 2 px steps, the low-pass floor waived and said so."""
     timed = ef.load_scene(DEMO, width=32, height=24)
-    ev = ef.render_events(timed, 0.02, preset="davis346")
-    assert ev.meta["render"]["steps"] >= math.ceil(0.02 * math.pi * 300) == 19
-    assert _chosen(ev)["steps_for_lowpass_pixel"] == 19
+    quiet = ef.render_events(timed, 0.02, preset="davis346", spp=64)
+    assert quiet.meta["render"]["steps"] == math.ceil(0.02 * math.pi * 300) == 19
+    assert _chosen(quiet)["by"] == "low-pass pixel" and "waived_for_noise" not in _chosen(quiet)
+    noisy = ef.render_events(timed, 0.02, preset="davis346")
+    chosen = _chosen(noisy, placed=noisy.meta["stepping"]["mode"] != "uniform")
+    assert chosen["waived_for_noise"] == ["low-pass pixel"] and chosen["steps_for_lowpass_pixel"] == 19
+    assert chosen["by"] == "image motion" and chosen["px_per_step"] == 2.0 and noisy.meta["render"]["steps"] < 19
 
 
 def test_shot_noise_keeps_its_rate_on_a_still_scene():
