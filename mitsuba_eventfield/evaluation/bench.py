@@ -311,9 +311,12 @@ def run_scene(spec: BenchScene, settings=None, seeds=SEEDS, log=print) -> list:
             else:
                 planned.append((resolved, extra))
         runs = {}
-        for i, seed in enumerate(seeds):          # seeds outermost: a slow spell of the machine hits every setting
+        for seed in seeds:                        # seeds outermost: a slow spell of the machine hits every setting
             for cfg, extra in planned:
-                ev, wall = _render(path, spec, cfg, seed, warm=i == 0)
+                # every run warmed on its own freshly loaded scene: a new scene's first render costs ~150 ms more
+                # (analytic scene), which a warm-up on the first seed only left in every later seed's time, so the
+                # fastest seed was always the first and the "fastest of five" one sample (+-10 %)
+                ev, wall = _render(path, spec, cfg, seed, warm=True)
                 runs.setdefault(cfg["key"], []).append(
                     {"scene": spec.name, "setting": cfg["key"], "label": label(cfg, spec.steps), "seed": seed,
                      "wall_s": wall + extra.get("plan_s", 0.0), "events": len(ev), "steps": ev.meta["render"]["steps"],

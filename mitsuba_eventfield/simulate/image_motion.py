@@ -214,7 +214,9 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
     ``chosen``: the default steps' reasons (``stepping.default_steps``): steps it made coarser than a pixel
     because Monte-Carlo noise limits the render are noted with that reason, not warned about. ``schedule``:
     the instants of steps placed by the motion (``steps`` None): the largest motion between two of them."""
-    if schedule is not None:
+    if schedule is not None and "largest_px_per_step" in (chosen or {}):    # the default's, placed without a scan
+        steps, scan, objects = len(schedule) - 1, None, chosen["largest_px_per_step"]
+    elif schedule is not None:
         steps = len(schedule) - 1
         timed.set_time(t_start)        # the shapes' bounds at the render's start, as the schedule saw them
         scan, objects = (None if d is None else float(d.max()) for d in

@@ -110,8 +110,7 @@ class _Loop:
         self.static = None if not reuse or allocation is not None or checkpoints is not None else \
             static_pixels.plan(timed, st, integ, summary.notes)
         self.renderer = FrameRenderer(integ.inner, st.spp, allocation, summary.notes, self.static, frozen)
-        # the probe's frame is the first step's frame (same seed, instant and spp) where every pixel is rendered
-        self.first_frame = first if allocation is None and self.static is None else None
+        self.first_frame = first if allocation is None and self.static is None else None   # the probe's: step 0's
         self.reuse = None if st.steps is None or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
         self.cache = []                                  # log-brightness frames of one period, for reuse
@@ -129,7 +128,8 @@ class _Loop:
             summary.reused_steps += 1
             return
         t0 = time.perf_counter()
-        self.timed.set_time(t)
+        if step_index or self.first_frame is None:      # the probe's first frame needs no scene at this instant
+            self.timed.set_time(t)
         t1 = time.perf_counter()
         self.render_frame(self.st.seed if self.st.seed_mode == "fixed" else self.st.seed + step_index,
                           step=step_index)

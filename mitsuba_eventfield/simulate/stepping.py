@@ -196,9 +196,12 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     probe = (sigma, first) if sigma is not None else None
     placed = _placed_by_motion(st, timed, bound, floor, for_motion, sampled) if for_motion > floor else None
     if placed is not None:
+        times, d = sampled                 # each placed step's image path, for the coarse-step note
+        path = np.interp(placed, times, np.concatenate([[0.0], np.cumsum(d)]))
         return replace(st, schedule=tuple(placed), px_per_step=bound, max_step=st.duration / floor,
                        min_step=min(MIN_PLACED_STEP, st.duration / floor),
-                       chosen=dict(chosen, placed="by image motion", steps=len(placed) - 1)), probe
+                       chosen=dict(chosen, placed="by image motion", steps=len(placed) - 1,
+                                   largest_px_per_step=float(np.diff(path).max()))), probe
     period = timed.scan_period
     periods = round(st.duration / period) if period else 0
     if periods >= 1 and abs(st.duration / period - periods) < 1e-9 * periods:     # the scan's phase grid
