@@ -114,7 +114,7 @@ SUITE = (BenchScene("analytic", None, ANALYTIC_DURATION, defines={"height": 48})
 
 
 def label(cfg: dict, base_steps: int) -> str:
-    """A setting in words, with its real numbers: '4 spp, 25 steps'; '4 spp, steps by image motion (default)'."""
+    """A setting in words, with its real numbers: '4 spp, 25 steps'; '4 spp, default steps (the default)'."""
     if cfg.get("auto"):
         return f"auto, --timing-accuracy {cfg['auto'] * 1e6:g}us (plan time included)"
     if cfg.get("adaptive"):
@@ -125,10 +125,10 @@ def label(cfg: dict, base_steps: int) -> str:
     if cfg.get("spp_changing"):
         text += f" ({cfg['spp_changing']} where it changes)"
     text += (f", {max(1, round(base_steps * cfg['steps_factor']))} steps" if "steps_factor" in cfg
-             else ", uniform steps by image motion")
+             else ", default steps")        # stepping.default_steps: by image motion, uniform under a scan
     if cfg.get("seed_mode") == "independent":
         text += ", new seed per step"
-    return text + (" (default)" if cfg["key"] == DEFAULT_KEY else "")
+    return text + (" (the default)" if cfg["key"] == DEFAULT_KEY else "")
 
 
 def pick_settings(keys=None) -> list:
