@@ -16,11 +16,15 @@ import sys
 
 import numpy as np
 
+from ..errors import EventFieldError
 from ..scene.timed import TimedScene
 
 MAX_PX_PER_STEP = 1.0
 MOTION_SAMPLES = 257           # instants per render at which moving objects are projected
-SPEED_CHUNK = 200_000          # instants projected at once by largest_image_speed
+SPEED_CHUNK = 200_000          # instants projected at once by largest_image_speed and sampled_motion
+SCHEDULE_SAMPLES = 2_000_000   # instants a schedule's motion is sampled at (64 a scan period) before thinning
+MIN_SAMPLES_PER_PERIOD = 8     # never fewer a scan period: a circle's path by 8 chords is 2.6 % short
+MAX_SCHEDULE_SAMPLES = 8_000_000   # 64 MB a sample array: 1,000,000 scan periods a render
 
 
 def _cameras(timed: TimedScene) -> list | None:
@@ -128,10 +132,21 @@ def image_displacements(timed: TimedScene, times) -> np.ndarray | None:
 
 
 def _motion_times(timed: TimedScene, t_start: float, duration: float) -> np.ndarray:
-    """The instants at which image motion is sampled: 64 per scan period, at least 1024 over the render."""
+    """The instants at which a schedule's image motion is sampled: 64 per scan period and at least 1024 over the
+    render, at most SCHEDULE_SAMPLES unless that leaves fewer than MIN_SAMPLES_PER_PERIOD a period (the cap of
+    200,000 this replaced left 2 a period at 100,000 periods: the samples fell on the same phases, and the scan's
+    path came out a fraction of itself). Beyond MAX_SCHEDULE_SAMPLES: refused, one line."""
     period = timed.scan_period or 0.0
-    n = max(1024, int(math.ceil(64 * duration / period)) if period else 0)
-    return t_start + np.linspace(0.0, duration, min(n, 200_000) + 1)
+    periods = duration / period if period else 0.0
+    n = max(1024, int(math.ceil(64 * periods)))
+    if n > SCHEDULE_SAMPLES:
+        n = max(SCHEDULE_SAMPLES, int(math.ceil(MIN_SAMPLES_PER_PERIOD * periods)))
+    if n > MAX_SCHEDULE_SAMPLES:
+        raise EventFieldError(f"duration = {duration:g} s is {periods:.0f} scan periods: steps placed by image motion "
+                              f"sample each period {MIN_SAMPLES_PER_PERIOD} times, allowed at most "
+                              f"{MAX_SCHEDULE_SAMPLES // MIN_SAMPLES_PER_PERIOD} periods a render (use uniform "
+                              "--steps, or split the render)")
+    return t_start + np.linspace(0.0, duration, n + 1)
 
 
 def largest_image_speed(timed: TimedScene, t_start: float, duration: float) -> float | None:
@@ -157,7 +172,13 @@ def sampled_motion(timed: TimedScene, t_start: float, duration: float) -> tuple:
     is placed by (``_motion_times``; for a render without a scan also what ``largest_image_speed`` samples)."""
     times = _motion_times(timed, t_start, duration)
     timed.set_time(t_start)            # the shapes' bounds at the render's start: the same answer on every call
-    return times, image_displacements(timed, times)
+    parts = []
+    for i0 in range(0, len(times) - 1, SPEED_CHUNK):     # bounded temporaries for renders of many periods
+        d = image_displacements(timed, times[i0:i0 + SPEED_CHUNK + 1])
+        if d is None:
+            return times, None
+        parts.append(d)
+    return times, np.concatenate(parts)
 
 
 def motion_schedule(timed: TimedScene, t_start: float, duration: float, px_per_step: float = MAX_PX_PER_STEP,

@@ -97,3 +97,17 @@ def test_unknown_motion_falls_back_or_refuses():
         ef.render_events(timed, 0.002, adaptive="motion")
     with pytest.raises(EventFieldError, match="allowed values are False, True, 'motion', 'log-change'"):
         ef.render_events(timed, 0.002, adaptive="sometimes")
+
+
+def test_schedules_of_many_scan_periods_do_not_alias_the_scan():
+    """150,000 periods of a 250 Hz circle (10 min simulated): the schedule keeps at least 8 motion samples a
+    period, so its steps per period are those of 1,000 periods within 2 % (8 chords of a circle are 2.6 % short
+    of it). The 200,000-sample cap this replaced left 1.3 samples a period: they fell on nearly the same phases.
+    Past 1,000,000 periods it is refused in one line."""
+    timed = ef.load_scene(GALVO, width=48, height=36)
+    period = timed.scan_period
+    few = len(motion_schedule(timed, 0.0, 1000 * period, 1.0)) - 1
+    many = len(motion_schedule(timed, 0.0, 150_000 * period, 1.0)) - 1
+    assert many / 150_000 == pytest.approx(few / 1000, rel=0.02)
+    with pytest.raises(EventFieldError, match=r"duration = .* scan periods.*at most 1000000 periods"):
+        motion_schedule(timed, 0.0, 1_000_100 * period, 1.0)
