@@ -18,8 +18,8 @@ class PixelVariables:
     traversal of a Python plugin (every Dr.Jit array in its ``__dict__``, ``drjit.detail.traverse_py_cb_ro``)
     does not enter. The frozen step render (``simulate/frames.py``) takes the scene, and so the integrator, as
     an input: with the state in ``__dict__`` every state array was an input of every replay, and the first
-    commit (None -> arrays) changed the inputs' layout, so Dr.Jit recorded the render twice more per render
-    (about 3.5 ms each at 48x36: the demo's 12 steps took 40-45 ms, now 33-38)."""
+    commit (None -> arrays) changed the inputs' layout, so Dr.Jit recorded the render 3 to 5 times a render
+    instead of 2 (about 3.5 ms each at 48x36: the demo's 12 steps took 40-45 ms, now 33-38)."""
 
 
 PIXEL_VARIABLES = ("size", "log_prev", "anchor", "k_on", "k_off", "offset", "c_on", "c_off", "staged",

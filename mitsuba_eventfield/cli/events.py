@@ -43,8 +43,9 @@ def _add_render(sub) -> None:
     g = r.add_mutually_exclusive_group()
     g.add_argument("--steps", type=num(1, MAX_STEPS, integer=True),
                    help="uniform time steps over the duration (default: as many as the known image motion "
-                        "needs, 0.5 px a step, 2 px where Monte-Carlo noise is large, uniform under a scan and "
-                        "placed by the motion without one; 100 where the motion is unknown)")
+                        "needs, 0.5 px a step, 2 px where Monte-Carlo noise is large, uniform under a scan, "
+                        "placed by the motion without one where that saves a tenth; 100 where the motion is "
+                        "unknown)")
     g.add_argument("--adaptive", nargs="?", const="auto", choices=("auto", "motion", "log-change"),
                    help="adaptive steps: 'motion' (placed before rendering so the known image motion, galvo scan "
                         "and moving objects, stays under --px-per-step), 'log-change' (sized while rendering by "

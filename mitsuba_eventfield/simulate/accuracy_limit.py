@@ -29,7 +29,7 @@ def noise_map(timed, spp: int, seed: int, t: float, integ=None, frozen=None):
     log through its own pixel (``stage``), and the result is (map, the radiance at ``seed``): the render's first
     frame, which the time-stepping loop stages instead of rendering it again (``stepping.default_steps``).
     ``frozen``: the loop's frozen step render (``frames.frozen_render``, at ``spp``): the probe's two frames are
-    its recording and first replay, so they cost what the loop's first two frames would have."""
+    its two recordings (a freshly loaded scene records twice), so the loop replays it from its first step on."""
     if integ is None:
         from .render import render_frames
         a, b = (render_frames(timed, [t], spp=spp, seed=s)[0] for s in (seed, seed + 1))
@@ -63,9 +63,10 @@ class AccuracyLimit:
     @classmethod
     def for_stepping(cls, st, sigma: np.ndarray | None = None) -> "AccuracyLimit":
         """Active for fixed-seed renders of at least MIN_STEPS steps known before rendering (uniform, or placed
-        by the image motion); otherwise every method does nothing (log-change steps and independent seeds have
-        no steps or frozen noise to speak of). ``sigma``: the noise map already measured (``noise_map``, by
-        ``stepping.default_steps``): not again."""
+        by the image motion: the default's or ``adaptive="motion"``, whose estimate takes the first two steps,
+        the shortest where the motion is fastest, so later longer steps may do worse); otherwise every method
+        does nothing (log-change steps and independent seeds have no steps or frozen noise to speak of).
+        ``sigma``: the noise map already measured (``noise_map``, by ``stepping.default_steps``): not again."""
         if st.adaptive or (st.steps is None and st.schedule is None):
             dts, steps = 0.0, 0
         elif st.schedule is not None:

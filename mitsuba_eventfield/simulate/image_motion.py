@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import EventFieldError
 from ..scene.timed import TimedScene
+from ..validate import MAX_STEPS
 
 MAX_PX_PER_STEP = 1.0
 MOTION_SAMPLES = 257           # instants per render at which moving objects are projected
@@ -198,8 +199,14 @@ def motion_schedule(timed: TimedScene, t_start: float, duration: float, px_per_s
         return None
     path = np.concatenate([[0.0], np.cumsum(d)])
     steps = max(1, int(math.ceil(path[-1] / px_per_step * (1 - 1e-6))))    # 50.0000001 px at 0.5: 100 steps
+    if steps > MAX_STEPS:                        # refused before the instants are built
+        raise EventFieldError(f"adaptive by image motion needs {steps} steps of at most {px_per_step:g} px: allowed "
+                              f"at most {MAX_STEPS} (raise px_per_step or shorten the render)")
     instants = np.interp(np.linspace(0.0, path[-1], steps + 1), path, times) if path[-1] > 0 else times[[0, -1]]
     if max_step is not None:                     # split steps longer than max_step (nothing moves there)
+        splits = int(np.maximum(1, np.ceil(np.diff(instants) / max_step - 1e-9)).sum())
+        if splits > MAX_STEPS:
+            raise EventFieldError(f"max_step = {max_step:g} s makes {splits} steps: allowed at most {MAX_STEPS}")
         out = [instants[0]]
         for t0, t1 in zip(instants[:-1], instants[1:]):
             k = max(1, int(math.ceil((t1 - t0) / max_step - 1e-9)))
@@ -234,14 +241,10 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
     at 4 a period, 346x260) says nothing at another film size or scan amplitude; the pixels a step do.
     ``chosen``: the default steps' reasons (``stepping.default_steps``): steps it made coarser than a pixel
     because Monte-Carlo noise limits the render are noted with that reason, not warned about. ``schedule``:
-    the instants of steps placed by the motion (``steps`` None): the largest motion between two of them."""
-    if schedule is not None and "largest_px_per_step" in (chosen or {}):    # the default's, placed without a scan
+    the instants of the default's steps placed by the motion (``steps`` None), whose largest image path a step
+    ``chosen["largest_px_per_step"]`` holds."""
+    if schedule is not None:           # the default's steps placed by the motion (no scan): their largest path
         steps, scan, objects = len(schedule) - 1, None, chosen["largest_px_per_step"]
-    elif schedule is not None:
-        steps = len(schedule) - 1
-        timed.set_time(t_start)        # the shapes' bounds at the render's start, as the schedule saw them
-        scan, objects = (None if d is None else float(d.max()) for d in
-                         (scan_displacements(timed, schedule), object_displacements(timed, schedule)))
     else:
         scan = scan_px_per_step(timed, duration, steps)
         objects = object_px_per_step(timed, t_start, duration, steps)
@@ -258,9 +261,11 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
                              "the default steps are finer")
         return
     need = int(math.ceil(steps * worst / MAX_PX_PER_STEP))
+    fix = (f"--steps {need} keeps it under {MAX_PX_PER_STEP:g} px" if schedule is None else
+           "the steps are placed by the motion, and the fastest moments would need steps shorter than "
+           "--min-step (default 1 us)")
     note = (f"warning: steps coarser than the image motion: per step {what} (more than {MAX_PX_PER_STEP:g} "
-            f"px: events between rendered instants are interpolated, not resolved, and missed); --steps {need} "
-            f"keeps it under {MAX_PX_PER_STEP:g} px")
+            f"px: events between rendered instants are interpolated, not resolved, and missed); {fix}")
     summary.notes.append(note)
     print(f"eventfield: {note}", file=sys.stderr)
 

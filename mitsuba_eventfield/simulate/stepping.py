@@ -124,9 +124,10 @@ def stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_ste
 
 
 # The default time stepping, measured on the speed-against-accuracy suite (docs/design.md, "Default steps"):
-# uniform steps (so that a periodic scan keeps its phase grid: period reuse, static pixels) as many as keep the
-# fastest known image motion (scan plus objects) under FINE_PX_PER_STEP pixels a step, or NOISY_PX_PER_STEP
-# where Monte-Carlo noise is large against the threshold. The analytic scene (noise 0.035 C at 4 spp): 0.5 px a
+# steps (uniform under a periodic scan, which keeps its phase grid: period reuse, static pixels; placed by the
+# motion without one, where that saves PLACED_SAVING) as many as keep the fastest known image motion (scan
+# plus objects) under FINE_PX_PER_STEP pixels a step, or NOISY_PX_PER_STEP where Monte-Carlo noise is large
+# against the threshold. The analytic scene (noise 0.035 C at 4 spp): 0.5 px a
 # step 0.7 % event-count error and 41 us p99 timing, 1 px 3.8 % and 125 us. Noisy renders (4 spp; the demo
 # 0.40 C, the fan 0.48 C): every step re-samples the noise of the pixels the motion sweeps, and the per-pixel
 # count error falls from 0.5 to 2 px a step (fan 48x36 0.22 / 0.18 / 0.16, 96x72 0.14 / 0.12 / 0.11, demo
@@ -136,7 +137,8 @@ FINE_PX_PER_STEP, NOISY_PX_PER_STEP = 0.5, 2.0
 NOISE_LIMITED = 0.25       # median Monte-Carlo noise in log brightness, as a fraction of the smaller threshold:
 #                            two independent draws differ by more than C in ~0.5 % of pixels at 0.25 C
 UNKNOWN_MOTION_STEPS = 100  # motion not known before rendering (aperiodic view, moving sensor)
-MIN_PLACED_STEP = 1e-6     # s: as adaptive stepping's default (no two instants closer, unless the motion needs it)
+MIN_PLACED_STEP = 1e-6     # s: as adaptive stepping's default: no two placed instants closer (an object passing
+#                            right by the camera may then move more than the bound in a step: the note says so)
 PLACED_SAVING = 0.1        # steps placed by the motion (not uniform) where they save at least this fraction: the
 #                            demo's object motion slows down, and 2 px steps placed by it are 12 against 14
 #                            uniform, for the same count error (0.475 +- 0.023 against 0.492 +- 0.018, 5 seeds)
@@ -179,12 +181,15 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     floors = _floors(st, integ.config)
     fine = int(math.ceil(speed * st.duration / FINE_PX_PER_STEP * (1 - 1e-9)))
     sigma, first, noise, bound = None, None, None, FINE_PX_PER_STEP
-    if fine > max(v for k, v in floors.items() if k != "low-pass pixel"):   # is the noise large against C?
-        sigma, first = noise_map(timed, probe_spp or st.spp, st.seed, st.t_start, integ, frozen)
+    others = max(v for k, v in floors.items() if k != "low-pass pixel")
+    if fine > others:                      # the bound decides: is the noise large against the threshold?
+        sigma, first = noise_map(timed, probe_spp or st.spp, st.seed, st.t_start, integ,
+                                 frozen if probe_spp is None else None)    # the frozen render is at st.spp
         noise = float(np.median(sigma)) / min(integ.threshold_on, integ.threshold_off)
         bound = NOISY_PX_PER_STEP if noise >= NOISE_LIMITED else FINE_PX_PER_STEP
-    waived = ["low-pass pixel"] if noise is not None and noise >= NOISE_LIMITED else []
-    floor = max(v for k, v in floors.items() if k not in waived)
+    noisy = noise is not None and noise >= NOISE_LIMITED
+    waived = ["low-pass pixel"] if noisy and floors["low-pass pixel"] > others else []
+    floor = max(1, max(v for k, v in floors.items() if k not in waived))
     for_motion = int(math.ceil(speed * st.duration / bound * (1 - 1e-9)))
     steps = max(floor, for_motion)
     decided_by = "image motion" if for_motion >= floor else max(floors, key=lambda k: -1 if k in waived else floors[k])
@@ -219,7 +224,7 @@ def _fastest_motion(st: Stepping, timed) -> tuple:
         return largest_image_speed(timed, st.t_start, st.duration), None
     sampled = sampled_motion(timed, st.t_start, st.duration)
     times, d = sampled
-    return (None if d is None else float(d.max()) / (times[1] - times[0])), sampled
+    return (None if d is None else float(d.max() / (times[1] - times[0]))), sampled
 
 
 def _floors(st: Stepping, pixel) -> dict:
@@ -239,8 +244,14 @@ def _placed_by_motion(st: Stepping, timed, bound: float, floor: int, uniform: in
     from .image_motion import motion_schedule
     if sampled is None:                    # a scan: uniform steps keep its phase grid (period reuse, static pixels)
         return None
-    placed = motion_schedule(timed, st.t_start, st.duration, bound, st.duration / floor,
-                             min(MIN_PLACED_STEP, st.duration / floor), sampled)
-    if placed is None or len(placed) - 1 > min(MAX_STEPS, uniform * (1 - PLACED_SAVING)):
+    allowed = min(MAX_STEPS, uniform * (1 - PLACED_SAVING))
+    if sampled[1].sum() / bound > allowed + 1:     # the motion's path needs too many: no schedule built
+        return None
+    try:
+        placed = motion_schedule(timed, st.t_start, st.duration, bound, st.duration / floor,
+                                 min(MIN_PLACED_STEP, st.duration / floor), sampled)
+    except EventFieldError:                # more than MAX_STEPS: uniform steps, capped, with the coarse-step note
+        return None
+    if placed is None or len(placed) - 1 > allowed:
         return None
     return placed

@@ -48,7 +48,7 @@ def _interrupt_at(monkeypatch, step):
                 pixel={"shot_noise_hz": 200.0})),
     (DEMO, dict(duration=0.01, adaptive="motion", px_per_step=0.1)),   # 24 steps placed by the objects' motion
     (GALVO, dict(duration=0.008, steps=64)),                        # a reused scan period, then copies
-    (DEMO, dict(duration=0.1)),                     # the default steps (14), chosen again alike on resume
+    (DEMO, dict(duration=0.1)),                     # the default steps (placed by the motion), chosen again alike on resume
 ], ids=["uniform-ideal", "adaptive-davis346-noise", "adaptive-motion", "galvo-reuse", "default-steps"])
 def test_interrupted_render_resumes_to_the_uninterrupted_file(tmp_path, monkeypatch, capsys, scene, kw):
     timed = ef.load_scene(scene, width=48, height=36)

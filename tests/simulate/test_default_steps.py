@@ -1,6 +1,7 @@
 """The steps a render takes unasked (issue 18: defaults chosen by measurement, ``stepping.default_steps``):
-uniform steps sized by the image motion known before rendering, checked against the analytic scene's exact
-events, rendered image shifts, the galvo phase grid and the scene's own motion."""
+steps sized by the image motion known before rendering (uniform, or placed by the motion without a scan),
+checked against the analytic scene's exact events, rendered image shifts, the galvo phase grid, the scene's own
+motion and the explicit stepping they stand for."""
 import math
 
 import cv2
@@ -92,6 +93,7 @@ def test_noisy_scene_takes_two_pixel_steps_until_samples_quiet_the_noise():
     quiet = ef.render_events(timed, 0.05, spp=64)
     a, b = _chosen(noisy, placed=True), _chosen(quiet, placed=True)
     assert a["px_per_step"] == 2.0 and a["noise_over_threshold"] >= 0.25
+    assert "waived_for_noise" not in a               # the ideal pixel has no low-pass floor to waive
     assert b["px_per_step"] == 0.5 and b["noise_over_threshold"] < 0.25
     timed.set_time(0.0)
     path = image_motion.object_displacements(timed, np.linspace(0.0, 0.05, 20_001)).sum()
@@ -148,7 +150,7 @@ def test_low_pass_pixel_bounds_the_default_step_unless_noise_hides_it():
     assert quiet.meta["render"]["steps"] == math.ceil(0.02 * math.pi * 300) == 19
     assert _chosen(quiet)["by"] == "low-pass pixel" and "waived_for_noise" not in _chosen(quiet)
     noisy = ef.render_events(timed, 0.02, preset="davis346")
-    chosen = _chosen(noisy, placed=noisy.meta["stepping"]["mode"] != "uniform")
+    chosen = _chosen(noisy)               # 2 steps: placing them by the motion would save none
     assert chosen["waived_for_noise"] == ["low-pass pixel"] and chosen["steps_for_lowpass_pixel"] == 19
     assert chosen["by"] == "image motion" and chosen["px_per_step"] == 2.0 and noisy.meta["render"]["steps"] < 19
 
@@ -181,3 +183,18 @@ def test_bad_spp_changing_is_refused_before_the_noise_probe_renders(bad):
     from mitsuba_eventfield.errors import EventFieldError
     with pytest.raises(EventFieldError, match="spp_changing"):
         ef.render_events(ef.load_scene(DEMO, width=32, height=24), 0.01, spp_changing=bad)
+
+
+def test_placed_default_steps_are_the_adaptive_motion_steps_at_its_bound():
+    """The demo's default (2 px, placed by the motion) renders the events of asking for that stepping
+    (``adaptive="motion"``, 2 px, no step longer than the render, 1 us the shortest), bit for bit: the probe's
+    first frame stands for the loop's, and both renders make the accuracy-limit note from the same frames."""
+    timed = ef.load_scene(DEMO, width=48, height=36)
+    default = ef.render_events(timed, 0.05)
+    asked = ef.render_events(timed, 0.05, adaptive="motion", px_per_step=2.0, max_step=0.05, min_step=1e-6)
+    assert _chosen(default, placed=True)["px_per_step"] == 2.0
+    assert default.meta["render"]["steps"] == asked.meta["render"]["steps"] >= 3
+    assert len(default) > 100
+    for a in "xytp":
+        assert np.array_equal(getattr(default, a), getattr(asked, a))
+    assert default.meta["render"]["timing_limit"] == asked.meta["render"]["timing_limit"] is not None
