@@ -160,8 +160,7 @@ def largest_image_speed(timed: TimedScene, t_start: float, duration: float) -> f
     dt = duration / n
     timed.set_time(t_start)            # the shapes' bounds at the render's start: the same answer on every call
     worst = 0.0
-    for i0 in range(0, n, SPEED_CHUNK):
-        d = image_displacements(timed, t_start + dt * np.arange(i0, min(n, i0 + SPEED_CHUNK) + 1))
+    for d in _displacement_chunks(timed, n, lambda i0, i1: t_start + dt * np.arange(i0, i1 + 1)):
         if d is None:
             return None
         worst = max(worst, float(d.max()))
@@ -173,13 +172,18 @@ def sampled_motion(timed: TimedScene, t_start: float, duration: float) -> tuple:
     is placed by (``_motion_times``; for a render without a scan also what ``largest_image_speed`` samples)."""
     times = _motion_times(timed, t_start, duration)
     timed.set_time(t_start)            # the shapes' bounds at the render's start: the same answer on every call
-    parts = []
-    for i0 in range(0, len(times) - 1, SPEED_CHUNK):     # bounded temporaries for renders of many periods
-        d = image_displacements(timed, times[i0:i0 + SPEED_CHUNK + 1])
+    parts = list(_displacement_chunks(timed, len(times) - 1, lambda i0, i1: times[i0:i1 + 1]))
+    return times, None if any(d is None for d in parts) else np.concatenate(parts)
+
+
+def _displacement_chunks(timed: TimedScene, n: int, instants):
+    """``image_displacements`` over instants 0..n, SPEED_CHUNK intervals at a time (bounded temporaries for
+    renders of many scan periods); ``instants(i0, i1)``: the instants i0..i1. Stops after a None (unknown)."""
+    for i0 in range(0, n, SPEED_CHUNK):
+        d = image_displacements(timed, instants(i0, min(n, i0 + SPEED_CHUNK)))
+        yield d
         if d is None:
-            return times, None
-        parts.append(d)
-    return times, np.concatenate(parts)
+            return
 
 
 def motion_schedule(timed: TimedScene, t_start: float, duration: float, px_per_step: float = MAX_PX_PER_STEP,
