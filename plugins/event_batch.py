@@ -88,15 +88,16 @@ def batchable(integ) -> bool:
 
 def commit_frames(integ, log_frames, times, base_us: int = 0) -> event_fill.DeviceEvents:
     """Events of the steps from ``times[0]`` (the pixels' current instant) through ``B = len(times) - 1``
-    frames: ``log_frames`` is a Float of ``B x N`` log brightnesses (frame-major), frame ``b`` the brightness
-    at ``times[b + 1]`` seconds (the low-pass recovers the radiance from it, as the per-step kernel does for a
+    frames: ``log_frames`` is a Float of ``B x N`` log brightnesses (frame-major; any further values are not
+    read: a caller's buffer for more frames may be passed whole), frame ``b`` the brightness at
+    ``times[b + 1]`` seconds (the low-pass recovers the radiance from it, as the per-step kernel does for a
     staged log frame). Advances the integrator's state; returns the chunk's events time-sorted on the device,
     as per-step commits would."""
     if not batchable(integ):
         raise ValueError("commit_frames: this pixel model steps one frame at a time (event_batch.batchable)")
     times = np.asarray(times, np.float64)
     steps, n_pix = len(times) - 1, integ.size[0] * integ.size[1] if integ.size else 0
-    if integ.log_prev is None or dr.width(log_frames) != steps * n_pix or steps < 1:
+    if integ.log_prev is None or dr.width(log_frames) < steps * n_pix or steps < 1:
         raise ValueError(f"commit_frames: {dr.width(log_frames)} values for {steps} frames of {n_pix} pixels "
                          "(after a first frame has set the pixels)")
     chunk = Chunk(integ, _state(integ), log_frames, times, integ.size[0], n_pix)

@@ -92,9 +92,10 @@ class AccuracyLimit:
         integ.staged = integ.staged_intensity = None          # not a step: nothing is committed
         self.sigma = np.abs(self.frames[0] - other) / math.sqrt(2)
 
-    def step_frame(self, integ) -> None:
+    def step_frame(self, log_now) -> None:
+        """Keep the log brightness (Dr.Jit Float) a step ended at, for the first two steps."""
         if self.active and len(self.frames) < 3:
-            self.frames.append(integ.log_prev.numpy())
+            self.frames.append(log_now.numpy())
 
     def estimate(self) -> dict | None:
         if self.sigma is None or len(self.frames) < 3:

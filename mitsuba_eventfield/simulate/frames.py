@@ -7,7 +7,12 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
+
 from .. import backend
+from ..errors import EventFieldError
+from ..scene.timed import load_scene
+from ..validate import positive
 
 mi, dr = backend.mi, backend.dr
 
@@ -64,3 +69,43 @@ class FrameRenderer:
                 self.frozen = None
             return frame
         return mi.render(timed.scene, sensor=timed.sensor, integrator=self.inner, seed=seed, spp=self.spp)
+
+
+def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
+                  linlog_threshold: float | None = None, rgb: bool = False, sensor=None) -> np.ndarray:
+    """Frames of the scene at the given times (seconds): (T, H, W) log brightness exactly as the event pixel
+    sees it (lin-log, fixed seed), or linear radiance with ``log=False``. Ground truth for reconstruction, and
+    the frame input of the complementary filter. ``rgb=True`` (with ``log=False``, scene loaded in a colour
+    variant): (T, H, W, 3) linear RGB, what a colour camera sees. ``sensor``: another Mitsuba sensor to look
+    through (e.g. ``truth.centre_pinhole``: a conventional camera beside the event camera)."""
+    if rgb and log:
+        raise EventFieldError("render_frames: rgb=True needs log=False (the event pixel's log is of luminance)")
+    from ..plugins import pixel_model
+    from ..plugins.event_integrator import DEFAULT_LINLOG, is_event_integrator
+    timed = load_scene(scene)
+    spp = positive(spp, "spp", integer=True)
+    integ = timed.scene.integrator()
+    if linlog_threshold is None:
+        linlog_threshold = (pixel_model.pixel_config(integ.scene_preset, **integ.scene_overrides).linlog_threshold
+                            if is_event_integrator(integ) else DEFAULT_LINLOG)
+    inner = integ.inner if is_event_integrator(integ) else integ
+    frames = []
+    times = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    if times.size == 0:
+        raise EventFieldError("render_frames: times is empty: give at least one time in seconds")
+    if not np.isfinite(times).all():
+        raise EventFieldError(f"render_frames: times must be finite seconds (got {times[~np.isfinite(times)][0]})")
+    for t in times:
+        timed.set_time(float(t))
+        img = mi.render(timed.scene, integrator=inner, seed=seed, spp=spp, sensor=sensor or timed.scene.sensors()[0])
+        arr = np.array(img)
+        if rgb:
+            if arr.shape[-1] < 3:
+                raise EventFieldError("render_frames: rgb=True needs the scene loaded in a colour variant "
+                                      f"(load_scene(..., color=True)); the active variant is {mi.variant()}")
+            frames.append(arr[..., :3])
+            continue
+        lum = arr[..., 0] if arr.shape[-1] == 1 else \
+            arr[..., 0] * 0.212671 + arr[..., 1] * 0.715160 + arr[..., 2] * 0.072169
+        frames.append(pixel_model.linlog_np(lum, linlog_threshold) if log else lum)
+    return np.stack(frames)

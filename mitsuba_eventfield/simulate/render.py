@@ -14,8 +14,6 @@ import os
 import sys
 import time
 
-import numpy as np
-
 from .. import backend
 from ..atomic import check_writable
 from ..errors import EventFieldError
@@ -25,7 +23,8 @@ from ..scene.timed import TimedScene, load_scene
 from ..validate import available_memory, positive
 from .periodic import period_blocks, phase_grid, reuse_plan
 from . import sample_allocation, static_pixels
-from .frames import FrameRenderer, frozen_render
+from . import step_batch
+from .frames import FrameRenderer, frozen_render, render_frames  # noqa: F401  (render_frames: re-exported)
 from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
 from .image_motion import note_image_motion
@@ -120,6 +119,9 @@ class _Loop:
         self.grid = None if st.steps is None or not integ.deterministic else \
             phase_grid(timed, st.duration, st.steps, st.t_start)
         self.period_events, self.copy_from, self.prev_key, self.period_block = {}, None, None, None
+        # steps committed to the pixels several at a time where nothing needs the state between them
+        self.batch = step_batch.for_loop(integ, st, sink, summary, self.width * self.height,
+                                         keeps_period_events=bool(self.reuse and self.grid))
 
     def render_at(self, t, step_index):
         integ, summary = self.integ, self.summary
@@ -166,6 +168,8 @@ class _Loop:
         c_min = min(integ.threshold_on, integ.threshold_off)
         while t < t_end - 1e-12:
             if self.checkpoints is not None and self.checkpoints.due():
+                if self.batch is not None:
+                    self.batch.flush()                   # the saved pixel state is that of every step so far
                 self.checkpoints.save(self, t, k, dt)
             if self.copy_from is not None:               # the pixel state repeats: copy whole periods, shifted
                 t, k = self._copy_periods(k)
@@ -184,11 +188,12 @@ class _Loop:
                     continue
                 dt = self._next_dt(change / dt, dt, c_min)
             self._step_events(t, t_next, k)
-            self.limit.step_frame(integ)
             if self.bar is not None:
                 _advance(self.bar, t_next - st.t_start)
                 self.bar.set_postfix_str(f"{self.summary.events + self.sink.device_events} events")
             t, k = t_next, k + 1
+        if self.batch is not None:
+            self.batch.flush()
         return k
 
     def _next_dt(self, rate, dt, c_min):
@@ -216,7 +221,8 @@ class _Loop:
 
     def _step_events(self, t, t_next, k) -> None:
         """The step's events (made on the device when the pixel model allows, and kept there until the sink's
-        buffer is full; else on the host: the same events either way, tests/plugins/test_event_fill.py)."""
+        buffer is full; else on the host: the same events either way, tests/plugins/test_event_fill.py), or
+        the step held for the next batch (``step_batch``: the same events again)."""
         st = self.st
         te = time.perf_counter()
         t0, t1, base_us = t, t_next, 0
@@ -225,8 +231,13 @@ class _Loop:
             p_idx, j = divmod(k, steps_per_period)
             step = st.duration / st.steps
             t0, t1, base_us = j * step, (j + 1) * step, grid_base_us + p_idx * period_us
+        if self.batch is not None:                       # held on the device, committed with the next steps
+            self.limit.step_frame(self.integ.staged)     # (no low-pass: the staged frame is the step's end)
+            self.batch.add(t0, t1, base_us, complete_until_us=int(math.floor(t_next * 1e6)))
+            return
         events = self.integ.commit_events(t0, t1, base_us)
         self.summary.events_s += time.perf_counter() - te
+        self.limit.step_frame(self.integ.log_prev)
         if self.reuse and self.grid:                     # a period's events are kept on the host for copying
             host = events.numpy()
             self._remember_period(j, p_idx, host)
@@ -379,42 +390,3 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     stream.meta = meta
     stream.meta["render"] = summary.as_dict()
     return stream if output is None else summary
-
-
-def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
-                  linlog_threshold: float | None = None, rgb: bool = False, sensor=None) -> np.ndarray:
-    """Frames of the scene at the given times (seconds): (T, H, W) log brightness exactly as the event pixel
-    sees it (lin-log, fixed seed), or linear radiance with ``log=False``. Ground truth for reconstruction, and
-    the frame input of the complementary filter. ``rgb=True`` (with ``log=False``, scene loaded in a colour
-    variant): (T, H, W, 3) linear RGB, what a colour camera sees. ``sensor``: another Mitsuba sensor to look
-    through (e.g. ``truth.centre_pinhole``: a conventional camera beside the event camera)."""
-    if rgb and log:
-        raise EventFieldError("render_frames: rgb=True needs log=False (the event pixel's log is of luminance)")
-    from ..plugins import pixel_model
-    from ..plugins.event_integrator import DEFAULT_LINLOG, is_event_integrator
-    timed = load_scene(scene)
-    spp = positive(spp, "spp", integer=True)
-    integ = timed.scene.integrator()
-    if linlog_threshold is None:
-        linlog_threshold = (pixel_model.pixel_config(integ.scene_preset, **integ.scene_overrides).linlog_threshold
-                            if is_event_integrator(integ) else DEFAULT_LINLOG)
-    inner = integ.inner if is_event_integrator(integ) else integ
-    frames = []
-    times = np.atleast_1d(np.asarray(times, dtype=np.float64))
-    if times.size == 0:
-        raise EventFieldError("render_frames: times is empty: give at least one time in seconds")
-    if not np.isfinite(times).all():
-        raise EventFieldError(f"render_frames: times must be finite seconds (got {times[~np.isfinite(times)][0]})")
-    for t in times:
-        timed.set_time(float(t))
-        img = mi.render(timed.scene, integrator=inner, seed=seed, spp=spp, sensor=sensor or timed.scene.sensors()[0])
-        arr = np.array(img)
-        if rgb:
-            if arr.shape[-1] < 3:
-                raise EventFieldError("render_frames: rgb=True needs the scene loaded in a colour variant "
-                                      f"(load_scene(..., color=True)); the active variant is {mi.variant()}")
-            frames.append(arr[..., :3])
-            continue
-        lum = arr[..., 0] if arr.shape[-1] == 1 else arr[..., 0] * 0.212671 + arr[..., 1] * 0.715160 + arr[..., 2] * 0.072169
-        frames.append(pixel_model.linlog_np(lum, linlog_threshold) if log else lum)
-    return np.stack(frames)

@@ -70,7 +70,7 @@ def test_writer_leaves_nothing_on_error(tmp_path, stream):
 
 def test_render_interrupted_leaves_no_file(tmp_path, demo_small, monkeypatch):
     """A failure in the middle of a streamed render (here in the background writer's thread, raised again in
-    the render's) removes the partial file. A tiny event buffer moves every step's events to the writer."""
+    the render's) removes the partial file. A tiny event buffer moves every batch's events to the writer."""
     from mitsuba_eventfield.events import hdf5 as render_mod
     calls = {"n": 0}
     real = render_mod.H5EventWriter.append
@@ -83,7 +83,8 @@ def test_render_interrupted_leaves_no_file(tmp_path, demo_small, monkeypatch):
 
     monkeypatch.setattr(render_mod.H5EventWriter, "append", failing_append)
     with pytest.raises(KeyboardInterrupt):
-        ef.render_events(demo_small, 0.005, steps=5, output=str(tmp_path / "out.h5"), event_buffer_mb=1e-6)
+        # 200 steps: the render commits its steps in batches of up to 64 (step_batch), each then its own chunk
+        ef.render_events(demo_small, 0.005, steps=200, output=str(tmp_path / "out.h5"), event_buffer_mb=1e-6)
     assert calls["n"] == 3 and os.listdir(tmp_path) == []
 
 
@@ -146,10 +147,11 @@ def test_render_streams_every_chunked_format(tmp_path, demo_small, ext, monkeypa
         real_add(self, *a)
         kept.append(0 if self.memory is None else len(self.memory))
     monkeypatch.setattr(sink_mod.Sink, "_add_host", add_host)
-    mem = ef.render_events(demo_small, 0.004, steps=6)
+    mem = ef.render_events(demo_small, 0.004, steps=200)
     assert max(kept) > 0                          # the in-memory render keeps its events, of course
     kept.clear()
     path = str(tmp_path / f"d{ext}")
-    summary = ef.render_events(demo_small, 0.004, steps=6, output=path, event_buffer_mb=1e-6)
-    assert len(kept) >= 6 and max(kept) == 0 and summary.writer_busy_s > 0    # a chunk per step
+    summary = ef.render_events(demo_small, 0.004, steps=200, output=path, event_buffer_mb=1e-6)
+    # a chunk per batch of steps (step_batch: up to 64 steps at 48x36)
+    assert len(kept) >= 4 and max(kept) == 0 and summary.writer_busy_s > 0
     assert ef.read_events(path).equals(mem) and os.listdir(tmp_path) == [f"d{ext}"]

@@ -102,14 +102,28 @@ def test_models_with_per_step_draws_or_event_state_are_not_batched(pixel):
         integ.commit_frames(mi.Float(np.zeros(W * H, np.float32)), [0.0, 1e-3])
 
 
-def test_a_still_chunk_fires_nothing_and_a_wrong_size_is_refused():
+def test_a_still_chunk_fires_nothing_and_too_few_values_are_refused():
     import mitsuba as mi
     integ = _integrator()
     integ.stage_log(mi.Float(np.ones(W * H, np.float32)), (W, H))
     integ.commit_events(0.0, 0.0)
     assert integ.commit_frames(mi.Float(np.ones(3 * W * H, np.float32)), [0.0, 1e-3, 2e-3, 3e-3]).count == 0
-    with pytest.raises(ValueError, match="values for 2 frames"):
-        integ.commit_frames(mi.Float(np.ones(3 * W * H, np.float32)), [0.0, 1e-3, 2e-3])
+    with pytest.raises(ValueError, match="values for 4 frames"):
+        integ.commit_frames(mi.Float(np.ones(3 * W * H, np.float32)), [0.0, 1e-3, 2e-3, 3e-3, 4e-3])
+
+
+def test_values_past_the_frames_are_not_read():
+    """A render's step batch passes its whole buffer, fewer steps than it holds after a scan period's end:
+    what lies past the steps' frames (here a frame that would fire in every pixel) changes nothing."""
+    import mitsuba as mi
+    frames, times = _frames(steps=3)
+    out = []
+    for tail in ([], [np.full(W * H, 9.0, np.float32)]):
+        integ = _integrator()
+        integ.stage_log(mi.Float(frames[0]), (W, H))
+        integ.commit_events(times[0], times[0])
+        out.append(integ.commit_frames(mi.Float(np.concatenate(frames[1:3] + tail)), times[:3]).numpy())
+    assert len(out[0][2]) > 100 and all(np.array_equal(a, b) for a, b in zip(*out))
 
 
 def test_converter_events_do_not_depend_on_grouping(monkeypatch):

@@ -95,9 +95,9 @@ def test_device_timestamps_keep_microseconds_after_hours():
 
 
 def test_render_same_events_on_device_and_host_and_in_any_chunking(tmp_path, demo_small):
-    """The render loop's device path, its chunking (one step per chunk, or the whole render) and the
-    background HDF5 writer change nothing: the file equals the host-path render, event for event. The host
-    path is forced by a readout cap no render reaches (it keeps every event, and draws no random number)."""
+    """The render loop's device path, its chunking (one committed batch of steps per chunk, or the whole
+    render) and the background HDF5 writer change nothing: the file equals the host-path render, event for
+    event. The host path is forced by a readout cap no render reaches (it keeps every event, and draws no random number)."""
     kw = dict(duration=0.01, steps=10, reuse=False)
     device = ef.render_events(demo_small, **kw)
     one_step_chunks = str(tmp_path / "small.h5")

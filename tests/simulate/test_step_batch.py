@@ -1,0 +1,78 @@
+"""A render's steps committed in batches (``simulate/step_batch.py``) give the events of committing each step:
+bit for bit, on a moving scene under a periodic scan (batches end at every scan period: the timestamp base
+changes there), on steps placed by the image motion, through the accuracy-limit estimate; and the renders
+whose pixel state is needed between steps are not batched."""
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.plugins import event_batch
+
+from conftest import DEMO, ROOT
+
+FAN = f"{ROOT}/scenes/fan/fan.xml"
+
+
+@pytest.fixture
+def batches(monkeypatch):
+    """Every batch committed: its number of steps."""
+    sizes, real = [], event_batch.commit_frames
+
+    def counted(integ, log_frames, times, base_us=0):
+        sizes.append(len(times) - 1)
+        return real(integ, log_frames, times, base_us)
+    monkeypatch.setattr(event_batch, "commit_frames", counted)
+    return sizes
+
+
+def _pair(timed, **kw):
+    batched = ef.render_events(timed, **kw)
+    with event_batch.one_frame_a_step():
+        single = ef.render_events(timed, **kw)
+    return batched, single
+
+
+def _same(a, b):
+    volatile = ("events_s", "write_s", "render_s", "motion_s", "wall_s", "writer_busy_s", "writer_wait_s")
+    ra = {k: v for k, v in a.meta["render"].items() if k not in volatile}
+    rb = {k: v for k, v in b.meta["render"].items() if k not in volatile}
+    return a.equals(b) and ra == rb
+
+
+def test_fan_batches_end_at_every_scan_period_and_equal_single_steps(batches, monkeypatch):
+    """The fan (250 Hz circle, spinning blades): 3 periods of 12 steps on the phase grid, at most 5 steps a
+    batch: batches of 5, 5, 2 in each period."""
+    monkeypatch.setitem(event_batch.LANE_STEPS, "llvm", 5 * 48 * 36)
+    monkeypatch.setattr(event_batch, "MIN_FRAMES_PER_KERNEL", 2)
+    timed = ef.load_scene(FAN, width=48, height=36)
+    batched, single = _pair(timed, duration=0.012, steps=36, reuse=False)
+    assert batches == [5, 5, 2] * 3
+    assert len(batched) > 10_000 and _same(batched, single)
+
+
+def test_steps_placed_by_the_image_motion_batch_alike(batches):
+    """The demo's default steps (no scan: placed by the cards' motion, of unequal lengths); the accuracy-limit
+    estimate, which reads the first two steps' frames, comes out the same."""
+    timed = ef.load_scene(DEMO, width=48, height=36)
+    batched, single = _pair(timed, duration=0.05)
+    assert batched.meta["stepping"]["mode"] == "adaptive" and batches and max(batches) > 1
+    assert batched.meta["render"]["timing_limit"] is not None
+    assert len(batched) > 1000 and _same(batched, single)
+
+
+@pytest.mark.parametrize("kw", [
+    dict(adaptive="log-change", min_step=2e-4),           # each step sized from the last one's change
+    dict(steps=10, pixel={"cutoff_hz": 300.0}),            # the low-pass takes the render's linear intensity
+    dict(steps=10, pixel={"threshold_jitter": 0.02}),      # random draws every step
+], ids=["log-change", "low-pass", "jitter"])
+def test_renders_that_need_the_state_between_steps_commit_each_step(batches, kw):
+    timed = ef.load_scene(DEMO, width=32, height=24)
+    ev = ef.render_events(timed, 0.01, **kw)
+    assert batches == [] and len(ev) > 0
+
+
+def test_a_periodic_views_kept_events_are_not_batched(batches):
+    """A static scene under a scan with reuse: the first periods' events are kept per step for copying."""
+    timed = ef.load_scene(f"{ROOT}/scenes/galvo_static/galvo_static.xml", width=48, height=36)
+    ev = ef.render_events(timed, 0.016, steps=128)          # 4 periods: the state repeats after the second
+    assert batches == [] and ev.meta["render"]["copied_steps"] > 0
+
