@@ -4,8 +4,8 @@ the host path (NumPy expansion and sort), on a synthetic frame stack and inside 
 Frame stack: a textured plane translating at 1.5 px per frame plus a bar rotating about the image centre, 2 kHz
 frames, C = 0.2, ideal pixel: what issue 15 measured on an H100. Throughput is pixel-steps per second of the
 converter (``events_from_frames``: upload, pixel kernel, events, one host copy per chunk), excluding the frame
-synthesis, best of three runs after a first one (compilation, allocation), for three paths: as chosen (frames
-batched, ``event_batch``), one frame a step (``event_batch.one_frame_a_step()``) and the NumPy host path
+synthesis, best of four runs (two rounds over the paths, each a first untimed run for compilation and
+allocation, then two), for three paths: as chosen (frames batched, ``event_batch``), one frame a step (``event_batch.one_frame_a_step()``) and the NumPy host path
 (``event_integrator.host_path()``). Renders: demo and fan scenes, what beyond the radiance render costs
 (events + motion + write, and the whole wall time, as fractions of the render) for the device path (steps
 committed in batches, ``simulate/step_batch.py``), the device path a step at a time, and the host path. Every
@@ -61,19 +61,24 @@ def frame_stack(width, height, frames, rate_hz=2000.0):
 def converter(width, height, frames):
     import mitsuba_eventfield as ef
     stack, times = frame_stack(width, height, frames)
-    res = {}
-    for name in ("device", "device_per_step", "host"):
-        with _path(name):
-            # compile, and let the allocator see the sizes once (a first full run in a process is 2-5x
-            # slower on the CPU: fresh memory); then the best of three
-            ev = ef.events_from_frames(stack, times, threshold=0.2)
-            wall = float("inf")
-            for _ in range(3):
-                t0 = time.perf_counter()
-                ev = ef.events_from_frames(stack, times, threshold=0.2)
-                wall = min(wall, time.perf_counter() - t0)
-        res[name] = {"wall_s": wall, "events": len(ev), "mpix_steps_per_s": width * height * (frames - 1) / wall / 1e6,
-                     "mev_per_s": len(ev) / wall / 1e6, "stream": ev}
+    paths = ("device", "device_per_step", "host")
+    walls, streams = {name: float("inf") for name in paths}, {}
+    # two rounds over the paths (this VM's speed drifts by 30 % within minutes), in each a path's first
+    # conversion untimed (it compiles, and lets the allocator see the sizes: a first full run is 2-5x slower on
+    # the CPU, fresh memory), then two timed; the best of the four counts. Alternating every run instead
+    # measured the allocator churning between the paths' chunk sizes (1280x720: batched 32 M against 85 M)
+    for _ in range(2):
+        for name in paths:
+            with _path(name):
+                streams[name] = ef.events_from_frames(stack, times, threshold=0.2)
+                for _ in range(2):
+                    t0 = time.perf_counter()
+                    ev = ef.events_from_frames(stack, times, threshold=0.2)
+                    walls[name] = min(walls[name], time.perf_counter() - t0)
+                    del ev
+    res = {name: {"wall_s": walls[name], "events": len(streams[name]),
+                  "mpix_steps_per_s": width * height * (frames - 1) / walls[name] / 1e6,
+                  "mev_per_s": len(streams[name]) / walls[name] / 1e6, "stream": streams[name]} for name in paths}
     host = res["host"].pop("stream")
     same = res["device"].pop("stream").equals(host) and res["device_per_step"].pop("stream").equals(host)
     return {"width": width, "height": height, "frames": frames, "identical": bool(same), **res}
