@@ -155,14 +155,15 @@ PASS_BITS = {"llvm": 20, "cuda": 11}
 
 def stable_order(key, key_bound: int):
     """Stable sorting permutation of UInt32 ``key`` whose values are all below ``key_bound``: a least-
-    significant-digit radix sort with only the passes that bound needs, ``PASS_BITS`` each (fixed shifts and
-    masks: the same cached kernels whatever the chunk's length), where ``dr.argsort`` on 32 bits always makes
-    three."""
+    significant-digit radix sort with only the passes that bound needs, of equal width up to ``PASS_BITS``
+    (fixed shifts and masks for a bound: the same cached kernels whatever the chunk's length), where
+    ``dr.argsort`` on 32 bits always makes three."""
     n = dr.width(key)
     bits = max(1, int(key_bound).bit_length())
     width = PASS_BITS["cuda" if dr.backend_v(key) == dr.JitBackend.CUDA else "llvm"]
     if bits <= width:                        # one pass: the key is its own digit
         return dr.detail.block_mkperm(key, n, 1 << bits)
+    width = -(-bits // -(-bits // width))    # as few passes, of equal width: 2 x 11 bits for 22, not 20 + 2
     index = dr.arange(mi.UInt32, n)
     for shift in range(0, bits, width):
         digit = (key >> shift) & ((1 << width) - 1)

@@ -44,9 +44,9 @@ previous instant, reference level and per-pixel ON/OFF thresholds.
 Pixel realism (``pixel_model.PixelConfig``; all off in the default ``ideal`` preset): threshold mismatch and
 per-crossing jitter, leak, shot noise and the photoreceptor low-pass evolve in the step's single Dr.Jit kernel
 (random numbers from a per-pixel PCG32, seeded). :meth:`commit_events` makes the step's events either on the
-device (``event_fill``: count, prefix sum, fill, refractory selection, shot noise, sort, clock) or on the host
-(``host_events``, then :meth:`readout`), whichever is faster on the backend (:attr:`device_resident`); both
-give the same events. The readout cap's random drops are always NumPy draws, per step.
+device (``event_fill``: count, prefix sum, fill, refractory selection, shot noise, sort, clock; the readout
+cap in ``readout``) or on the host (``host_events``, then :meth:`readout`), whichever is faster on the backend
+(:attr:`device_resident`); both give the same events.
 """
 from __future__ import annotations
 
@@ -263,15 +263,13 @@ class _EventIntegratorMethods:
         """Accept the staged frame as the brightness at t1 and return the step's events of (t0, t1], time-sorted
         and read out, with timestamps ``rint(t 1e6) + base_us`` microseconds: made on the device
         (``event_fill.DeviceEvents``) or on the host (``event_fill.HostEvents``) as :attr:`device_resident`
-        says. Both paths give the same events, bit for bit. With a readout cap, the step's events come to the host for it
-        (its random drops are NumPy draws per step)."""
+        says. Both paths give the same events, bit for bit, the readout cap's drops included (``readout``: its
+        random keys are a hash both paths compute)."""
         if self.device_resident:
             events = self.commit_device(t0, t1, base_us)
             if self.limiter is None:
                 return events
-            x, y, t_us, p = events.numpy()
-            keep = self.limiter.filter(t_us)
-            return event_fill.HostEvents(x[keep], y[keep], t_us[keep], p[keep])
+            return self.limiter.filter_device(events, t0, t1, self.config.timestamp_resolution_us)
         x, y, ts, p = self.commit(t0, t1)
         t_us = np.rint(ts * 1e6).astype(np.int64) + base_us
         order = event_fill.time_order(t_us, int(math.floor(t0 * 1e6)) + base_us)
@@ -355,7 +353,7 @@ class _EventIntegratorMethods:
         if cfg.timestamp_resolution_us:
             res = cfg.timestamp_resolution_us
             t_us = (np.floor(t_us / res) * res).astype(np.int64)
-        if self.limiter is not None and len(t_us):
+        if self.limiter is not None:       # every step, empty ones too: its count keys the limiter's draws
             keep = self.limiter.filter(t_us)
             x, y, t_us, p = x[keep], y[keep], t_us[keep], p[keep]
         return x, y, t_us, p

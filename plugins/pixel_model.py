@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from mitsuba_eventfield.errors import ConfigError   # a ValueError too: one named error for bad pixel input
+from mitsuba_eventfield.plugins.readout import READOUT_BINS_PER_MS, ReadoutLimiter  # noqa: F401  (re-exported)
 
 
 def linlog(dr, intensity, linear_below: float):
@@ -250,49 +251,3 @@ def refractory_extra(pixel, t, before, crossings, last_emit, period):
     keep = (t >= before + period) & (~np.isfinite(first) | (t <= first - period) | after_all)
     last_emit[pixel[keep]] = np.maximum(last_emit[pixel[keep]], t[keep])
     return keep
-
-
-READOUT_BINS_PER_MS = 9
-
-
-class ReadoutLimiter:
-    """Drops events at random so that no 1 ms window ever holds more than cap * 1 ms of them.
-
-    Time is cut into bins of 1/9 ms, each allowed 1/10 of the 1 ms budget: any 1 ms window overlaps at most 10
-    bins, so the cap holds for every window (saturated throughput is 90% of the cap). Within an overfull bin
-    the survivors are a uniformly random subset. State carries across steps (a bin may span two).
-    """
-
-    def __init__(self, cap_ev_s: float, seed: int = 0):
-        self.bin_us = 1000.0 / READOUT_BINS_PER_MS
-        self.budget = int(cap_ev_s * 1e-3 / (READOUT_BINS_PER_MS + 1))
-        self.rng = np.random.default_rng(seed + 7919)
-        self.open_bin, self.used = -1, 0
-        self.dropped = 0
-
-    def filter(self, t_us: np.ndarray) -> np.ndarray:
-        """Keep mask for time-sorted timestamps (int us)."""
-        if len(t_us) == 0:
-            return np.zeros(0, bool)
-        b = np.floor(t_us / self.bin_us).astype(np.int64)
-        first = int(b[0])
-        counts = np.bincount(b - first)
-        if first == self.open_bin:
-            counts[0] += self.used
-        if counts.max() <= self.budget:                  # nothing overflows: keep all, no random draw needed
-            last = len(counts) - 1
-            self.used, self.open_bin = int(counts[last]), first + last
-            return np.ones(len(t_us), bool)
-        key = self.rng.random(len(t_us))
-        order = np.lexsort((key, b))                         # random order within each bin
-        b_s = b[order]
-        start = np.r_[0, np.nonzero(np.diff(b_s))[0] + 1]
-        rank = np.arange(len(b_s)) - np.repeat(start, np.diff(np.r_[start, len(b_s)]))
-        rank = rank + np.where(b_s == self.open_bin, self.used, 0)   # budget already used in a carried bin
-        keep = np.zeros(len(t_us), bool)
-        keep[order] = rank < self.budget
-        last = b_s[-1]
-        self.used = int(np.count_nonzero(keep[order][b_s == last])) + (self.used if last == self.open_bin else 0)
-        self.open_bin = int(last)
-        self.dropped += int(len(t_us) - keep.sum())
-        return keep

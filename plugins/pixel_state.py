@@ -9,6 +9,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mitsuba_eventfield.errors import ConfigError
+
 STATE_ARRAYS = {"log_prev": "Float", "anchor": "Float", "k_on": "Int32", "k_off": "Int32", "c_on": "Float",
                 "c_off": "Float", "offset": "Float", "leak_rate": "Float"}
 
@@ -41,7 +43,7 @@ def add_pixel_variables(methods) -> None:
 def get_state(integ) -> dict:
     """Everything that fixes the pixels' future events, as NumPy arrays and plain numbers (a checkpoint):
     levels, event counts, thresholds, drift, the noise generator's state, last emissions, the readout
-    limiter's generator and counters."""
+    limiter's counters."""
     if integ.staged is not None:
         raise RuntimeError("get_state() with a staged frame: commit it first")
     d = {"size": np.array(integ.size or (0, 0)), "refractory_dropped": integ.refractory_dropped,
@@ -55,8 +57,7 @@ def get_state(integ) -> dict:
         d["last_emit"] = integ.last_emit if isinstance(integ.last_emit, np.ndarray) else integ.last_emit.numpy()
     if integ.limiter is not None:
         lim = integ.limiter
-        d["limiter"] = np.array(json.dumps({"rng": lim.rng.bit_generator.state, "open_bin": lim.open_bin,
-                                            "used": lim.used, "dropped": lim.dropped}))
+        d["limiter"] = np.array(json.dumps(lim.state()))
     return d
 
 
@@ -76,8 +77,9 @@ def set_state(integ, d: dict) -> None:
     if cfg.readout_cap:
         integ.limiter = integ._make_limiter(integ.size[0] * integ.size[1])
         saved = json.loads(str(d["limiter"]))
-        integ.limiter.rng.bit_generator.state = saved["rng"]
-        integ.limiter.open_bin, integ.limiter.used, integ.limiter.dropped = \
-            saved["open_bin"], saved["used"], saved["dropped"]
+        if "steps" not in saved:          # a checkpoint of the generator-drawn limiter (before 2026-11-25)
+            raise ConfigError("checkpoint: its readout limiter drew its drops from a random generator, which this "
+                              "version replaced with hashed keys: render again from the start")
+        integ.limiter.set_state(saved)
     integ.refractory_dropped, integ.noise_events = int(d["refractory_dropped"]), int(d["noise_events"])
     dr.make_opaque(*[v for v in (getattr(integ, n) for n in STATE_ARRAYS) if v is not None])

@@ -3,7 +3,7 @@
 A render to an HDF5 file with checkpoints on writes its events in segments under ``<output>.resume/`` (each
 segment a complete DSEC file, closed at a checkpoint) and, at every checkpoint, the state that fixes all later
 events: the step index, time and adaptive step, the pixel state (``EventIntegrator.get_state``: levels, event
-counts, thresholds, drift, the noise generator, last emissions, the readout limiter's generator) and the
+counts, thresholds, drift, the noise generator, last emissions, the readout limiter's counters) and the
 summary's counters. A checkpoint is committed by replacing ``checkpoint.json`` (atomic rename) after its segment
 and its state file are complete, so whatever kills the process (Ctrl-C, SIGTERM, a crash, SIGKILL, power loss),
 the folder holds one consistent checkpoint. ``render_events(..., resume=True)`` (``eventfield render ...

@@ -1,0 +1,198 @@
+"""The sensor's readout cap: events dropped at random so that no 1 ms window holds more than the cap, applied to
+each step's time-sorted events on the host (NumPy, :meth:`ReadoutLimiter.filter`) or on the device (Dr.Jit,
+:meth:`ReadoutLimiter.filter_device`, so that a capped pixel model's events never leave the device a step at a
+time): the same drops, bit for bit.
+
+Time is cut into bins of 1/9 ms, each allowed 1/10 of the 1 ms budget: any 1 ms window overlaps at most 10 bins,
+so the cap holds for every window (saturated throughput is 90 % of the cap). Within an overfull bin the
+survivors are the events with the smallest random keys (up to 24 bits, :func:`key_bits`; ties: time order), a
+uniformly random subset; state
+carries across steps (a bin may span two steps: the events kept of it in the earlier step count against it).
+
+The keys are a counter-based hash of (seed, step, the event's index in the step), not a generator's stream, so
+that host and device draw the same keys without exchanging any; a step with no overfull bin draws none (and on
+the device costs one read of four numbers). Until 2026-11 the host drew them from NumPy's generator: the kept
+subsets differ from that version's for the same seed, with the same statistics.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+READOUT_BINS_PER_MS = 9
+
+_GOLDEN, _M1, _M2 = 0x9E3779B1, 0x85EBCA6B, 0xC2B2AE35      # Weyl step and MurmurHash3's finaliser
+_MASK = 0xFFFFFFFF
+KEY_BITS = 24
+
+
+def key_bits(last_bin: int) -> int:
+    """Key bits that order the events of an overfull bin, for a step whose bins run 0..``last_bin``: with the
+    bin above them the device sorts one 32-bit word (two radix passes on the CPU). 24 for steps of up to 255
+    bins (28 ms), fewer for longer ones (18 at 1 s). Equal keys keep time order: among 100,000 events of one bin
+    a few hundred pairs tie at 24 bits, and a tie matters only where it straddles the bin's cut."""
+    return min(KEY_BITS, 32 - int(last_bin).bit_length())
+
+
+def step_word(seed: int, step: int) -> int:
+    """The 32-bit word that, with an event's index, keys the draws of one step."""
+    return (seed * 0x27D4EB2F + step * 0x165667B1 + 7919) & _MASK
+
+
+def keys_np(n: int, word: int) -> np.ndarray:
+    """The ``n`` events' keys (uint32) of a step with ``step_word`` ``word``."""
+    with np.errstate(over="ignore"):
+        h = np.arange(n, dtype=np.uint32) * np.uint32(_GOLDEN) + np.uint32(word)
+        h ^= h >> np.uint32(16)
+        h *= np.uint32(_M1)
+        h ^= h >> np.uint32(13)
+        h *= np.uint32(_M2)
+        h ^= h >> np.uint32(16)
+    return h
+
+
+def keys_dr(mi, n: int, word):
+    """:func:`keys_np` on the device (UInt32 arithmetic wraps as NumPy's uint32 does)."""
+    import drjit as dr
+    h = dr.arange(mi.UInt32, n) * _GOLDEN + word
+    h ^= h >> 16
+    h *= _M1
+    h ^= h >> 13
+    h *= _M2
+    return h ^ (h >> 16)
+
+
+class ReadoutLimiter:
+    """The readout cap of one sensor: its budget per bin and its state across steps (the open bin, the events
+    kept of it, the steps seen, the events dropped)."""
+
+    def __init__(self, cap_ev_s: float, seed: int = 0):
+        self.bin_us = 1000.0 / READOUT_BINS_PER_MS
+        self.budget = int(cap_ev_s * 1e-3 / (READOUT_BINS_PER_MS + 1))
+        self.seed = int(seed)
+        self.open_bin, self.used = -1, 0
+        self.steps = 0
+        self.dropped = 0
+
+    def state(self) -> dict:
+        return {"open_bin": self.open_bin, "used": self.used, "steps": self.steps, "dropped": self.dropped}
+
+    def set_state(self, saved: dict) -> None:
+        self.open_bin, self.used, self.steps, self.dropped = (int(saved[k]) for k in ("open_bin", "used", "steps",
+                                                                                     "dropped"))
+
+    def _next_word(self) -> int:
+        self.steps += 1
+        return step_word(self.seed, self.steps)
+
+    def _carry(self, first: int) -> int:
+        """Events already kept of the step's first bin (when an earlier step left it open)."""
+        return self.used if first == self.open_bin else 0
+
+    def _close(self, first: int, last_rel: int, last_count: int) -> None:
+        """After a step: its last bin is the open one, holding ``last_count`` kept events (the carry included)."""
+        self.used, self.open_bin = last_count, first + last_rel
+
+    def filter(self, t_us: np.ndarray) -> np.ndarray:
+        """Keep mask (bool) for one step's time-sorted timestamps (int64 us)."""
+        word = self._next_word()
+        if len(t_us) == 0:
+            return np.zeros(0, bool)
+        b = np.floor(t_us / self.bin_us).astype(np.int64)
+        first = int(b[0])
+        counts = np.bincount(b - first)
+        carry = self._carry(first)
+        counts[0] += carry
+        last = len(counts) - 1
+        if counts.max() <= self.budget:                  # nothing overflows: keep all, no key needed
+            self._close(first, last, int(counts[last]))
+            return np.ones(len(t_us), bool)
+        order = np.lexsort((keys_np(len(t_us), word) >> (32 - key_bits(last)), b))   # bin, key, time order
+        b_s = b[order]
+        start = np.r_[0, np.nonzero(np.diff(b_s))[0] + 1]
+        rank = np.arange(len(b_s)) - np.repeat(start, np.diff(np.r_[start, len(b_s)]))
+        rank = rank + np.where(b_s == self.open_bin, self.used, 0)   # budget already used in a carried bin
+        keep = np.zeros(len(t_us), bool)
+        keep[order] = rank < self.budget
+        self._close(first, last, int(np.count_nonzero(keep[order][b_s == first + last])) +
+                    (carry if last == 0 else 0))
+        self.dropped += int(len(t_us) - keep.sum())
+        return keep
+
+    def _kept_in_last(self, last_count: int, last_rel: int, carry: int) -> int:
+        """Kept events of the step's last bin, with the carry (``last_count`` holds it where that bin is the
+        first): the first ``budget`` ranks of a bin survive, the carry's among them."""
+        carried = carry if last_rel == 0 else 0
+        return min(last_count - carried, max(self.budget - carried, 0)) + carried
+
+    def filter_device(self, events, t0: float, t1: float, resolution_us: float = 0.0):
+        """:meth:`filter` on a step's ``event_fill.DeviceEvents`` between ``t0`` and ``t1`` seconds (their clock
+        ``resolution_us``), on the device: the kept events, time order kept, as ``DeviceEvents``."""
+        import drjit as dr
+        import mitsuba as mi
+        from mitsuba_eventfield.plugins import event_fill
+        word = self._next_word()
+        n = events.count
+        if n == 0:
+            return events
+        # an opaque divisor: Dr.Jit turns a division by a literal into a product with its reciprocal, which
+        # moved 92 of 200,000 integer timestamps to the neighbouring bin
+        b = mi.Int64(dr.floor(mi.Float64(events.t) / event_fill._opaque(self.bin_us, mi.Float64)))
+        first_d = dr.gather(mi.Int64, b, mi.UInt32(0))
+        rel = mi.UInt32(b - first_d)
+        bins = int(((t1 - t0) * 1e6 + resolution_us + 2) / self.bin_us) + 4    # a bound on the step's bins
+        counts = dr.zeros(mi.UInt32, bins)
+        dr.scatter_reduce(dr.ReduceOp.Add, counts, mi.UInt32(1), rel)
+        last_rel_d = dr.gather(mi.UInt32, rel, mi.UInt32(n - 1))
+        open_d, used_d = event_fill._opaque(self.open_bin, mi.Int64), event_fill._opaque(self.used, mi.UInt32)
+        carry_d = dr.select(first_d == open_d, used_d, 0)
+        counts0 = counts + dr.select(dr.arange(mi.UInt32, bins) == 0, carry_d, 0)
+        head = _read_int64([dr.max(counts0), first_d, last_rel_d, dr.gather(mi.UInt32, counts0, last_rel_d)])
+        most, first, last_rel, last_count = head
+        carry = self._carry(first)
+        if most <= self.budget:
+            self._close(first, last_rel, last_count)
+            return events
+        kept, keep, ends = self._keep_device(rel, counts, carry_d, last_rel, word, n)
+        self._close(first, last_rel, self._kept_in_last(last_count, last_rel, carry))
+        self.dropped += n - kept
+        stats = dict(refractory_dropped=events.refractory_dropped, noise_events=events.noise_events)
+        if kept == 0:
+            return event_fill.DeviceEvents(*event_fill.empty_columns(), count=0, **stats)
+        slot, mask = ends - 1, keep != 0
+        cols = []
+        for col in (events.xy, events.t, events.p):
+            out = dr.empty(type(col), kept)
+            dr.scatter(out, col, slot, mask)
+            cols.append(out)
+        dr.eval(*cols)
+        return event_fill.DeviceEvents(*cols, count=kept, **stats)
+
+    def _keep_device(self, rel, counts, carry_d, last_rel: int, word: int, n: int):
+        """(kept count, keep flags, their inclusive prefix sum) of a step with an overfull bin: its events
+        ordered by (bin, key, time), the first ``budget`` ranks of each bin kept (the carry counted in bin 0)."""
+        import drjit as dr
+        import mitsuba as mi
+        from mitsuba_eventfield.plugins import event_fill
+        bits = key_bits(last_rel)
+        key = keys_dr(mi, n, event_fill._opaque(word, mi.UInt32)) >> (32 - bits)
+        combined = (rel << bits) | key
+        dr.eval(combined)
+        order = event_fill.stable_order(combined, ((last_rel + 1) << bits) - 1)       # bin, key, time order
+        b_s = dr.gather(mi.UInt32, rel, order)
+        start = dr.prefix_reduce(dr.ReduceOp.Add, counts, exclusive=True)
+        rank = dr.arange(mi.UInt32, n) - dr.gather(mi.UInt32, start, b_s) + dr.select(b_s == 0, carry_d, 0)
+        keep = dr.zeros(mi.UInt32, n)
+        dr.scatter(keep, mi.UInt32(rank < self.budget), order)
+        ends = dr.prefix_reduce(dr.ReduceOp.Add, keep, exclusive=False)
+        return _read_int64([dr.gather(mi.UInt32, ends, mi.UInt32(n - 1))])[0], keep, ends
+
+
+def _read_int64(values) -> list:
+    """Up to four device scalars as Python ints, in one device-to-host copy."""
+    import drjit as dr
+    import mitsuba as mi
+    packed = dr.zeros(mi.Int64, 4)
+    for i, v in enumerate(values):
+        dr.scatter(packed, mi.Int64(v), mi.UInt32(i))
+    return [int(v) for v in packed.numpy()[:len(values)]]
+
