@@ -256,7 +256,8 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
     worst = (scan or 0.0) + (objects or 0.0)            # a point on a moving object moves by both
     if worst <= MAX_PX_PER_STEP * (1 + 1e-9):
         return
-    what = " and ".join(f"the {k} {v:.3g} px" for k, v in (("scan", scan), ("objects", objects)) if v)
+    parts = [f"the {k} {v:.3g} px" for k, v in (("scan", scan), ("objects", objects)) if v]
+    what = " and ".join(parts) + (f", together {worst:.3g} px" if len(parts) > 1 else "")   # the check is on the sum
     allowed = (chosen or {}).get("px_per_step") or MAX_PX_PER_STEP
     if worst <= allowed * (1 + 1e-6):
         summary.notes.append(f"steps of about {worst:.3g} px of image motion (per step {what}), chosen because "

@@ -53,3 +53,16 @@ def test_galvo_scan_motion_in_the_render_metadata():
     path = scan_image_path_px(timed.sensor.optics_metadata(), 48, 36)
     assert motion["scan"] == pytest.approx(path / 4, rel=1e-6) and motion["scan"] > 1
     assert any("steps coarser than the image motion" in n for n in ev.meta["render"]["notes"])
+
+
+def test_the_coarse_step_warning_says_the_scan_and_objects_add_up():
+    """The fan at 96x72, 80 steps over 20 ms: the scan (0.90 px a step) and the blades (0.88 px) are each under
+    a pixel; a point on a blade moves by both, 1.78 px, which is what the warning is about and must say."""
+    from mitsuba_eventfield.scene import bundled_scene
+    from mitsuba_eventfield.simulate.render import _new_summary
+    from mitsuba_eventfield.simulate.stepping import stepping
+    timed = ef.load_scene(bundled_scene("fan/fan.xml"), width=96, height=72)
+    st = stepping(timed, 0.02, 80, False, 0.5, None, None, 4, 0, "fixed", 0.0, 1.0)
+    notes = _new_summary(timed, st, None).notes
+    scan = float(notes[0].split("per step the scan ")[1].split(" px")[0])
+    assert scan < 1 and "together 1.78 px" in notes[0]
