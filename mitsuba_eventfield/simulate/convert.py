@@ -84,6 +84,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
         sink.drain()
         summary.write_s += time.perf_counter() - tw
         summary.writer_wait_s, summary.writer_busy_s = sink.writer_wait_s, sink.writer_busy_s
+        summary.writer_tail_s = sink.writer_tail_s
         summary.wall_s = time.perf_counter() - wall0
         meta.update({"t_start_us": int(round(t_first * 1e6)), "duration_us": int(round(summary.duration_s * 1e6))})
         meta["render"] = summary.as_dict()

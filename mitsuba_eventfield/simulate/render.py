@@ -286,6 +286,7 @@ class _Loop:
         self.sink.drain()
         summary.write_s += time.perf_counter() - tw
         summary.writer_wait_s, summary.writer_busy_s = self.sink.writer_wait_s, self.sink.writer_busy_s
+        summary.writer_tail_s = self.sink.writer_tail_s
         meta["render"] = summary.as_dict()
         tw = time.perf_counter()
         stream = self.sink.finish(int(round((self.st.t_start + self.st.duration) * 1e6)), {"render": meta["render"]})

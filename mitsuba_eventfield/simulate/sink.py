@@ -51,6 +51,10 @@ class Sink:
         return self.writer.wait_s if self.writer is not None else 0.0
 
     @property
+    def writer_tail_s(self) -> float:
+        return self.writer.tail_s if self.writer is not None else 0.0
+
+    @property
     def writer_busy_s(self) -> float:
         return self.writer.busy_s if self.writer is not None else 0.0
 

@@ -57,3 +57,52 @@ def test_malloc_tuning_set_after_start_up_is_not_the_environments():
     later = "import os, sys\nos.environ['MALLOC_TRIM_THRESHOLD_'] = '65536'\n" + CHILD
     held, kept_mb = _run("hold", code=later)
     assert held == "True" and kept_mb < 1.0
+
+
+class _SlowTarget:
+    """A writer target that takes ``delay`` seconds a chunk (``last_delay`` for the chunk closing the stream)."""
+
+    def __init__(self, delay, last_delay=None):
+        import threading
+        self.delay, self.last_delay, self.chunks, self.closing = delay, last_delay, 0, threading.Event()
+
+    def append(self, x, y, t, p, complete_until_us=None):
+        import time
+        time.sleep(self.last_delay if self.closing.is_set() and self.last_delay is not None else self.delay)
+        self.chunks += 1
+
+    def close(self, end_us=None, meta=None):
+        pass
+
+    def abort(self):
+        pass
+
+
+def _feed(target, chunks, between_s):
+    """Hand ``chunks`` one-event chunks to a background writer, ``between_s`` apart (the render's steps)."""
+    import time
+    import numpy as np
+    from mitsuba_eventfield.events.writer import BackgroundWriter
+    w = BackgroundWriter(target)
+    one = (np.zeros(1, np.uint16), np.zeros(1, np.uint16), np.zeros(1, np.int64), np.ones(1, np.int8))
+    for i in range(chunks):
+        if i == chunks - 1:
+            target.closing.set()
+        w.append(*one)
+        time.sleep(between_s)
+    w.drain()
+    return w
+
+
+def test_waiting_for_the_last_chunks_is_not_a_slow_disk():
+    """A writer that keeps up with every step but takes long over the final chunk: the render's wait at the end
+    is its tail, not time blocked on a full queue (which says the disk set the pace)."""
+    w = _feed(_SlowTarget(0.001, last_delay=0.3), chunks=6, between_s=0.02)
+    assert w.tail_s > 0.25 and w.wait_s < 0.05
+
+
+def test_a_writer_slower_than_the_steps_blocks_the_render():
+    """Chunks written more slowly than they come (0.05 s against 0.005 s a step): the two-chunk queue fills and
+    the render waits on it while it runs."""
+    w = _feed(_SlowTarget(0.05), chunks=10, between_s=0.005)
+    assert w.wait_s > 0.2 and w.tail_s < 0.2
