@@ -5,12 +5,12 @@ Frame stack: a textured plane translating at 1.5 px per frame plus a bar rotatin
 frames, C = 0.2, ideal pixel: what issue 15 measured on an H100. Throughput is pixel-steps per second of the
 converter (``events_from_frames``: upload, pixel kernel, events, one host copy per chunk), excluding the frame
 synthesis, best of four runs (two rounds over the paths, each a first untimed run for compilation and
-allocation, then two), for three paths: as chosen (frames batched, ``event_batch``), one frame a step (``event_batch.one_frame_a_step()``) and the NumPy host path
-(``event_integrator.host_path()``). Renders: demo and fan scenes, what beyond the radiance render costs
-(events + motion + write, and the whole wall time, as fractions of the render) for the device path (steps
-committed in batches, ``simulate/step_batch.py``), the device path a step at a time, and the host path. Every
-run compares the paths' events (on the same frames for the converter; renders also compare the renderer with
-itself).
+allocation, then two), for three paths: as chosen (frames batched, ``event_batch``), one frame a step
+(``event_batch.one_frame_a_step()``) and the NumPy host path (``event_integrator.host_path()``). Renders:
+demo and fan scenes, what beyond the radiance render costs (events + motion + write, and the whole wall time,
+as fractions of the render) for the device path (steps committed in batches, ``simulate/step_batch.py``), the
+device path a step at a time, and the host path. Every run compares the paths' events (on the same frames for
+the converter; renders also compare the renderer with itself).
 
 Writes benchmarks/results/event_engine.json and .md; the device name is recorded with every number.
 Usage: ./run bench event_engine   (or python benchmarks/bench_event_engine.py [--quick])

@@ -156,7 +156,7 @@ PASS_BITS = {"llvm": 20, "cuda": 11}
 def stable_order(key, key_bound: int):
     """Stable sorting permutation of UInt32 ``key`` whose values are all below ``key_bound``: a least-
     significant-digit radix sort with only the passes that bound needs, of equal width up to ``PASS_BITS``
-    (fixed shifts and masks for a bound: the same cached kernels whatever the chunk's length), where
+    (fixed shifts and masks for a bound's bit count: the same cached kernels whatever the chunk's length), where
     ``dr.argsort`` on 32 bits always makes three."""
     n = dr.width(key)
     bits = max(1, int(key_bound).bit_length())
@@ -211,11 +211,13 @@ def _refractory_plan(size, tk, last, period):
     return first, stride, kept, new_last, first_kept
 
 
-def _read(values) -> list:
-    """Up to four device scalars as Python ints, in one array: one device-to-host copy (the chunk's only sync)."""
-    packed = dr.zeros(mi.UInt32, 4)
+def _read(values, cls=None) -> list:
+    """Up to four device scalars as Python ints (always four: zeros past ``values``), in one array of ``cls``
+    (default UInt32): one device-to-host copy (the chunk's only sync)."""
+    cls = cls or mi.UInt32
+    packed = dr.zeros(cls, 4)
     for i, v in enumerate(values):
-        dr.scatter(packed, v, mi.UInt32(i))
+        dr.scatter(packed, cls(v), mi.UInt32(i))
     return [int(v) for v in packed.numpy()]
 
 

@@ -58,7 +58,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import event_batch, event_fill, host_events, pixel_model, pixel_state, pixel_step
+from mitsuba_eventfield.plugins import (event_batch, event_fill, host_events, pixel_model, pixel_state, pixel_step,
+                                        readout)
 
 from ._per_variant import per_variant, subclass
 
@@ -209,7 +210,7 @@ class _EventIntegratorMethods:
     def _make_limiter(self, n_pix: int):
         cfg = self.config
         cap = cfg.readout_cap * (n_pix / cfg.readout_cap_native_pixels if cfg.readout_cap_native_pixels else 1)
-        return pixel_model.ReadoutLimiter(cap, cfg.seed)
+        return readout.ReadoutLimiter(cap, cfg.seed)
 
     def commit(self, t0: float, t1: float):
         """Accept the staged frame as the brightness at time t1 (seconds) and return the events of (t0, t1].

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from mitsuba_eventfield.errors import ConfigError   # a ValueError too: one named error for bad pixel input
-from mitsuba_eventfield.plugins.readout import READOUT_BINS_PER_MS, ReadoutLimiter  # noqa: F401  (re-exported)
+from mitsuba_eventfield.plugins.readout import READOUT_BINS_PER_MS
 
 
 def linlog(dr, intensity, linear_below: float):

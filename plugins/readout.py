@@ -6,8 +6,8 @@ time): the same drops, bit for bit.
 Time is cut into bins of 1/9 ms, each allowed 1/10 of the 1 ms budget: any 1 ms window overlaps at most 10 bins,
 so the cap holds for every window (saturated throughput is 90 % of the cap). Within an overfull bin the
 survivors are the events with the smallest random keys (up to 24 bits, :func:`key_bits`; ties: time order), a
-uniformly random subset; state
-carries across steps (a bin may span two steps: the events kept of it in the earlier step count against it).
+uniformly random subset; state carries across steps (a bin may span two steps: the events kept of it in the
+earlier step count against it).
 
 The keys are a counter-based hash of (seed, step, the event's index in the step), not a generator's stream, so
 that host and device draw the same keys without exchanging any; a step with no overfull bin draws none (and on
@@ -146,7 +146,8 @@ class ReadoutLimiter:
         open_d, used_d = event_fill._opaque(self.open_bin, mi.Int64), event_fill._opaque(self.used, mi.UInt32)
         carry_d = dr.select(first_d == open_d, used_d, 0)
         counts0 = counts + dr.select(dr.arange(mi.UInt32, bins) == 0, carry_d, 0)
-        head = _read_int64([dr.max(counts0), first_d, last_rel_d, dr.gather(mi.UInt32, counts0, last_rel_d)])
+        head = event_fill._read([dr.max(counts0), first_d, last_rel_d, dr.gather(mi.UInt32, counts0, last_rel_d)],
+                                mi.Int64)
         most, first, last_rel, last_count = head
         carry = self._carry(first)
         if most <= self.budget:
@@ -184,15 +185,5 @@ class ReadoutLimiter:
         keep = dr.zeros(mi.UInt32, n)
         dr.scatter(keep, mi.UInt32(rank < self.budget), order)
         ends = dr.prefix_reduce(dr.ReduceOp.Add, keep, exclusive=False)
-        return _read_int64([dr.gather(mi.UInt32, ends, mi.UInt32(n - 1))])[0], keep, ends
-
-
-def _read_int64(values) -> list:
-    """Up to four device scalars as Python ints, in one device-to-host copy."""
-    import drjit as dr
-    import mitsuba as mi
-    packed = dr.zeros(mi.Int64, 4)
-    for i, v in enumerate(values):
-        dr.scatter(packed, mi.Int64(v), mi.UInt32(i))
-    return [int(v) for v in packed.numpy()[:len(values)]]
+        return event_fill._read([dr.gather(mi.UInt32, ends, mi.UInt32(n - 1))])[0], keep, ends
 

@@ -2,8 +2,8 @@
 
 The render thread hands time-sorted chunks to :class:`BackgroundWriter`; a bounded queue keeps host memory
 flat (at most ``depth`` chunks wait), and the time the render spends blocked on a full queue is the measure of
-whether the disk (or the compression) is the bottleneck: ``wait_s`` near zero means it kept up. Waiting at the
-end for the chunks still queued (``tail_s``) is not: any render has a last chunk to write.
+whether the disk (or the compression) is the bottleneck: ``wait_s`` near zero means it kept up. Draining the
+queue, at a checkpoint or at the end (``tail_s``), is not: any render has a last chunk to write.
 
 A bounded queue alone did not keep memory flat. The chunks (megabytes each) are made on the render thread and
 freed on the writer's, and glibc's malloc raises its mmap threshold each time such a block is freed, up to 32 MB.
@@ -70,7 +70,7 @@ class BackgroundWriter:
         self.queue: queue.Queue = queue.Queue(maxsize=max(1, int(depth)))
         self.error: BaseException | None = None
         self.wait_s = 0.0      # the caller's time blocked on a full queue: the writer did not keep up
-        self.tail_s = 0.0      # the caller's time waiting, at the end, for the chunks still queued
+        self.tail_s = 0.0      # the caller's time draining the queue: at checkpoints and at the end
         self.busy_s = 0.0      # the worker's time writing
         self.thread = threading.Thread(target=self._work, name="eventfield-writer", daemon=True)
         self.thread.start()
@@ -107,10 +107,11 @@ class BackgroundWriter:
             self.tail_s += time.perf_counter() - t0     # the last chunks: written after any render, not a pace
 
     def wait(self):
-        """Wait until every queued chunk is written, keeping the worker for more (a checkpoint)."""
+        """Wait until every queued chunk is written, keeping the worker for more (a checkpoint: a drain the
+        render asked for, counted with the final one in ``tail_s``, not a pace)."""
         t0 = time.perf_counter()
         self.queue.join()
-        self.wait_s += time.perf_counter() - t0
+        self.tail_s += time.perf_counter() - t0
         self._raise()
 
     def drain(self):

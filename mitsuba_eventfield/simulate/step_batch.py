@@ -91,7 +91,9 @@ def for_loop(integ, st, sink, summary, n_pix: int, keeps_period_events: bool) ->
         longest = st.duration / st.steps
     else:
         return None
+    if not math.isfinite(longest):
+        return None
     frames = event_batch.default_frames_per_kernel(n_pix, longest)
-    if frames < 2 or not math.isfinite(longest):
+    if frames < 2:
         return None
     return StepBatch(integ, sink, summary, n_pix, frames)

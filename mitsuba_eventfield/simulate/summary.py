@@ -35,7 +35,7 @@ class RenderSummary:
     write_s: float = 0.0        # the render thread's time handing events over (device-to-host copy, queue)
     writer_busy_s: float = 0.0  # the background writer's time compressing and writing (overlaps the render)
     writer_wait_s: float = 0.0  # the render thread's time blocked on the writer: > 0 means the disk set the pace
-    writer_tail_s: float = 0.0  # the render thread's wait at the end for the chunks still queued (not a pace)
+    writer_tail_s: float = 0.0  # the render thread's drains of the queue, checkpoints and the end (not a pace)
     image_motion_px_per_step: dict | None = None  # scan and objects, pixels per step (uniform stepping)
     timing_limit: dict | None = None            # what limits timestamp accuracy, with both estimates (us)
     sample_allocation: dict | None = None       # samples where they matter: the split and its check
@@ -75,8 +75,8 @@ class RenderSummary:
         if self.writer_busy_s:
             pace = "the disk writer set the pace" if self.writer_wait_s > 0.05 * self.wall_s else "it kept up"
             lines.append(f"file writer: {self.writer_busy_s:.2f} s on its own thread, the render waited "
-                         f"{self.writer_wait_s:.2f} s for it ({pace}), and {self.writer_tail_s:.2f} s at the end "
-                         "for its last chunks")
+                         f"{self.writer_wait_s:.2f} s for it ({pace}), and {self.writer_tail_s:.2f} s for its queue "
+                         "to drain (checkpoints, the last chunks)")
         if self.output:
             lines.append(f"wrote {self.output}")
         lines += self.notes

@@ -97,8 +97,8 @@ def _feed(target, chunks, between_s):
 def test_waiting_for_the_last_chunks_is_not_a_slow_disk():
     """A writer that keeps up with every step but takes long over the final chunk: the render's wait at the end
     is its tail, not time blocked on a full queue (which says the disk set the pace)."""
-    w = _feed(_SlowTarget(0.001, last_delay=0.3), chunks=6, between_s=0.02)
-    assert w.tail_s > 0.25 and w.wait_s < 0.05
+    w = _feed(_SlowTarget(0.001, last_delay=0.6), chunks=6, between_s=0.02)
+    assert w.tail_s > 0.3 and w.wait_s < 0.05
 
 
 def test_a_writer_slower_than_the_steps_blocks_the_render():

@@ -95,17 +95,24 @@ def test_device_timestamps_keep_microseconds_after_hours():
 
 
 def test_render_same_events_on_device_and_host_and_in_any_chunking(tmp_path, demo_small):
-    """The render loop's device path, its chunking (one committed batch of steps per chunk, or the whole
-    render) and the background HDF5 writer change nothing: the file equals the host-path render, event for
-    event. The host path is forced by a readout cap no render reaches (it keeps every event, and draws no random number)."""
-    kw = dict(duration=0.01, steps=10, reuse=False)
+    """The render loop's device path, its chunking (a chunk for each committed batch of steps, or the whole
+    render) and the background HDF5 writer change nothing: the file equals the host-path render (NumPy
+    expansion, a step at a time), event for event. 160 steps: batches of at most 64 at 48x36, so several
+    chunks."""
+    from mitsuba_eventfield.plugins.event_integrator import host_path
+    from mitsuba_eventfield.simulate import sink as sink_mod
+    kw = dict(duration=0.01, steps=160, reuse=False)
     device = ef.render_events(demo_small, **kw)
-    one_step_chunks = str(tmp_path / "small.h5")
-    summary = ef.render_events(demo_small, **kw, output=one_step_chunks, event_buffer_mb=1e-6)
-    host = ef.render_events(demo_small, **kw, pixel={"readout_cap": 1e15})
-    assert host.meta["render"]["dropped_readout"] == 0
+    batch_chunks = str(tmp_path / "small.h5")
+    chunks, real_add = [], sink_mod.Sink._add_host
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(sink_mod.Sink, "_add_host", lambda self, *a: (chunks.append(len(a[2])), real_add(self, *a)))
+        summary = ef.render_events(demo_small, **kw, output=batch_chunks, event_buffer_mb=1e-6)
+    with host_path():
+        host = ef.render_events(demo_small, **kw)
+    assert len(chunks) >= 3 and sum(chunks) == len(device)
     assert len(device) > 1500 and device.equals(host)
-    assert ef.read_events(one_step_chunks).equals(device)
+    assert ef.read_events(batch_chunks).equals(device)
     assert summary.events == len(device) and summary.writer_busy_s > 0
     assert summary.on == int((device.p > 0).sum())
     assert os.listdir(tmp_path) == ["small.h5"]

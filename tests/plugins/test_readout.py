@@ -26,11 +26,14 @@ def _steps(rng, steps=80, span_us=1500, long_every=0):
         t0 += span
 
 
-def test_host_and_device_limiters_keep_the_same_events():
+@pytest.mark.parametrize("cap", [3e5, 5e3], ids=["budget-30", "budget-0"])
+def test_host_and_device_limiters_keep_the_same_events(cap):
+    """A budget of 30 events a bin (steps that overflow, their first bin shared with the step before) and of
+    0 (every event of every step dropped)."""
     import drjit as dr
     import mitsuba as mi
-    host, device = readout.ReadoutLimiter(3e5, seed=7), readout.ReadoutLimiter(3e5, seed=7)
-    overflowing = 0
+    host, device = readout.ReadoutLimiter(cap, seed=7), readout.ReadoutLimiter(cap, seed=7)
+    overflowing = all_dropped = 0
     for t0, t1, x, y, t, p in _steps(np.random.default_rng(0), long_every=20):
         keep = host.filter(t)
         got = device.filter_device(_device_events(mi, dr, x, y, t, p), t0 * 1e-6, t1 * 1e-6)
@@ -38,7 +41,9 @@ def test_host_and_device_limiters_keep_the_same_events():
         assert all(np.array_equal(a, b) for a, b in zip(expected, got.numpy()))
         assert host.state() == device.state()
         overflowing += int(keep.sum() < len(t))
+        all_dropped += int(len(t) > 0 and not keep.any())
     assert overflowing > 20 and host.dropped > 5000
+    assert all_dropped > 50 if host.budget == 0 else all_dropped == 0
 
 
 def test_no_millisecond_passes_more_than_the_cap():

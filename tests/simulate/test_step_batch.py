@@ -79,7 +79,6 @@ def test_a_periodic_views_kept_events_are_not_batched(batches):
     assert batches == [] and ev.meta["render"]["copied_steps"] > 0
 
 
-
 def test_static_pixels_rendered_once_a_period_batch_alike(batches, monkeypatch):
     """The fan with the static-pixel split (the pixels no blade can reach rendered once a scan period: the
     frames the batch holds are composed from a cache and a partial render)."""
