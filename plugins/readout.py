@@ -5,8 +5,8 @@ time): the same drops, bit for bit.
 
 Time is cut into bins of 1/9 ms, each allowed 1/10 of the 1 ms budget: any 1 ms window overlaps at most 10 bins,
 so the cap holds for every window (saturated throughput is 90 % of the cap). Within an overfull bin the
-survivors are the events with the smallest random keys (up to 24 bits, :func:`key_bits`; ties: time order), a
-uniformly random subset; state carries across steps (a bin may span two steps: the events kept of it in the
+survivors are the events with the smallest random keys (24 bits; ties: time order), a uniformly random
+subset; state carries across steps (a bin may span two steps: the events kept of it in the
 earlier step count against it).
 
 The keys are a counter-based hash of (seed, step, the event's index in the step), not a generator's stream, so
@@ -22,15 +22,10 @@ READOUT_BINS_PER_MS = 9
 
 _GOLDEN, _M1, _M2 = 0x9E3779B1, 0x85EBCA6B, 0xC2B2AE35      # Weyl step and MurmurHash3's finaliser
 _MASK = 0xFFFFFFFF
+# bits of the random key that order an overfull bin's events: equal keys keep time order, and among 100,000
+# events of one bin a few hundred pairs tie at 24 bits (a tie matters only where it straddles the bin's cut);
+# with the bin above them, steps of up to 256 bins (28 ms) sort one 32-bit word on the device
 KEY_BITS = 24
-
-
-def key_bits(last_bin: int) -> int:
-    """Key bits that order the events of an overfull bin, for a step whose bins run 0..``last_bin``: with the
-    bin above them the device sorts one 32-bit word (two radix passes on the CPU). 24 for steps of up to 255
-    bins (28 ms), fewer for longer ones (18 at 1 s). Equal keys keep time order: among 100,000 events of one bin
-    a few hundred pairs tie at 24 bits, and a tie matters only where it straddles the bin's cut."""
-    return min(KEY_BITS, 32 - int(last_bin).bit_length())
 
 
 def step_word(seed: int, step: int) -> int:
@@ -106,7 +101,7 @@ class ReadoutLimiter:
         if counts.max() <= self.budget:                  # nothing overflows: keep all, no key needed
             self._close(first, last, int(counts[last]))
             return np.ones(len(t_us), bool)
-        order = np.lexsort((keys_np(len(t_us), word) >> (32 - key_bits(last)), b))   # bin, key, time order
+        order = np.lexsort((keys_np(len(t_us), word) >> (32 - KEY_BITS), b))   # bin, key, time order
         b_s = b[order]
         start = np.r_[0, np.nonzero(np.diff(b_s))[0] + 1]
         rank = np.arange(len(b_s)) - np.repeat(start, np.diff(np.r_[start, len(b_s)]))
@@ -174,11 +169,16 @@ class ReadoutLimiter:
         import drjit as dr
         import mitsuba as mi
         from mitsuba_eventfield.plugins import event_fill
-        bits = key_bits(last_rel)
-        key = keys_dr(mi, n, event_fill._opaque(word, mi.UInt32)) >> (32 - bits)
-        combined = (rel << bits) | key
-        dr.eval(combined)
-        order = event_fill.stable_order(combined, ((last_rel + 1) << bits) - 1)       # bin, key, time order
+        key = keys_dr(mi, n, event_fill._opaque(word, mi.UInt32)) >> (32 - KEY_BITS)
+        if last_rel < 1 << (32 - KEY_BITS):      # bin above key in one word: one sort (two passes on the CPU)
+            combined = (rel << KEY_BITS) | key
+            dr.eval(combined)
+            order = event_fill.stable_order(combined, ((last_rel + 1) << KEY_BITS) - 1)    # bin, key, time
+        else:                                    # a long step: by key, then stably by bin
+            dr.eval(key)
+            by_key = event_fill.stable_order(key, (1 << KEY_BITS) - 1)
+            order = dr.gather(mi.UInt32, by_key,
+                              event_fill.stable_order(dr.gather(mi.UInt32, rel, by_key), last_rel + 1))
         b_s = dr.gather(mi.UInt32, rel, order)
         start = dr.prefix_reduce(dr.ReduceOp.Add, counts, exclusive=True)
         rank = dr.arange(mi.UInt32, n) - dr.gather(mi.UInt32, start, b_s) + dr.select(b_s == 0, carry_d, 0)
