@@ -136,7 +136,7 @@ class ReadoutLimiter:
         rel = mi.UInt32(b - first_d)
         bins = int(((t1 - t0) * 1e6 + resolution_us + 2) / self.bin_us) + 4    # a bound on the step's bins
         counts = dr.zeros(mi.UInt32, bins)
-        dr.scatter_reduce(dr.ReduceOp.Add, counts, mi.UInt32(1), rel)
+        dr.scatter_reduce(dr.ReduceOp.Add, counts, mi.UInt32(1), rel, rel < bins)     # never out of bounds
         last_rel_d = dr.gather(mi.UInt32, rel, mi.UInt32(n - 1))
         open_d, used_d = event_fill._opaque(self.open_bin, mi.Int64), event_fill._opaque(self.used, mi.UInt32)
         carry_d = dr.select(first_d == open_d, used_d, 0)
@@ -144,6 +144,9 @@ class ReadoutLimiter:
         head = event_fill._read([dr.max(counts0), first_d, last_rel_d, dr.gather(mi.UInt32, counts0, last_rel_d)],
                                 mi.Int64)
         most, first, last_rel, last_count = head
+        if last_rel >= bins:
+            raise ValueError(f"readout: events span {last_rel + 1} bins, more than their step ({t0} s, {t1} s) "
+                             f"allows ({bins})")
         carry = self._carry(first)
         if most <= self.budget:
             self._close(first, last_rel, last_count)

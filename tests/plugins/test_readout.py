@@ -103,3 +103,14 @@ def test_a_capped_pixel_keeps_its_events_on_the_device_and_its_state_in_a_checkp
     old = dict(state, limiter=np.array('{"rng": {}, "open_bin": 3, "used": 1, "dropped": 0}'))
     with pytest.raises(ConfigError, match="random generator"):
         pixel_state.set_state(other, old)
+
+
+def test_events_outside_their_step_are_refused_not_scattered_out_of_bounds():
+    """The device limiter sizes its bin counts from the step's interval; events spanning more are a caller's
+    error, refused in one line (the counting scatter is masked, so nothing is written out of bounds)."""
+    import drjit as dr
+    import mitsuba as mi
+    t = np.sort(np.random.default_rng(0).integers(0, 100_000, 1000)).astype(np.int64)
+    events = _device_events(mi, dr, np.zeros(1000, np.uint32), np.zeros(1000, np.uint32), t, np.ones(1000, np.int8))
+    with pytest.raises(ValueError, match=r"events span \d+ bins, more than their step .* allows \(13\)"):
+        readout.ReadoutLimiter(3e5).filter_device(events, 0.0, 0.001)
