@@ -137,7 +137,10 @@ class FrozenOrTraced:
     does not redo the host-side arithmetic of its recording (docs/design.md, static pixels)."""
 
     def __init__(self, fn):
-        self.fn, self.frozen, self.refused = fn, dr.freeze(fn), None
+        # auto_opaque=False: every literal input is made opaque at each call. With Dr.Jit's default a literal that
+        # changes between calls (a moving shape's to_world, built from host scalars so that Mitsuba need not read
+        # it back: scene/timed.py) is found by recording again: the fan's render was recorded 5 times, not 2
+        self.fn, self.frozen, self.refused = fn, dr.freeze(fn, auto_opaque=False), None
 
     @property
     def n_recordings(self) -> int:

@@ -26,7 +26,7 @@ class _Binding:
     name: str
     key: str
     kind: str          # "to_world" or "vertices"
-    base: object       # transform at t=0, or (positions, normals) as Dr.Jit arrays
+    base: object       # (transform type, its scalar type, float64 matrix at t=0), or (positions, normals) arrays
 
 
 class TimedScene:
@@ -45,6 +45,7 @@ class TimedScene:
         self.params = mi.traverse(scene)
         self.time = 0.0
         self.sampler_choice = "the scene's own"
+        self._entry_base = None        # opaque UInt32 0 for the moving meshes' matrix gathers (_move_meshes)
         self._bindings = [self._bind(name) for name in (motion.objects if motion else {})]
         # time-varying sensors (the galvo) expose an opaque `time` parameter and reduce t to a scan phase
         self._sensor_times = [(key, node) for key, (_, _, node, _) in self.params.properties.items()
@@ -86,7 +87,9 @@ class TimedScene:
         if f"{name}.to_world" in keys:
             key = f"{name}.to_world"
             current = self.params[key]   # keep the t=0 placement as a float64 matrix: composing in NumPy
-            return _Binding(name, key, "to_world", (type(current), np.array(current.matrix.numpy()).reshape(4, 4)))
+            scalar_type = getattr(mi, "Scalar" + type(current).__name__)     # its host (scalar) counterpart
+            return _Binding(name, key, "to_world",
+                            (type(current), scalar_type, np.array(current.matrix.numpy()).reshape(4, 4)))
         if f"{name}.vertex_positions" in keys:
             key = f"{name}.vertex_positions"
             positions = mi.Point3f(dr.unravel(mi.Point3f, self.params[key]))
@@ -109,25 +112,37 @@ class TimedScene:
             return
         for key, node in self._sensor_times:
             self.params[key] = mi.Float(node.phase_time(self.time if view_time is None else float(view_time)))
-        moved = []                     # (parameter key, new vertex array) of every moving mesh
+        meshes = [b for b in self._bindings if b.kind == "vertices"]
         for b in self._bindings:
-            m = self.motion.objects[b.name].matrix(self.time)
-            if b.kind == "to_world":  # composed on the host: no Dr.Jit kernel for a 4x4 product
-                transform_type, base = b.base
-                self.params[b.key] = transform_type(m @ base)
-            else:
-                mat = mi.Matrix4f(m)
-                dr.make_opaque(mat)  # a literal matrix would compile a new kernel every step
-                xf = mi.Transform4f(mat)
-                positions, normals = b.base
-                moved.append((b.key, dr.ravel(xf @ positions)))
-                if normals is not None:
-                    moved.append((b.name + ".vertex_normals", dr.ravel(dr.normalize(xf @ normals))))
-        if moved:
-            dr.eval(*(v for _, v in moved))   # every mesh's positions and normals in one kernel per step
-            for key, value in moved:
-                self.params[key] = value
+            if b.kind == "to_world":
+                # built from a scalar (host) transform: its entries and inverse are literals, which Mitsuba
+                # stores without reading anything back; one from a NumPy array copied 16 entries to the device
+                # and Mitsuba read 28 back for its host-side copy, each a sync on a GPU (memsets instead: 15)
+                transform_type, scalar_type, base = b.base
+                self.params[b.key] = transform_type(scalar_type(self.motion.objects[b.name].matrix(self.time) @ base))
+        if meshes:
+            self._move_meshes(meshes)
         self.params.update()
+
+    def _move_meshes(self, meshes) -> None:
+        """Every moving mesh's positions and normals at ``self.time`` in one kernel, from one host-to-device copy
+        of all their matrices (a Matrix4f per mesh from NumPy copied each of its 16 entries on its own)."""
+        mats = np.stack([self.motion.objects[b.name].matrix(self.time) for b in meshes]).astype(np.float32)
+        entries = mi.Float(mats.ravel())
+        if self._entry_base is None:      # an opaque 0: entry (opaque + j) is a gather inside the kernel; a
+            self._entry_base = mi.UInt32(0)   # literal index would read each entry with a copy of its own
+            dr.make_opaque(self._entry_base)
+        moved = []                     # (parameter key, new vertex array) of every moving mesh
+        for i, b in enumerate(meshes):
+            mat = mi.Matrix4f(*[dr.gather(mi.Float, entries, self._entry_base + (16 * i + j)) for j in range(16)])
+            xf = mi.Transform4f(mat)
+            positions, normals = b.base
+            moved.append((b.key, dr.ravel(xf @ positions)))
+            if normals is not None:
+                moved.append((b.name + ".vertex_normals", dr.ravel(dr.normalize(xf @ normals))))
+        dr.eval(*(v for _, v in moved))   # every mesh's positions and normals in one kernel per step
+        for key, value in moved:
+            self.params[key] = value
 
     def describe(self) -> dict:
         """Metadata describing the scene for output files."""
