@@ -2,7 +2,7 @@
 # What issue 15 still needs measured on a CUDA GPU, in two device commands (device minutes are scarce; each
 # command must finish within the device tool's 10 minutes). After ../shared/gpu/prepare.sh, from the device tool:
 #   run(command="bash benchmarks/gpu_session.sh tests", carry=[".gpu"])   the suite under cuda_ad_mono
-#   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, fan 1280x720, memory
+#   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, fan 1280x720
 # Everything lands under $OUT (the device tool brings it back): logs, the benchmarks' results files (written
 # there, not into benchmarks/results/), nvidia-smi. Copy the results files into benchmarks/results/ here and
 # commit them: they carry the GPU's name.
@@ -30,6 +30,10 @@ case "$stage" in
         # engine + converter (device, per step, host) and the renders' cost beyond the radiance render
         EVENTFIELD_RESULTS_DIR="$OUT" timeout 300 $PY benchmarks/bench_event_engine.py $quick \
             > "$OUT/event_engine.txt" 2>&1
+        # HDF5 writing with the chunks deflated on the host's cores (idle while the GPU renders) against HDF5's
+        # own filters on one thread
+        [ -z "$quick" ] && EVENTFIELD_RESULTS_DIR="$OUT" timeout 120 $PY benchmarks/bench_writer.py \
+            > "$OUT/writer.txt" 2>&1
         # issue 15's own row: the fan at 1280x720, 400 steps, to HDF5 (render / events / motion / write split)
         sizes="-D width=1280 -D height=720"; steps=400
         if [ -n "$quick" ]; then sizes="-D width=96 -D height=72"; steps=80; fi

@@ -79,6 +79,7 @@ CASES = {
     "H5EventWriter compression": (lambda s: ef.H5EventWriter(os.path.join(OUT, "w.h5"), 8, 6, compression="zip"),
                                   "compression"),
     "H5EventWriter width": (lambda s: ef.H5EventWriter(os.path.join(OUT, "w.h5"), -8, 6), "width"),
+    "H5EventWriter threads": (lambda s: ef.H5EventWriter(os.path.join(OUT, "w.h5"), 8, 6, threads=-1), "threads"),
     "read_events path type": (lambda s: ef.read_events(None), "path"),
     "write_events not a stream": (lambda s: ef.write_events(os.path.join(OUT, "e.h5"), None), "events"),
     "Motion duration": (lambda s: ef.Motion(duration=-1.0), "duration"),

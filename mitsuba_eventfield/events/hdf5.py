@@ -2,9 +2,12 @@
 rendering, and the reader."""
 from __future__ import annotations
 
+import collections
 import contextlib
 import json
 import os
+import zlib
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -18,16 +21,41 @@ H5_FORMAT_VERSION = 1
 H5_GZIP_LEVEL = 1   # deflate level: 2-4x faster to write than level 4+, within 15% of their size (docs/design.md)
 H5_BYTES_PER_EVENT = 13        # x, y uint16 + t int64 + p uint8
 H5_COMPRESSIONS = ("gzip", "lzf", None)
+MAX_COMPRESSION_THREADS = 64
+
+
+def default_compression_threads() -> int:
+    """Threads that deflate an HDF5 writer's chunks: every core. On a GPU machine the host cores are idle while
+    the GPU renders, and HDF5 itself deflates on one thread (~13 M events/s, docs/design.md), far below what a
+    GPU makes; on the CPU the render's own threads share the cores, and deflating outside HDF5 is cheaper
+    anyway (its filter pipeline and per-chunk resizes cost ~1.5x the deflate on one thread)."""
+    return max(1, min(MAX_COMPRESSION_THREADS, os.cpu_count() or 1))
+
+
+def _shuffled(values: np.ndarray) -> bytes:
+    """HDF5's shuffle filter: every value's first byte, then every second byte, ... (one-byte values as they
+    are), so the slowly varying high bytes of coordinates and timestamps sit together for deflate."""
+    size = values.dtype.itemsize
+    contiguous = np.ascontiguousarray(values)
+    return contiguous.tobytes() if size == 1 else contiguous.view(np.uint8).reshape(-1, size).T.tobytes()
+
+
+def deflate_chunk(values: np.ndarray, level: int, shuffle: bool) -> bytes:
+    """One chunk of a column as HDF5's shuffle + deflate filters store it (zlib stream at ``level``), for
+    ``write_direct_chunk``: HDF5 and every reader decode it with their own filters."""
+    return zlib.compress(_shuffled(values) if shuffle else np.ascontiguousarray(values).tobytes(), level)
 
 
 def _json(meta: dict) -> str:
     return json.dumps(meta, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o), sort_keys=True)
 
 
-def _check_options(width, height, chunk, compression, level) -> None:
+def _check_options(width, height, chunk, compression, level, threads=None) -> None:
     """The writer's arguments, refused (ConfigError naming them) before any file is created."""
     for name, value in (("width", width), ("height", height)):
         number(value, f"event file: {name}", 0, MAX_SENSOR, integer=True, strict=True)
+    if threads is not None:
+        number(threads, "event file: threads", 0, MAX_COMPRESSION_THREADS, integer=True, strict=True)
     number(chunk, "event file: chunk", 1, 10_000_000, integer=True, strict=True)
     if compression not in H5_COMPRESSIONS:
         raise ConfigError(f"event file: compression = {compression!r}: allowed "
@@ -41,12 +69,17 @@ class H5EventWriter:
 
     Use as a context manager: the file is renamed into place by :meth:`close`, and deleted if an exception
     escapes (so no half-written file is ever visible under the target name). ``compression``: "gzip" (deflate,
-    readable everywhere; ``level`` 0-9) or None; "lzf" is accepted but only h5py reads it.
+    readable everywhere; ``level`` 0-9) or None; "lzf" is accepted but only h5py reads it. ``threads``: how many
+    threads deflate whole chunks at once (default :func:`default_compression_threads`); they are stored with
+    ``write_direct_chunk`` exactly as HDF5's own shuffle + deflate filters store them, so the file is the same
+    to every reader. The last, partial chunk goes through HDF5's own filters; ``threads=0`` sends every chunk
+    through them, on the writing thread.
     """
 
     def __init__(self, path: str, width: int, height: int, meta: dict | None = None, chunk: int = 1 << 16,
-                 compression: str | None = "gzip", level: int | None = H5_GZIP_LEVEL, shuffle: bool = True):
-        _check_options(width, height, chunk, compression, level)
+                 compression: str | None = "gzip", level: int | None = H5_GZIP_LEVEL, shuffle: bool = True,
+                 threads: int | None = None):
+        _check_options(width, height, chunk, compression, level, threads)
         self.path = check_writable(path, "event file")
         remove_stale_partials(self.path)
         self.tmp = temporary_name(self.path)
@@ -60,6 +93,10 @@ class H5EventWriter:
         self._ms_written = 0
         self._closed = False
         self.f = self._io = None
+        self._deflate = (level if level is not None else 4, shuffle and bool(compression)) \
+            if compression == "gzip" else None          # (level, shuffle) of chunks deflated here
+        self._threads = int(threads) if threads is not None else default_compression_threads()
+        self._pool = None          # made at the first whole chunk
         try:
             with self._writing(HEADER_BYTES):
                 self._create(compression, level if compression == "gzip" else None, shuffle and bool(compression))
@@ -135,16 +172,51 @@ class H5EventWriter:
         if n == 0:
             return
         cols = [np.concatenate([b[i] for b in self._buffer]) for i in range(4)]
+        deflated = self._deflated_chunks(cols, n)
         for i in range(0, n, self.chunk):
             m = min(self.chunk, n - i)
             with self._writing(self._pending_bytes(m)):
                 n0, n1 = self.written, self.written + m
+                stored = next(deflated) if deflated is not None and m == self.chunk else None
                 for k, v in zip("xytp", cols):
                     self.ds[k].resize((n1,))
-                    self.ds[k][n0:n1] = v[i:i + m]
+                    if stored is not None:
+                        self.ds[k].id.write_direct_chunk((n0,), stored[k], 0)
+                    else:
+                        self.ds[k][n0:n1] = v[i:i + m]
                 self.written = n1
                 self._flush_ms_index()
         self._buffer = [tuple(c[n:] for c in cols)] if n < pending else []
+
+    def _deflated_chunks(self, cols, n):
+        """The whole chunks among the first ``n`` buffered events, in order, each as {column: its bytes as
+        HDF5's filters store them}, deflated on the thread pool a few chunks ahead of the writes (so that a
+        single large append holds only those in memory, not the whole compressed stream); None where HDF5's own
+        filters write them (no gzip, ``threads=0``, or a writer not on the chunk grid)."""
+        whole = n // self.chunk
+        if self._deflate is None or not self._threads or whole == 0 or self.written % self.chunk:
+            return None
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self._threads, thread_name_prefix="h5-deflate")
+        level, shuffle, ahead = *self._deflate, 2 * self._threads
+
+        def submit(j):
+            return {k: self._pool.submit(deflate_chunk, v[j * self.chunk:(j + 1) * self.chunk], level, shuffle)
+                    for k, v in zip("xytp", cols)}
+
+        def in_order():
+            window = collections.deque(submit(j) for j in range(min(ahead, whole)))
+            for j in range(whole):
+                done = window.popleft()
+                if j + ahead < whole:
+                    window.append(submit(j + ahead))
+                yield {k: f.result() for k, f in done.items()}
+        return in_order()
+
+    def _stop_pool(self):
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
 
     def _flush_ms_index(self):
         if not self._ms_buffer:
@@ -168,6 +240,7 @@ class H5EventWriter:
         if self._closed:
             return
         self._flush(final=True)
+        self._stop_pool()
         end = end_us if end_us is not None else (self.last_t or 0)
         self._write_ms_index(np.empty(0, np.int64), self.count, int(end))
         if meta:
@@ -190,6 +263,7 @@ class H5EventWriter:
         if self._closed:
             return
         self._closed = True
+        self._stop_pool()
         try:
             for handle in (self.f, self._io):   # HDF5 first: it writes its last bytes through _io
                 with contextlib.suppress(Exception):

@@ -47,6 +47,40 @@ def test_h5_event_datasets_use_gzip(tmp_path, stream):
         assert ef.read_events(path).equals(stream)
 
 
+def test_h5_chunks_deflated_on_threads_are_what_hdf5_itself_stores(tmp_path, stream):
+    """Whole chunks are shuffled and deflated on a thread pool and stored with write_direct_chunk: the bytes of
+    a chunk HDF5 compressed itself decode with our inverse of shuffle + deflate (so ``_shuffled`` is HDF5's
+    shuffle), and HDF5's own filters decode ours (a plain read gives the events back), from 1 and 3 threads
+    (and 0: HDF5's filters throughout), with the partial last chunk left to HDF5."""
+    import zlib
+
+    from mitsuba_eventfield.events import hdf5
+    values = {"x": stream.x, "t": stream.t, "p": (stream.p > 0).astype(np.uint8)}
+    with h5py.File(str(tmp_path / "hdf5_own.h5"), "w") as f:
+        for k, v in values.items():
+            f.create_dataset(k, data=v, chunks=(4096,), compression="gzip", compression_opts=1, shuffle=True)
+        for k, v in values.items():
+            _, raw = f[k].id.read_direct_chunk((4096,))
+            assert zlib.decompress(raw) == hdf5._shuffled(v[4096:8192])
+            assert zlib.decompress(hdf5.deflate_chunk(v[4096:8192], 1, True)) == zlib.decompress(raw)
+    for threads in (0, 1, 3):
+        path = str(tmp_path / f"threads{threads}.h5")
+        with ef.H5EventWriter(path, 64, 48, chunk=4096, threads=threads) as w:
+            for k in range(0, len(stream), 7000):
+                w.append(stream.x[k:k + 7000], stream.y[k:k + 7000], stream.t[k:k + 7000], stream.p[k:k + 7000])
+        assert ef.read_events(path).equals(stream)
+        whole = str(tmp_path / f"one_append{threads}.h5")     # 4 whole chunks in one flush: 2 x threads ahead
+        with ef.H5EventWriter(whole, 64, 48, chunk=4096, threads=threads) as w:
+            w.append(stream.x, stream.y, stream.t, stream.p)
+        assert ef.read_events(whole).equals(stream)
+        with h5py.File(path, "r") as f:
+            ds = f["events"]["t"]
+            mask, raw = ds.id.read_direct_chunk((8192,))     # a whole chunk: deflated here, every filter applied
+            assert mask == 0 and np.array_equal(np.frombuffer(zlib.decompress(raw), np.uint8).reshape(8, -1).T
+                                                .copy().view(np.int64).ravel(), stream.t[8192:12288])
+            assert ds.shape == (len(stream),) and len(stream) % 4096     # and a partial last chunk, HDF5's
+
+
 def test_old_lzf_files_still_read(tmp_path, stream):
     """Files written before the switch (LZF, an h5py-only filter) keep reading."""
     path = str(tmp_path / "old.h5")
