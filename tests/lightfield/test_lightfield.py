@@ -233,3 +233,19 @@ def test_subset_does_not_reuse_the_parent_refocus_cache(kaleido_lf):
     sub = lf.subset(idx)
     assert np.allclose(ef.refocus(sub, NEAR), ef.refocus(fresh, NEAR))
     assert not np.allclose(ef.refocus(sub, NEAR), ef.refocus(lf, NEAR), atol=1e-3)
+
+
+def test_a_stream_of_two_scan_periods_has_two_whole_periods_though_its_duration_is_rounded():
+    """Two periods of a 150 Hz scan last 13,333.3 us; the stream records 13,333 (whole microseconds), and its
+    second period must still be there (``./run bench scan_frequency`` stopped at 150 Hz: 'allowed 0..0')."""
+    import os
+
+    from mitsuba_eventfield.lightfield.model import galvo_period_starts
+    scene = ef.load_scene(os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"), width=24, height=18,
+                          frequency=150)
+    ev = ef.render_events(scene, 2 / 150, steps=16)
+    assert ev.duration_us == 13333
+    starts = galvo_period_starts(ev)
+    assert sorted(starts) == [0, 1] and starts[1] == pytest.approx(1 / 150, abs=1e-12)
+    lf = ef.lightfield.from_events(ev, period=1, views=8)
+    assert lf.views.shape[0] == 8 and lf.times[0] == pytest.approx(1 / 150, abs=1e-3)
