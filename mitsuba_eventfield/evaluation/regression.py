@@ -25,6 +25,15 @@ from ..simulate.render import render_events, render_frames
 # frame: mean relative difference and its 99th percentile; events: total count and per-pixel net count
 FRAME_MEAN_TOL, FRAME_P99_TOL = 0.005, 0.05
 EVENT_TOTAL_TOL, EVENT_PIXEL_TOL = 0.03, 0.05
+# events rendered on another backend than the references' (CUDA against LLVM): its float32 sin/cos and ray
+# intersections round differently, and a galvo scene's event counts are sensitive to the last bit. Measured on
+# LLVM by shifting every instant of the render by 1 ns to 0.1 us (0.0001-0.009 deg of a 250 Hz scan phase, the
+# size of such rounding): the galvo cases' mean per-pixel difference reaches 0.080 and the total 3.2 % (a pixel
+# near a threshold level at the last instant flips by one event); the demo and kaleidoscope cases do not move.
+# These tolerances are twice that floor; a real change stays far beyond them (the scan 10 % larger: 0.30).
+# Frames move by less than 0.0002 mean and 0.002 p99 under the same shifts: their tolerances hold as they are.
+EVENT_TOTAL_TOL_OTHER_BACKEND, EVENT_PIXEL_TOL_OTHER_BACKEND = 0.065, 0.16
+REFERENCE_BACKEND = "llvm"     # references blessed before their backend was recorded in them were made on LLVM
 
 
 @dataclass(frozen=True)
@@ -45,11 +54,12 @@ CASES = (
 )
 
 
-def render_case(case: Case, scene_path: str | None = None, **extra_defines):
-    """(frame (H, W) linear radiance, net event counts (H, W)) of a case."""
+def render_case(case: Case, scene_path: str | None = None, shift_s: float = 0.0, **extra_defines):
+    """(frame (H, W) linear radiance, net event counts (H, W)) of a case; ``shift_s`` moves every instant
+    (the tolerances' test: a stand-in for another backend's rounding of the scan angle)."""
     timed = load_scene(scene_path or bundled_scene(case.scene), **dict(case.defines, **extra_defines))
-    frame = render_frames(timed, [case.frame_time], log=False)[0]
-    events = render_events(timed, case.duration, steps=case.steps)
+    frame = render_frames(timed, [case.frame_time + shift_s], log=False)[0]
+    events = render_events(timed, case.duration, steps=case.steps, t_start=shift_s)
     return frame.astype(np.float32), events.signed_counts()
 
 
@@ -65,21 +75,35 @@ def bless(directory: str, cases=CASES) -> list:
     for case in cases:
         frame, net = render_case(case)
         fpath, epath = _paths(case, directory)
-        write_exr(fpath, {"Y": frame}, {"case": case.name, "package_version": __version__})
+        write_exr(fpath, {"Y": frame}, {"case": case.name, "package_version": __version__,
+                                        "backend": _backend()})
         write_png(epath, np.clip(net + 128, 0, 255).astype(np.uint8))
         written += [fpath, epath]
     return written
 
 
-def compare(case: Case, frame: np.ndarray, net: np.ndarray, directory: str) -> list:
-    """Differences beyond tolerance, as readable strings (empty: matches the reference)."""
+def _backend() -> str:
+    """The active variant's backend: "llvm", "cuda" or "scalar"."""
+    import mitsuba as mi
+    return mi.variant().split("_")[0]
+
+
+def compare(case: Case, frame: np.ndarray, net: np.ndarray, directory: str, other_backend: bool | None = None) -> list:
+    """Differences beyond tolerance, as readable strings (empty: matches the reference). ``other_backend``:
+    whether the render ran on another backend than the references (None: the active variant's backend against
+    the one recorded in the reference); events then get the wider ``*_OTHER_BACKEND`` tolerances."""
     import cv2
 
     from ..images import read_exr
     fpath, epath = _paths(case, directory)
     if not (os.path.exists(fpath) and os.path.exists(epath)):
         return [f"{case.name}: no reference in {directory} (run `eventfield regression --bless`)"]
-    ref = read_exr(fpath)[0]["Y"]
+    channels, meta = read_exr(fpath)
+    ref = channels["Y"]
+    if other_backend is None:
+        other_backend = _backend() != (meta or {}).get("backend", REFERENCE_BACKEND)
+    total_tol, pixel_tol = (EVENT_TOTAL_TOL_OTHER_BACKEND, EVENT_PIXEL_TOL_OTHER_BACKEND) if other_backend else \
+        (EVENT_TOTAL_TOL, EVENT_PIXEL_TOL)
     ref_net = cv2.imread(epath, cv2.IMREAD_UNCHANGED).astype(np.int64) - 128
     problems = []
     if ref.shape != frame.shape:
@@ -90,10 +114,9 @@ def compare(case: Case, frame: np.ndarray, net: np.ndarray, directory: str) -> l
                         f"{np.percentile(rel, 99):.4f} > {FRAME_P99_TOL})")
     clipped = np.clip(net, -128, 127)
     total, ref_total = np.abs(clipped).sum(), np.abs(ref_net).sum()
-    if abs(total - ref_total) > EVENT_TOTAL_TOL * max(ref_total, 1) or \
-            np.abs(clipped - ref_net).mean() > EVENT_PIXEL_TOL:
-        problems.append(f"{case.name}: events differ (|net| {total} vs {ref_total}; mean per-pixel difference "
-                        f"{np.abs(clipped - ref_net).mean():.3f} > {EVENT_PIXEL_TOL})")
+    if abs(total - ref_total) > total_tol * max(ref_total, 1) or np.abs(clipped - ref_net).mean() > pixel_tol:
+        problems.append(f"{case.name}: events differ (|net| {total} vs {ref_total}, tolerance {total_tol:.1%}; "
+                        f"mean per-pixel difference {np.abs(clipped - ref_net).mean():.3f}, tolerance {pixel_tol})")
     return problems
 
 

@@ -3,7 +3,7 @@ import csv
 import os
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, needs
 
 import mitsuba_eventfield as ef
 
@@ -18,6 +18,7 @@ def _strip(table):
 
 
 def test_local_and_dask_give_identical_tables(tmp_path):
+    needs("distributed", "sweep")
     from distributed import Client, LocalCluster
     local = ef.sweep(GALVO, OVER, BASE, processes=2)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
