@@ -28,7 +28,7 @@ def default_compression_threads() -> int:
     """Threads that deflate an HDF5 writer's chunks: every core. On a GPU machine the host cores are idle while
     the GPU renders, and HDF5 itself deflates on one thread (~13 M events/s, docs/design.md), far below what a
     GPU makes; on the CPU the render's own threads share the cores, and deflating outside HDF5 is cheaper
-    anyway (its filter pipeline and per-chunk resizes cost ~1.5x the deflate on one thread)."""
+    anyway (one thread 1.08x faster than HDF5's filters on the fan's events: benchmarks/results/writer.md)."""
     return max(1, min(MAX_COMPRESSION_THREADS, os.cpu_count() or 1))
 
 
