@@ -98,9 +98,9 @@ def main():
     for reuse in runs:
         md.append(f"- static scene ({reuse['resolution']}, {reuse['amplitude_deg']} deg scan, {reuse['periods']} "
                   f"periods of a 250 Hz circle, {reuse['steps']} steps, {reuse['events']} events): reuse "
-                  f"**{reuse['speedup']:.1f}x** faster than rendering every step (fastest of three reuse runs; the first, "
-                  f"into memory the process had not touched, {reuse['speedup_first_run']:.1f}x); rendered {reuse['rendered_steps']} "
-                  f"steps, reused {reuse['reused_steps']} frames, copied {reuse['copied_steps']} steps of events; "
+                  f"**{reuse['speedup']:.1f}x** faster than rendering every step (fastest of three reuse runs; the "
+                  f"first, into memory the process had not touched, {reuse['speedup_first_run']:.1f}x); rendered "
+                  f"{reuse['rendered_steps']} steps, reused {reuse['reused_steps']} frames, copied {reuse['copied_steps']} steps of events; "
                   f"identical events: {reuse['identical_events']}")
     md += [f"- render time galvo / perspective ({cam['resolution']}, {cam['spp']} spp, median of "
            f"{cam['repetitions']}): **{cam['ratio']:.3f}** (target <= 1.1)", ""]

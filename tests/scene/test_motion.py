@@ -132,12 +132,16 @@ def test_a_step_moves_meshes_and_shapes_without_copying_entries_to_or_from_the_d
     import mitsuba as mi
     scene = mi.load_dict({"type": "scene", "sensor": {"type": "perspective"},
                           **{f"m{i}": {"type": "cube", "id": f"m{i}"} for i in range(3)},
-                          "r": {"type": "rectangle", "id": "r", "to_world": mi.ScalarTransform4f().translate([5, 0, 0])}})
-    motion = {"objects": {"m0": {"velocity": [0.3, 0, 0], "spin": {"rpm": 600, "axis": [0, 1, 1], "center": [1, 0, 0]}},
-                          "m1": {"velocity": [0, -2, 0]}, "m2": {"spin": {"rpm": 60, "axis": [1, 0, 0], "center": [0, 0, 0]}},
-                          "r": {"velocity": [0, 0, 40], "spin": {"rpm": 900, "axis": [0, 0, 1], "center": [5, 0, 0]}}}}
+                          "r": {"type": "rectangle", "id": "r",
+                                "to_world": mi.ScalarTransform4f().translate([5, 0, 0])}})
+    motion = {"objects": {
+        "m0": {"velocity": [0.3, 0, 0], "spin": {"rpm": 600, "axis": [0, 1, 1], "center": [1, 0, 0]}},
+        "m1": {"velocity": [0, -2, 0]},
+        "m2": {"spin": {"rpm": 60, "axis": [1, 0, 0], "center": [0, 0, 0]}},
+        "r": {"velocity": [0, 0, 40], "spin": {"rpm": 900, "axis": [0, 0, 1], "center": [5, 0, 0]}}}}
     timed = ef.load_scene(scene, motion=motion)
-    base = {k: np.array(timed.params[f"{k}.vertex_positions"]).reshape(-1, 3).astype(np.float64) for k in ("m0", "m1", "m2")}
+    base = {k: np.array(timed.params[f"{k}.vertex_positions"]).reshape(-1, 3).astype(np.float64)
+            for k in ("m0", "m1", "m2")}
     timed.set_time(0.01)
     dr.sync_thread()
     dr.kernel_history()
