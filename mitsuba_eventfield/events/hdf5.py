@@ -25,11 +25,12 @@ MAX_COMPRESSION_THREADS = 64
 
 
 def default_compression_threads() -> int:
-    """Threads that deflate an HDF5 writer's chunks: every core. On a GPU machine the host cores are idle while
+    """Threads that deflate an HDF5 writer's chunks: every core this process may run on. On a GPU machine the host cores are idle while
     the GPU renders, and HDF5 itself deflates on one thread (~13 M events/s, docs/design.md), far below what a
     GPU makes; on the CPU the render's own threads share the cores, and deflating outside HDF5 is cheaper
     anyway (one thread 1.08x faster than HDF5's filters on the fan's events: benchmarks/results/writer.md)."""
-    return max(1, min(MAX_COMPRESSION_THREADS, os.cpu_count() or 1))
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()   # not the
+    return max(1, min(MAX_COMPRESSION_THREADS, cores or 1))     # host's cores where the process is pinned to fewer
 
 
 def _shuffled(values: np.ndarray) -> bytes:
@@ -71,8 +72,8 @@ class H5EventWriter:
     escapes (so no half-written file is ever visible under the target name). ``compression``: "gzip" (deflate,
     readable everywhere; ``level`` 0-9) or None; "lzf" is accepted but only h5py reads it. ``threads``: how many
     threads deflate whole chunks at once (default :func:`default_compression_threads`); they are stored with
-    ``write_direct_chunk`` exactly as HDF5's own shuffle + deflate filters store them, so the file is the same
-    to every reader. The last, partial chunk goes through HDF5's own filters; ``threads=0`` sends every chunk
+    ``write_direct_chunk`` in the form HDF5's own shuffle + deflate filters store them (the same bytes where both
+    use the same zlib), so every reader decodes them with its own filters. The last, partial chunk goes through HDF5's own filters; ``threads=0`` sends every chunk
     through them, on the writing thread.
     """
 
@@ -239,6 +240,13 @@ class H5EventWriter:
         """Finish the index up to ``end_us`` (default: last event), write the metadata and publish the file."""
         if self._closed:
             return
+        try:
+            self._close(end_us, meta)
+        except BaseException:
+            self.abort()       # the deflating threads stopped and no partial file left (a full disk at close)
+            raise
+
+    def _close(self, end_us, meta):
         self._flush(final=True)
         self._stop_pool()
         end = end_us if end_us is not None else (self.last_t or 0)

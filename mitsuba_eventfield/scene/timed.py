@@ -26,7 +26,7 @@ class _Binding:
     name: str
     key: str
     kind: str          # "to_world" or "vertices"
-    base: object       # (transform type, its scalar type, float64 matrix at t=0), or (positions, normals) arrays
+    base: object       # (transform type, its scalar type, float64 matrix at t=0, made opaque?), or (positions, normals)
 
 
 class TimedScene:
@@ -88,8 +88,13 @@ class TimedScene:
             key = f"{name}.to_world"
             current = self.params[key]   # keep the t=0 placement as a float64 matrix: composing in NumPy
             scalar_type = getattr(mi, "Scalar" + type(current).__name__)     # its host (scalar) counterpart
+            # a shape that emits keeps some of the transform's values as literals in its emitter's sampling,
+            # which an unfrozen render would compile anew every step: its transform is made opaque (Mitsuba then
+            # reads it back: tests/scene/test_motion.py)
+            node = self.params.properties[key][2]
+            opaque = isinstance(node, mi.Shape) and node.is_emitter()
             return _Binding(name, key, "to_world",
-                            (type(current), scalar_type, np.array(current.matrix.numpy()).reshape(4, 4)))
+                            (type(current), scalar_type, np.array(current.matrix.numpy()).reshape(4, 4), opaque))
         if f"{name}.vertex_positions" in keys:
             key = f"{name}.vertex_positions"
             positions = mi.Point3f(dr.unravel(mi.Point3f, self.params[key]))
@@ -118,8 +123,11 @@ class TimedScene:
                 # built from a scalar (host) transform: its entries and inverse are literals, which Mitsuba
                 # stores without reading anything back; one from a NumPy array copied 16 entries to the device
                 # and Mitsuba read 28 back for its host-side copy, each a sync on a GPU (memsets instead: 15)
-                transform_type, scalar_type, base = b.base
-                self.params[b.key] = transform_type(scalar_type(self.motion.objects[b.name].matrix(self.time) @ base))
+                transform_type, scalar_type, base, opaque = b.base
+                xf = transform_type(scalar_type(self.motion.objects[b.name].matrix(self.time) @ base))
+                if opaque:
+                    dr.make_opaque(xf)
+                self.params[b.key] = xf
         if meshes:
             self._move_meshes(meshes)
         self.params.update()

@@ -59,7 +59,7 @@ def test_exact_bytes_per_dialect(dialect):
 
 @pytest.mark.parametrize("dialect", ["keysight", "rigol"])
 def test_pyvisa_sim_start_readback_stop(dialect):
-    needs("pyvisa", "device")
+    needs("pyvisa_sim", "device")     # simulated_visa: pyvisa with the pyvisa-sim backend
     t = simulated_visa(dialect)
     c = GalvoController(t, dialect, ramp_steps=3, ramp_time=0)
     report = c.start(CIRCLE, sleep=NO_SLEEP)
@@ -79,7 +79,7 @@ def test_pyvisa_sim_start_readback_stop(dialect):
 def test_refused_setting_never_reaches_an_output_pyvisa_sim(dialect):
     """The instrument refuses what our envelope (widened here on purpose) lets through: the read-back before
     "output on" catches it and the outputs stay off."""
-    needs("pyvisa", "device")
+    needs("pyvisa_sim", "device")     # simulated_visa: pyvisa with the pyvisa-sim backend
     t = simulated_visa(dialect)
     wide = GalvoSpec(envelope=((35.0, 12.5), (1e6, 0.2)))      # lets 200 kHz through our check ...
     c = GalvoController(t, dialect, spec=wide, ramp_steps=1, ramp_time=0)
@@ -127,7 +127,7 @@ def test_envelope_derates_with_frequency():
 
 
 def test_captured_events_carry_the_same_scan_description(tmp_path):
-    needs("pyvisa", "device")
+    needs("pyvisa_sim", "device")     # simulated_visa: pyvisa with the pyvisa-sim backend
     import numpy as np
 
     from mitsuba_eventfield.device import tag_events

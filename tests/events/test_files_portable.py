@@ -47,7 +47,7 @@ def test_h5_event_datasets_use_gzip(tmp_path, stream):
         assert ef.read_events(path).equals(stream)
 
 
-def test_h5_chunks_deflated_on_threads_are_what_hdf5_itself_stores(tmp_path, stream):
+def test_h5_chunks_deflated_on_threads_are_what_hdf5_itself_stores(tmp_path, stream, monkeypatch):
     """Whole chunks are shuffled and deflated on a thread pool and stored with write_direct_chunk: the bytes of
     a chunk HDF5 compressed itself decode with our inverse of shuffle + deflate (so ``_shuffled`` is HDF5's
     shuffle), and HDF5's own filters decode ours (a plain read gives the events back), from 1 and 3 threads
@@ -55,6 +55,7 @@ def test_h5_chunks_deflated_on_threads_are_what_hdf5_itself_stores(tmp_path, str
     import zlib
 
     from mitsuba_eventfield.events import hdf5
+    hdf5_deflate = hdf5.deflate_chunk
     values = {"x": stream.x, "t": stream.t, "p": (stream.p > 0).astype(np.uint8)}
     with h5py.File(str(tmp_path / "hdf5_own.h5"), "w") as f:
         for k, v in values.items():
@@ -63,12 +64,16 @@ def test_h5_chunks_deflated_on_threads_are_what_hdf5_itself_stores(tmp_path, str
             _, raw = f[k].id.read_direct_chunk((4096,))
             assert zlib.decompress(raw) == hdf5._shuffled(v[4096:8192])
             assert zlib.decompress(hdf5.deflate_chunk(v[4096:8192], 1, True)) == zlib.decompress(raw)
+    deflated = []                       # the writer's own deflating, counted: HDF5's filters would pass too
+    monkeypatch.setattr(hdf5, "deflate_chunk", lambda v, *a: deflated.append(len(v)) or hdf5_deflate(v, *a))
     for threads in (0, 1, 3):
+        deflated.clear()
         path = str(tmp_path / f"threads{threads}.h5")
         with ef.H5EventWriter(path, 64, 48, chunk=4096, threads=threads) as w:
             for k in range(0, len(stream), 7000):
                 w.append(stream.x[k:k + 7000], stream.y[k:k + 7000], stream.t[k:k + 7000], stream.p[k:k + 7000])
         assert ef.read_events(path).equals(stream)
+        assert deflated == ([] if threads == 0 else [4096] * 4 * (len(stream) // 4096))   # 4 columns
         whole = str(tmp_path / f"one_append{threads}.h5")     # 4 whole chunks in one flush: 2 x threads ahead
         with ef.H5EventWriter(whole, 64, 48, chunk=4096, threads=threads) as w:
             w.append(stream.x, stream.y, stream.t, stream.p)
@@ -310,6 +315,21 @@ def test_disk_fills_while_streaming(tmp_path, stream, monkeypatch):
             for k in range(0, len(stream), 1000):
                 w.append(stream.x[k:k + 1000], stream.y[k:k + 1000], stream.t[k:k + 1000], stream.p[k:k + 1000])
     assert calls["n"] == 4 and os.listdir(tmp_path) == []
+
+
+def test_disk_fills_at_close_stops_the_deflating_threads(tmp_path, stream, monkeypatch):
+    """The disk fills when close writes the last chunks: the one-line error, no file, and the writer's
+    deflating threads stopped (a failed close used to leave them, and the partial file, behind)."""
+    import threading
+    path = str(tmp_path / "c.h5")
+    w = ef.H5EventWriter(path, 64, 48, chunk=2048, threads=2)
+    w.append(stream.x, stream.y, stream.t, stream.p)            # whole chunks written through the threads
+    assert w._pool is not None
+    _disk(monkeypatch, free_after=10_000)
+    with pytest.raises(ef.EventFieldError, match="disk full"):
+        w.close()
+    assert w._pool is None and os.listdir(tmp_path) == []
+    assert not [t for t in threading.enumerate() if t.name.startswith("h5-deflate")]
 
 
 def test_disk_fills_during_render(tmp_path, demo_small, monkeypatch):

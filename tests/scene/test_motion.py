@@ -162,3 +162,32 @@ def test_a_step_moves_meshes_and_shapes_without_copying_entries_to_or_from_the_d
     # the rectangle (z = 0 at rest, away from the cubes) now at z = 0.8, turned about its centre; a ray along z
     hit = timed.scene.ray_intersect(mi.Ray3f(mi.Point3f(5.1, 0.2, 5.0), mi.Vector3f(0, 0, -1)))
     assert abs(hit.p.z[0] - 0.8) < 1e-5
+
+
+def test_moving_emitting_shapes_compile_nothing_after_the_first_frames():
+    """A moving shape that emits keeps values of its transform as literals in its emitter's sampling: from a
+    literal (scalar-built) to_world an unfrozen render compiled a new kernel every frame (5 of 5). Its
+    transform is made opaque; a plain moving shape keeps the literal (no read-back: the test above)."""
+    import drjit as dr
+    import mitsuba as mi
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": "path"},
+        "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 16, "height": 12}},
+        "lamp": {"type": "rectangle", "id": "lamp", "emitter": {"type": "area", "radiance": 1.0},
+                 "to_world": mi.ScalarTransform4f().translate([0, 0, 3])},
+        "ball": {"type": "sphere", "id": "ball", "emitter": {"type": "area", "radiance": 2.0},
+                 "to_world": mi.ScalarTransform4f().translate([1, 0, 4])},
+        "card": {"type": "rectangle", "id": "card", "to_world": mi.ScalarTransform4f().translate([-1, 0, 5])}})
+    timed = ef.load_scene(scene, motion={"objects": {"lamp": {"velocity": [0.5, 0, 0]},
+                                                     "ball": {"velocity": [0, 0.5, 0]},
+                                                     "card": {"velocity": [0, -0.5, 0]}}})
+    first = ef.render_frames(timed, [0.0, 0.01], log=False)
+    dr.kernel_history()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        later = ef.render_frames(timed, list(np.linspace(0.02, 0.1, 5)), log=False)
+        history = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert history and all(k["cache_hit"] for k in history)
+    assert np.abs(later[-1] - first[0]).max() > 0.1          # the lamp and the ball did move in the image
