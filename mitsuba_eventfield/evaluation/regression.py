@@ -88,7 +88,8 @@ def _backend() -> str:
     return mi.variant().split("_")[0]
 
 
-def compare(case: Case, frame: np.ndarray, net: np.ndarray, directory: str, other_backend: bool | None = None) -> list:
+def compare(case: Case, frame: np.ndarray, net: np.ndarray, directory: str,
+            other_backend: bool | None = None) -> list:
     """Differences beyond tolerance, as readable strings (empty: matches the reference). ``other_backend``:
     whether the render ran on another backend than the references (None: the active variant's backend against
     the one recorded in the reference); events then get the wider ``*_OTHER_BACKEND`` tolerances."""

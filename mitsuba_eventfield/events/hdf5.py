@@ -25,10 +25,11 @@ MAX_COMPRESSION_THREADS = 64
 
 
 def default_compression_threads() -> int:
-    """Threads that deflate an HDF5 writer's chunks: every core this process may run on. On a GPU machine the host cores are idle while
-    the GPU renders, and HDF5 itself deflates on one thread (~13 M events/s, docs/design.md), far below what a
-    GPU makes; on the CPU the render's own threads share the cores, and deflating outside HDF5 is cheaper
-    anyway (one thread 1.08x faster than HDF5's filters on the fan's events: benchmarks/results/writer.md)."""
+    """Threads that deflate an HDF5 writer's chunks: every core this process may run on. On a GPU machine the
+    host's cores are idle while the GPU renders, and HDF5 itself deflates on one thread (~13 M events/s,
+    docs/design.md), far below what a GPU makes; on the CPU the render's own threads share the cores, and
+    deflating outside HDF5 is cheaper anyway (one thread 1.08x faster than HDF5's filters on the fan's events:
+    benchmarks/results/writer.md)."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()   # not the
     return max(1, min(MAX_COMPRESSION_THREADS, cores or 1))     # host's cores where the process is pinned to fewer
 
@@ -73,8 +74,8 @@ class H5EventWriter:
     readable everywhere; ``level`` 0-9) or None; "lzf" is accepted but only h5py reads it. ``threads``: how many
     threads deflate whole chunks at once (default :func:`default_compression_threads`); they are stored with
     ``write_direct_chunk`` in the form HDF5's own shuffle + deflate filters store them (the same bytes where both
-    use the same zlib), so every reader decodes them with its own filters. The last, partial chunk goes through HDF5's own filters; ``threads=0`` sends every chunk
-    through them, on the writing thread.
+    use the same zlib), so every reader decodes them with its own filters. The last, partial chunk goes through
+    HDF5's own filters; ``threads=0`` sends every chunk through them, on the writing thread.
     """
 
     def __init__(self, path: str, width: int, height: int, meta: dict | None = None, chunk: int = 1 << 16,

@@ -185,8 +185,8 @@ def galvo_period_starts(events, periods=None) -> dict:
     ``periods``, each checked against the stream)."""
     period = scan_period(_galvo_scan(events.meta.get("optics", {}), "scan periods"))
     t0 = events.meta.get("t_start_us", 0) * 1e-6
-    # whole periods only; the stream's duration is rounded to the microsecond, so two periods of 150 Hz (13,333.3 us)
-    # are 13,333 us long and must still count as two
+    # whole periods only; the stream's duration is rounded to the microsecond, so two periods of 150 Hz
+    # (13,333.3 us) are 13,333 us long and must still count as two
     n_periods = int(math.floor((events.duration_us + 0.5) * 1e-6 / period + 1e-9))
     if periods is not None and (isinstance(periods, (str, bytes)) or not np.iterable(periods)):
         raise ConfigError(f"periods = {periods!r}: expected a list of scan period indices")

@@ -26,7 +26,8 @@ class _Binding:
     name: str
     key: str
     kind: str          # "to_world" or "vertices"
-    base: object       # (transform type, its scalar type, float64 matrix at t=0, made opaque?), or (positions, normals)
+    base: object       # (transform type, its scalar type, float64 matrix at t=0, made opaque?), or
+                       # (positions, normals) as Dr.Jit arrays
 
 
 class TimedScene:
