@@ -48,6 +48,7 @@ class TimedScene:
         self.sampler_choice = "the scene's own"
         self._entry_base = None        # opaque UInt32 0 for the moving meshes' matrix gathers (_move_meshes)
         self._bindings = [self._bind(name) for name in (motion.objects if motion else {})]
+        self._meshes = [b for b in self._bindings if b.kind == "vertices"]     # moved together, one kernel a step
         # time-varying sensors (the galvo) expose an opaque `time` parameter and reduce t to a scan phase
         self._sensor_times = [(key, node) for key, (_, _, node, _) in self.params.properties.items()
                               if key.endswith(".time") and hasattr(node, "phase_time")]
@@ -118,7 +119,6 @@ class TimedScene:
             return
         for key, node in self._sensor_times:
             self.params[key] = mi.Float(node.phase_time(self.time if view_time is None else float(view_time)))
-        meshes = [b for b in self._bindings if b.kind == "vertices"]
         for b in self._bindings:
             if b.kind == "to_world":
                 # built from a scalar (host) transform: its entries and inverse are literals, which Mitsuba
@@ -129,8 +129,8 @@ class TimedScene:
                 if opaque:
                     dr.make_opaque(xf)
                 self.params[b.key] = xf
-        if meshes:
-            self._move_meshes(meshes)
+        if self._meshes:
+            self._move_meshes(self._meshes)
         self.params.update()
 
     def _move_meshes(self, meshes) -> None:
