@@ -1,32 +1,42 @@
-"""Events of many frames in a few kernels: the frames-to-events converter's fast path (issue 15, part 4).
+"""Events of many frames in a few kernels: the fast path of the frames-to-events converter and of a render's
+step batches (``simulate/step_batch.py``), for every pixel model (issue 15, parts 1 and 4).
 
 A step at a time, every frame pays the same fixed cost (a pixel kernel, a scan, a sync to size the event
 arrays, a fill, a sort, each a launch; about 0.4 ms at 346x260 on the CPU before any event). Given ``B``
 frames at once:
 
-1. count: one kernel loops every pixel through the ``B`` steps (``pixel_step.advance``, the per-step kernel's
-   own definition) and keeps each (step, pixel) lane's crossing count ``|n|``, frame-major, and the state
-   after the last step;
-2. prefix sum over the ``B x N`` lanes; one sync reads the total;
+1. count: one kernel loops every pixel through the ``B`` steps (``pixel_step.step``, the per-step kernel's own
+   definition, and ``event_fill.select_events``, the per-step path's selection) and keeps each (step, pixel)
+   lane's kept count, frame-major, each pixel's events in the chunk, and the state after the last step;
+2. prefix sum over the lanes; one sync reads every step's last slot (the total is the last);
 3. fill and time order: ``event_fill.fill``, the one fill of every device path. Its crossing writer
    (``Chunk.write``) steps the pixels again from the chunk's first state, so nothing but the counts is stored
    between the passes (storing each lane's levels and reading them back cost more than stepping twice: the
-   converter's kernels at 346x260, 4 frames a kernel, 53 against 113 M pixel-steps/s); one stable radix sort
-   of the chunk by microsecond.
+   converter's kernels at 346x260, 4 frames a kernel, 53 against 113 M pixel-steps/s), and only the pixels
+   that fired in the chunk when they are fewer than half (a still pixel writes nothing); one stable radix
+   sort of the chunk by microsecond;
+4. the readout cap, where the pixel model has one, on the whole chunk at once
+   (``readout.ReadoutLimiter.filter_device``: the drops of step-by-step filtering).
+
+Every pixel model batches. Its random parts draw from the per-pixel PCG32 generator, which the loop carries
+(five draws a step at most, in the per-step kernel's order: the same numbers); the refractory period carries
+each pixel's last emission; shot-noise events take a second lane per pixel after each step's crossings, as
+the per-step path puts a step's noise after its crossings; the drop and noise counts are summed per pixel in
+the loop.
 
 The events equal, bit for bit, those of ``B`` calls of ``EventIntegrator.commit_device`` joined in order: the
 same float operations in the same order, and a stable sort keyed by time over slots in (step, pixel,
 crossing) order is the per-step order concatenated (a step's times never pass the next step's start: the
 interpolation fraction is clipped to [0, 1] and rounding to microseconds keeps order; the one exception is a
 float64 ``t0 + 1.0 (t1 - t0)`` one ulp above ``t1`` where ``t1`` is exactly half a microsecond, which the
-per-step concatenation would leave out of order and the chunk sorts). Pixel models that draw random numbers
-per step (threshold jitter, shot noise) or keep per-event state (refractory period, readout cap) are not
-batched: ``batchable`` says so and the caller steps them one frame at a time.
+per-step concatenation would leave out of order and the chunk sorts). Tested against the host path for
+every pixel model and chunking (tests/plugins/test_event_batch.py).
 """
 from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import drjit as dr
 import mitsuba as mi
@@ -80,96 +90,207 @@ def one_frame_a_step():
 
 
 def batchable(integ) -> bool:
-    """True when ``integ``'s pixel model can take many frames per kernel (see the module docstring)."""
-    cfg = integ.config
-    return not _disabled[0] and integ.device_resident and \
-        not (cfg.threshold_jitter or cfg.shot_noise_hz or cfg.refractory_s or cfg.readout_cap)
+    """True when ``integ`` may take many frames per kernel: every pixel model can (module docstring), unless
+    :func:`one_frame_a_step` or the host path (``event_integrator.host_path``) is asked for."""
+    return not _disabled[0] and integ.path_override != "host"
 
 
-def commit_frames(integ, log_frames, times, base_us: int = 0) -> event_fill.DeviceEvents:
+def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = False) -> event_fill.DeviceEvents:
     """Events of the steps from ``times[0]`` (the pixels' current instant) through ``B = len(times) - 1``
-    frames: ``log_frames`` is a Float of ``B x N`` log brightnesses (frame-major; any further values are not
-    read: a caller's buffer for more frames may be passed whole), frame ``b`` the brightness at
-    ``times[b + 1]`` seconds (the low-pass recovers the radiance from it, as the per-step kernel does for a
-    staged log frame). Advances the integrator's state; returns the chunk's events time-sorted on the device,
-    as per-step commits would."""
+    frames: ``frames`` is a Float of ``B x N`` log brightnesses (frame-major; any further values are not read:
+    a caller's buffer for more frames may be passed whole), frame ``b`` the brightness at ``times[b + 1]``
+    seconds; with ``intensity`` they are linear radiances (a render's, which the low-pass and shot noise read
+    as the per-step kernel does) and their log is taken in the kernel; else the low-pass and shot noise
+    recover the radiance from the log, as the per-step kernel does for a staged log frame. Advances the
+    integrator's state (pixels, generator, last emissions, readout cap, counters); returns the chunk's events
+    time-sorted and read out on the device, as per-step commits would."""
     if not batchable(integ):
-        raise ValueError("commit_frames: this pixel model steps one frame at a time (event_batch.batchable)")
+        raise ValueError("commit_frames: frames are committed one at a time here (event_batch.batchable)")
     times = np.asarray(times, np.float64)
     steps, n_pix = len(times) - 1, integ.size[0] * integ.size[1] if integ.size else 0
-    if integ.log_prev is None or dr.width(log_frames) < steps * n_pix or steps < 1:
-        raise ValueError(f"commit_frames: {dr.width(log_frames)} values for {steps} frames of {n_pix} pixels "
+    if integ.log_prev is None or dr.width(frames) < steps * n_pix or steps < 1:
+        raise ValueError(f"commit_frames: {dr.width(frames)} values for {steps} frames of {n_pix} pixels "
                          "(after a first frame has set the pixels)")
-    chunk = Chunk(integ, _state(integ), log_frames, times, integ.size[0], n_pix)
-    kept = dr.empty(mi.UInt32, steps * n_pix)
+    cfg = integ.config
+    if cfg.refractory_s and isinstance(integ.last_emit, np.ndarray):   # after host-path steps: moved
+        integ.last_emit = event_fill.device_copy(integ.last_emit, mi.Float64)
+    chunk = Chunk(integ, _state(integ), frames, times, integ.size[0], n_pix, intensity)
+    lanes = chunk.lanes_per_step
+    counts = dr.empty(mi.UInt32, steps * lanes)
+    lanes_d, n_d = event_fill._opaque(lanes, mi.UInt32), event_fill._opaque(n_pix, mi.UInt32)
+    tally = cfg.refractory_s or cfg.shot_noise_hz         # the drops and noise events to count
+    sums = [dr.zeros(mi.UInt32, n_pix) for _ in range(4)] if tally else []
 
-    def count(b, lane, log_prev, levels):
-        dr.scatter(kept, mi.UInt32(dr.abs(levels.n)), lane)
-    final = chunk.run(count)
-    dr.eval(kept, *final)
+    def count(b, pixel, log_prev, st, sel, t0, t1, fired, *tallies):
+        lane = b * lanes_d + pixel
+        dr.scatter(counts, sel.kept, lane)
+        fired = fired + sel.kept                 # the pixel's events in the chunk: the fill steps only these
+        if sel.hit is not None:
+            dr.scatter(counts, mi.UInt32(sel.hit), lane + n_d)
+            fired = fired + mi.UInt32(sel.hit)
+        if not tally:
+            return (fired,)
+        # per pixel, carried through the loop: crossings, kept crossings, noise draws that hit, kept noise
+        values = [mi.UInt32(dr.abs(st.levels.n)), sel.kept]
+        if sel.hit is not None:
+            values += [mi.UInt32(st.noise[0]), mi.UInt32(sel.hit)]
+        return (fired,) + tuple(acc + v for acc, v in zip(tallies, values)) + tallies[len(values):]
+    final, (fired, *sums) = chunk.run(count, [dr.zeros(mi.UInt32, n_pix)] + sums)
+    dr.eval(counts, fired, *final.values(), *sums)
+    ends = dr.prefix_reduce(dr.ReduceOp.Add, counts, exclusive=False)
+    # one read: every step's last slot (the chunk's total is the last), then the tallies
+    step_last = mi.UInt32((np.arange(1, steps + 1) * lanes - 1).astype(np.uint32))
+    head = [dr.gather(mi.UInt32, ends, step_last)] + [dr.sum(v) for v in sums]
+    read = event_fill.concat_arrays(head, mi.UInt32).numpy()
+    step_ends = read[:steps]
     _set_state(integ, final)
-    ends = dr.prefix_reduce(dr.ReduceOp.Add, kept, exclusive=False)
-    total = event_fill._read([dr.gather(mi.UInt32, ends, steps * n_pix - 1)])[0]
-    return event_fill.fill(chunk, ends, total, base_us, integ.config.timestamp_resolution_us)
+    stats = {}
+    if tally:
+        raw, kept, noise_raw, noise_kept = (int(v) for v in read[steps:])
+        stats = dict(refractory_dropped=(raw - kept) + (noise_raw - noise_kept), noise_events=noise_kept)
+        integ.refractory_dropped += stats["refractory_dropped"]
+        integ.noise_events += noise_kept
+    total = int(step_ends[-1])
+    if total:
+        chunk.only_firing(fired)
+    events = event_fill.fill(chunk, ends, total, base_us, cfg.timestamp_resolution_us, stats=stats)
+    if integ.limiter is None:
+        return events
+    step_counts = np.diff(np.r_[0, step_ends]).astype(np.int64)
+    return integ.limiter.filter_device(events, step_counts, times[0], times[-1], cfg.timestamp_resolution_us)
 
 
-def _state(integ) -> tuple:
-    return (integ.log_prev, integ.k_on, integ.k_off) + ((integ.offset,) if integ.offset is not None else ())
+# the pixel state a chunk carries from step to step, in this order (those the pixel model has)
+STATE = ("log_prev", "k_on", "k_off", "offset", "rng", "last_emit")
 
 
-def _set_state(integ, state) -> None:
-    integ.log_prev, integ.k_on, integ.k_off = state[:3]
-    if integ.offset is not None:
-        integ.offset = state[3]
+def _state(integ) -> dict:
+    return {name: getattr(integ, name) for name in STATE if getattr(integ, name) is not None}
+
+
+def _set_state(integ, state: dict) -> None:
+    for name, value in state.items():
+        if name == "rng":
+            integ.rng = mi.PCG32(integ.rng)
+            integ.rng.state = value
+        else:
+            setattr(integ, name, value)
 
 
 @dataclass
 class Chunk:
     """``B`` frames of every pixel from a state, as ``event_fill.fill`` takes crossings: stepping the pixels is
     cheap next to storing each (step, pixel) lane's brightness before and after, reference level and count
-    (16 bytes a lane written, then read back by the fill), so the count pass keeps only ``|n|`` and the fill
-    steps the pixels again from the same state (the same operations: the same values, bit for bit)."""
+    (16 bytes a lane written, then read back by the fill), so the count pass keeps only the kept counts and the
+    fill steps the pixels again from the same state (generator included: the same draws; the same operations:
+    the same values, bit for bit). Lanes: per step every pixel's crossings, then (with shot noise) every
+    pixel's noise event, so that slot order is the per-step path's: a step's crossings, then its noise."""
     integ: object
-    state: tuple                 # log_prev, k_on, k_off[, offset] at times[0]
-    log_frames: object
+    state: dict                  # STATE at times[0] (the names the pixel model has)
+    frames: object
     times: np.ndarray
     width: int
     n_pix: int
+    intensity: bool = False      # frames are linear radiances (else log brightnesses)
+    pixels: object = None        # the pixels :meth:`run` steps (UInt32 indices; None: every pixel)
 
-    def run(self, each_step) -> tuple:
-        """One kernel: every pixel through the ``B`` steps (``pixel_step.advance``, the per-step kernel's own
-        definition); ``each_step(b, lane, log_prev, levels)`` is traced into the loop body (``lane``: the
-        frame-major index b N + pixel). Returns the state after the last step (lazy)."""
-        integ, cfg = self.integ, self.integ.config
-        pixel = dr.arange(mi.UInt32, self.n_pix)
+    # below this fraction of the pixels firing, the fill steps only those (gathered state, one compress)
+    FIRING_SUBSET = 0.5
+
+    def only_firing(self, fired) -> None:
+        """Let :meth:`write` step only the pixels with an event in the chunk (``fired``: each pixel's count),
+        where they are few: a still pixel writes nothing, and the count pass already moved its state on."""
+        pixels = dr.compress(fired > 0)
+        if dr.width(pixels) < self.FIRING_SUBSET * self.n_pix:
+            self.pixels = pixels
+
+    def _at_pixels(self):
+        """(pixel indices, lane count, the integrator's per-pixel constants, the start state, a generator
+        template) at :attr:`pixels` (every pixel when None)."""
+        integ, state = self.integ, self.state
+        if self.pixels is None:
+            return dr.arange(mi.UInt32, self.n_pix), self.n_pix, integ, state, integ.rng
+        idx = self.pixels
+        view = SimpleNamespace(config=integ.config, linlog_threshold=integ.linlog_threshold)
+        for name in ("c_on", "c_off", "anchor", "leak_rate"):
+            v = getattr(integ, name)
+            setattr(view, name, dr.gather(type(v), v, idx) if v is not None else None)
+        rng = None
+        if integ.rng is not None:
+            rng = mi.PCG32(integ.rng)
+            rng.state, rng.inc = dr.gather(mi.UInt64, state["rng"].state, idx), dr.gather(mi.UInt64, integ.rng.inc, idx)
+        sub = {k: rng if k == "rng" else dr.gather(type(v), v, idx) for k, v in state.items()}
+        return idx, dr.width(idx), view, sub, rng
+
+    @property
+    def lanes_per_step(self) -> int:
+        return self.n_pix * (2 if self.integ.config.shot_noise_hz else 1)
+
+    def run(self, each_step, carry=()) -> tuple:
+        """One kernel: every pixel through the ``B`` steps (``pixel_step.step``, the per-step kernel's own
+        definition, and ``event_fill.select_events``, the per-step path's selection);
+        ``each_step(b, pixel, log_prev, step, selection, t0, t1, *carry)`` is traced into the loop body and
+        returns the new ``carry`` (per-pixel values it keeps across steps). Returns the state after the last
+        step and the last carry (lazy)."""
+        cfg = self.integ.config
+        pixel, lanes, integ, state, rng_template = self._at_pixels()
         n_d = event_fill._opaque(self.n_pix, mi.UInt32)
         # the per-step kernel's dt is mi.Float(t1 - t0): the same float64 difference, rounded to float32
-        dts = mi.Float(np.diff(self.times).astype(np.float32)) if cfg.cutoff_hz or cfg.leak_rate_hz else None
-        has_offset = len(self.state) == 4
+        dts = mi.Float(np.diff(self.times).astype(np.float32)) if pixel_step.needs_dt(cfg) else None
+        t_d = mi.Float64(self.times)
+        period = event_fill._opaque(cfg.refractory_s, mi.Float64) if cfg.refractory_s else None
+        names = list(state)
+        start = [state[k].state if k == "rng" else state[k] for k in names]
 
-        def body(b, log_prev, k_on, k_off, *offset):
-            lane = b * n_d + pixel
-            log_in = dr.gather(mi.Float, self.log_frames, lane)
+        n_state = len(names)
+
+        def body(b, *values):
+            s, carried = dict(zip(names, values[:n_state])), values[n_state:]
+            value = dr.gather(mi.Float, self.frames, b * n_d + pixel)
+            if self.intensity:
+                intensity, log_in = value, pixel_model.linlog(dr, value, integ.linlog_threshold)
+            else:
+                log_in = value
+                intensity = pixel_model.linlog_inverse(dr, value, integ.linlog_threshold) \
+                    if pixel_step.needs_intensity(cfg) else None
             dt = dr.gather(mi.Float, dts, b) if dts is not None else None
-            intensity = pixel_model.linlog_inverse(dr, log_in, integ.linlog_threshold) if cfg.cutoff_hz else None
-            levels = pixel_step.advance(integ, log_prev, k_on, k_off, offset[0] if has_offset else None, log_in,
-                                        intensity, dt, integ.c_on, integ.c_off)
-            each_step(b, lane, log_prev, levels)
-            return (b + 1, levels.log_now, levels.k_on, levels.k_off) + ((levels.offset,) if has_offset else ())
+            rng = None
+            if "rng" in s:
+                rng = mi.PCG32(rng_template)
+                rng.state = s["rng"]
+            st = pixel_step.step(integ, s["log_prev"], s["k_on"], s["k_off"], s.get("offset"), rng, log_in,
+                                 intensity, dt)
+            lv = st.levels
+            t0, t1 = dr.gather(mi.Float64, t_d, b), dr.gather(mi.Float64, t_d, b + 1)
+            sel = event_fill.select_events(lv.n, s["log_prev"], lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1,
+                                           s.get("last_emit"), period, st.noise)
+            carried = each_step(b, pixel, s["log_prev"], st, sel, t0, t1, *carried)
+            after = {"log_prev": lv.log_now, "k_on": lv.k_on, "k_off": lv.k_off, "offset": lv.offset,
+                     "rng": rng.state if rng is not None else None, "last_emit": sel.last_emit}
+            return (b + 1,) + tuple(after[k] for k in names) + tuple(carried)
 
         bound = event_fill._opaque(len(self.times) - 1, mi.UInt32)
-        out = dr.while_loop((dr.zeros(mi.UInt32, self.n_pix),) + tuple(self.state), lambda b, *rest: b < bound,
-                            body)
-        return tuple(out[1:])
+        out = dr.while_loop((dr.zeros(mi.UInt32, lanes),) + tuple(start) + tuple(carry),
+                            lambda b, *rest: b < bound, body)
+        return dict(zip(names, out[1:1 + n_state])), tuple(out[1 + n_state:])
 
     def write(self, ends, xy, key_of, key_out, word_out) -> None:
-        """``event_fill``'s crossing writer: the pixels stepped again, each step's crossings into their slots."""
-        t_d = mi.Float64(self.times)
+        """``event_fill``'s crossing writer: the pixels stepped again, each step's crossings into their slots,
+        then its noise events (only the firing pixels when :meth:`only_firing` chose them)."""
+        lanes_d, n_d = event_fill._opaque(self.lanes_per_step, mi.UInt32), event_fill._opaque(self.n_pix, mi.UInt32)
+        if self.pixels is not None:
+            xy = dr.gather(mi.UInt32, xy, self.pixels)
 
-        def write_step(b, lane, log_prev, levels):
-            kept = mi.UInt32(dr.abs(levels.n))
-            event_fill.write_crossings(levels.n, kept, dr.gather(mi.UInt32, ends, lane) - kept, log_prev,
-                                       levels.log_now, levels.log_ref, self.integ.c_on, self.integ.c_off,
-                                       dr.gather(mi.Float64, t_d, b), dr.gather(mi.Float64, t_d, b + 1), xy,
-                                       key_of, key_out, word_out)
+        def write_step(b, pixel, log_prev, st, sel, t0, t1):         # carries nothing
+            lane = b * lanes_d + pixel
+            lv = st.levels
+            event_fill.write_crossings(lv.n, sel.kept, dr.gather(mi.UInt32, ends, lane) - sel.kept, log_prev,
+                                       lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1, xy, key_of, key_out,
+                                       word_out, sel.first, sel.stride)
+            if sel.hit is not None:
+                slot = dr.gather(mi.UInt32, ends, lane + n_d) - 1
+                on_bit = dr.select(sel.noise_on, mi.UInt32(1 << 31), mi.UInt32(0))
+                dr.scatter(key_out, key_of(sel.noise_t), slot, sel.hit)
+                dr.scatter(word_out, xy | on_bit, slot, sel.hit)
+            return ()
         self.run(write_step)

@@ -140,6 +140,18 @@ def empty() -> DeviceEvents:
     return DeviceEvents(*empty_columns(), count=0)
 
 
+def device_copy(values, cls):
+    """NumPy ``values`` as a ``cls`` array in Dr.Jit's own memory. An array made from NumPy memory is read with
+    alignment 1, so a kernel reading it is another variant (another compile) of the kernel that reads the same
+    state computed on the device; a copy by a scatter kernel is aligned (``dr.gather`` by ``arange`` and
+    ``dr.copy`` are folded back to the NumPy memory)."""
+    src = cls(values)
+    out = dr.empty(cls, dr.width(src))
+    dr.scatter(out, src, dr.arange(mi.UInt32, dr.width(src)))
+    dr.eval(out)
+    return out
+
+
 def _opaque(value, cls):
     v = cls(value)
     dr.make_opaque(v)       # a literal per step would be baked into the kernel and recompile it every step
@@ -233,44 +245,77 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
     time-sorted events, still on the device, with the step's refractory drops and noise events counted."""
     n_pix = dr.width(n)
     t0_d, t1_d = _opaque(t0, mi.Float64), _opaque(t1, mi.Float64)
-    size = mi.UInt32(dr.abs(n))
-    sign_d = dr.select(n > 0, mi.Int32(1), mi.Int32(-1))
-    f64 = [mi.Float64(a) for a in (log_prev, log_now, log_ref)]
-    step_d = dr.select(n > 0, mi.Float64(c_on), mi.Float64(c_off))
-
-    def tk(k):
-        return _crossing_time(k, sign_d, *f64, step_d, t0_d, t1_d)
-    first, stride, kept = mi.Float64(0.0), mi.Float64(1.0), size
-    if refractory is not None:
-        period = _opaque(refractory.period, mi.Float64)
-        last = refractory.last_emit
-        first, stride, kept_f, new_last, first_kept = _refractory_plan(size, tk, last, period)
-        kept = mi.UInt32(kept_f)
-    hit = None
-    if noise is not None:
-        hit, u_pol, u_t = noise
-        nt = t0_d + mi.Float64(u_t) * (t1_d - t0_d)
-        if refractory is not None:
-            hit = hit & (nt >= last + period) & (~dr.isfinite(first_kept) | (nt <= first_kept - period)
-                                                 | (nt >= new_last + period))
-            new_last = dr.select(hit, dr.maximum(new_last, nt), new_last)
+    period = _opaque(refractory.period, mi.Float64) if refractory is not None else None
+    sel = select_events(n, log_prev, log_now, log_ref, c_on, c_off, t0_d, t1_d,
+                        refractory.last_emit if refractory is not None else None, period, noise)
+    kept, hit = sel.kept, sel.hit
     if refractory is not None or hit is not None:   # one kernel for the plan; lazy, every use would redo it
-        dr.eval(*[v for v in (kept, first, stride, hit, nt if hit is not None else None,
-                              new_last if refractory is not None else None) if v is not None])
+        dr.eval(*[v for v in (kept, sel.first, sel.stride, hit, sel.noise_t, sel.last_emit) if v is not None])
     ends = dr.prefix_reduce(dr.ReduceOp.Add, kept, exclusive=False)        # inclusive scan: slot ends
-    totals = [dr.gather(mi.UInt32, ends, n_pix - 1), dr.sum(size)]
+    totals = [dr.gather(mi.UInt32, ends, n_pix - 1), dr.sum(mi.UInt32(dr.abs(n)))]
     if hit is not None:
         totals += [dr.sum(mi.UInt32(hit)), dr.sum(mi.UInt32(noise[0]))]
     if refractory is not None:
-        refractory.last_emit = new_last
+        refractory.last_emit = sel.last_emit
     total, raw, noise_kept, noise_hits = _read(totals)
     stats = dict(refractory_dropped=(raw - total) + (noise_hits - noise_kept), noise_events=noise_kept)
     if total + noise_kept == 0:
         return DeviceEvents(*empty_columns(), count=0, **stats)
     crossings = Crossings(n, kept, log_prev, log_now, log_ref, c_on, c_off, np.array([t0, t1]), width, n_pix,
-                          first if refractory is not None else None, stride if refractory is not None else None)
-    shot = ShotNoise(hit, nt, u_pol < 0.5, noise_kept) if noise_kept else None
+                          sel.first, sel.stride)
+    shot = ShotNoise(hit, sel.noise_t, sel.noise_on, noise_kept) if noise_kept else None
     return fill(crossings, ends, total, base_us, resolution_us, shot, stats)
+
+
+@dataclass
+class Selection:
+    """Which of a step's crossings and noise draws become events, per pixel lane (:func:`select_events`):
+    ``kept`` crossings (UInt32), their ranks ``first + j stride`` (Float64; None without a refractory period:
+    every crossing, rank j), the kept noise event (``hit`` Bool, time ``noise_t`` Float64 s, ``noise_on``; None
+    without shot noise) and the pixel's last emission after the step (None without a refractory period)."""
+    kept: object
+    first: object = None
+    stride: object = None
+    hit: object = None
+    noise_t: object = None
+    noise_on: object = None
+    last_emit: object = None
+
+
+def select_events(n, log_prev, log_now, log_ref, c_on, c_off, t0_d, t1_d, last_emit=None, period=None,
+                  noise=None) -> Selection:
+    """A step's selection of events, one lane a pixel, lazily (the per-step path evaluates it in one kernel,
+    ``event_batch`` traces it inside its loop over steps): the closed-form refractory plan
+    (``_refractory_plan``) when ``last_emit`` (Float64 s per pixel) is given with ``period``, and the shot-noise
+    event of ``noise`` = (hit, u_pol, u_t) at ``t0 + u_t (t1 - t0)``, kept only where the refractory period
+    allows it around the pixel's previous and this step's kept crossings."""
+    size = mi.UInt32(dr.abs(n))
+    sel = Selection(kept=size)
+    if last_emit is not None:
+        sign_d = dr.select(n > 0, mi.Int32(1), mi.Int32(-1))
+        f64 = [mi.Float64(a) for a in (log_prev, log_now, log_ref)]
+        step_d = dr.select(n > 0, mi.Float64(c_on), mi.Float64(c_off))
+
+        def tk(k):
+            return _crossing_time(k, sign_d, *f64, step_d, t0_d, t1_d)
+
+        def plan(size, last):
+            return _refractory_plan(size, tk, last, period)
+
+        def still(size, last):    # the plan of a pixel without crossings: nothing kept, nothing changes
+            return mi.Float64(0.0), mi.Float64(1.0), mi.Float64(0.0), last, dr.full(mi.Float64, dr.inf, dr.width(last))
+        # a symbolic branch: the CPU skips the plan's float64 divisions in every packet of still pixels
+        sel.first, sel.stride, kept_f, new_last, first_kept = dr.if_stmt((size, last_emit), size > 0, plan, still)
+        sel.kept, sel.last_emit = mi.UInt32(kept_f), new_last
+    if noise is not None:
+        hit, u_pol, u_t = noise[:3]
+        nt = t0_d + mi.Float64(u_t) * (t1_d - t0_d)
+        if last_emit is not None:
+            hit = hit & (nt >= last_emit + period) & (~dr.isfinite(first_kept) | (nt <= first_kept - period)
+                                                      | (nt >= new_last + period))
+            sel.last_emit = dr.select(hit, dr.maximum(new_last, nt), new_last)
+        sel.hit, sel.noise_t, sel.noise_on = hit, nt, u_pol < 0.5
+    return sel
 
 
 @dataclass

@@ -252,9 +252,10 @@ class _EventIntegratorMethods:
     def device_resident(self) -> bool:
         """True when a step's events are made on the device (:meth:`commit_device`), False for the NumPy path
         (:meth:`commit` and :meth:`readout`); both give the same events. On a GPU always the device. On the CPU
-        (LLVM) the NumPy path is faster for pixel models with a refractory period or shot noise (about 50
-        kernel launches a step against sparse NumPy work on shared memory: benchmarks/results/pixel.md), so
-        those take it; ``event_path()`` overrides the choice."""
+        (LLVM) the NumPy path is faster a step at a time for pixel models with a refractory period or shot
+        noise (about 50 kernel launches a step against sparse NumPy work on shared memory), so those take it
+        there; steps committed several at a time (:meth:`commit_frames`) are made on the device for every
+        model (benchmarks/results/pixel.md). ``event_path()`` overrides the choice."""
         if self.path_override is not None:
             return self.path_override == "device"
         cfg = self.config
@@ -270,7 +271,7 @@ class _EventIntegratorMethods:
             events = self.commit_device(t0, t1, base_us)
             if self.limiter is None:
                 return events
-            return self.limiter.filter_device(events, t0, t1, self.config.timestamp_resolution_us)
+            return self.limiter.filter_device(events, [events.count], t0, t1, self.config.timestamp_resolution_us)
         x, y, ts, p = self.commit(t0, t1)
         t_us = np.rint(ts * 1e6).astype(np.int64) + base_us
         order = event_fill.time_order(t_us, int(math.floor(t0 * 1e6)) + base_us)
@@ -288,7 +289,7 @@ class _EventIntegratorMethods:
         refractory = None
         if cfg.refractory_s:
             if isinstance(self.last_emit, np.ndarray):     # after host-path steps: the same state, moved
-                self.last_emit = mi.Float64(self.last_emit)
+                self.last_emit = event_fill.device_copy(self.last_emit, mi.Float64)
             refractory = event_fill.Refractory(self.last_emit, cfg.refractory_s)
         noise = step["noise"][:3] if step["noise"] is not None else None
         events = event_fill.crossing_events(step["n"], self.log_prev, step["log_now"], step["log_ref"],
@@ -313,40 +314,30 @@ class _EventIntegratorMethods:
         return event_batch.commit_frames(self, log_frames, times, base_us)
 
     def _pixel_step(self, log_in, intensity, duration: float) -> dict:
-        """One step of every pixel, evaluated in one Dr.Jit kernel: photoreceptor low-pass, leak, threshold
-        jitter, crossing counts and shot noise. Returns the step's arrays by name."""
+        """One step of every pixel, evaluated in one Dr.Jit kernel (``pixel_step.step``: photoreceptor low-pass,
+        leak, threshold jitter, crossing counts and shot noise). Returns the step's arrays by name."""
         cfg = self.config
-        if intensity is None and (cfg.cutoff_hz or cfg.shot_noise_hz):
+        if intensity is None and pixel_step.needs_intensity(cfg):
             intensity = pixel_model.linlog_inverse(dr, log_in, self.linlog_threshold)
         dt = None
-        if cfg.cutoff_hz or cfg.leak_rate_hz or cfg.shot_noise_hz:
+        if pixel_step.needs_dt(cfg):
             dt = mi.Float(duration)
             dr.make_opaque(dt)                  # a new literal per step would recompile the kernel
-        c_on, c_off = self.c_on, self.c_off
-        if cfg.threshold_jitter:
-            g = mi.warp.square_to_std_normal(mi.Point2f(self.rng.next_float32(), self.rng.next_float32()))
-            c_on = dr.maximum(c_on + cfg.threshold_jitter * g.x, self.c_on * 0.1)
-            c_off = dr.maximum(c_off + cfg.threshold_jitter * g.y, self.c_off * 0.1)
-        lv = pixel_step.advance(self, self.log_prev, self.k_on, self.k_off, self.offset, log_in, intensity, dt,
-                                c_on, c_off)
-        n, k_on, k_off, log_now, log_ref, offset = lv.n, lv.k_on, lv.k_off, lv.log_now, lv.log_ref, lv.offset
-        if cfg.threshold_jitter:                # the reference moved by the jittered thresholds
-            offset = offset + mi.Float(dr.maximum(n, 0)) * (c_on - self.c_on) \
-                - mi.Float(dr.maximum(-n, 0)) * (c_off - self.c_off)
-        todo = [n, k_on, k_off, log_now, log_ref]
+        st = pixel_step.step(self, self.log_prev, self.k_on, self.k_off, self.offset, self.rng, log_in, intensity,
+                             dt)
+        lv = st.levels
+        todo = [lv.n, lv.k_on, lv.k_off, lv.log_now, lv.log_ref]
         if cfg.threshold_jitter:                # gathered below: evaluate here, in the one kernel
-            todo += [c_on, c_off]
+            todo += [st.c_on, st.c_off]
         noise = None
-        if cfg.shot_noise_hz:
-            prob = pixel_model.shot_noise_probability(dr, intensity, dt, cfg.shot_noise_hz, cfg.bright_intensity,
-                                                      cfg.shot_noise_bright_factor)
-            u, u_pol, u_t = self.rng.next_float32(), self.rng.next_float32(), self.rng.next_float32()
-            noise = (u < prob, u_pol, u_t, mi.Int32(dr.select(u < prob, 1, 0)))
+        if st.noise is not None:
+            hit, u_pol, u_t = st.noise
+            noise = (hit, u_pol, u_t, mi.Int32(dr.select(hit, 1, 0)))
             todo += list(noise)
-        todo += [v for v in (offset, getattr(self.rng, "state", None)) if v is not None]
+        todo += [v for v in (lv.offset, getattr(self.rng, "state", None)) if v is not None]
         dr.eval(*todo)
-        return {"n": n, "k_on": k_on, "k_off": k_off, "log_now": log_now, "log_ref": log_ref, "c_on": c_on,
-                "c_off": c_off, "offset": offset, "noise": noise}
+        return {"n": lv.n, "k_on": lv.k_on, "k_off": lv.k_off, "log_now": lv.log_now, "log_ref": lv.log_ref,
+                "c_on": st.c_on, "c_off": st.c_off, "offset": lv.offset, "noise": noise}
 
     def readout(self, x, y, t_us, p):
         """The sensor's output stage on one step's time-sorted events: clock quantisation, readout cap."""

@@ -1,7 +1,8 @@
-"""One step of every event pixel's deterministic state: the single definition that the per-step kernel
-(``EventIntegrator._pixel_step``) and the many-frames kernel (``event_batch``) both trace, so the two cannot
-drift apart. Random parts (threshold jitter, shot noise) stay with the per-step kernel: they draw from the
-per-pixel generator around this core."""
+"""One step of every event pixel: the single definition that the per-step kernel (``EventIntegrator._pixel_step``)
+and the many-frames kernel (``event_batch``) both trace, so the two cannot drift apart. :func:`advance` is the
+deterministic core; :func:`step` wraps it with the random parts (threshold jitter, shot noise), which draw from
+the per-pixel PCG32 generator in a fixed order: two jitter draws, then three noise draws a step. A generator
+carried through a many-frames loop therefore draws what the per-step kernel draws, step after step."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -43,3 +44,47 @@ def advance(integ, log_prev, k_on, k_off, offset, log_in, intensity, dt, c_on, c
         log_ref = log_ref + offset
     n = pixel_model.count_crossings(dr, mi.Int32, log_now, log_ref, c_on, c_off)
     return PixelLevels(log_now, log_ref, n, k_on + dr.maximum(n, 0), k_off + dr.maximum(-n, 0), offset)
+
+
+@dataclass
+class PixelStep:
+    """A whole step of the pixel model: the levels, the thresholds the step compared against (the pixel's own,
+    or jittered), and the shot-noise draws (hit Bool, u_pol, u_t; None without shot noise)."""
+    levels: PixelLevels
+    c_on: object
+    c_off: object
+    noise: tuple | None
+
+
+def step(integ, log_prev, k_on, k_off, offset, rng, log_in, intensity, dt) -> PixelStep:
+    """Every pixel through one step with the whole pixel model: threshold jitter (two draws from ``rng``),
+    :func:`advance`, the reference moved by the jittered thresholds, shot noise (three draws). ``rng``: the
+    per-pixel ``mi.PCG32`` (advanced in place; None when nothing draws). ``intensity``: the linear radiance
+    (needed by the low-pass and shot noise). Lazy: the caller evaluates."""
+    cfg = integ.config
+    c_on, c_off = integ.c_on, integ.c_off
+    if cfg.threshold_jitter:
+        g = mi.warp.square_to_std_normal(mi.Point2f(rng.next_float32(), rng.next_float32()))
+        c_on = dr.maximum(c_on + cfg.threshold_jitter * g.x, integ.c_on * 0.1)
+        c_off = dr.maximum(c_off + cfg.threshold_jitter * g.y, integ.c_off * 0.1)
+    lv = advance(integ, log_prev, k_on, k_off, offset, log_in, intensity, dt, c_on, c_off)
+    if cfg.threshold_jitter:                # the reference moved by the jittered thresholds
+        lv.offset = lv.offset + mi.Float(dr.maximum(lv.n, 0)) * (c_on - integ.c_on) \
+            - mi.Float(dr.maximum(-lv.n, 0)) * (c_off - integ.c_off)
+    noise = None
+    if cfg.shot_noise_hz:
+        prob = pixel_model.shot_noise_probability(dr, intensity, dt, cfg.shot_noise_hz, cfg.bright_intensity,
+                                                  cfg.shot_noise_bright_factor)
+        u_hit, u_pol, u_t = rng.next_float32(), rng.next_float32(), rng.next_float32()
+        noise = (u_hit < prob, u_pol, u_t)
+    return PixelStep(lv, c_on, c_off, noise)
+
+
+def needs_intensity(cfg) -> bool:
+    """True when the pixel model reads the linear radiance, not only its log (low-pass, shot noise)."""
+    return bool(cfg.cutoff_hz or cfg.shot_noise_hz)
+
+
+def needs_dt(cfg) -> bool:
+    """True when the pixel model reads the step's length (low-pass, leak, shot noise)."""
+    return bool(cfg.cutoff_hz or cfg.leak_rate_hz or cfg.shot_noise_hz)

@@ -45,10 +45,10 @@ def keys_np(n: int, word: int) -> np.ndarray:
     return h
 
 
-def keys_dr(mi, n: int, word):
-    """:func:`keys_np` on the device (UInt32 arithmetic wraps as NumPy's uint32 does)."""
-    import drjit as dr
-    h = dr.arange(mi.UInt32, n) * _GOLDEN + word
+def keys_dr(mi, index, word):
+    """:func:`keys_np` on the device for the events numbered ``index`` (UInt32) within their step, whose
+    ``step_word`` is ``word`` (one, or one an event); UInt32 arithmetic wraps as NumPy's uint32 does."""
+    h = index * _GOLDEN + word
     h ^= h >> 16
     h *= _M1
     h ^= h >> 13
@@ -119,13 +119,21 @@ class ReadoutLimiter:
         carried = carry if last_rel == 0 else 0
         return min(last_count - carried, max(self.budget - carried, 0)) + carried
 
-    def filter_device(self, events, t0: float, t1: float, resolution_us: float = 0.0):
-        """:meth:`filter` on a step's ``event_fill.DeviceEvents`` between ``t0`` and ``t1`` seconds (their clock
-        ``resolution_us``), on the device: the kept events, time order kept, as ``DeviceEvents``."""
+    def filter_device(self, events, step_counts, t0: float, t1: float, resolution_us: float = 0.0):
+        """:meth:`filter` on the ``event_fill.DeviceEvents`` of ``len(step_counts)`` consecutive steps between
+        ``t0`` and ``t1`` seconds (their clock ``resolution_us``), on the device: time-sorted, each step's
+        ``step_counts[s]`` events contiguous and in order (a chunk of ``event_batch``, or one step). Returns
+        the kept events, time order kept, as ``DeviceEvents``: those :meth:`filter` keeps step by step.
+
+        Why one pass serves many steps: an event of step ``s`` in bin ``b`` survives when its rank among
+        step ``s``'s events of ``b`` (ordered by key, then time) plus what earlier steps kept of ``b`` is below
+        the budget, and earlier steps kept ``min(budget, carry + their events of b)``. Ranking every event of
+        ``b`` over the chunk ordered by (step, key, time), after the bin's carry, keeps the same events: an
+        event ranked past the budget there is past it step by step too, and below it the two ranks agree."""
         import drjit as dr
         import mitsuba as mi
         from mitsuba_eventfield.plugins import event_fill
-        word = self._next_word()
+        words = [self._next_word() for _ in step_counts]     # every step draws its word, empty ones too
         n = events.count
         if n == 0:
             return events
@@ -134,7 +142,7 @@ class ReadoutLimiter:
         b = mi.Int64(dr.floor(mi.Float64(events.t) / event_fill._opaque(self.bin_us, mi.Float64)))
         first_d = dr.gather(mi.Int64, b, mi.UInt32(0))
         rel = mi.UInt32(b - first_d)
-        bins = int(((t1 - t0) * 1e6 + resolution_us + 2) / self.bin_us) + 4    # a bound on the step's bins
+        bins = int(((t1 - t0) * 1e6 + resolution_us + 2) / self.bin_us) + 4    # a bound on the steps' bins
         counts = dr.zeros(mi.UInt32, bins)
         dr.scatter_reduce(dr.ReduceOp.Add, counts, mi.UInt32(1), rel, rel < bins)     # never out of bounds
         last_rel_d = dr.gather(mi.UInt32, rel, mi.UInt32(n - 1))
@@ -145,13 +153,13 @@ class ReadoutLimiter:
                                 mi.Int64)
         most, first, last_rel, last_count = head
         if last_rel >= bins:
-            raise ValueError(f"readout: events span {last_rel + 1} bins, more than their step ({t0} s, {t1} s) "
-                             f"allows ({bins})")
+            raise ValueError(f"readout: events span {last_rel + 1} bins, more than their steps ({t0} s, {t1} s) "
+                             f"allow ({bins})")
         carry = self._carry(first)
         if most <= self.budget:
             self._close(first, last_rel, last_count)
             return events
-        kept, keep, ends = self._keep_device(rel, counts, carry_d, last_rel, word, n)
+        kept, keep, ends = self._keep_device(rel, counts, carry_d, last_rel, step_counts, words, n)
         self._close(first, last_rel, self._kept_in_last(last_count, last_rel, carry))
         self.dropped += n - kept
         stats = dict(refractory_dropped=events.refractory_dropped, noise_events=events.noise_events)
@@ -166,27 +174,49 @@ class ReadoutLimiter:
         dr.eval(*cols)
         return event_fill.DeviceEvents(*cols, count=kept, **stats)
 
-    def _keep_device(self, rel, counts, carry_d, last_rel: int, word: int, n: int):
-        """(kept count, keep flags, their inclusive prefix sum) of a step with an overfull bin: its events
-        ordered by (bin, key, time), the first ``budget`` ranks of each bin kept (the carry counted in bin 0)."""
+    def _keep_device(self, rel, counts, carry_d, last_rel: int, step_counts, words, n: int):
+        """(kept count, keep flags, their inclusive prefix sum) of steps with an overfull bin: their events
+        ordered by (bin, step, key, time), the first ``budget`` ranks of each bin kept (the carry counted in
+        bin 0). (bin, step) never decreases along time-sorted events, so each distinct pair is a group
+        numbered in time order, and a stable sort by key, then by group, gives that order."""
         import drjit as dr
         import mitsuba as mi
         from mitsuba_eventfield.plugins import event_fill
-        key = keys_dr(mi, n, event_fill._opaque(word, mi.UInt32)) >> (32 - KEY_BITS)
-        if last_rel < 1 << (32 - KEY_BITS):      # bin above key in one word: one sort (two passes on the CPU)
-            combined = (rel << KEY_BITS) | key
+        step_counts = np.asarray(step_counts, np.int64)
+        index = dr.arange(mi.UInt32, n)
+        if len(step_counts) == 1:
+            step, in_step = None, index
+            word = event_fill._opaque(words[0], mi.UInt32)
+            group, groups = rel, last_rel + 1
+        else:
+            starts = np.r_[0, np.cumsum(step_counts)[:-1]]
+            # each event's step: +1 at every later step's first slot (empty steps share it), summed
+            marks = dr.zeros(mi.UInt32, n)
+            later = starts[1:][starts[1:] < n]
+            if len(later):
+                dr.scatter_reduce(dr.ReduceOp.Add, marks, mi.UInt32(1), mi.UInt32(later.astype(np.uint32)))
+            step = dr.prefix_reduce(dr.ReduceOp.Add, marks, exclusive=False)
+            in_step = index - dr.gather(mi.UInt32, mi.UInt32(starts.astype(np.uint32)), step)
+            word = dr.gather(mi.UInt32, mi.UInt32(np.asarray(words, np.uint32)), step)
+            previous = index - 1
+            changed = (index > 0) & ((rel != dr.gather(mi.UInt32, rel, previous, index > 0))
+                                     | (step != dr.gather(mi.UInt32, step, previous, index > 0)))
+            group = dr.prefix_reduce(dr.ReduceOp.Add, mi.UInt32(changed), exclusive=False)
+            groups = last_rel + len(step_counts)     # a bound: each step after the first opens one more at most
+        key = keys_dr(mi, in_step, word) >> (32 - KEY_BITS)
+        if groups <= 1 << (32 - KEY_BITS):      # group above key in one word: one sort (two passes on the CPU)
+            combined = (group << KEY_BITS) | key
             dr.eval(combined)
-            order = event_fill.stable_order(combined, ((last_rel + 1) << KEY_BITS) - 1)    # bin, key, time
-        else:                                    # a long step: by key, then stably by bin
-            dr.eval(key)
+            order = event_fill.stable_order(combined, (groups << KEY_BITS) - 1)     # group, key, time
+        else:                                    # many groups: by key, then stably by group
+            dr.eval(key, group)
             by_key = event_fill.stable_order(key, (1 << KEY_BITS) - 1)
             order = dr.gather(mi.UInt32, by_key,
-                              event_fill.stable_order(dr.gather(mi.UInt32, rel, by_key), last_rel + 1))
+                              event_fill.stable_order(dr.gather(mi.UInt32, group, by_key), groups))
         b_s = dr.gather(mi.UInt32, rel, order)
         start = dr.prefix_reduce(dr.ReduceOp.Add, counts, exclusive=True)
-        rank = dr.arange(mi.UInt32, n) - dr.gather(mi.UInt32, start, b_s) + dr.select(b_s == 0, carry_d, 0)
+        rank = index - dr.gather(mi.UInt32, start, b_s) + dr.select(b_s == 0, carry_d, 0)
         keep = dr.zeros(mi.UInt32, n)
         dr.scatter(keep, mi.UInt32(rank < self.budget), order)
         ends = dr.prefix_reduce(dr.ReduceOp.Add, keep, exclusive=False)
         return event_fill._read([dr.gather(mi.UInt32, ends, mi.UInt32(n - 1))])[0], keep, ends
-

@@ -40,6 +40,7 @@ CASES = {
     "render_events spp": (lambda s: ef.render_events(s, 0.01, steps=2, spp=float("nan")), "spp"),
     "render_events threshold": (lambda s: ef.render_events(s, 0.01, steps=2, threshold=-1), "threshold_on"),
     "render_events pixel": (lambda s: ef.render_events(s, 0.01, steps=2, pixel={"bogus": 1}), "bogus"),
+    "render_events pixel preset": (lambda s: ef.render_events(s, 0.01, steps=2, pixel="davis346"), "preset="),
     "render_events output": (lambda s: ef.render_events(s, 0.01, steps=2, output="/tmp/x.foo"), ".foo"),
     "render_events buffer": (lambda s: ef.render_events(s, 0.01, steps=2, event_buffer_mb=0), "event_buffer_mb"),
     "render_events checkpoint": (lambda s: ef.render_events(s, 0.01, steps=2, checkpoint_s=5), "HDF5 output"),

@@ -92,9 +92,14 @@ class AccuracyLimit:
         integ.staged = integ.staged_intensity = None          # not a step: nothing is committed
         self.sigma = np.abs(self.frames[0] - other) / math.sqrt(2)
 
+    @property
+    def wants_frames(self) -> bool:
+        """True until the first two steps' frames are kept (:meth:`step_frame`)."""
+        return self.active and len(self.frames) < 3
+
     def step_frame(self, log_now) -> None:
         """Keep the log brightness (Dr.Jit Float) a step ended at, for the first two steps."""
-        if self.active and len(self.frames) < 3:
+        if self.wants_frames:
             self.frames.append(log_now.numpy())
 
     def estimate(self) -> dict | None:

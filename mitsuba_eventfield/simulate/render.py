@@ -16,7 +16,7 @@ import time
 
 from .. import backend
 from ..atomic import check_writable
-from ..errors import EventFieldError
+from ..errors import ConfigError, EventFieldError
 from ..events.io import format_of
 from ..plugins.event_fill import film_limit_error
 from ..scene.timed import TimedScene, load_scene
@@ -72,6 +72,9 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
     explicit = {"threshold_on": threshold_on if threshold_on is not None else threshold,
                 "threshold_off": threshold_off if threshold_off is not None else threshold,
                 "linlog_threshold": linlog_threshold}
+    if pixel is not None and not isinstance(pixel, dict):
+        raise ConfigError(f"pixel model: pixel = {pixel!r}: must be a dict of pixel parameters (a preset's name "
+                          "goes in preset=)")
     explicit.update(pixel or {})
     for name, v in explicit.items():
         if v is not None:
@@ -231,7 +234,10 @@ class _Loop:
             p_idx, j = divmod(k, steps_per_period)
             step = st.duration / st.steps
             t0, t1, base_us = j * step, (j + 1) * step, grid_base_us + p_idx * period_us
-        if self.batch is not None:                       # held on the device, committed with the next steps
+        # held on the device, committed with the next steps; but the accuracy limit reads the pixels' log
+        # brightness at the first two steps' ends, which under a low-pass is the pixels' state, not the frame
+        low_pass_frames = self.limit.wants_frames and self.integ.config.cutoff_hz
+        if self.batch is not None and not low_pass_frames:
             self.limit.step_frame(self.integ.staged)     # (no low-pass: the staged frame is the step's end)
             self.batch.add(t0, t1, base_us, complete_until_us=int(math.floor(t_next * 1e6)))
             return
@@ -274,10 +280,6 @@ class _Loop:
             summary.sample_allocation = dict(self.allocation.as_meta(),
                                              **self.allocation.check((integ.k_on + integ.k_off).numpy(), summary.notes))
         summary.noise_events = integ.noise_events
-        if summary.dropped_readout:
-            total = summary.events + summary.dropped_readout
-            summary.notes.append(f"readout cap dropped {summary.dropped_readout} of {total} events "
-                                 f"({100 * summary.dropped_readout / total:.1f}%)")
         summary.wall_s = time.perf_counter() - wall0
         if self.timed.is_static and self.timed.scan_period == 0.0:
             summary.notes.append("static scene seen by a fixed view: events can only come from Monte-Carlo noise "
@@ -285,6 +287,10 @@ class _Loop:
         tw = time.perf_counter()
         self.sink.drain()
         summary.write_s += time.perf_counter() - tw
+        if summary.dropped_readout:      # after the drain: events still on the device are counted by then
+            total = summary.events + summary.dropped_readout
+            summary.notes.append(f"readout cap dropped {summary.dropped_readout} of {total} events "
+                                 f"({100 * summary.dropped_readout / total:.1f}%)")
         summary.writer_wait_s, summary.writer_busy_s = self.sink.writer_wait_s, self.sink.writer_busy_s
         summary.writer_tail_s = self.sink.writer_tail_s
         meta["render"] = summary.as_dict()

@@ -11,17 +11,19 @@ committing each step (``event_batch``'s equality, tested on renders in tests/sim
 A render batches its steps only where nothing needs the pixel state between steps and the batch's events are
 those of its steps (:func:`for_loop`):
 
-* the pixel model takes many frames per kernel (``event_batch.batchable``: no threshold jitter, shot noise,
-  refractory period or readout cap), and has no photoreceptor low-pass: the per-step kernel low-passes the
-  render's own linear intensity, which a batch, holding only log frames, would recover from the log (equal
-  only to rounding);
+* every pixel model does: threshold jitter and shot noise draw from the per-pixel generator carried through
+  the batch's loop, the refractory period keeps its last emissions there, the readout cap takes the batch's
+  steps at once (``readout.ReadoutLimiter.filter_device``). A model that reads the linear radiance
+  (photoreceptor low-pass, shot noise) is held the render's radiance, whose log the batch takes as the
+  per-step kernel does (holding the log and recovering the radiance from it would be equal only to rounding);
 * the steps are known in advance (uniform, or placed by the image motion): log-change steps are sized from
   the last step's change, and a step may be rendered again;
 * the events of a periodic view's first periods are not being kept to be copied (``periodic``: they are
   kept per step on the host).
 
 A batch also ends where the timestamp base changes (a new scan period on the phase grid: the chunk's times
-are one period's phases) and before a checkpoint saves the pixel state (``flush``).
+are one period's phases), where a step brings a log frame to a batch of radiances or back (a reused period's
+cached frames are logs), and before a checkpoint saves the pixel state (``flush``).
 """
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ import time
 import numpy as np
 
 from .. import backend
-from ..plugins import event_batch, event_fill
+from ..plugins import event_batch, event_fill, pixel_step
 
 mi, dr = backend.mi, backend.dr
 
@@ -47,18 +49,22 @@ class StepBatch:
         self.times: list[float] = []       # the first held step's start, then each held step's end (seconds)
         self.base_us = 0
         self.until_us = 0
+        self.intensity = False             # the held frames are radiances (else log brightnesses)
+        self.wants_intensity = pixel_step.needs_intensity(integ.config)
 
     def add(self, t0: float, t1: float, base_us: int, complete_until_us: int) -> None:
         """Hold the integrator's staged frame as the step (t0, t1] (timestamps + ``base_us``); commit the batch
         when it is full. The staged frame is taken: the integrator's state moves on only when the batch is
         committed."""
-        if self.times and (base_us != self.base_us or t0 != self.times[-1]):
+        intensity = self.wants_intensity and self.integ.staged_intensity is not None
+        if self.times and (base_us != self.base_us or t0 != self.times[-1] or intensity != self.intensity):
             self.flush()
         te = time.perf_counter()
         if not self.times:
-            self.times, self.base_us = [t0], base_us
+            self.times, self.base_us, self.intensity = [t0], base_us, intensity
         slot = event_fill._opaque((len(self.times) - 1) * self.n_pix, mi.UInt32)
-        dr.scatter(self.buffer, self.integ.staged, self.lane + slot)
+        frame = self.integ.staged_intensity if intensity else self.integ.staged
+        dr.scatter(self.buffer, frame, self.lane + slot)
         dr.eval(self.buffer)                 # one kernel a step; the rendered image is released
         self.integ.staged = self.integ.staged_intensity = None
         self.times.append(t1)
@@ -73,7 +79,7 @@ class StepBatch:
             self.times = []
             return
         te = time.perf_counter()
-        events = event_batch.commit_frames(self.integ, self.buffer, self.times, self.base_us)
+        events = event_batch.commit_frames(self.integ, self.buffer, self.times, self.base_us, self.intensity)
         self.times = []
         tw = time.perf_counter()
         self.summary.events_s += tw - te
@@ -83,7 +89,7 @@ class StepBatch:
 
 def for_loop(integ, st, sink, summary, n_pix: int, keeps_period_events: bool) -> StepBatch | None:
     """The loop's step batch, or None where its steps are committed one at a time (module docstring)."""
-    if not integ.batchable or integ.config.cutoff_hz or st.adaptive or keeps_period_events:
+    if not integ.batchable or st.adaptive or keeps_period_events:
         return None
     if st.schedule is not None:
         longest = float(np.max(np.diff(st.schedule)))

@@ -37,7 +37,7 @@ def test_host_and_device_limiters_keep_the_same_events(cap):
     overflowing = all_dropped = long_overflowing = 0
     for t0, t1, x, y, t, p in _steps(np.random.default_rng(0), long_every=20):
         keep = host.filter(t)
-        got = device.filter_device(_device_events(mi, dr, x, y, t, p), t0 * 1e-6, t1 * 1e-6)
+        got = device.filter_device(_device_events(mi, dr, x, y, t, p), [len(t)], t0 * 1e-6, t1 * 1e-6)
         expected = (x[keep].astype(np.uint16), y[keep].astype(np.uint16), t[keep], p[keep])
         assert all(np.array_equal(a, b) for a, b in zip(expected, got.numpy()))
         assert host.state() == device.state()
@@ -46,6 +46,34 @@ def test_host_and_device_limiters_keep_the_same_events(cap):
         long_overflowing += int(t1 - t0 > 100_000 and keep.sum() < len(t))
     assert overflowing > 20 and host.dropped > 5000 and long_overflowing >= 3
     assert all_dropped > 50 if host.budget == 0 else all_dropped == 0
+
+
+@pytest.mark.parametrize("cap", [3e5, 1e6], ids=["budget-30", "budget-100"])
+def test_many_steps_at_once_keep_what_step_by_step_keeps(cap):
+    """The device limiter on a chunk of consecutive steps (a batch of ``event_batch``: 1 to 12 steps, empty
+    ones among them, bins shared across steps, 0.3 s steps whose bins and steps do not fit one sort word with
+    the key) keeps the events the host limiter keeps step by step, and ends in the same state."""
+    import drjit as dr
+    import mitsuba as mi
+    host, device = readout.ReadoutLimiter(cap, seed=5), readout.ReadoutLimiter(cap, seed=5)
+    steps = list(_steps(np.random.default_rng(3), steps=120, long_every=25))
+    rng, i, overflowing = np.random.default_rng(9), 0, 0
+    while i < len(steps):
+        chunk = steps[i:i + int(rng.integers(1, 13))]
+        i += len(chunk)
+        expected, counts = [], []
+        for t0, t1, x, y, t, p in chunk:
+            keep = host.filter(t)
+            overflowing += int(keep.sum() < len(t))
+            expected.append((x[keep].astype(np.uint16), y[keep].astype(np.uint16), t[keep], p[keep]))
+            counts.append(len(t))
+        joined = [np.concatenate([q[c] for q in chunk]) for c in range(2, 6)]
+        got = device.filter_device(_device_events(mi, dr, *joined), counts, chunk[0][0] * 1e-6, chunk[-1][1] * 1e-6)
+        for c in range(4):
+            assert np.array_equal(np.concatenate([e[c] for e in expected]), got.numpy()[c])
+        assert host.state() == device.state()
+    least_overflowing, least_dropped = (20, 3000) if host.budget == 30 else (3, 100)
+    assert overflowing > least_overflowing and host.dropped > least_dropped, (overflowing, host.dropped)
 
 
 def test_no_millisecond_passes_more_than_the_cap():
@@ -78,7 +106,8 @@ def test_keys_agree_on_both_sides_and_are_uniform():
     import mitsuba as mi
     word = readout.step_word(11, 5)
     k = readout.keys_np(200_000, word)
-    assert np.array_equal(k, readout.keys_dr(mi, 200_000, mi.UInt32(word)).numpy())
+    import drjit as dr
+    assert np.array_equal(k, readout.keys_dr(mi, dr.arange(mi.UInt32, 200_000), mi.UInt32(word)).numpy())
     assert abs(k.mean() / 2**32 - 0.5) < 0.005 and len(np.unique(k)) > 199_000
     assert not np.array_equal(k, readout.keys_np(200_000, readout.step_word(11, 6)))
 
@@ -112,5 +141,5 @@ def test_events_outside_their_step_are_refused_not_scattered_out_of_bounds():
     import mitsuba as mi
     t = np.sort(np.random.default_rng(0).integers(0, 100_000, 1000)).astype(np.int64)
     events = _device_events(mi, dr, np.zeros(1000, np.uint32), np.zeros(1000, np.uint32), t, np.ones(1000, np.int8))
-    with pytest.raises(ValueError, match=r"events span \d+ bins, more than their step .* allows \(13\)"):
-        readout.ReadoutLimiter(3e5).filter_device(events, 0.0, 0.001)
+    with pytest.raises(ValueError, match=r"events span \d+ bins, more than their steps .* allow \(13\)"):
+        readout.ReadoutLimiter(3e5).filter_device(events, [1000], 0.0, 0.001)
