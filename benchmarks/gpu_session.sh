@@ -2,7 +2,7 @@
 # What issue 15 still needs measured on a CUDA GPU, in two device commands (device minutes are scarce; each
 # command must finish within the device tool's 10 minutes). After ../shared/gpu/prepare.sh, from the device tool:
 #   run(command="bash benchmarks/gpu_session.sh tests", carry=[".gpu"])   the suite under cuda_ad_mono
-#   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, fan 1280x720
+#   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, pixel, fan 1280x720
 # Everything lands under $OUT (the device tool brings it back): logs, the benchmarks' results files (written
 # there, not into benchmarks/results/), nvidia-smi. Copy the results files into benchmarks/results/ here and
 # commit them: they carry the GPU's name.
@@ -34,6 +34,9 @@ case "$stage" in
         # own filters on one thread
         [ -z "$quick" ] && EVENTFIELD_RESULTS_DIR="$OUT" timeout 120 $PY benchmarks/bench_writer.py \
             > "$OUT/writer.txt" 2>&1
+        # the realistic pixel (every effect, batched) against the ideal one, and a step at a time
+        [ -z "$quick" ] && EVENTFIELD_RESULTS_DIR="$OUT" timeout 150 $PY benchmarks/bench_pixel.py \
+            > "$OUT/pixel.txt" 2>&1
         # issue 15's own row: the fan at 1280x720, 400 steps, to HDF5 (render / events / motion / write split)
         sizes="-D width=1280 -D height=720"; steps=400
         if [ -n "$quick" ]; then sizes="-D width=96 -D height=72"; steps=80; fi

@@ -6,7 +6,7 @@ arrays, a fill, a sort, each a launch; about 0.4 ms at 346x260 on the CPU before
 frames at once:
 
 1. count: one kernel loops every pixel through the ``B`` steps (``pixel_step.step``, the per-step kernel's own
-   definition, and ``event_fill.select_events``, the per-step path's selection) and keeps each (step, pixel)
+   definition, and ``event_select.select_events``, the per-step path's selection) and keeps each (step, pixel)
    lane's kept count, frame-major, each pixel's events in the chunk, and the state after the last step;
 2. prefix sum over the lanes; one sync reads every step's last slot (the total is the last);
 3. fill and time order: ``event_fill.fill``, the one fill of every device path. Its crossing writer
@@ -42,7 +42,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import event_fill, pixel_model, pixel_step
+from mitsuba_eventfield.plugins import event_fill, event_select, pixel_model, pixel_step
 
 
 # Lane-steps (pixels x frames) per kernel by backend, and the fewest frames. CPU (converter kernels alone, 2 kHz
@@ -199,7 +199,11 @@ class Chunk:
 
     def only_firing(self, fired) -> None:
         """Let :meth:`write` step only the pixels with an event in the chunk (``fired``: each pixel's count),
-        where they are few: a still pixel writes nothing, and the count pass already moved its state on."""
+        where they are few: a still pixel writes nothing, and the count pass already moved its state on. On
+        the CPU only: the compress is a second sync a chunk, which on a GPU would cost more than stepping
+        every pixel again (not measured there)."""
+        if dr.backend_v(fired) == dr.JitBackend.CUDA:
+            return
         pixels = dr.compress(fired > 0)
         if dr.width(pixels) < self.FIRING_SUBSET * self.n_pix:
             self.pixels = pixels
@@ -228,7 +232,7 @@ class Chunk:
 
     def run(self, each_step, carry=()) -> tuple:
         """One kernel: every pixel through the ``B`` steps (``pixel_step.step``, the per-step kernel's own
-        definition, and ``event_fill.select_events``, the per-step path's selection);
+        definition, and ``event_select.select_events``, the per-step path's selection);
         ``each_step(b, pixel, log_prev, step, selection, t0, t1, *carry)`` is traced into the loop body and
         returns the new ``carry`` (per-pixel values it keeps across steps). Returns the state after the last
         step and the last carry (lazy)."""
@@ -262,7 +266,7 @@ class Chunk:
                                  intensity, dt)
             lv = st.levels
             t0, t1 = dr.gather(mi.Float64, t_d, b), dr.gather(mi.Float64, t_d, b + 1)
-            sel = event_fill.select_events(lv.n, s["log_prev"], lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1,
+            sel = event_select.select_events(lv.n, s["log_prev"], lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1,
                                            s.get("last_emit"), period, st.noise)
             carried = each_step(b, pixel, s["log_prev"], st, sel, t0, t1, *carried)
             after = {"log_prev": lv.log_now, "k_on": lv.k_on, "k_off": lv.k_off, "offset": lv.offset,

@@ -58,8 +58,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import (event_batch, event_fill, host_events, pixel_model, pixel_state, pixel_step,
-                                        readout)
+from mitsuba_eventfield.plugins import (event_batch, event_fill, event_select, host_events, pixel_model, pixel_state,
+                                        pixel_step, readout)
 
 from ._per_variant import per_variant, subclass
 
@@ -290,7 +290,7 @@ class _EventIntegratorMethods:
         if cfg.refractory_s:
             if isinstance(self.last_emit, np.ndarray):     # after host-path steps: the same state, moved
                 self.last_emit = event_fill.device_copy(self.last_emit, mi.Float64)
-            refractory = event_fill.Refractory(self.last_emit, cfg.refractory_s)
+            refractory = event_select.Refractory(self.last_emit, cfg.refractory_s)
         noise = step["noise"][:3] if step["noise"] is not None else None
         events = event_fill.crossing_events(step["n"], self.log_prev, step["log_now"], step["log_ref"],
                                             step["c_on"], step["c_off"], self.staged_size[0], t0, t1, base_us,

@@ -131,9 +131,14 @@ def test_a_chunk_whose_few_firing_pixels_are_filled_alone_equals_the_host_path(p
     expected = _host_events(pixel, frames, times, 0)
     got, integ = _batched_events(pixel, frames, times, 4, 0)
     assert len(expected[2]) > 1000 and all(np.array_equal(a, b) for a, b in zip(expected, got))
-    # (the leak fires still pixels too: with every effect on, a chunk may hold more than half: all stepped)
+    # (the leak fires still pixels too: with every effect on, a chunk may hold more than half: all stepped;
+    # on a GPU every pixel is stepped: Chunk.only_firing)
+    import mitsuba as mi
     filled_alone = [k for k in subsets if k is not None]
-    assert len(filled_alone) >= 2 and all(W * H // 5 - 20 <= k <= W * H // 2 for k in filled_alone), subsets
+    if mi.variant().startswith("cuda"):
+        assert subsets and not filled_alone
+    else:
+        assert len(filled_alone) >= 2 and all(W * H // 5 - 20 <= k <= W * H // 2 for k in filled_alone), subsets
     host = _host_integrator(pixel, frames, times)
     for name in ("log_prev", "k_on", "k_off", "offset", "last_emit"):
         if getattr(host, name) is not None:

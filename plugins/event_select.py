@@ -1,0 +1,100 @@
+"""Which of a step's crossings and shot-noise draws become events, one lane a pixel, on the device: the
+refractory period's closed-form selection and the noise event's placement and gating. One definition that the
+per-step fill (``event_fill.crossing_events``) and the many-frames kernels (``event_batch``) both trace; the
+NumPy twin is ``pixel_model.refractory_crossings`` / ``refractory_extra`` (``host_events``), and the crossing
+times are ``pixel_model.expand_crossings``'s, operation for operation."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+
+
+def crossing_time(k, sign, lp, ln, ref, step, t0, t1):
+    """Seconds (Float64) of crossing ``k`` (1-based) of a pixel: where its step's linear segment meets level
+    ``ref + sign k C``; the same operations, order and precision as ``pixel_model.expand_crossings``."""
+    frac = (ref + mi.Float64(mi.Int64(sign) * mi.Int64(k)) * step - lp) / (ln - lp)
+    frac = dr.clip(dr.select(dr.isnan(frac), 1.0, frac), 0.0, 1.0)
+    return t0 + frac * (t1 - t0)
+
+
+@dataclass
+class Refractory:
+    """Refractory state for :func:`crossing_events`: ``last_emit`` (Float64 seconds per pixel, -inf before a
+    pixel's first event; replaced by the updated array) and the period in seconds."""
+    last_emit: object
+    period: float
+
+
+def _refractory_plan(size, tk, last, period):
+    """Per pixel, the closed-form refractory selection of ``pixel_model.refractory_crossings`` on the device:
+    crossings are evenly spaced within a step, so the kept ones are ranks first, first + stride, ... Returns
+    (first, stride, kept count, updated last emission, first kept time), all Float64 per pixel."""
+    size_f = mi.Float64(size)
+    t_a, t_b = tk(1), tk(2)
+    multi = size > 1
+    spacing = dr.select(multi, t_b - t_a, 1.0)
+    wait = last + period - t_a                                  # > 0: the first crossing is too early
+    first_multi = dr.ceil(wait / spacing - 1e-9)
+    first_multi = dr.maximum(dr.select(dr.isnan(first_multi), 0.0, first_multi), 0.0)
+    first = dr.select(multi, first_multi, dr.select(wait <= 0, 0.0, 1.0))
+    stride = dr.select(multi, dr.maximum(1.0, dr.ceil(period / spacing - 1e-9)), 1.0)
+    any_kept = first < size_f
+    runs = dr.floor((size_f - 1 - first) / stride)
+    kept = dr.select(any_kept, runs + 1, 0.0)
+    rank_last = dr.select(dr.isinf(stride), first, first + stride * runs)
+    new_last = dr.select(any_kept, tk(mi.Int64(dr.select(any_kept, rank_last, 0.0)) + 1), last)
+    first_kept = dr.select(any_kept, tk(mi.Int64(dr.select(any_kept, first, 0.0)) + 1), dr.inf)
+    return first, stride, kept, new_last, first_kept
+
+
+@dataclass
+class Selection:
+    """Which of a step's crossings and noise draws become events, per pixel lane (:func:`select_events`):
+    ``kept`` crossings (UInt32), their ranks ``first + j stride`` (Float64; None without a refractory period:
+    every crossing, rank j), the kept noise event (``hit`` Bool, time ``noise_t`` Float64 s, ``noise_on``; None
+    without shot noise) and the pixel's last emission after the step (None without a refractory period)."""
+    kept: object
+    first: object = None
+    stride: object = None
+    hit: object = None
+    noise_t: object = None
+    noise_on: object = None
+    last_emit: object = None
+
+
+def select_events(n, log_prev, log_now, log_ref, c_on, c_off, t0_d, t1_d, last_emit=None, period=None,
+                  noise=None) -> Selection:
+    """A step's selection of events, one lane a pixel, lazily (the per-step path evaluates it in one kernel,
+    ``event_batch`` traces it inside its loop over steps): the closed-form refractory plan
+    (``_refractory_plan``) when ``last_emit`` (Float64 s per pixel) is given with ``period``, and the shot-noise
+    event of ``noise`` = (hit, u_pol, u_t) at ``t0 + u_t (t1 - t0)``, kept only where the refractory period
+    allows it around the pixel's previous and this step's kept crossings."""
+    size = mi.UInt32(dr.abs(n))
+    sel = Selection(kept=size)
+    if last_emit is not None:
+        sign_d = dr.select(n > 0, mi.Int32(1), mi.Int32(-1))
+        f64 = [mi.Float64(a) for a in (log_prev, log_now, log_ref)]
+        step_d = dr.select(n > 0, mi.Float64(c_on), mi.Float64(c_off))
+
+        def tk(k):
+            return crossing_time(k, sign_d, *f64, step_d, t0_d, t1_d)
+
+        def plan(size, last):
+            return _refractory_plan(size, tk, last, period)
+
+        def still(size, last):    # the plan of a pixel without crossings: nothing kept, nothing changes
+            return mi.Float64(0.0), mi.Float64(1.0), mi.Float64(0.0), last, dr.full(mi.Float64, dr.inf, dr.width(last))
+        # a symbolic branch: the CPU skips the plan's float64 divisions in every packet of still pixels
+        sel.first, sel.stride, kept_f, new_last, first_kept = dr.if_stmt((size, last_emit), size > 0, plan, still)
+        sel.kept, sel.last_emit = mi.UInt32(kept_f), new_last
+    if noise is not None:
+        hit, u_pol, u_t = noise[:3]
+        nt = t0_d + mi.Float64(u_t) * (t1_d - t0_d)
+        if last_emit is not None:
+            hit = hit & (nt >= last_emit + period) & (~dr.isfinite(first_kept) | (nt <= first_kept - period)
+                                                      | (nt >= new_last + period))
+            sel.last_emit = dr.select(hit, dr.maximum(new_last, nt), new_last)
+        sel.hit, sel.noise_t, sel.noise_on = hit, nt, u_pol < 0.5
+    return sel
