@@ -1,7 +1,7 @@
 """The sensor's readout cap: events dropped at random so that no 1 ms window holds more than the cap, applied to
 each step's time-sorted events on the host (NumPy, :meth:`ReadoutLimiter.filter`) or on the device (Dr.Jit,
-:meth:`ReadoutLimiter.filter_device`, so that a capped pixel model's events never leave the device a step at a
-time): the same drops, bit for bit.
+:meth:`ReadoutLimiter.filter_device`, one step or a batch of steps at once, so that a capped pixel model's
+events never leave the device a step at a time): the same drops, bit for bit.
 
 Time is cut into bins of 1/9 ms, each allowed 1/10 of the 1 ms budget: any 1 ms window overlaps at most 10 bins,
 so the cap holds for every window (saturated throughput is 90 % of the cap). Within an overfull bin the
@@ -11,7 +11,7 @@ earlier step count against it).
 
 The keys are a counter-based hash of (seed, step, the event's index in the step), not a generator's stream, so
 that host and device draw the same keys without exchanging any; a step with no overfull bin draws none (and on
-the device costs one read of four numbers). Until 2026-11 the host drew them from NumPy's generator: the kept
+the device costs one read of four numbers a batch). Until 2026-11 the host drew them from NumPy's generator: the kept
 subsets differ from that version's for the same seed, with the same statistics.
 """
 from __future__ import annotations

@@ -49,7 +49,10 @@ def _interrupt_at(monkeypatch, step):
     (DEMO, dict(duration=0.01, adaptive="motion", px_per_step=0.1)),   # 24 steps placed by the objects' motion
     (GALVO, dict(duration=0.008, steps=64)),                        # a reused scan period, then copies
     (DEMO, dict(duration=0.1)),                     # the default steps (placed by the motion), chosen again alike on resume
-], ids=["uniform-ideal", "adaptive-davis346-noise", "adaptive-motion", "galvo-reuse", "default-steps"])
+    # uniform steps through the step batches with every effect (generator, last emissions, readout cap saved)
+    (DEMO, dict(duration=0.01, steps=20, preset="davis346", pixel={"shot_noise_hz": 200.0, "readout_cap": 1.5e6})),
+], ids=["uniform-ideal", "adaptive-davis346-noise", "adaptive-motion", "galvo-reuse", "default-steps",
+        "uniform-davis346-batched"])
 def test_interrupted_render_resumes_to_the_uninterrupted_file(tmp_path, monkeypatch, capsys, scene, kw):
     timed = ef.load_scene(scene, width=48, height=36)
     ref, out = str(tmp_path / "ref.h5"), str(tmp_path / "out.h5")
