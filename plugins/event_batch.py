@@ -151,7 +151,7 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
         integ.refractory_dropped += stats["refractory_dropped"]
         integ.noise_events += noise_kept
     total = int(step_ends[-1])
-    if total:
+    if 0 < total < 2 * n_pix:     # more events than that: most pixels fire, and the compress would be wasted
         chunk.only_firing(fired)
     events = event_fill.fill(chunk, ends, total, base_us, cfg.timestamp_resolution_us, stats=stats)
     if integ.limiter is None:
@@ -278,7 +278,7 @@ class Chunk:
                             lambda b, *rest: b < bound, body)
         return dict(zip(names, out[1:1 + n_state])), tuple(out[1 + n_state:])
 
-    def write(self, ends, xy, key_of, key_out, word_out) -> None:
+    def write(self, ends, xy, put) -> None:
         """``event_fill``'s crossing writer: the pixels stepped again, each step's crossings into their slots,
         then its noise events (only the firing pixels when :meth:`only_firing` chose them)."""
         lanes_d, n_d = event_fill._opaque(self.lanes_per_step, mi.UInt32), event_fill._opaque(self.n_pix, mi.UInt32)
@@ -289,12 +289,11 @@ class Chunk:
             lane = b * lanes_d + pixel
             lv = st.levels
             event_fill.write_crossings(lv.n, sel.kept, dr.gather(mi.UInt32, ends, lane) - sel.kept, log_prev,
-                                       lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1, xy, key_of, key_out,
-                                       word_out, sel.first, sel.stride)
+                                       lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1, xy, put, sel.first,
+                                       sel.stride)
             if sel.hit is not None:
                 slot = dr.gather(mi.UInt32, ends, lane + n_d) - 1
                 on_bit = dr.select(sel.noise_on, mi.UInt32(1 << 31), mi.UInt32(0))
-                dr.scatter(key_out, key_of(sel.noise_t), slot, sel.hit)
-                dr.scatter(word_out, xy | on_bit, slot, sel.hit)
+                put(slot, sel.noise_t, xy | on_bit, sel.hit)
             return ()
         self.run(write_step)
