@@ -21,8 +21,8 @@ def crossing_time(k, sign, lp, ln, ref, step, t0, t1):
 
 @dataclass
 class Refractory:
-    """Refractory state for :func:`crossing_events`: ``last_emit`` (Float64 seconds per pixel, -inf before a
-    pixel's first event; replaced by the updated array) and the period in seconds."""
+    """Refractory state for ``event_fill.crossing_events``: ``last_emit`` (Float64 seconds per pixel, -inf
+    before a pixel's first event; replaced by the updated array) and the period in seconds."""
     last_emit: object
     period: float
 
