@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, replace
 from fractions import Fraction
+from functools import cached_property
 
 import numpy as np
 
@@ -159,7 +160,7 @@ class Lissajous(ScanCurve):
         return (TWO_PI * self.freq_x, TWO_PI * self.freq_y, r(self.amplitude_x), r(self.amplitude_y),
                 r(self.phase_x), r(self.phase_y), r(self.offset_x), r(self.offset_y))
 
-    @property
+    @cached_property         # the curve is frozen; the rationals cost ~10 us, and a render asks every step
     def period(self) -> float | None:
         fx, fy = (Fraction(f).limit_denominator(10_000) for f in (self.freq_x, self.freq_y))
         if self.amplitude_x == 0:

@@ -25,6 +25,13 @@ def batches(monkeypatch):
     return sizes
 
 
+def _batches_of(monkeypatch, frames, n_pix):
+    """At most ``frames`` steps a batch, on either backend."""
+    for backend in ("llvm", "cuda"):
+        monkeypatch.setitem(event_batch.LANE_STEPS, backend, frames * n_pix)
+    monkeypatch.setattr(event_batch, "MIN_FRAMES_PER_KERNEL", 2)
+
+
 def _pair(timed, **kw):
     batched = ef.render_events(timed, **kw)
     with event_batch.one_frame_a_step():
@@ -44,8 +51,7 @@ def _same(a, b):
 def test_fan_batches_end_at_every_scan_period_and_equal_single_steps(batches, monkeypatch):
     """The fan (250 Hz circle, spinning blades): 3 periods of 12 steps on the phase grid, at most 5 steps a
     batch: batches of 5, 5, 2 in each period."""
-    monkeypatch.setitem(event_batch.LANE_STEPS, "llvm", 5 * 48 * 36)
-    monkeypatch.setattr(event_batch, "MIN_FRAMES_PER_KERNEL", 2)
+    _batches_of(monkeypatch, 5, 48 * 36)
     timed = ef.load_scene(FAN, width=48, height=36)
     batched, single = _pair(timed, duration=0.012, steps=36, reuse=False)
     assert batches == [5, 5, 2] * 3
@@ -73,8 +79,7 @@ def test_every_pixel_model_batches_alike(batches, monkeypatch, model):
     """The demo's moving cards through 24 uniform steps, batches of at most 5 (so that the realistic pixel's
     readout cap meets batches whose bins span several steps; the film's cap is scaled to its pixels). Under a
     low-pass the first two steps are committed singly: the accuracy limit reads the pixels' state after them."""
-    monkeypatch.setitem(event_batch.LANE_STEPS, "llvm", 5 * 40 * 30)
-    monkeypatch.setattr(event_batch, "MIN_FRAMES_PER_KERNEL", 2)
+    _batches_of(monkeypatch, 5, 40 * 30)
     timed = ef.load_scene(DEMO, width=40, height=30)
     batched, single = _pair(timed, duration=0.04, steps=24, **model)
     assert batches == ([5] * 4 + [4] if "threshold_jitter" in model.get("pixel", {}) else [5] * 4 + [2])
