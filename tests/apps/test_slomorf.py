@@ -11,7 +11,7 @@ import sys
 import cv2
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, TEST_VARIANT
 
 from mitsuba_eventfield import backend
 from mitsuba_eventfield.apps import slomorf
@@ -80,7 +80,7 @@ def test_each_depth_brings_its_own_object_into_focus(result):
 
 
 def test_variant_is_restored(result):
-    assert backend.mi.variant() == "llvm_ad_mono"        # conftest's; the RGB frames used llvm_ad_rgb
+    assert backend.mi.variant() == TEST_VARIANT        # conftest's; the RGB frames used the RGB variant
 
 
 def test_outputs_are_complete(result, tmp_path):

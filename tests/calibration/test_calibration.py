@@ -4,7 +4,7 @@ import os
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, TEST_VARIANT
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.calibration import CalibrationError, fit_depth, fit_galvo, fit_tracks, track_point
@@ -155,7 +155,7 @@ def test_kaleidoscope_tiles_found_on_a_render_and_flat_field():
     from lf_scenes import kaleido_sensor, two_planes
 
     from mitsuba_eventfield.calibration.kaleidoscope import find_tiles, flat_field, register
-    ef.set_variant("llvm_ad_mono")
+    ef.set_variant(TEST_VARIANT)
     target = two_planes(mi, kaleido_sensor(film=240, spp=4), blank_strip=False)   # a calibration target ...
     target.pop("near")
     target["far"]["to_world"] = mi.ScalarTransform4f().translate([0, 0, 1.0]).rotate([0, 1, 0], 180).scale(0.5)

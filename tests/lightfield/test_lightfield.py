@@ -3,7 +3,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import DEMO, ROOT
+from conftest import DEMO, ROOT, TEST_VARIANT
 from lf_scenes import FAR, NEAR, kaleido_sensor, two_planes, view_fov_deg
 
 import mitsuba_eventfield as ef
@@ -57,7 +57,7 @@ def test_galvo_solver_recovers_the_static_image(capsys):
 @pytest.fixture(scope="module")
 def kaleido_lf():
     mi = _mi()
-    ef.set_variant("llvm_ad_mono")
+    ef.set_variant(TEST_VARIANT)
     sc = mi.load_dict(two_planes(mi, kaleido_sensor()))
     optics = sc.sensors()[0].optics_metadata()
     return ef.from_spatial(np.array(mi.render(sc))[..., 0], optics, log=False), optics

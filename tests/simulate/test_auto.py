@@ -1,7 +1,7 @@
 """Automatic modelling choices, each checked against the full computation."""
 import os
 
-from conftest import ROOT
+from conftest import ROOT, TEST_VARIANT
 
 import mitsuba_eventfield as ef
 
@@ -17,7 +17,7 @@ def test_plan_choices_hold_against_the_full_computation(capsys):
     assert plan.color is False
     ef.set_variant(color=True)
     rgb = ef.render_events(ef.load_scene(FAN, **SMALL), 0.004, steps=16, spp=4)
-    ef.set_variant("llvm_ad_mono")
+    ef.set_variant(TEST_VARIANT)
     mono = ef.render_events(ef.load_scene(FAN, **SMALL), 0.004, steps=16, spp=4)
     assert len(mono) > 100 and rgb.equals(mono)
     # spp: the chosen count meets the noise target on fresh seeds; half of it would not (unless at 1)
