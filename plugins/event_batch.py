@@ -293,7 +293,6 @@ class Chunk:
                                        sel.stride)
             if sel.hit is not None:
                 slot = dr.gather(mi.UInt32, ends, lane + n_d) - 1
-                on_bit = dr.select(sel.noise_on, mi.UInt32(1 << 31), mi.UInt32(0))
-                put(slot, sel.noise_t, xy | on_bit, sel.hit)
+                put(slot, sel.noise_t, event_fill.event_word(xy, sel.noise_on), sel.hit)
             return ()
         self.run(write_step)

@@ -89,6 +89,11 @@ def pack_xy(x, y):
     return x | (y << 16)
 
 
+def event_word(xy, on):
+    """The fill's event word: ``pack_xy``'s x | y << 16 with bit 31 set for an ON event."""
+    return xy | dr.select(on, mi.UInt32(1 << 31), mi.UInt32(0))
+
+
 def polarity(on):
     """Int8 +1 where ``on``, -1 elsewhere: the ``DeviceEvents.p`` column."""
     i8 = dr.int8_array_t(mi.Int32)
@@ -270,7 +275,7 @@ def write_crossings(n, kept, start, before, after, ref, c_on, c_off, t0, t1, xy,
     refractory pixel, else j. A symbolic loop over each lane's crossings (inside a caller's loop: one kernel)."""
     on = n > 0
     sign = dr.select(on, mi.Int32(1), mi.Int32(-1))
-    word = xy | dr.select(on, mi.UInt32(1 << 31), mi.UInt32(0))
+    word = event_word(xy, on)
     step = dr.select(on, mi.Float64(c_on), mi.Float64(c_off))
     segment = (mi.Float64(before), mi.Float64(after), mi.Float64(ref), step, t0, t1)
     ranked = first is not None
@@ -339,7 +344,7 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
         cr.write(ends, xy, put)
     if noise is not None:
         slot = dr.prefix_reduce(dr.ReduceOp.Add, mi.UInt32(noise.hit), exclusive=True) + _opaque(total, mi.UInt32)
-        put(slot, noise.t, xy | dr.select(noise.on, mi.UInt32(1 << 31), mi.UInt32(0)), noise.hit)
+        put(slot, noise.t, event_word(xy, noise.on), noise.hit)
     if packed:
         keys = mi.UInt32(key_out >> 32)
         dr.eval(keys)
