@@ -9,7 +9,6 @@ drops the messages that are expected and say nothing to our users.
 """
 from __future__ import annotations
 
-import gc
 import sys
 
 from . import _llvm
@@ -19,6 +18,9 @@ _llvm.configure()
 
 import drjit as dr  # noqa: E402  (must follow the libLLVM configuration)
 import mitsuba as mi  # noqa: E402
+
+# frozen functions live with the plugins (the lowest layer: the event passes freeze too); re-exported here
+from .plugins.frozen import FREEZE_ENV, FrozenOrTraced, freezing  # noqa: E402,F401
 
 _active: str | None = None
 _QUIET_MESSAGES = (
@@ -128,40 +130,3 @@ def ensure_variant(color: bool = False) -> str:
     if _active is not None and mi.variant() == _active:
         return _active
     return set_variant(color=color)
-
-
-class FrozenOrTraced:
-    """``fn`` as a Dr.Jit frozen function (``dr.freeze``: recorded once, replayed), traced from then on when
-    Dr.Jit refuses to record it (a virtual call on an object that is not among the inputs, e.g. a textured
-    area emitter); ``refused`` then says why, in one line. Feed one instance one input layout only: a replay
-    does not redo the host-side arithmetic of its recording (docs/design.md, static pixels)."""
-
-    def __init__(self, fn):
-        # auto_opaque=False: every literal input is made opaque at each call. With Dr.Jit's default a literal that
-        # changes between calls (a moving shape's to_world, built from host scalars so that Mitsuba need not read
-        # it back: scene/timed.py) is found by recording again: the fan's render was recorded 5 times, not 2
-        self.fn, self.frozen, self.refused = fn, dr.freeze(fn, auto_opaque=False), None
-
-    @property
-    def n_recordings(self) -> int:
-        """How many times Dr.Jit recorded the function (bounded, then replayed: tests/simulate/test_frozen_render.py)."""
-        return self.frozen.n_recordings
-
-    def __call__(self, *args):
-        if self.refused is None:
-            # Python's cycle collector must not run inside a recording or replay: it may destroy Mitsuba and
-            # Dr.Jit objects left in cycles by earlier code (a failed render's traceback), and one such destructor
-            # aborted the process there (the full test suite, in mi.render under dr.freeze: "Garbage-collecting")
-            collecting = gc.isenabled()
-            gc.disable()
-            try:
-                return self.frozen(*args)
-            except RuntimeError as e:
-                if "frozen function" not in str(e):
-                    raise
-                why = " ".join(str(e.__cause__ or e).split()).split("validate(): ")[-1].split(". ")[0][:160]
-                self.refused = why or "refused"
-            finally:
-                if collecting:
-                    gc.enable()
-        return self.fn(*args)

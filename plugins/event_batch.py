@@ -36,13 +36,13 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass
-from types import SimpleNamespace
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from mitsuba_eventfield.plugins import event_fill, event_select, pixel_model, pixel_step
+from mitsuba_eventfield.plugins.frozen import FrozenOrTraced, freezing
 
 
 # Lane-steps (pixels x frames) per kernel by backend, and the fewest frames. CPU (converter kernels alone, 2 kHz
@@ -114,43 +114,30 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
     cfg = integ.config
     if cfg.refractory_s and isinstance(integ.last_emit, np.ndarray):   # after host-path steps: moved
         integ.last_emit = event_fill.device_copy(integ.last_emit, mi.Float64)
-    chunk = Chunk(integ, _state(integ), frames, times, integ.size[0], n_pix, intensity)
-    lanes = chunk.lanes_per_step
-    counts = dr.empty(mi.UInt32, steps * lanes)
-    lanes_d, n_d = event_fill._opaque(lanes, mi.UInt32), event_fill._opaque(n_pix, mi.UInt32)
-    tally = cfg.refractory_s or cfg.shot_noise_hz         # the drops and noise events to count
-    sums = [dr.zeros(mi.UInt32, n_pix) for _ in range(4)] if tally else []
-
-    def count(b, pixel, log_prev, st, sel, t0, t1, fired, *tallies):
-        lane = b * lanes_d + pixel
-        dr.scatter(counts, sel.kept, lane)
-        fired = fired + sel.kept                 # the pixel's events in the chunk: the fill steps only these
-        if sel.hit is not None:
-            dr.scatter(counts, mi.UInt32(sel.hit), lane + n_d)
-            fired = fired + mi.UInt32(sel.hit)
-        if not tally:
-            return (fired,)
-        # per pixel, carried through the loop: crossings, kept crossings, noise draws that hit, kept noise
-        values = [mi.UInt32(dr.abs(st.levels.n)), sel.kept]
-        if sel.hit is not None:
-            values += [mi.UInt32(st.noise[0]), mi.UInt32(sel.hit)]
-        return (fired,) + tuple(acc + v for acc, v in zip(tallies, values)) + tallies[len(values):]
-    final, (fired, *sums) = chunk.run(count, [dr.zeros(mi.UInt32, n_pix)] + sums)
-    dr.eval(counts, fired, *final.values(), *sums)
-    ends = dr.prefix_reduce(dr.ReduceOp.Add, counts, exclusive=False)
+    view = PixelView.of(integ)
+    state = _state(integ)
+    # the chunk's times as arrays in Dr.Jit's memory (from lists: an array made from NumPy memory has that
+    # memory's alignment, which decides the frozen passes' input layout, so it would record them again now and
+    # then, with kernels of another alignment). The per-step kernel's dt is mi.Float(t1 - t0): the same float64
+    # difference, rounded to float32
+    t_d = mi.Float64(times.tolist())
+    dts = mi.Float(np.diff(times).astype(np.float32).tolist()) if pixel_step.needs_dt(cfg) else None
+    lanes = n_pix * (2 if cfg.shot_noise_hz else 1)
+    step_last = mi.UInt32((np.arange(1, steps + 1) * lanes - 1).tolist())
+    count = _count_pass(view, (integ.size[0], n_pix, steps, intensity, dr.width(frames)))
+    final, ends, fired, head = count(view.arrays(), state, frames, t_d, dts, step_last)
     # one read: every step's last slot (the chunk's total is the last), then the tallies
-    step_last = mi.UInt32((np.arange(1, steps + 1) * lanes - 1).astype(np.uint32))
-    head = [dr.gather(mi.UInt32, ends, step_last)] + [dr.sum(v) for v in sums]
-    read = event_fill.concat_arrays(head, mi.UInt32).numpy()
+    read = head.numpy()
     step_ends = read[:steps]
     _set_state(integ, final)
     stats = {}
-    if tally:
+    if cfg.refractory_s or cfg.shot_noise_hz:
         raw, kept, noise_raw, noise_kept = (int(v) for v in read[steps:])
         stats = dict(refractory_dropped=(raw - kept) + (noise_raw - noise_kept), noise_events=noise_kept)
         integ.refractory_dropped += stats["refractory_dropped"]
         integ.noise_events += noise_kept
     total = int(step_ends[-1])
+    chunk = Chunk(view, state, frames, times, t_d, dts, integ.size[0], n_pix, intensity)
     if 0 < total < 2 * n_pix:     # more events than that: most pixels fire, and the compress would be wasted
         chunk.only_firing(fired)
     events = event_fill.fill(chunk, ends, total, base_us, cfg.timestamp_resolution_us, stats=stats)
@@ -160,12 +147,136 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
     return integ.limiter.filter_device(events, step_counts, times[0], times[-1], cfg.timestamp_resolution_us)
 
 
+def _count_pass(view: "PixelView", shape: tuple):
+    """The count pass of a chunk: ``fn(arrays, state, frames, t, dt, step_last) -> (state after, ends, fired,
+    head)`` for a pixel model and chunk shape (film width, pixels, steps, radiance or log frames, frame buffer
+    length), frozen (:func:`_frozen`). ``ends``: each (step, lane) slot end; ``head``: every step's last slot
+    end, then the four tallies (refractory and noise) when the model has them."""
+    width, n_pix, steps, intensity, _ = shape
+    model = view.model()          # the cached pass keeps the model, not this integrator's arrays
+    cfg = model.config
+
+    def make():
+        def count_pass(arrays, state, frames, t_d, dts, step_last):
+            chunk = Chunk(model.bind(arrays), state, frames, None, t_d, dts, width, n_pix, intensity, steps=steps)
+            lanes = chunk.lanes_per_step
+            counts = dr.empty(mi.UInt32, steps * lanes)
+            lanes_d, n_d = event_fill._opaque(lanes, mi.UInt32), event_fill._opaque(n_pix, mi.UInt32)
+            tally = bool(cfg.refractory_s or cfg.shot_noise_hz)       # the drops and noise events to count
+            sums = [dr.zeros(mi.UInt32, n_pix) for _ in range(4)] if tally else []
+
+            def count(b, pixel, log_prev, st, sel, t0, t1, fired, *tallies):
+                lane = b * lanes_d + pixel
+                dr.scatter(counts, sel.kept, lane)
+                fired = fired + sel.kept          # the pixel's events in the chunk: the fill steps only these
+                if sel.hit is not None:
+                    dr.scatter(counts, mi.UInt32(sel.hit), lane + n_d)
+                    fired = fired + mi.UInt32(sel.hit)
+                if not tally:
+                    return (fired,)
+                # per pixel, carried through the loop: crossings, kept crossings, noise draws that hit, kept noise
+                values = [mi.UInt32(dr.abs(st.levels.n)), sel.kept]
+                if sel.hit is not None:
+                    values += [mi.UInt32(st.noise[0]), mi.UInt32(sel.hit)]
+                return (fired,) + tuple(acc + v for acc, v in zip(tallies, values)) + tallies[len(values):]
+            final, (fired, *sums) = chunk.run(count, [dr.zeros(mi.UInt32, n_pix)] + sums)
+            dr.eval(counts, fired, *final.values(), *sums)
+            ends = dr.prefix_reduce(dr.ReduceOp.Add, counts, exclusive=False)
+            head = [dr.gather(mi.UInt32, ends, step_last)] + [dr.sum(v) for v in sums]
+            return final, ends, fired, event_fill.concat_arrays(head, mi.UInt32)
+        return count_pass
+    return _frozen("count", view, shape, make)
+
+
+def _frozen(kind: str, view: "PixelView", shape: tuple, make):
+    """The chunk pass ``kind`` for a pixel model and chunk shape, made by ``make()`` once and frozen
+    (``dr.freeze``; traced at every call with ``EVENTFIELD_FREEZE=0``).
+
+    Why: the kernels of a chunk do not change from chunk to chunk, but tracing them did: the pixel model's step,
+    the selection and the writer traced again for every chunk cost 0.2-0.5 ms a pass on the CPU (346x260
+    demo, ideal to every effect), as much as the kernels of an ideal pixel's four steps; on a GPU, where the
+    kernels take far less, more so. What a chunk changes is an argument (a replay does not redo host-side work:
+    docs/design.md); the model and the shape, which the traced code reads as Python values, are the key. The
+    event total is not in the key: the write pass scatters into slots sized outside it (a replay may be given
+    arrays of another length, which Dr.Jit supports), and the sort, whose ``block_mkperm`` a replay would run
+    at the recorded length (Dr.Jit 1.5: wrong results from a replay at another length, checked), stays outside.
+    """
+    key = (kind, view.key(), shape)
+    fn = _PASSES.get(key)
+    if fn is None:
+        fn = make()
+        if freezing():
+            fn = FrozenOrTraced(fn)
+        if len(_PASSES) >= 64:          # bounded: the films and models of one process are few
+            _PASSES.pop(next(iter(_PASSES)))
+        _PASSES[key] = fn
+    return fn
+
+
+_PASSES: dict = {}
+
+
+@dataclass
+class PixelView:
+    """What a chunk's kernels read of an integrator besides its state: the pixel model (``config``, a key) and
+    the per-pixel constants (thresholds, reference anchor, leak rates, the generators' streams), as arrays a
+    frozen function takes as arguments (:meth:`arrays`, :meth:`bind`); the same names as the integrator's, so
+    ``pixel_step.step`` reads either."""
+    config: object
+    linlog_threshold: float
+    c_on: object = None
+    c_off: object = None
+    anchor: object = None
+    leak_rate: object = None
+    rng_inc: object = None
+
+    CONSTANTS = ("c_on", "c_off", "anchor", "leak_rate", "rng_inc")
+
+    @staticmethod
+    def of(integ) -> "PixelView":
+        return PixelView(integ.config, integ.linlog_threshold, integ.c_on, integ.c_off, integ.anchor,
+                         integ.leak_rate, integ.rng.inc if integ.rng is not None else None)
+
+    def key(self) -> tuple:
+        """The model, as a frozen function's key: every value its kernels bake in."""
+        return (tuple(sorted(self.config.as_dict().items())), self.linlog_threshold,
+                tuple(getattr(self, k) is not None for k in self.CONSTANTS), mi.variant())
+
+    def model(self) -> "PixelView":
+        """The model alone, without arrays (what a cached frozen pass may keep)."""
+        return PixelView(self.config, self.linlog_threshold)
+
+    def arrays(self) -> dict:
+        return {k: getattr(self, k) for k in self.CONSTANTS if getattr(self, k) is not None}
+
+    def bind(self, arrays: dict) -> "PixelView":
+        return PixelView(self.config, self.linlog_threshold, **{k: arrays.get(k) for k in self.CONSTANTS})
+
+    def gather(self, idx) -> "PixelView":
+        """The view at pixels ``idx``."""
+        return PixelView(self.config, self.linlog_threshold,
+                         **{k: (dr.gather(type(v), v, idx) if v is not None else None)
+                            for k, v in ((k, getattr(self, k)) for k in self.CONSTANTS)})
+
+    def generator(self, state):
+        """A PCG32 with this view's streams at ``state`` (None without a generator)."""
+        if self.rng_inc is None:
+            return None
+        rng = mi.PCG32()
+        rng.state, rng.inc = state, self.rng_inc
+        return rng
+
+
 # the pixel state a chunk carries from step to step, in this order (those the pixel model has)
 STATE = ("log_prev", "k_on", "k_off", "offset", "rng", "last_emit")
 
 
 def _state(integ) -> dict:
-    return {name: getattr(integ, name) for name in STATE if getattr(integ, name) is not None}
+    """The integrator's pixel state by name (the generator by its state array)."""
+    state = {name: getattr(integ, name) for name in STATE if getattr(integ, name) is not None}
+    if "rng" in state:
+        state["rng"] = state["rng"].state
+    return state
 
 
 def _set_state(integ, state: dict) -> None:
@@ -185,17 +296,24 @@ class Chunk:
     fill steps the pixels again from the same state (generator included: the same draws; the same operations:
     the same values, bit for bit). Lanes: per step every pixel's crossings, then (with shot noise) every
     pixel's noise event, so that slot order is the per-step path's: a step's crossings, then its noise."""
-    integ: object
-    state: dict                  # STATE at times[0] (the names the pixel model has)
+    view: PixelView              # the pixel model and its per-pixel constants
+    state: dict                  # STATE at times[0] (the names the pixel model has; the generator's state array)
     frames: object
-    times: np.ndarray
+    times: np.ndarray | None     # the step boundaries in seconds, on the host (None inside the count pass)
+    t_d: object                  # the same as Float64
+    dts: object                  # each step's length as Float (None when the model does not read it)
     width: int
     n_pix: int
     intensity: bool = False      # frames are linear radiances (else log brightnesses)
+    steps: int | None = None     # len(times) - 1 (given where times is not)
     pixels: object = None        # the pixels :meth:`run` steps (UInt32 indices; None: every pixel)
 
     # below this fraction of the pixels firing, the fill steps only those (gathered state, one compress)
     FIRING_SUBSET = 0.5
+
+    def __post_init__(self):
+        if self.steps is None:
+            self.steps = len(self.times) - 1
 
     def only_firing(self, fired) -> None:
         """Let :meth:`write` step only the pixels with an event in the chunk (``fired``: each pixel's count),
@@ -209,26 +327,16 @@ class Chunk:
             self.pixels = pixels
 
     def _at_pixels(self):
-        """(pixel indices, lane count, the integrator's per-pixel constants, the start state, a generator
-        template) at :attr:`pixels` (every pixel when None)."""
-        integ, state = self.integ, self.state
+        """(pixel indices, lane count, the view, the start state) at :attr:`pixels` (every pixel when None)."""
         if self.pixels is None:
-            return dr.arange(mi.UInt32, self.n_pix), self.n_pix, integ, state, integ.rng
+            return dr.arange(mi.UInt32, self.n_pix), self.n_pix, self.view, self.state
         idx = self.pixels
-        view = SimpleNamespace(config=integ.config, linlog_threshold=integ.linlog_threshold)
-        for name in ("c_on", "c_off", "anchor", "leak_rate"):
-            v = getattr(integ, name)
-            setattr(view, name, dr.gather(type(v), v, idx) if v is not None else None)
-        rng = None
-        if integ.rng is not None:
-            rng = mi.PCG32(integ.rng)
-            rng.state, rng.inc = dr.gather(mi.UInt64, state["rng"].state, idx), dr.gather(mi.UInt64, integ.rng.inc, idx)
-        sub = {k: rng if k == "rng" else dr.gather(type(v), v, idx) for k, v in state.items()}
-        return idx, dr.width(idx), view, sub, rng
+        sub = {k: dr.gather(type(v), v, idx) for k, v in self.state.items()}
+        return idx, dr.width(idx), self.view.gather(idx), sub
 
     @property
     def lanes_per_step(self) -> int:
-        return self.n_pix * (2 if self.integ.config.shot_noise_hz else 1)
+        return self.n_pix * (2 if self.view.config.shot_noise_hz else 1)
 
     def run(self, each_step, carry=()) -> tuple:
         """One kernel: every pixel through the ``B`` steps (``pixel_step.step``, the per-step kernel's own
@@ -236,33 +344,27 @@ class Chunk:
         ``each_step(b, pixel, log_prev, step, selection, t0, t1, *carry)`` is traced into the loop body and
         returns the new ``carry`` (per-pixel values it keeps across steps). Returns the state after the last
         step and the last carry (lazy)."""
-        cfg = self.integ.config
-        pixel, lanes, integ, state, rng_template = self._at_pixels()
+        cfg = self.view.config
+        pixel, lanes, view, state = self._at_pixels()
         n_d = event_fill._opaque(self.n_pix, mi.UInt32)
-        # the per-step kernel's dt is mi.Float(t1 - t0): the same float64 difference, rounded to float32
-        dts = mi.Float(np.diff(self.times).astype(np.float32)) if pixel_step.needs_dt(cfg) else None
-        t_d = mi.Float64(self.times)
+        dts, t_d = self.dts, self.t_d
         period = event_fill._opaque(cfg.refractory_s, mi.Float64) if cfg.refractory_s else None
         names = list(state)
-        start = [state[k].state if k == "rng" else state[k] for k in names]
-
+        start = [state[k] for k in names]
         n_state = len(names)
 
         def body(b, *values):
             s, carried = dict(zip(names, values[:n_state])), values[n_state:]
             value = dr.gather(mi.Float, self.frames, b * n_d + pixel)
             if self.intensity:
-                intensity, log_in = value, pixel_model.linlog(dr, value, integ.linlog_threshold)
+                intensity, log_in = value, pixel_model.linlog(dr, value, view.linlog_threshold)
             else:
                 log_in = value
-                intensity = pixel_model.linlog_inverse(dr, value, integ.linlog_threshold) \
+                intensity = pixel_model.linlog_inverse(dr, value, view.linlog_threshold) \
                     if pixel_step.needs_intensity(cfg) else None
             dt = dr.gather(mi.Float, dts, b) if dts is not None else None
-            rng = None
-            if "rng" in s:
-                rng = mi.PCG32(rng_template)
-                rng.state = s["rng"]
-            st = pixel_step.step(integ, s["log_prev"], s["k_on"], s["k_off"], s.get("offset"), rng, log_in,
+            rng = view.generator(s["rng"]) if "rng" in s else None
+            st = pixel_step.step(view, s["log_prev"], s["k_on"], s["k_off"], s.get("offset"), rng, log_in,
                                  intensity, dt)
             lv = st.levels
             t0, t1 = dr.gather(mi.Float64, t_d, b), dr.gather(mi.Float64, t_d, b + 1)
@@ -273,26 +375,41 @@ class Chunk:
                      "rng": rng.state if rng is not None else None, "last_emit": sel.last_emit}
             return (b + 1,) + tuple(after[k] for k in names) + tuple(carried)
 
-        bound = event_fill._opaque(len(self.times) - 1, mi.UInt32)
+        bound = event_fill._opaque(self.steps, mi.UInt32)
         out = dr.while_loop((dr.zeros(mi.UInt32, lanes),) + tuple(start) + tuple(carry),
                             lambda b, *rest: b < bound, body)
         return dict(zip(names, out[1:1 + n_state])), tuple(out[1 + n_state:])
 
-    def write(self, ends, xy, put) -> None:
+    def write(self, ends, slots) -> None:
         """``event_fill``'s crossing writer: the pixels stepped again, each step's crossings into their slots,
-        then its noise events (only the firing pixels when :meth:`only_firing` chose them)."""
+        then its noise events (only the firing pixels when :meth:`only_firing` chose them); one frozen
+        function per model and chunk shape (:func:`_frozen`)."""
+        shape = (self.width, self.n_pix, self.steps, self.intensity, dr.width(self.frames), slots.packed)
+        model, width, n_pix, intensity, steps = self.view.model(), self.width, self.n_pix, self.intensity, self.steps
+
+        def make():     # the cached pass keeps the model and the shape, not this chunk's arrays
+            def write_pass(arrays, state, frames, t_d, dts, ends, pixels, slot_arrays):
+                chunk = Chunk(model.bind(arrays), state, frames, None, t_d, dts, width, n_pix, intensity,
+                              steps=steps, pixels=pixels)
+                chunk._write(ends, event_fill.Slots(**slot_arrays))
+            return write_pass
+        fn = _frozen("write", self.view, shape, make)
+        fn(self.view.arrays(), self.state, self.frames, self.t_d, self.dts, ends, self.pixels,
+           {"key": slots.key, "word": slots.word, "base": slots.base, "start": slots.start})
+
+    def _write(self, ends, slots) -> None:
         lanes_d, n_d = event_fill._opaque(self.lanes_per_step, mi.UInt32), event_fill._opaque(self.n_pix, mi.UInt32)
-        if self.pixels is not None:
-            xy = dr.gather(mi.UInt32, xy, self.pixels)
+        pixels = self.pixels if self.pixels is not None else dr.arange(mi.UInt32, self.n_pix)
+        xy = event_fill.pixel_xy(pixels, self.width)       # once, not per step: a vector integer division
 
         def write_step(b, pixel, log_prev, st, sel, t0, t1):         # carries nothing
             lane = b * lanes_d + pixel
             lv = st.levels
             event_fill.write_crossings(lv.n, sel.kept, dr.gather(mi.UInt32, ends, lane) - sel.kept, log_prev,
-                                       lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1, xy, put, sel.first,
+                                       lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1, xy, slots.put, sel.first,
                                        sel.stride)
             if sel.hit is not None:
                 slot = dr.gather(mi.UInt32, ends, lane + n_d) - 1
-                put(slot, sel.noise_t, event_fill.event_word(xy, sel.noise_on), sel.hit)
+                slots.put(slot, sel.noise_t, event_fill.event_word(xy, sel.noise_on), sel.hit)
             return ()
         self.run(write_step)

@@ -258,13 +258,14 @@ class Crossings:
     first: object = None
     stride: object = None
 
-    def write(self, ends, xy, put) -> None:
-        """The crossings into their slots (``ends``: inclusive prefix sum of ``kept``; ``put``: :func:`fill`'s
-        slot writer)."""
+    def write(self, ends, slots: "Slots") -> None:
+        """The crossings into their slots (``ends``: inclusive prefix sum of ``kept``; ``slots``: :func:`fill`'s
+        slots)."""
         t0, t1 = (_opaque(float(t), mi.Float64) for t in self.times)
         kept = self.kept
+        xy = pixel_xy(dr.arange(mi.UInt32, self.n_pix), self.width)
         write_crossings(self.n, kept, ends - kept, self.before, self.after, self.ref, self.c_on, self.c_off, t0,
-                        t1, xy, put, self.first, self.stride)
+                        t1, xy, slots.put, self.first, self.stride)
 
 
 def write_crossings(n, kept, start, before, after, ref, c_on, c_off, t0, t1, xy, put, first=None,
@@ -300,64 +301,88 @@ class ShotNoise:
     count: int
 
 
+@dataclass
+class Slots:
+    """The event slots :func:`fill` sizes and a crossing writer fills: per slot the sort key (microseconds from
+    ``start``, the chunk's first microsecond minus one, with ``base`` added: Int64 opaque scalars) and the
+    event word x | y << 16 | ON << 31, both in one UInt64 ``key`` (key above) when the key fits 32 bits, else
+    ``key`` (UInt64) and ``word`` (UInt32) apart. Arrays only, so that a frozen writer takes them as
+    arguments (``event_batch``); :meth:`put` is the one slot writer."""
+    key: object
+    word: object
+    base: object
+    start: object
+
+    @property
+    def packed(self) -> bool:
+        return self.word is None
+
+    def put(self, slot, t_s, word, active=True) -> None:
+        """Event ``word`` at ``t_s`` seconds into ``slot`` (where ``active``)."""
+        key = mi.Int64(dr.round(t_s * 1e6)) + self.base - self.start
+        if self.packed:
+            dr.scatter(self.key, (mi.UInt64(mi.UInt32(key)) << 32) | mi.UInt64(word), slot, active)
+        else:
+            dr.scatter(self.key, mi.UInt64(key), slot, active)
+            dr.scatter(self.word, word, slot, active)
+
+
+def pixel_xy(pixel, width: int):
+    """``pack_xy`` of pixel indices (row-major, ``width`` pixels a row): no division per event."""
+    w_d = _opaque(width, mi.UInt32)
+    y = pixel // w_d
+    return pack_xy(pixel - y * w_d, y)
+
+
 def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float = 0.0,
          noise: ShotNoise | None = None, stats: dict | None = None) -> DeviceEvents:
     """The events of ``cr`` (``ends``: inclusive prefix sum of ``kept``; ``total``: its last entry), then the
     noise events, time-sorted, with timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor
     clock ``resolution_us`` when > 0. ``cr.write`` has one lane a pixel write its own crossings into its slot
-    range (the fill of esim_torch's count / prefix-sum / fill), two words an event: the sort key
-    (microseconds from the chunk's first one) and x | y << 16 | ON << 31, so no event searches for its pixel
-    or divides by the width, and the sort moves 8 bytes an event. The two words share one 64-bit slot (key
-    above): one scatter an event in the fill and one gather after the sort, where two 32-bit arrays took two
-    of each (dense 2 kHz converter stack, 346x260: the fill kernel 0.39 -> 0.34 ms a frame, the gather 0.10 ->
-    0.09); a 64-bit key (time-lapse spans) keeps two arrays. Noise events take the slots after every crossing,
-    in pixel order, so equal times keep crossings first."""
+    range (the fill of esim_torch's count / prefix-sum / fill) through :class:`Slots`, two words an event: the
+    sort key (microseconds from the chunk's first one) and x | y << 16 | ON << 31, so no event searches for its
+    pixel or divides by the width, and the sort moves 8 bytes an event. The two words share one 64-bit slot
+    (key above): one scatter an event in the fill and one gather after the sort, where two 32-bit arrays took
+    two of each (dense 2 kHz converter stack, 346x260: the fill kernel 0.39 -> 0.34 ms a frame, the gather
+    0.10 -> 0.09); a 64-bit key (time-lapse spans) keeps two arrays. Noise events take the slots after every
+    crossing, in pixel order, so equal times keep crossings first."""
     count = total + (noise.count if noise else 0)
     if count == 0:
         return DeviceEvents(*empty_columns(), count=0, **(stats or {}))
     start_us = int(math.floor(cr.times[0] * 1e6)) + int(base_us) - 1
-    base_d, start_d = _opaque(base_us, mi.Int64), _opaque(start_us, mi.Int64)
-    key_bound = int(math.ceil((cr.times[-1] - cr.times[0]) * 1e6)) + 3
-    # a span of 2^32 us (71.6 minutes: time-lapse frames) does not fit the 32-bit key: 64 bits, Dr.Jit's sort
-    key_type = mi.UInt32 if key_bound < 1 << 32 else mi.UInt64
-    packed = key_type is mi.UInt32
-    key_out = dr.empty(mi.UInt64 if packed else key_type, count)
-    word_out = None if packed else dr.empty(mi.UInt32, count)
-    pixel = dr.arange(mi.UInt32, cr.n_pix)
-    w_d = _opaque(cr.width, mi.UInt32)
-    y = pixel // w_d
-    xy = pack_xy(pixel - y * w_d, y)
-
     # the key is microseconds from the chunk's first (minus one), so its range is the chunk's length, known
     # here without asking the device
-    def key_of(t_s):
-        return key_type(mi.Int64(dr.round(t_s * 1e6)) + base_d - start_d)
-
-    def put(slot, t_s, word, active=True):        # the slot writer of cr.write and of the noise below
-        if packed:
-            dr.scatter(key_out, (mi.UInt64(key_of(t_s)) << 32) | mi.UInt64(word), slot, active)
-        else:
-            dr.scatter(key_out, key_of(t_s), slot, active)
-            dr.scatter(word_out, word, slot, active)
-
+    key_bound = int(math.ceil((cr.times[-1] - cr.times[0]) * 1e6)) + 3
+    # a span of 2^32 us (71.6 minutes: time-lapse frames) does not fit the 32-bit key: 64 bits, Dr.Jit's sort
+    packed = key_bound < 1 << 32
+    slots = Slots(_evaluated(dr.empty(mi.UInt64, count)), None if packed else _evaluated(dr.empty(mi.UInt32, count)),
+                  _opaque(base_us, mi.Int64), _opaque(start_us, mi.Int64))
     if total:
-        cr.write(ends, xy, put)
+        cr.write(ends, slots)
     if noise is not None:
+        xy = pixel_xy(dr.arange(mi.UInt32, cr.n_pix), cr.width)
         slot = dr.prefix_reduce(dr.ReduceOp.Add, mi.UInt32(noise.hit), exclusive=True) + _opaque(total, mi.UInt32)
-        put(slot, noise.t, event_word(xy, noise.on), noise.hit)
+        slots.put(slot, noise.t, event_word(xy, noise.on), noise.hit)
     if packed:
-        keys = mi.UInt32(key_out >> 32)
+        keys = mi.UInt32(slots.key >> 32)
         dr.eval(keys)
-        both = dr.gather(mi.UInt64, key_out, stable_order(keys, key_bound))
+        both = dr.gather(mi.UInt64, slots.key, stable_order(keys, key_bound))
         key, word = mi.UInt32(both >> 32), mi.UInt32(both & 0xFFFFFFFF)
+        t_us = mi.Int64(key) + slots.start
     else:
-        dr.eval(key_out, word_out)
-        order = dr.argsort(key_out)        # stable, as stable_order
-        key, word = dr.gather(key_type, key_out, order), dr.gather(mi.UInt32, word_out, order)
-    t_us = mi.Int64(key) + start_d
+        dr.eval(slots.key, slots.word)
+        order = dr.argsort(slots.key)        # stable, as stable_order
+        key, word = dr.gather(mi.UInt64, slots.key, order), dr.gather(mi.UInt32, slots.word, order)
+        t_us = mi.Int64(key) + slots.start
     if resolution_us:              # the sensor clock, after ordering by true time (as the host's readout)
         res = _opaque(resolution_us, mi.Float64)
         t_us = mi.Int64(dr.floor(mi.Float64(t_us) / res) * res)
     xy, p = word & 0x7FFFFFFF, polarity((word >> 31) != 0)
     dr.eval(xy, t_us, p)
     return DeviceEvents(xy, t_us, p, count=count, **(stats or {}))
+
+
+def _evaluated(array):
+    """``array`` with memory of its own (a frozen writer scatters into it: an argument, not a literal)."""
+    dr.eval(array)
+    return array

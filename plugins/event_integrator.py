@@ -187,13 +187,18 @@ class _EventIntegratorMethods:
         self.log_prev = mi.Float(log_now)
         self.anchor = mi.Float(log_now)
         self.k_on, self.k_off = dr.zeros(mi.Int32, n_pix), dr.zeros(mi.Int32, n_pix)
-        self.c_on = mi.Float(pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_on, cfg.threshold_sigma))
-        self.c_off = mi.Float(pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_off, cfg.threshold_sigma))
+        # per-pixel constants drawn in NumPy, copied into Dr.Jit's memory (event_fill.device_copy): an array on
+        # NumPy's memory has that memory's alignment, a kernel variant of its own and, in the frozen chunk passes
+        # (event_batch), now and then another recording
+        self.c_on = event_fill.device_copy(
+            pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_on, cfg.threshold_sigma), mi.Float)
+        self.c_off = event_fill.device_copy(
+            pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_off, cfg.threshold_sigma), mi.Float)
         if cfg.leak_rate_hz or cfg.threshold_jitter:
             self.offset = dr.zeros(mi.Float, n_pix)
         if cfg.leak_rate_hz:
             rates = cfg.leak_rate_hz * np.maximum(1 + cfg.leak_jitter * rng.standard_normal(n_pix), 0)
-            self.leak_rate = mi.Float(rates.astype(np.float32))
+            self.leak_rate = event_fill.device_copy(rates.astype(np.float32), mi.Float)
             # a sensor in steady state has its pixels at random phases of their leak cycle
             self.offset = -mi.Float(rng.random(n_pix).astype(np.float32)) * self.c_on
         if cfg.shot_noise_hz or cfg.threshold_jitter:

@@ -5,8 +5,6 @@ One home, so that the time-stepping loop and the accuracy-limit probe render fra
 same way."""
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from .. import backend
@@ -16,7 +14,7 @@ from ..validate import positive
 
 mi, dr = backend.mi, backend.dr
 
-FREEZE_ENV = "EVENTFIELD_FREEZE"
+FREEZE_ENV = backend.FREEZE_ENV
 
 
 def frozen_render(inner, spp: int):
@@ -32,7 +30,7 @@ def frozen_render(inner, spp: int):
     in a process rounded differently from its later ones (one timestamp moved by 1 us), ``mi.render`` does not.
     Scenes whose kernels Dr.Jit refuses to record (a virtual call on an object that is not among the inputs,
     e.g. textured area emitters) are traced every step, with a note. Not measured on a GPU."""
-    if os.environ.get(FREEZE_ENV, "1") == "0":
+    if not backend.freezing():
         return None
 
     def render(scene, sensor, seed):     # every object the kernels read is an input, so it is traversed

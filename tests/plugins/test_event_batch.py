@@ -58,14 +58,20 @@ def _host_events(pixel, frames, times, base_us):
     return [np.concatenate([q[c] for q in parts]) for c in range(4)]
 
 
-def _batched_events(pixel, frames, times, chunk, base_us):
+def _batched_events(pixel, frames, times, chunk, base_us, own_memory=False):
+    """Events of ``frames`` committed ``chunk`` at a time; with ``own_memory`` each chunk's frames are copied
+    into Dr.Jit's memory first, as the converter and a render's batches hold them (an array on NumPy's memory
+    has that memory's alignment, which a frozen pass records as part of its input layout)."""
     import mitsuba as mi
+    from mitsuba_eventfield.plugins.event_fill import device_copy
     integ, parts = _integrator(**pixel), []
     integ.stage_log(mi.Float(frames[0]), (W, H))
     assert integ.commit_events(times[0], times[0]).count == 0 and integ.batchable
     for a in range(1, len(frames), chunk):
         b = min(a + chunk, len(frames))
-        ev = integ.commit_frames(mi.Float(np.concatenate(frames[a:b])), times[a - 1:b], base_us=base_us)
+        values = np.concatenate(frames[a:b])
+        values = device_copy(values, mi.Float) if own_memory else mi.Float(values)
+        ev = integ.commit_frames(values, times[a - 1:b], base_us=base_us)
         parts.append(ev.numpy())
     return [np.concatenate([q[c] for q in parts]) for c in range(4)], integ
 
@@ -294,3 +300,37 @@ def test_default_grouping_keeps_one_radix_pass_on_the_cpu():
     assert event_batch.default_frames_per_kernel(64 * 48, 1e-5) == 64
     assert event_batch.default_frames_per_kernel(1280 * 720, 1 / 2000) == 3     # the fewest
     assert event_batch.default_frames_per_kernel(1280 * 720, 0.4) == 2           # 3 would need a second pass
+
+
+@pytest.mark.parametrize("pixel", [BATCHABLE["ideal"], BATCHABLE["everything"]], ids=["ideal", "everything"])
+def test_chunk_passes_are_replayed_and_equal_the_traced_ones(pixel, monkeypatch):
+    """A chunk's count and write passes are frozen (``event_batch._frozen``): after a few recordings of a chunk
+    shape the later chunks of it replay them (were each chunk recorded, freezing would only add cost), on
+    dense chunks and on sparse ones (whose write pass steps a firing subset of another length every chunk),
+    and the events and the state after equal those of tracing every chunk (``EVENTFIELD_FREEZE=0``)."""
+    from mitsuba_eventfield.plugins import event_batch
+    dense, times = _frames(steps=60, seed=4)
+    still = np.arange(W * H) % 5 != 0          # a fifth of the pixels change: the write pass steps a subset
+    sparse = [np.where(still, dense[0], f).astype(np.float32) for f in dense]
+    runs = {}
+    for freeze in ("1", "0"):
+        monkeypatch.setenv("EVENTFIELD_FREEZE", freeze)
+        monkeypatch.setattr(event_batch, "_PASSES", {})
+        runs[freeze] = [_batched_events(pixel, frames, times, 3, base_us=17, own_memory=True)
+                        for frames in (dense, sparse)]
+        if freeze == "1":
+            passes = event_batch._PASSES
+            assert {key[0] for key in passes} == {"count", "write"}
+            # 40 chunks of one shape: a new integrator's first chunk, whose state was made on the host, records
+            # again, and so may a first chunk of sparse frames (measured: 2-4 recordings a pass); then replays
+            assert all(0 < fn.n_recordings <= 8 and fn.refused is None for fn in passes.values()), \
+                {key[0]: fn.n_recordings for key, fn in passes.items()}
+        else:
+            assert not any(hasattr(fn, "n_recordings") for fn in event_batch._PASSES.values())
+    for (frozen, f_integ), (traced, t_integ) in zip(runs["1"], runs["0"]):
+        assert len(frozen[0]) > W * H
+        for a, b in zip(frozen, traced):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
+        assert np.array_equal(f_integ.log_prev.numpy(), t_integ.log_prev.numpy())
+        if pixel:
+            assert np.array_equal(f_integ.rng.state.numpy(), t_integ.rng.state.numpy())

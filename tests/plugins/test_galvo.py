@@ -184,7 +184,11 @@ def test_event_angles_recovered_from_metadata_alone(tmp_path):
 def test_galvo_time_updates_do_not_recompile():
     import drjit as dr
     timed = _square_scene("circle", frequency=250.0, amplitude=0.5)
-    ef.render_events(timed, 0.001, steps=3, reuse=False)
+    # the warm-ups render the measured render's steps (its chunks of steps: the event passes are recorded per
+    # chunk shape, plugins/event_batch.py) at other instants, twice (a freshly loaded scene's frozen render
+    # records twice: simulate/frames.py): what must not recompile is the scan's new times
+    for t_start in (0.0061, 0.0087):
+        ef.render_events(timed, 0.004, steps=12, reuse=False, t_start=t_start)
     dr.kernel_history()
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:

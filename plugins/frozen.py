@@ -1,0 +1,55 @@
+"""Dr.Jit frozen functions (``dr.freeze``) as this project uses them: :class:`FrozenOrTraced` (recorded once,
+replayed; traced where Dr.Jit refuses to record) and the switch :func:`freezing` (``EVENTFIELD_FREEZE=0``
+traces every call). In the plugins' layer because a chunk's event passes (``event_batch``) freeze as a step's
+render does (``simulate/frames.py``); ``mitsuba_eventfield.backend`` re-exports both."""
+from __future__ import annotations
+
+import gc
+import os
+
+import drjit as dr
+
+FREEZE_ENV = "EVENTFIELD_FREEZE"
+
+
+def freezing() -> bool:
+    """Whether repeated Dr.Jit work is frozen (``dr.freeze``): a step's render (``simulate/frames.py``) and a
+    chunk's event passes (``plugins/event_batch.py``); ``EVENTFIELD_FREEZE=0`` traces them at every call."""
+    return os.environ.get(FREEZE_ENV, "1") != "0"
+
+
+class FrozenOrTraced:
+    """``fn`` as a Dr.Jit frozen function (``dr.freeze``: recorded once, replayed), traced from then on when
+    Dr.Jit refuses to record it (a virtual call on an object that is not among the inputs, e.g. a textured
+    area emitter); ``refused`` then says why, in one line. Feed one instance one input layout only: a replay
+    does not redo the host-side arithmetic of its recording (docs/design.md, static pixels)."""
+
+    def __init__(self, fn):
+        # auto_opaque=False: every literal input is made opaque at each call. With Dr.Jit's default a literal that
+        # changes between calls (a moving shape's to_world, built from host scalars so that Mitsuba need not read
+        # it back: scene/timed.py) is found by recording again: the fan's render was recorded 5 times, not 2
+        self.fn, self.frozen, self.refused = fn, dr.freeze(fn, auto_opaque=False), None
+
+    @property
+    def n_recordings(self) -> int:
+        """How many times Dr.Jit recorded the function (bounded, then replayed: tests/simulate/test_frozen_render.py)."""
+        return self.frozen.n_recordings
+
+    def __call__(self, *args):
+        if self.refused is None:
+            # Python's cycle collector must not run inside a recording or replay: it may destroy Mitsuba and
+            # Dr.Jit objects left in cycles by earlier code (a failed render's traceback), and one such destructor
+            # aborted the process there (the full test suite, in mi.render under dr.freeze: "Garbage-collecting")
+            collecting = gc.isenabled()
+            gc.disable()
+            try:
+                return self.frozen(*args)
+            except RuntimeError as e:
+                if "frozen function" not in str(e):
+                    raise
+                why = " ".join(str(e.__cause__ or e).split()).split("validate(): ")[-1].split(". ")[0][:160]
+                self.refused = why or "refused"
+            finally:
+                if collecting:
+                    gc.enable()
+        return self.fn(*args)
