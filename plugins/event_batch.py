@@ -18,6 +18,9 @@ frames at once:
 4. the readout cap, where the pixel model has one, on the whole chunk at once
    (``readout.ReadoutLimiter.filter_device``: the drops of step-by-step filtering).
 
+The count pass (1-2) and the crossing writer (3) are frozen functions (:func:`_frozen`): recorded for a pixel
+model and chunk shape, then replayed chunk after chunk instead of traced again.
+
 Every pixel model batches. Its random parts draw from the per-pixel PCG32 generator, which the loop carries
 (five draws a step at most, in the per-step kernel's order: the same numbers); the refractory period carries
 each pixel's last emission; shot-noise events take a second lane per pixel after each step's crossings, as

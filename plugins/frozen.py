@@ -21,8 +21,11 @@ def freezing() -> bool:
 class FrozenOrTraced:
     """``fn`` as a Dr.Jit frozen function (``dr.freeze``: recorded once, replayed), traced from then on when
     Dr.Jit refuses to record it (a virtual call on an object that is not among the inputs, e.g. a textured
-    area emitter); ``refused`` then says why, in one line. Feed one instance one input layout only: a replay
-    does not redo the host-side arithmetic of its recording (docs/design.md, static pixels)."""
+    area emitter); ``refused`` then says why, in one line. Whatever a call changes must reach it as a Dr.Jit
+    input: a replay does not redo the host-side arithmetic of its recording (docs/design.md, static pixels),
+    so Python values the function reads belong in the key of the instance (one instance per key, as
+    ``event_batch._frozen``). A new input layout (which inputs are literals, share a width, or sit on NumPy's
+    memory with its alignment) makes Dr.Jit record again: correct, but a recording costs a trace."""
 
     def __init__(self, fn):
         # auto_opaque=False: every literal input is made opaque at each call. With Dr.Jit's default a literal that
