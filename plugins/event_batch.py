@@ -240,9 +240,14 @@ class PixelView:
         return PixelView(integ.config, integ.linlog_threshold, integ.c_on, integ.c_off, integ.anchor,
                          integ.leak_rate, integ.rng.inc if integ.rng is not None else None)
 
+    # configuration fields no chunk pass reads (the seed draws the per-pixel constants and the generators'
+    # streams, which are arguments): left out of the key, so a sweep over seeds replays one recording
+    UNTRACED = ("seed",)
+
     def key(self) -> tuple:
         """The model, as a frozen function's key: every value its kernels bake in."""
-        return (tuple(sorted(self.config.as_dict().items())), self.linlog_threshold,
+        fields = {k: v for k, v in self.config.as_dict().items() if k not in self.UNTRACED}
+        return (tuple(sorted(fields.items())), self.linlog_threshold,
                 tuple(getattr(self, k) is not None for k in self.CONSTANTS), mi.variant())
 
     def model(self) -> "PixelView":

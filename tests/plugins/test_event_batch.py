@@ -325,6 +325,15 @@ def test_chunk_passes_are_replayed_and_equal_the_traced_ones(pixel, monkeypatch)
             # again, and so may a first chunk of sparse frames (measured: 2-4 recordings a pass); then replays
             assert all(0 < fn.n_recordings <= 8 and fn.refused is None for fn in passes.values()), \
                 {key[0]: fn.n_recordings for key, fn in passes.items()}
+            if pixel:
+                # another seed: other thresholds and generator streams, which are arguments: the same passes,
+                # replayed after at most a new integrator's first-chunk recordings
+                before = {key: fn.n_recordings for key, fn in passes.items()}
+                other, _ = _batched_events(dict(pixel, seed=pixel["seed"] + 1), dense, times, 3, 17,
+                                           own_memory=True)
+                assert set(passes) == set(before) and len(other[0]) != len(runs["1"][0][0][0])
+                assert all(fn.n_recordings <= before[key] + 2 for key, fn in passes.items()), \
+                    [(before[key], fn.n_recordings) for key, fn in passes.items()]
         else:
             assert not any(hasattr(fn, "n_recordings") for fn in event_batch._PASSES.values())
     for (frozen, f_integ), (traced, t_integ) in zip(runs["1"], runs["0"]):
