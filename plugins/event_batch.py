@@ -45,7 +45,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsuba_eventfield.plugins import event_fill, event_select, pixel_model, pixel_step
-from mitsuba_eventfield.plugins.frozen import FrozenOrTraced, freezing
+from mitsuba_eventfield.plugins.frozen import FrozenCache
 
 
 # Lane-steps (pixels x frames) per kernel by backend, and the fewest frames. CPU (converter kernels alone, 2 kHz
@@ -204,19 +204,10 @@ def _frozen(kind: str, view: "PixelView", shape: tuple, make):
     arrays of another length, which Dr.Jit supports), and the sort, whose ``block_mkperm`` a replay would run
     at the recorded length (Dr.Jit 1.5: wrong results from a replay at another length, checked), stays outside.
     """
-    key = (kind, view.key(), shape)
-    fn = _PASSES.get(key)
-    if fn is None:
-        fn = make()
-        if freezing():
-            fn = FrozenOrTraced(fn)
-        if len(_PASSES) >= 64:          # bounded: the films and models of one process are few
-            _PASSES.pop(next(iter(_PASSES)))
-        _PASSES[key] = fn
-    return fn
+    return _PASSES.made((kind, view.key(), shape), make)
 
 
-_PASSES: dict = {}
+_PASSES = FrozenCache()
 
 
 @dataclass

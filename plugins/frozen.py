@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import gc
 import os
+import threading
 
 import drjit as dr
 
@@ -14,8 +15,15 @@ FREEZE_ENV = "EVENTFIELD_FREEZE"
 
 def freezing() -> bool:
     """Whether repeated Dr.Jit work is frozen (``dr.freeze``): a step's render (``simulate/frames.py``) and a
-    chunk's event passes (``plugins/event_batch.py``); ``EVENTFIELD_FREEZE=0`` traces them at every call."""
-    return os.environ.get(FREEZE_ENV, "1") != "0"
+    chunk's event passes (``plugins/event_batch.py``); ``EVENTFIELD_FREEZE=0`` traces them at every call, and
+    so does any thread but the main one. Why: a frozen call traverses its inputs, and the traversal of a
+    Python plugin (ours: the event integrator, the galvo sensor) takes the GIL while Dr.Jit 1.5 holds its own
+    lock; a thread holding the GIL that then needs Dr.Jit's lock (any array freed) deadlocks against it. Seen
+    once in the full suite (2026-11-26): a Dask worker rendering a sweep point on its task thread, in
+    ``Scene::traverse_1_cb_ro`` waiting for the GIL, while its event-loop thread, holding the GIL, spun in
+    ``jit_var_dec_ref_impl`` freeing an array (the lock inversion of Dr.Jit issue 524). On the main thread
+    nothing else in this package uses Dr.Jit concurrently (the event writer's thread takes NumPy arrays)."""
+    return os.environ.get(FREEZE_ENV, "1") != "0" and threading.current_thread() is threading.main_thread()
 
 
 class FrozenOrTraced:
@@ -56,3 +64,23 @@ class FrozenOrTraced:
                 if collecting:
                     gc.enable()
         return self.fn(*args)
+
+
+class FrozenCache(dict):
+    """Functions by key, each made on first use (``make()``) and frozen unless ``EVENTFIELD_FREEZE=0``; at
+    most ``size`` kept, the oldest dropped first (a key per film and model: a process meets few)."""
+
+    def __init__(self, size: int = 64):
+        super().__init__()
+        self.size = size
+
+    def made(self, key, make):
+        """The function for ``key``: frozen where :func:`freezing` says so, else traced (kept apart)."""
+        key = (key, freezing())
+        fn = self.get(key)
+        if fn is None:
+            fn = FrozenOrTraced(make()) if key[1] else make()
+            if len(self) >= self.size:
+                self.pop(next(iter(self)))
+            self[key] = fn
+        return fn

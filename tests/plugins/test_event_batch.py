@@ -309,22 +309,23 @@ def test_chunk_passes_are_replayed_and_equal_the_traced_ones(pixel, monkeypatch)
     dense chunks and on sparse ones (whose write pass steps a firing subset of another length every chunk),
     and the events and the state after equal those of tracing every chunk (``EVENTFIELD_FREEZE=0``)."""
     from mitsuba_eventfield.plugins import event_batch
+    from mitsuba_eventfield.plugins.frozen import FrozenCache
     dense, times = _frames(steps=60, seed=4)
     still = np.arange(W * H) % 5 != 0          # a fifth of the pixels change: the write pass steps a subset
     sparse = [np.where(still, dense[0], f).astype(np.float32) for f in dense]
     runs = {}
     for freeze in ("1", "0"):
         monkeypatch.setenv("EVENTFIELD_FREEZE", freeze)
-        monkeypatch.setattr(event_batch, "_PASSES", {})
+        monkeypatch.setattr(event_batch, "_PASSES", FrozenCache())
         runs[freeze] = [_batched_events(pixel, frames, times, 3, base_us=17, own_memory=True)
                         for frames in (dense, sparse)]
         if freeze == "1":
             passes = event_batch._PASSES
-            assert {key[0] for key in passes} == {"count", "write"}
+            assert {key[0][0] for key in passes} == {"count", "write"}
             # 40 chunks of one shape: a new integrator's first chunk, whose state was made on the host, records
             # again, and so may a first chunk of sparse frames (measured: 2-4 recordings a pass); then replays
             assert all(0 < fn.n_recordings <= 8 and fn.refused is None for fn in passes.values()), \
-                {key[0]: fn.n_recordings for key, fn in passes.items()}
+                {key[0][0]: fn.n_recordings for key, fn in passes.items()}
             if pixel:
                 # another seed: other thresholds and generator streams, which are arguments: the same passes,
                 # replayed after at most a new integrator's first-chunk recordings

@@ -85,3 +85,27 @@ def test_no_cycle_collection_inside_a_frozen_call():
     frozen.refused = "for the test"                                # the traced fallback
     frozen(dr.arange(mi.Float, 3))
     assert seen == [False, True] and gc.isenabled()
+
+
+def test_only_the_main_thread_freezes():
+    """Off the main thread nothing is frozen (a frozen call's traversal of our Python plugins takes the GIL
+    under Dr.Jit's lock, which deadlocked a Dask worker against its event-loop thread: plugins/frozen.py): a
+    render on another thread traces its frames and its event passes, and its events equal the main thread's."""
+    import threading
+    from mitsuba_eventfield.plugins import frozen
+    path, defines, _ = SCENES["fan"]
+    seen = {}
+
+    def render(where):
+        seen[where] = (frozen.freezing(), frames.frozen_render(None, 4) is None)
+        timed = ef.load_scene(os.path.join(ROOT, "scenes", path), **defines)
+        seen[where + " events"] = ef.render_events(timed, 0.004, steps=12)
+        made = frozen.FrozenCache().made("k", lambda: (lambda: 1))
+        seen[where + " cache"] = isinstance(made, frozen.FrozenOrTraced)
+    render("main")
+    worker = threading.Thread(target=render, args=("thread",))
+    worker.start()
+    worker.join()
+    assert seen["main"] == (True, False) and seen["main cache"]
+    assert seen["thread"] == (False, True) and not seen["thread cache"]
+    assert len(seen["main events"]) > 1000 and seen["main events"].equals(seen["thread events"])
