@@ -87,12 +87,13 @@ def test_no_cycle_collection_inside_a_frozen_call():
     assert seen == [False, True] and gc.isenabled()
 
 
-def test_only_the_main_thread_freezes():
+def test_only_the_main_thread_freezes(monkeypatch):
     """Off the main thread nothing is frozen (a frozen call's traversal of our Python plugins takes the GIL
     under Dr.Jit's lock, which deadlocked a Dask worker against its event-loop thread: plugins/frozen.py): a
     render on another thread traces its frames and its event passes, and its events equal the main thread's."""
     import threading
     from mitsuba_eventfield.plugins import frozen
+    monkeypatch.setenv(frames.FREEZE_ENV, "1")
     path, defines, _ = SCENES["fan"]
     seen = {}
 
