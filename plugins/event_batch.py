@@ -125,7 +125,7 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
     # difference, rounded to float32
     t_d = mi.Float64(times.tolist())
     dts = mi.Float(np.diff(times).astype(np.float32).tolist()) if pixel_step.needs_dt(cfg) else None
-    lanes = n_pix * (2 if cfg.shot_noise_hz else 1)
+    lanes = lanes_per_step(cfg, n_pix)
     step_last = mi.UInt32((np.arange(1, steps + 1) * lanes - 1).tolist())
     count = _count_pass(view, (integ.size[0], n_pix, steps, intensity, dr.width(frames)))
     final, ends, fired, head = count(view.arrays(), state, frames, t_d, dts, step_last)
@@ -266,6 +266,11 @@ class PixelView:
         return rng
 
 
+def lanes_per_step(cfg, n_pix: int) -> int:
+    """Count lanes a step: every pixel's crossings, then with shot noise every pixel's noise event."""
+    return n_pix * (2 if cfg.shot_noise_hz else 1)
+
+
 # the pixel state a chunk carries from step to step, in this order (those the pixel model has)
 STATE = ("log_prev", "k_on", "k_off", "offset", "rng", "last_emit")
 
@@ -335,7 +340,7 @@ class Chunk:
 
     @property
     def lanes_per_step(self) -> int:
-        return self.n_pix * (2 if self.view.config.shot_noise_hz else 1)
+        return lanes_per_step(self.view.config, self.n_pix)
 
     def run(self, each_step, carry=()) -> tuple:
         """One kernel: every pixel through the ``B`` steps (``pixel_step.step``, the per-step kernel's own
