@@ -3,8 +3,8 @@
 # command must finish within the device tool's 10 minutes). After ../shared/gpu/prepare.sh, from the device tool:
 #   run(command="bash benchmarks/gpu_session.sh tests", carry=[".gpu"])   the suite under cuda_ad_mono
 #   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, pixel, fan 1280x720
-# Everything lands under $OUT (the device tool brings it back): logs, the benchmarks' results files (written
-# there, not into benchmarks/results/), nvidia-smi. Copy the results files into benchmarks/results/ here and
+# Everything lands in one tarball under $OUT (the device tool brings it back): logs, the benchmarks' results
+# files (written there, not into benchmarks/results/), nvidia-smi. Copy the results files into benchmarks/results/ here and
 # commit them: they carry the GPU's name.
 # A dry run on the CPU checks the script itself: PY=.venv/bin/python OUT=/tmp/gpu_dry bash benchmarks/gpu_session.sh bench --quick
 set -uo pipefail
@@ -13,36 +13,50 @@ OUT=${OUT:-/tmp/gpu_session}
 PY=${PY:-"bash .gpu/run.sh python"}
 stage=${1:-bench}
 quick=${2:-}
-mkdir -p "$OUT"
-(nvidia-smi || echo "no nvidia-smi") > "$OUT/nvidia-smi.txt" 2>&1
+# the device tool brings back at most 8 files: everything is written under $W and packed into one tarball after
+# every step, so a step cut off by its limit still leaves the ones before it
+W=${W:-/tmp/gpu_work}
+mkdir -p "$OUT" "$W"
+pack() { tar czf "$OUT/gpu_$stage.tgz" -C "$W" . ; }
+(nvidia-smi || echo "no nvidia-smi") > "$W/nvidia-smi.txt" 2>&1
 $PY -c "import mitsuba_eventfield as ef; ef.set_variant(None); import mitsuba as mi; print('variant', mi.variant())" \
-    2>&1 | tee "$OUT/variant.txt"
+    2>&1 | tee "$W/variant.txt"
+pack
+step() {   # step NAME SECONDS COMMAND...: the command's output to $W/NAME.txt, then pack
+    local name=$1 limit=$2; shift 2
+    local t0=$SECONDS
+    EVENTFIELD_RESULTS_DIR="$W" timeout "$limit" "$@" > "$W/$name.txt" 2>&1
+    echo "[$name] exit $? after $((SECONDS - t0)) s" | tee -a "$W/steps.txt"
+    pack
+}
 
 case "$stage" in
     tests)
-        # the default LLVM suite on CUDA; the regression references were made on LLVM and are compared with the
-        # other-backend tolerances there (evaluation/regression.py); extras the image lacks are skipped
-        EVENTFIELD_TEST_VARIANT=cuda_ad_mono timeout 560 $PY -m pytest -q -p no:cacheprovider tests \
-            > "$OUT/tests_cuda.txt" 2>&1
-        echo "pytest exit $?" >> "$OUT/tests_cuda.txt"
-        tail -n 40 "$OUT/tests_cuda.txt" ;;
+        # the default LLVM suite under cuda_ad_mono, spread over the machine's cores (each worker its own CUDA
+        # context; Dr.Jit's kernel cache on disk is shared); the regression references were made on LLVM and are
+        # compared with the other-backend tolerances there (evaluation/regression.py); extras the image lacks
+        # are skipped with their reason
+        n=${TEST_WORKERS:-8}
+        step tests_cuda "${TEST_LIMIT:-400}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -q -rfEs \
+            -p no:cacheprovider -n "$n" --timeout 240 tests
+        tail -n 60 "$W/tests_cuda.txt" ;;
     bench)
-        # engine + converter (device, per step, host) and the renders' cost beyond the radiance render
-        EVENTFIELD_RESULTS_DIR="$OUT" timeout 300 $PY benchmarks/bench_event_engine.py $quick \
-            > "$OUT/event_engine.txt" 2>&1
-        # HDF5 writing with the chunks deflated on the host's cores (idle while the GPU renders) against HDF5's
-        # own filters on one thread
-        [ -z "$quick" ] && EVENTFIELD_RESULTS_DIR="$OUT" timeout 120 $PY benchmarks/bench_writer.py \
-            > "$OUT/writer.txt" 2>&1
-        # the realistic pixel (every effect, batched) against the ideal one, and a step at a time
-        [ -z "$quick" ] && EVENTFIELD_RESULTS_DIR="$OUT" timeout 150 $PY benchmarks/bench_pixel.py \
-            > "$OUT/pixel.txt" 2>&1
-        # issue 15's own row: the fan at 1280x720, 400 steps, to HDF5 (render / events / motion / write split)
+        # engine + converter (device, per step, host) and issue 15's render rows (demo 0.1 s; fan 1280x720,
+        # 400 steps) with their cost beyond the radiance render
+        step event_engine 240 $PY benchmarks/bench_event_engine.py $quick
+        # issue 15's own row through the CLI: the fan at 1280x720, 400 steps, to HDF5 (render / events / motion /
+        # write split, and whether the writer or the render was the bottleneck)
         sizes="-D width=1280 -D height=720"; steps=400
         if [ -n "$quick" ]; then sizes="-D width=96 -D height=72"; steps=80; fi
-        timeout 200 $PY -m mitsuba_eventfield.cli render scenes/fan/fan.xml -o /tmp/fan_gpu.h5 $sizes \
-            --duration 0.02 --steps $steps --quiet > "$OUT/fan_render.txt" 2>&1
+        step fan_render 90 $PY -m mitsuba_eventfield.cli render scenes/fan/fan.xml -o /tmp/fan_gpu.h5 $sizes \
+            --duration 0.02 --steps $steps
         rm -f /tmp/fan_gpu.h5
-        tail -n 25 "$OUT/event_engine.txt" "$OUT/fan_render.txt" ;;
+        # the realistic pixel (every effect, batched) against the ideal one
+        step pixel 90 $PY benchmarks/bench_pixel.py
+        # host and GPU memory for 10x the duration (fan 346x260, every pixel, to HDF5)
+        [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
+        # HDF5 writing on the host's cores against HDF5's own filters on one thread
+        [ -z "$quick" ] && step writer 60 $PY benchmarks/bench_writer.py
+        cat "$W/steps.txt"; tail -n 30 "$W/event_engine.txt" "$W/fan_render.txt" ;;
     *) echo "usage: gpu_session.sh tests|bench [--quick]" >&2; exit 2 ;;
 esac

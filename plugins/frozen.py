@@ -58,12 +58,29 @@ class FrozenOrTraced:
             except RuntimeError as e:
                 if "frozen function" not in str(e):
                     raise
+                # Dr.Jit wraps whatever the recorded function raised, a KeyboardInterrupt too (Ctrl-C or the
+                # CLI's SIGTERM landing inside a recording): that is the user stopping, not a refusal to freeze,
+                # and tracing on would swallow it (the render ran to its end: seen under pytest-xdist)
+                stop = _interrupt_in(e)
+                if stop is not None:
+                    raise stop from e
                 why = " ".join(str(e.__cause__ or e).split()).split("validate(): ")[-1].split(". ")[0][:160]
                 self.refused = why or "refused"
             finally:
                 if collecting:
                     gc.enable()
         return self.fn(*args)
+
+
+def _interrupt_in(e: BaseException):
+    """The KeyboardInterrupt or SystemExit in ``e``'s chain of causes, or None."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, (KeyboardInterrupt, SystemExit)):
+            return e
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return None
 
 
 class FrozenCache(dict):

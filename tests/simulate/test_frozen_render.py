@@ -87,6 +87,28 @@ def test_no_cycle_collection_inside_a_frozen_call():
     assert seen == [False, True] and gc.isenabled()
 
 
+def test_an_interrupt_while_recording_stops_instead_of_falling_back():
+    """A KeyboardInterrupt (Ctrl-C, or the CLI's SIGTERM) raised inside a recording reaches the caller. Dr.Jit
+    hands it back wrapped in a RuntimeError, which FrozenOrTraced took for a refusal to freeze: it traced on, and
+    an interrupted CLI render ran to its end (seen under pytest-xdist). The next call records again."""
+    import mitsuba as mi
+
+    from mitsuba_eventfield import backend
+    calls = []
+
+    def stopped_once(x):
+        calls.append(1)
+        if len(calls) == 1:
+            raise KeyboardInterrupt("SIGINT")
+        return x + 1
+
+    frozen = backend.FrozenOrTraced(stopped_once)
+    with pytest.raises(KeyboardInterrupt, match="SIGINT"):
+        frozen(mi.Float([1.0, 2.0]))
+    assert frozen.refused is None and len(calls) == 1              # not traced on after the interrupt
+    assert frozen(mi.Float([1.0, 2.0])).numpy().tolist() == [2.0, 3.0] and frozen.refused is None
+
+
 def test_only_the_main_thread_freezes(monkeypatch):
     """Off the main thread nothing is frozen (a frozen call's traversal of our Python plugins takes the GIL
     under Dr.Jit's lock, which deadlocked a Dask worker against its event-loop thread: plugins/frozen.py): a
