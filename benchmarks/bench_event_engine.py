@@ -80,8 +80,11 @@ def converter(width, height, frames):
                   "mpix_steps_per_s": width * height * (frames - 1) / walls[name] / 1e6,
                   "mev_per_s": len(streams[name]) / walls[name] / 1e6, "stream": streams[name]} for name in paths}
     host = res["host"].pop("stream")
-    same = res["device"].pop("stream").equals(host) and res["device_per_step"].pop("stream").equals(host)
-    return {"width": width, "height": height, "frames": frames, "identical": bool(same), **res}
+    device, per_step = res["device"].pop("stream"), res["device_per_step"].pop("stream")
+    same = device.equals(host) and per_step.equals(host)
+    return {"width": width, "height": height, "frames": frames, "identical": bool(same),
+            "difference": {"device_per_step": _difference(device, per_step), "host": _difference(device, host)},
+            **res}
 
 
 def render_overhead(scene, duration, steps, reps=3, **defines):
