@@ -30,6 +30,20 @@ def needs(module: str, extra: str):
         pytest.skip(f"{module} is not installed (optional: pip install '.[{extra}]')")
 
 
+def pytest_configure(config):
+    config.addinivalue_line("markers", "needs(module, extra): the test needs an optional dependency; skipped "
+                            "with the reason where it is absent (failed under CI): see needs()")
+
+
+def pytest_runtest_setup(item):
+    for mark in item.iter_markers("needs"):
+        needs(*mark.args)
+
+
+# AEDAT4 files are written and read through dv-processing (the aedat4 extra), which a GPU image may lack
+AEDAT4 = pytest.param(".aedat4", marks=pytest.mark.needs("dv_processing", "aedat4"))
+
+
 @pytest.fixture(scope="session", autouse=True)
 def mono_variant():
     ef.set_variant(TEST_VARIANT)

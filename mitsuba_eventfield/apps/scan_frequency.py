@@ -105,13 +105,10 @@ def edge_contrast(img, ref, mask=None, floor: float = 0.0) -> float:
 def region_scores(img, ref, mask) -> dict:
     """PSNR and SSIM on ``mask`` on the scale of ``evaluation.quality`` (white level of the reference's region;
     SSIM: OpenCV's map on 8-bit codes, averaged over the region), and the edge contrast kept."""
-    import cv2
-
-    from ..evaluation.quality import psnr, white_level
+    from ..evaluation.quality import psnr, ssim_map, white_level
     white = white_level(ref[mask])
     codes = [np.rint(np.clip(a / white, 0, 1) * 255).astype(np.uint8) for a in (img, ref)]
-    ssim_map = cv2.quality.QualitySSIM_compute(codes[0], codes[1])[1]
-    return {"psnr_db": psnr(img[mask], ref[mask], white), "ssim": float(ssim_map[mask].mean()),
+    return {"psnr_db": psnr(img[mask], ref[mask], white), "ssim": float(ssim_map(*codes)[mask].mean()),
             "edge_contrast": edge_contrast(img, ref, mask, EDGE_FLOOR)}
 
 

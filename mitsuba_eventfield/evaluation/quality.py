@@ -41,16 +41,37 @@ def psnr(estimate: np.ndarray, truth: np.ndarray, white: float | None = None) ->
     return float("inf") if mse == 0 else float(10 * np.log10(1.0 / mse))
 
 
-def ssim(estimate: np.ndarray, truth: np.ndarray, white: float | None = None) -> float:
+# OpenCV's SSIM constants for 8-bit codes: (0.01 * 255)^2 and (0.03 * 255)^2
+_SSIM_C1, _SSIM_C2 = 6.5025, 58.5225
+
+
+def ssim_map(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The per-pixel SSIM of two 8-bit images (float32, the images' shape): OpenCV contrib's
+    ``cv2.quality.QualitySSIM_compute``. Where the contrib modules are missing (``opencv-python-headless``
+    installed beside or instead of the contrib build, as on the project's GPU image), the same computation
+    with core OpenCV's Gaussian blur, in the same float32 order: equal to contrib's to the bit
+    (tests/evaluation/test_quality.py)."""
     import cv2
+    if hasattr(cv2, "quality"):
+        return np.asarray(cv2.quality.QualitySSIM_compute(a, b)[1], np.float32).reshape(np.shape(a))
+    i1, i2 = np.asarray(a, np.float32), np.asarray(b, np.float32)
+
+    def blur(x):
+        return cv2.GaussianBlur(x, (11, 11), 1.5)
+    mu1, mu2 = blur(i1), blur(i2)
+    s1, s2, s12 = blur(i1 * i1) - mu1 * mu1, blur(i2 * i2) - mu2 * mu2, blur(i1 * i2) - mu1 * mu2
+    return ((2 * mu1 * mu2 + _SSIM_C1) * (2 * s12 + _SSIM_C2)
+            / ((mu1 * mu1 + mu2 * mu2 + _SSIM_C1) * (s1 + s2 + _SSIM_C2)))
+
+
+def ssim(estimate: np.ndarray, truth: np.ndarray, white: float | None = None) -> float:
     if np.shape(estimate) != np.shape(truth):
         raise ValueError(f"shapes differ: estimate {np.shape(estimate)}, truth {np.shape(truth)}")
     white = white_level(truth) if white is None else white
     a = np.rint(_unit(estimate, white) * 255).astype(np.uint8)
     b = np.rint(_unit(truth, white) * 255).astype(np.uint8)
-    score = cv2.quality.QualitySSIM_compute(a, b)[0]
-    channels = 1 if a.ndim == 2 else a.shape[-1]
-    return float(np.mean(score[:channels]))
+    # the mean over each channel's map, then over channels (every channel has as many pixels)
+    return float(np.mean(ssim_map(a, b), dtype=np.float64))
 
 
 def scores(estimate: np.ndarray, truth: np.ndarray, white: float | None = None) -> dict:

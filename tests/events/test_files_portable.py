@@ -12,13 +12,14 @@ import h5py
 import numpy as np
 import OpenEXR
 import pytest
+from conftest import AEDAT4
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.events import disk
 from mitsuba_eventfield.events import io as eventio
 from mitsuba_eventfield.images import read_exr, write_exr
 
-FORMATS = [".h5", ".npz", ".txt", ".aedat4"]
+FORMATS = [".h5", ".npz", ".txt", AEDAT4]
 
 
 @pytest.fixture(scope="module")
@@ -257,6 +258,7 @@ def _aedat4_body_damaged(tmp_path, stream, damage):
     return str(path)
 
 
+@pytest.mark.needs("dv_processing", "aedat4")
 @pytest.mark.parametrize("damage", ["overwritten_ff", "overwritten_random", "truncated_mid_packet"])
 def test_aedat4_with_a_damaged_body_is_one_line_never_a_hang(tmp_path, stream, damage):
     """dv-processing spins forever inside one call on some damaged packets (these two among them): the read

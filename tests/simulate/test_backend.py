@@ -26,14 +26,14 @@ def test_llvm_library_is_at_least_16():
 APPENDERS = """
 import json, sys
 import mitsuba as mi
-mi.set_variant("llvm_ad_mono")
+mi.set_variant(sys.argv[2])
 def appenders():
     log = mi.logger()
     return [type(log.appender(i)).__name__ for i in range(log.appender_count())]
 seen = {"before": appenders()}
 import mitsuba_eventfield as ef
 seen["import"] = appenders()
-ef.set_variant("llvm_ad_mono")
+ef.set_variant(sys.argv[2])
 ef.load_scene(ef.scene.bundled_scene("demo/demo.xml"), width=8, height=6)
 seen["set_variant"] = appenders()
 ef.quiet_mitsuba_log()
@@ -57,7 +57,9 @@ def test_mitsuba_log_is_ours_only_when_asked(tmp_path):
     import sys
     path = str(tmp_path / "e.h5")
     ef.write_events(path, ef.EventStream([1], [2], [3], [1], 8, 6, {}))
-    r = subprocess.run([sys.executable, "-c", APPENDERS, path], capture_output=True, text=True, timeout=300)
+    from conftest import TEST_VARIANT
+    r = subprocess.run([sys.executable, "-c", APPENDERS, path, TEST_VARIANT], capture_output=True, text=True,
+                       timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     seen = json.loads(r.stdout.strip().splitlines()[-1])
     assert seen["before"] == ["StreamAppender"]
