@@ -43,9 +43,14 @@ class DeviceEvents:
     refractory_dropped: int = 0      # crossings and noise events the refractory period removed in this step
     noise_events: int = 0            # shot-noise events kept in this step
 
-    def numpy(self):
+    def numpy(self, owned: bool = False):
         """(x uint16, y uint16, t int64 us, p int8) NumPy arrays. On the CPU these are views of the Dr.Jit
-        arrays (no copy; x and y strided halves of ``xy``); from a GPU, one device-to-host copy."""
+        arrays (no copy; x and y strided halves of ``xy``); from a GPU, one device-to-host copy into Dr.Jit's
+        pinned host memory. ``owned``: NumPy's own memory instead, one host copy more, and Dr.Jit's buffers
+        released here. For arrays that another thread frees (the background writer): Dr.Jit returns a freed
+        pinned buffer to its cache through the freeing thread's CUDA state, and the fan's peak host memory grew
+        with the events written (an H200: 1.2 GB over 0.05 s, 7.1 GB over 0.5 s; flat on the CPU, also with
+        16 writer threads; docs/design.md)."""
         if self.count == 0:
             return (np.empty(0, np.uint16), np.empty(0, np.uint16), np.empty(0, np.int64), np.empty(0, np.int8))
         xy = self.xy.numpy()
@@ -54,7 +59,10 @@ class DeviceEvents:
             x, y = halves[0::2], halves[1::2]
         else:
             x, y = (xy & 0xFFFF).astype(np.uint16), (xy >> 16).astype(np.uint16)
-        return x, y, self.t.numpy(), self.p.numpy()
+        cols = (x, y, self.t.numpy(), self.p.numpy())
+        if owned:
+            cols = tuple(np.array(c, copy=True, order="C") for c in cols)
+        return cols
 
     @staticmethod
     def concat(parts: list["DeviceEvents"]) -> "DeviceEvents":

@@ -77,8 +77,10 @@ class Sink:
                 self._add_host(*part.numpy(), until)
             return
         # to a writer on the CPU (the device is the host): join the parts' views once there; from a GPU join
-        # them on the device first, so that one copy crosses
-        host = DeviceEvents.host_columns(parts) if _cpu() else DeviceEvents.concat(parts).numpy()
+        # them on the device first, so that one copy crosses; a writer frees the chunk on its own thread, so it
+        # gets NumPy's memory, not Dr.Jit's pinned buffers (DeviceEvents.numpy)
+        host = DeviceEvents.host_columns(parts) if _cpu() else \
+            DeviceEvents.concat(parts).numpy(owned=self.writer is not None)
         self._add_host(*host, until)
 
     def add_step(self, events, complete_until_us: int) -> None:
