@@ -25,7 +25,8 @@ pack
 step() {   # step NAME SECONDS COMMAND...: the command's output to $W/NAME.txt, then pack
     local name=$1 limit=$2; shift 2
     local t0=$SECONDS
-    EVENTFIELD_RESULTS_DIR="$W" timeout "$limit" "$@" > "$W/$name.txt" 2>&1
+    # SIGINT first: pytest then prints its summary of what ran (the failures' causes) before it stops
+    EVENTFIELD_RESULTS_DIR="$W" timeout -s INT -k 30 "$limit" "$@" > "$W/$name.txt" 2>&1
     echo "[$name] exit $? after $((SECONDS - t0)) s" | tee -a "$W/steps.txt"
     pack
 }
@@ -37,9 +38,10 @@ case "$stage" in
         # compared with the other-backend tolerances there (evaluation/regression.py); extras the image lacks
         # are skipped with their reason
         n=${TEST_WORKERS:-8}
-        step tests_cuda "${TEST_LIMIT:-400}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -q -rfEs \
-            -p no:cacheprovider -n "$n" --timeout 240 tests
-        tail -n 60 "$W/tests_cuda.txt" ;;
+        # (-v: each test's outcome as it ends; a run cut short still names what failed; TESTS picks a subset)
+        step tests_cuda "${TEST_LIMIT:-400}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -v \
+            --tb=short -rfEs -p no:cacheprovider -n "$n" --timeout 240 ${TESTS:-tests}
+        grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_cuda.txt" | tail -n 60 ;;
     bench)
         # engine + converter (device, per step, host) and issue 15's render rows (demo 0.1 s; fan 1280x720,
         # 400 steps) with their cost beyond the radiance render
