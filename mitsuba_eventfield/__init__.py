@@ -41,9 +41,11 @@ from .optics.scan import ScanCurve, curve_from_dict, event_angles, make_curve  #
 from .scene import Motion, TimedScene, load_motion, load_scene, parse_motion  # noqa: E402
 from .simulate import auto  # noqa: E402
 from .simulate.convert import events_from_frames  # noqa: E402
+from .simulate.device_stream import DeviceEventStream  # noqa: E402
 from .simulate.render import RenderSummary, render_events, render_frames  # noqa: E402
 
 __all__ = ["__version__", "choose_variant", "set_variant", "quiet_mitsuba_log", "EventFieldError", "ConfigError", "EventStream",
+           "DeviceEventStream",
            "H5EventWriter", "read_events", "write_events", "Motion", "load_motion", "parse_motion",
            "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "render_frames", "events_from_frames", "reconstruct",
            "TimedScene", "load_scene", "scan", "ScanCurve", "make_curve", "curve_from_dict", "event_angles",

@@ -104,7 +104,7 @@ def event_word(xy, on):
 
 def polarity(on):
     """Int8 +1 where ``on``, -1 elsewhere: the ``DeviceEvents.p`` column."""
-    i8 = dr.int8_array_t(mi.Int32)
+    i8 = int8_array()
     return dr.select(on, i8(1), i8(-1))
 
 
@@ -147,8 +147,13 @@ def time_order(t_us: np.ndarray, step_start_us: int) -> np.ndarray:
     return np.argsort(t_us, kind="stable")
 
 
+def int8_array():
+    """The ``DeviceEvents.p`` column's type (Int8 of the active backend)."""
+    return dr.int8_array_t(mi.Int32)
+
+
 def empty_columns():
-    return mi.UInt32(), mi.Int64(), dr.int8_array_t(mi.Int32)()
+    return mi.UInt32(), mi.Int64(), int8_array()()
 
 
 def empty() -> DeviceEvents:

@@ -93,6 +93,10 @@ CASES = {
     "write_preview t0": (lambda s: ef.write_preview(os.path.join(OUT, "p.png"), EVENTS, t0_us=math.nan), "t0_us"),
     "render_frames empty times": (lambda s: ef.render_frames(s, []), "times"),
     "events_from_frames fps": (lambda s: ef.events_from_frames(np.ones((3, 4, 4)), fps=-1), "fps"),
+    "events_from_frames on_device": (lambda s: ef.events_from_frames(
+        np.ones((3, 4, 4)), fps=10, output=os.path.join(OUT, "c.h5"), on_device=True), "on_device"),
+    "render_events on_device": (lambda s: ef.render_events(s, 0.01, steps=2, output=os.path.join(OUT, "r.h5"),
+                                                           on_device=True), "on_device"),
     "TimedScene scene": (lambda s: ef.TimedScene(None), "scene"),
     "load_scene motion": (lambda s: ef.load_scene(DEMO, motion=5, width=16, height=12), "motion"),
     "curve_from_dict curve": (lambda s: ef.curve_from_dict({"curve": "zigzag"}), "zigzag"),
@@ -145,6 +149,8 @@ EXEMPT = {
     "RenderSummary": "result record that render_events fills in and returns; never built from user input",
     "SweepTable": "result record that sweep returns; never built from user input",
     "DepthMap": "result record that depth_from_focus returns; never built from user input",
+    "DeviceEventStream": "result record that events_from_frames / render_events return with on_device; never "
+                         "built from user input",
     "ScanCurve": "abstract base of the scan curves (its methods raise NotImplementedError); curves come from "
                  "make_curve / curve_from_dict, which have cases",
 }

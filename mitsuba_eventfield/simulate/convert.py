@@ -23,6 +23,7 @@ from ..events.io import format_of
 from ..plugins import event_batch, event_fill, pixel_model
 from ..validate import positive
 from .frame_sources import FrameSource, from_array, open_frames
+from .device_stream import check_on_device
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary
 
@@ -46,7 +47,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
                        pixel: dict | None = None, threshold: float | None = None, srgb: bool = False,
                        output: str | None = None, fmt: str | None = None, progress: bool = False,
                        event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, meta: dict | None = None,
-                       frames_per_kernel: int | None = None):
+                       frames_per_kernel: int | None = None, on_device: bool = False):
     """Events of a frame sequence through the event pixel model.
 
     ``frames``: a (T, H, W[, C]) array (intensity: floats linear, integers scaled by their maximum), a path
@@ -56,9 +57,14 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     ``frames_per_kernel``: frames the pixel model takes per kernel where it can (``event_batch``; the events
     are the same, only the speed changes); None picks by film size and backend.
 
+    ``on_device=True`` (no ``output``): the events stay on the device and come back as a
+    :class:`DeviceEventStream` (columns for PyTorch and the like through DLPack, no copy; ``.numpy()`` is the
+    EventStream this returns otherwise).
+
     Returns the :class:`EventStream` (``output`` None) or, writing to ``output``, the :class:`RenderSummary`.
     """
     backend.ensure_variant()
+    check_on_device(on_device, output)
     group = None if frames_per_kernel is None else positive(frames_per_kernel, "frames_per_kernel", integer=True)
     source = frames if isinstance(frames, FrameSource) else \
         open_frames(frames, fps, srgb) if isinstance(frames, (str, os.PathLike)) else \
@@ -75,7 +81,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
             "width": source.width, "height": source.height, "optics": {"design": "frames (converted)"},
             "pixel_model": integ.pixel_model_metadata(), "source": source.describe, **(meta or {})}
     sink = Sink(output, fmt, source.width, source.height, meta, count=summary.count,
-                buffer_mb=positive(event_buffer_mb, "event_buffer_mb"))
+                buffer_mb=event_buffer_mb, on_device=on_device)
     wall0 = time.perf_counter()
     try:
         t_first, t_last = _feed(source, integ, sink, summary, progress, group)

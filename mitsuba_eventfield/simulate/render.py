@@ -20,7 +20,7 @@ from ..errors import ConfigError, EventFieldError
 from ..events.io import format_of
 from ..plugins.event_fill import film_limit_error
 from ..scene.timed import TimedScene, load_scene
-from ..validate import available_memory, positive
+from ..validate import available_memory
 from .periodic import period_blocks, phase_grid, reuse_plan
 from . import sample_allocation, static_pixels
 from . import step_batch
@@ -29,6 +29,7 @@ from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
 from .image_motion import note_image_motion
 from .stepping import SEED_MODES, Stepping, default_steps, stepping  # noqa: F401  (SEED_MODES: re-exported)
+from .device_stream import check_on_device
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary, run_metadata
 
@@ -340,11 +341,12 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   progress: bool = False, t_start: float = 0.0, reuse: bool = True, preset: str | None = None,
                   pixel: dict | None = None, extra_meta: dict | None = None,
                   event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, checkpoint_s: float | None = None,
-                  resume: bool = False, px_per_step: float = 1.0, spp_changing: int | None = None):
+                  resume: bool = False, px_per_step: float = 1.0, spp_changing: int | None = None, on_device=False):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
-    Returns an :class:`EventStream` when ``output`` is None; otherwise streams to ``output`` (by extension: HDF5,
-    npz, text, AEDAT4 in chunks, RAW, DAT at the end) and returns a :class:`RenderSummary` (``meta["render"]``).
+    Returns an :class:`EventStream` when ``output`` is None (``on_device``: a :class:`DeviceEventStream`, the
+    events left on the device); otherwise streams to ``output`` (by extension: HDF5, npz, text, AEDAT4 in
+    chunks, RAW, DAT at the end) and returns a :class:`RenderSummary` (``meta["render"]``).
     ``reuse``: a static scene under a periodic view renders one period and feeds its frames again; a moving
     one renders the pixels no moving object can change once per period (``static_pixels.py``); False: every
     pixel at every step.
@@ -360,6 +362,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     ``spp_changing``: samples where they matter: pixels whose brightness changes (found by probe renders) get
     this many samples per step, the others ``spp`` (``sample_allocation.py``).
     """
+    check_on_device(on_device, output)
     timed = load_scene(scene)
     st = stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_step, spp, seed, seed_mode,
                   t_start, px_per_step)
@@ -376,9 +379,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                      sample_allocation=allocation.as_meta() if allocation else None)
     meta.update(extra_meta or {})
     checkpoints = checkpoints_for(output, fmt, meta, checkpoint_s, resume)
-    sink = Sink(output, fmt, width, height, meta, count=summary.count,
-                buffer_mb=positive(event_buffer_mb, "event_buffer_mb"),
-                segments=checkpoints.segments if checkpoints else None)
+    sink = Sink(output, fmt, width, height, meta, count=summary.count, buffer_mb=event_buffer_mb,
+                segments=checkpoints.segments if checkpoints else None, on_device=on_device)
     bar = _progress_bar(st.duration) if progress else None
     wall0 = time.perf_counter()
     try:
@@ -392,8 +394,6 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     finally:
         if bar is not None:
             bar.close()
-    if stream is None:
-        return summary
-    stream.meta = meta
-    stream.meta["render"] = summary.as_dict()
+    if stream is not None:           # in memory, on the device, or a format written at the end (RAW, DAT)
+        stream.meta = {**meta, "render": summary.as_dict()}
     return stream if output is None else summary

@@ -11,8 +11,10 @@ from ..events.io import format_of, write_events
 from ..events.streaming import STREAMED, open_writer
 from ..events.stream import EventStream
 from ..events.writer import BackgroundWriter
-from ..plugins.event_fill import DeviceEvents
+from ..plugins.event_fill import DeviceEvents, device_copy, int8_array
+from ..validate import positive
 from .checkpoint import SegmentWriter
+from .device_stream import DeviceEventStream, numpy_columns
 
 DEFAULT_EVENT_BUFFER_MB = 64.0
 DEVICE_BYTES_PER_EVENT = 13          # xy (UInt32), t (Int64), p (Int8) while an event waits on the device
@@ -33,17 +35,20 @@ class Sink:
     (segments under ``<output>.resume`` for a checkpointed render). ``count`` is called with each chunk's polarities as it leaves the buffer (the render's ON/OFF totals)."""
 
     def __init__(self, output, fmt, width, height, meta, count=None, buffer_mb: float = DEFAULT_EVENT_BUFFER_MB,
-                 segments: list | None = None):
+                 segments: list | None = None, on_device: bool = False):
+        self.capacity = buffer_events(positive(buffer_mb, "event_buffer_mb"))     # refused before any file opens
         self.output, self.width, self.height, self.meta = output, width, height, meta
         self.fmt = format_of(output, fmt) if output else None
         self.writer = None
+        # on_device (no output): chunks stay on the device, joined there at the end (simulate/device_stream.py)
+        self.on_device = bool(on_device) and not output
+        self.device_chunks: list = []
         if segments is not None:         # a checkpointed render: segments under <output>.resume, merged at the end
             self.writer = BackgroundWriter(SegmentWriter(output, width, height, meta, segments))
         elif self.fmt in STREAMED:       # HDF5, npz, text, AEDAT4: written while rendering
             self.writer = BackgroundWriter(open_writer(output, self.fmt, width, height, meta))
-        self.memory = EventBuffer() if self.writer is None else None     # the in-memory result
+        self.memory = EventBuffer() if self.writer is None and not self.on_device else None   # in-memory result
         self.count = count or (lambda p: None)
-        self.capacity = buffer_events(buffer_mb)
         self.device_parts, self.device_events, self.until = [], 0, None
 
     @property
@@ -72,6 +77,9 @@ class Sink:
             return
         parts, until = self.device_parts, self.until
         self.device_parts, self.device_events, self.until = [], 0, None
+        if self.on_device:
+            self._keep_on_device(DeviceEvents.concat(parts))
+            return
         if _cpu() and self.writer is None:      # in memory on the CPU: each part's views copied into the buffer
             for part in parts:
                 self._add_host(*part.numpy(), until)
@@ -95,7 +103,19 @@ class Sink:
         self.flush_device()
         self._add_host(x, y, t, p, complete_until_us)
 
+    def _keep_on_device(self, chunk: DeviceEvents) -> None:
+        if chunk.count:
+            self.count(chunk.p.numpy())          # the ON / OFF totals: one byte an event crosses, not thirteen
+            self.device_chunks.append(chunk)
+
     def _add_host(self, x, y, t, p, complete_until_us):
+        if self.on_device:                      # a host-side step's events (a sequential pixel model) go up
+            import mitsuba as mi
+            xy, t, p = numpy_columns(x, y, t, p)
+            if len(t):
+                self._keep_on_device(DeviceEvents(device_copy(xy, mi.UInt32), device_copy(t, mi.Int64),
+                                                  device_copy(p, int8_array()), len(t)))
+            return
         self.count(p)
         if self.writer is not None:
             self.writer.append(x, y, t, p, complete_until_us)
@@ -121,6 +141,8 @@ class Sink:
 
     def finish(self, end_us, meta):
         self.drain()
+        if self.on_device:
+            return DeviceEventStream.join(self.device_chunks, self.width, self.height, {**self.meta, **meta})
         if self.writer is not None:
             self.writer.close(end_us=end_us, meta=meta)
             return None

@@ -1,0 +1,103 @@
+"""Conversion with the events left on the device (``events_from_frames(..., on_device=True)``,
+simulate/device_stream.py): the same events as the host result, against the closed-form ramp instants too; the
+columns handed over through DLPack without a copy; host-made steps uploaded; bad use refused in one line."""
+import numpy as np
+import pytest
+from test_convert import C, _ramp_truth, _ramps
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.plugins.event_integrator import host_path
+
+
+def _stack(frames=30, width=64, height=48, seed=0):
+    """A moving texture (every pixel crosses several times) at 1 kHz."""
+    rng = np.random.default_rng(seed)
+    tex = rng.random((height, width + frames)).astype(np.float32)
+    return np.stack([0.05 + tex[:, i:i + width] for i in range(frames)]), np.arange(frames) / 1000.0
+
+
+@pytest.mark.parametrize("pixel", [None, {"refractory_s": 2e-4, "shot_noise_hz": 3.0, "seed": 4}],
+                         ids=["ideal", "refractory_noise"])
+def test_device_result_equals_the_host_result(pixel):
+    stack, t = _stack()
+    host = ef.events_from_frames(stack, t, threshold=C, pixel=pixel)
+    dev = ef.events_from_frames(stack, t, threshold=C, pixel=pixel, on_device=True)
+    assert isinstance(dev, ef.DeviceEventStream) and len(dev) == len(host) > 20_000
+    assert dev.equals(host) and dev.numpy().equals(host)
+    assert dev.on_count() == int(np.count_nonzero(host.p > 0)) == dev.meta["render"]["on"]
+    assert dev.meta["render"]["events"] == len(host) and (dev.width, dev.height) == (64, 48)
+
+
+def test_columns_cross_by_dlpack_without_a_copy():
+    stack, t, rates = _ramps()
+    dev = ef.events_from_frames(stack, t, threshold=C, on_device=True)
+    cols = {k: np.from_dlpack(v) for k, v in dev.columns().items()}
+    assert {k: v.dtype for k, v in cols.items()} == {"x": np.int32, "y": np.int32, "t": np.int64, "p": np.int8}
+    # the closed-form instants, read straight from the device columns
+    truth = _ramp_truth(rates, t[-1])
+    assert len(cols["t"]) == 3 * sum(len(v) for v in truth.values()) and (cols["p"] == 1).all()
+    for x, expected in truth.items():
+        got = np.sort(cols["t"][(cols["x"] == x) & (cols["y"] == 1)])
+        assert len(got) == len(expected) and np.abs(got - expected).max() <= 1.0
+    # the DLPack view is the stream's own memory, not a copy: two exports point at one buffer (on the CPU
+    # backend, where NumPy can take the device's memory; a copying export would give two)
+    import mitsuba as mi
+    if mi.variant().startswith("llvm"):
+        first, second = np.from_dlpack(dev.t), np.from_dlpack(dev.t)
+        assert first.ctypes.data == second.ctypes.data and not first.flags.writeable
+
+
+def test_host_made_steps_are_uploaded(monkeypatch):
+    """The NumPy host path (a step at a time on the host) reaches the device result too, in time order."""
+    from mitsuba_eventfield.simulate import sink
+    uploads = []
+    real = sink.numpy_columns
+    monkeypatch.setattr(sink, "numpy_columns", lambda *c: uploads.append(len(c[2])) or real(*c))
+    stack, t = _stack(frames=12, seed=2)
+    plain = ef.events_from_frames(stack, t, threshold=C)
+    assert uploads == []
+    with host_path():
+        dev = ef.events_from_frames(stack, t, threshold=C, on_device=True, event_buffer_mb=0.05)
+    assert len(uploads) == 11 and sum(uploads) == len(dev)       # a step at a time, each uploaded
+    assert len(dev) > 5000 and dev.equals(plain) and dev.numpy().is_sorted
+
+
+def test_nothing_to_fire_and_bad_use():
+    flat = np.full((5, 8, 8), 0.5, np.float32)
+    dev = ef.events_from_frames(flat, np.arange(5) / 100.0, threshold=C, on_device=True)
+    assert len(dev) == 0 and dev.on_count() == 0 and len(dev.numpy()) == 0 and dev.numpy().width == 8
+    with pytest.raises(ef.EventFieldError, match=r"out\.h5: on_device keeps the events on the device"):
+        ef.events_from_frames(flat, np.arange(5) / 100.0, output="out.h5", on_device=True)
+
+
+def test_torch_tensors_share_the_columns():
+    torch = pytest.importorskip("torch")           # not a dependency: PyTorch users have it
+    stack, t = _stack(frames=8)
+    dev = ef.events_from_frames(stack, t, threshold=C, on_device=True)
+    tensors = dev.torch()
+    host = dev.numpy()
+    assert tensors["t"].dtype == torch.int64 and np.array_equal(tensors["t"].cpu().numpy(), host.t)
+    assert np.array_equal(tensors["x"].cpu().numpy(), host.x.astype(np.int32))
+
+
+@pytest.mark.parametrize("name", ["demo/demo.xml", "galvo_static/galvo_static.xml"])
+def test_a_render_left_on_the_device_equals_the_host_render(name, monkeypatch):
+    """render_events(on_device=True): the same events as in memory, for a moving scene (steps in batches) and a
+    static galvo scene whose later scan periods reuse the first period's events (kept and shifted on the host,
+    so they are uploaded)."""
+    import os
+
+    from conftest import ROOT
+
+    from mitsuba_eventfield.simulate import sink
+    uploads = []
+    real = sink.numpy_columns
+    monkeypatch.setattr(sink, "numpy_columns", lambda *c: uploads.append(len(c[2])) or real(*c))
+    path = os.path.join(ROOT, "scenes", name)
+    host = ef.render_events(ef.load_scene(path, width=40, height=30), 0.012, steps=48)
+    uploads.clear()
+    dev = ef.render_events(ef.load_scene(path, width=40, height=30), 0.012, steps=48, on_device=True)
+    assert len(host) > 500 and dev.equals(host) and dev.meta["render"]["events"] == len(host)
+    assert (sum(uploads) > 0) == ("galvo_static" in name)       # the reused periods came from the host
+    with pytest.raises(ef.EventFieldError, match="on_device keeps the events on the device"):
+        ef.render_events(ef.load_scene(path, width=8, height=6), 0.001, steps=2, output="x.h5", on_device=True)
