@@ -7,8 +7,9 @@ period all 0, device 'cpu', no output files), ``generate_events(luma, t)`` per f
 virtualenv (v2e is no dependency of ours), driven by this file in a subprocess.
 
 Throughput: pixel-steps per second of the conversion alone (frame synthesis excluded; v2e is handed its luma
-ready-made), on the first 100 frames, ours / v2e on 2 torch threads / v2e on 1 thread in turn, best of 5 each
-($EVENTFIELD_BENCH_REPS; $EVENTFIELD_V2E_TORCH_THREADS sets the 2).
+ready-made), on the first 100 frames, ours (an EventStream in host memory) / ours with the events left in
+Dr.Jit's arrays (``on_device=True``, read as NumPy arrays through DLPack) / v2e on 2 torch threads / v2e on 1
+thread in turn, best of 5 each ($EVENTFIELD_BENCH_REPS; $EVENTFIELD_V2E_TORCH_THREADS sets the 2).
 
 Same intensities: v2e takes luma in DN and applies its lin-log (linear through 0 below 20 DN, ln above). It is
 fed ``400 * I``, so the darkest pixel (I = 0.05) sits at 20 DN and every pixel is on its log branch, where
@@ -172,7 +173,8 @@ def timed(stack, times, folder):
     n = min(TIMED_FRAMES, len(stack))
     s, t = stack[:n], times[:n]
     ef.events_from_frames(s[:4], t[:4], threshold=C)                              # compile kernels
-    walls = {"ours": [], "v2e": [], "v2e_1_thread": []}
+    _arrays_left_in_drjit(ef, s[:4], t[:4])
+    walls = {"ours": [], "ours_arrays": [], "v2e": [], "v2e_1_thread": []}
     split = []            # per run of ours: (events on the device, the result moved into host memory), seconds
     for _ in range(REPS):
         t0 = time.perf_counter()
@@ -180,15 +182,29 @@ def timed(stack, times, folder):
         walls["ours"].append(time.perf_counter() - t0)
         split.append((ev.meta["render"]["events_s"], ev.meta["render"]["write_s"]))
         del ev
+        t0 = time.perf_counter()
+        cols = _arrays_left_in_drjit(ef, s, t)
+        walls["ours_arrays"].append(time.perf_counter() - t0)
+        del cols
         walls["v2e"].append(run_v2e(folder, LUMA_LOG, TORCH_THREADS, n)[0]["wall_s"])
         walls["v2e_1_thread"].append(run_v2e(folder, LUMA_LOG, 1, n)[0]["wall_s"])
     steps = stack.shape[1] * stack.shape[2] * (n - 1)
     out = {k: {"frames": n, "walls_s": w, "mpix_steps_per_s": steps / min(w) / 1e6} for k, w in walls.items()}
     for k in ("v2e", "v2e_1_thread"):
         out[k]["ours_over_this"] = out["ours"]["mpix_steps_per_s"] / out[k]["mpix_steps_per_s"]
+        out[k]["ours_arrays_over_this"] = out["ours_arrays"]["mpix_steps_per_s"] / out[k]["mpix_steps_per_s"]
     fastest = int(np.argmin(walls["ours"]))
     out["ours"]["events_s"], out["ours"]["host_result_s"] = split[fastest]
     return out
+
+
+def _arrays_left_in_drjit(ef, frames, times):
+    """Ours with the events left where the engine made them (``on_device=True``; on the CPU that is host
+    memory): x, y, t, p as NumPy arrays over Dr.Jit's memory (DLPack, no copy; x and y unpacked by one kernel),
+    which is how v2e hands its events over too (arrays in memory, not a file)."""
+    import numpy as np
+    dev = ef.events_from_frames(frames, times, threshold=C, on_device=True)
+    return {k: np.from_dlpack(v) for k, v in dev.columns().items()}
 
 
 def one_size(width, height, frames, eight_bit):
@@ -252,15 +268,20 @@ def markdown(res):
           f"{h['loadavg_1min_start_end'][1]:.1f} at the end: "
           "other jobs inflate times, v2e's on 2 threads most):", "",
           f"| film | ours Mpix-steps/s | ours: events / host result, ms a frame | v2e, {TORCH_THREADS} threads | "
-          "ours / v2e | v2e, 1 thread | ours / v2e |",
-          "|---|---|---|---|---|---|---|"]
+          "ours / v2e | v2e, 1 thread | ours / v2e | ours, events left in Dr.Jit's arrays | that / v2e, "
+          f"{TORCH_THREADS} threads |",
+          "|---|---|---|---|---|---|---|---|---|"]
     for s in res["sizes"]:
         t = s["timing"]
         frames = t["ours"]["frames"] - 1
         md.append(f"| {s['width']}x{s['height']} | {t['ours']['mpix_steps_per_s']:.2f} | "
                   f"{1e3 * t['ours']['events_s'] / frames:.2f} / {1e3 * t['ours']['host_result_s'] / frames:.2f} | "
                   f"{t['v2e']['mpix_steps_per_s']:.2f} | **{t['v2e']['ours_over_this']:.1f}x** | "
-                  f"{t['v2e_1_thread']['mpix_steps_per_s']:.2f} | {t['v2e_1_thread']['ours_over_this']:.1f}x |")
+                  f"{t['v2e_1_thread']['mpix_steps_per_s']:.2f} | {t['v2e_1_thread']['ours_over_this']:.1f}x | "
+                  f"{t['ours_arrays']['mpix_steps_per_s']:.2f} | {t['v2e']['ours_arrays_over_this']:.1f}x |")
+    md += ["", "The last two columns: ``on_device=True`` (on the CPU the device is the host), its x, y, t, p taken "
+           "as NumPy arrays over Dr.Jit's memory through DLPack (no copy; x and y unpacked by one kernel). v2e "
+           "too hands its events over as arrays in memory."]
     md += ["", "Agreement over the whole stack, each against a float64 ideal reference: pixels whose count differs "
            "(sum |diff|, max; how many of them have no tie), timestamp error of the k-th event in pixels with "
            "equal counts and no tie (p50 / p99 / max, us):", "",

@@ -22,8 +22,8 @@ from ..errors import EventFieldError
 from ..events.io import format_of
 from ..plugins import event_batch, event_fill, pixel_model
 from ..validate import positive
-from .frame_sources import FrameSource, from_array, open_frames
 from .device_stream import check_on_device
+from .frame_sources import FrameSource, from_array, open_frames
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary
 

@@ -27,9 +27,9 @@ from . import step_batch
 from .frames import FrameRenderer, frozen_render, render_frames  # noqa: F401  (render_frames: re-exported)
 from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
+from .device_stream import check_on_device
 from .image_motion import note_image_motion
 from .stepping import SEED_MODES, Stepping, default_steps, stepping  # noqa: F401  (SEED_MODES: re-exported)
-from .device_stream import check_on_device
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary, run_metadata
 
