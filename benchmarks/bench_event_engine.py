@@ -9,8 +9,9 @@ allocation, then two), for four paths: the events left on the device (``on_devic
 events synced before the clock stops), as chosen (frames batched, ``event_batch``), one frame a step
 (``event_batch.one_frame_a_step()``) and the NumPy host path (``event_integrator.host_path()``). Renders:
 demo and fan scenes, what beyond the radiance render costs (events + motion + write, and the whole wall time,
-as fractions of the render) for the device path (steps committed in batches, ``simulate/step_batch.py``), the
-device path a step at a time, and the host path. Every run compares the paths' events (on the same frames for
+as fractions of the render) for the device path with its events left on the device (``on_device=True``), the
+device path (steps committed in batches, ``simulate/step_batch.py``), the device path a step at a time, and the
+host path. Every run compares the paths' events (on the same frames for
 the converter; renders also compare the renderer with itself).
 
 Writes benchmarks/results/event_engine.json and .md; the device name is recorded with every number.
@@ -109,8 +110,10 @@ def render_overhead(scene, duration, steps, reps=3, **defines):
     render: the summary's events + motion + write against its render time (as the summary prints it), and the
     whole wall time against the render time (setup, the accuracy-limit frame and work the summary's timers
     miss: a kernel queued behind the render counts as render time there)."""
+    import drjit as dr
+
     import mitsuba_eventfield as ef
-    paths = ("device", "device_per_step", "host")
+    paths = ("on_device", "device", "device_per_step", "host")
     scenes, best, streams = {}, {}, {}
     for name in paths:
         scenes[name] = ef.load_scene(scene, **defines)
@@ -120,7 +123,11 @@ def render_overhead(scene, duration, steps, reps=3, **defines):
         for name in paths:
             with _path(name):
                 t0 = time.perf_counter()
-                ev = ef.render_events(scenes[name], duration, steps=steps, reuse=False)
+                ev = ef.render_events(scenes[name], duration, steps=steps, reuse=False,
+                                      on_device=name == "on_device")
+                if name == "on_device":           # the events made, not merely queued
+                    dr.eval(ev.xy, ev.t, ev.p)
+                    dr.sync_thread()
                 wall = time.perf_counter() - t0
             r = ev.meta["render"]
             beyond = r["events_s"] + r["motion_s"] + r["write_s"]
@@ -129,12 +136,13 @@ def render_overhead(scene, duration, steps, reps=3, **defines):
                    "wall_beyond_render_pct": 100 * (wall - r["render_s"]) / r["render_s"], "events": r["events"]}
             if name not in best or wall < best[name]["wall_s"]:
                 best[name] = row
-            streams.setdefault(name, ev)
+            if name not in streams:
+                streams[name] = ev.numpy() if name == "on_device" else ev
             del ev
-    d = streams["device"]
+    d, others = streams["device"], [k for k in paths if k != "device"]
     return {"scene": os.path.relpath(scene, SCENES), "steps": steps, "reps": reps,
-            "identical": all(d.equals(streams[k]) for k in paths[1:]),
-            "difference": {k: _difference(d, streams[k]) for k in paths[1:]}, **best}
+            "identical": all(d.equals(streams[k]) for k in others),
+            "difference": {k: _difference(d, streams[k]) for k in others}, **best}
 
 
 def _difference(a, b):
@@ -192,7 +200,8 @@ def main(quick=False):
            "+ write, and the whole wall time, each as % of the render):", "",
            "| scene | steps | events | path | render s | events / motion / write s | beyond render | wall beyond "
            "render |", "|---|---|---|---|---|---|---|---|"]
-    labels = {"device": "device, steps in batches", "device_per_step": "device, a step a commit", "host": "host"}
+    labels = {"on_device": "device, events left there", "device": "device, steps in batches",
+              "device_per_step": "device, a step a commit", "host": "host"}
     for r in renders:
         for k, label in labels.items():
             d = r[k]
