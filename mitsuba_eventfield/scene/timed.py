@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,6 +53,18 @@ class TimedScene:
         # time-varying sensors (the galvo) expose an opaque `time` parameter and reduce t to a scan phase
         self._sensor_times = [(key, node) for key, (_, _, node, _) in self.params.properties.items()
                               if key.endswith(".time") and hasattr(node, "phase_time")]
+        self._moving = self._moving_params()
+
+    def _moving_params(self):
+        """The parameters a step writes, alone: Mitsuba's ``update()`` schedules and hashes every parameter it
+        holds (the demo's 40 of them: 0.2 ms of Python a step, on every backend), so the steps go through a copy
+        kept to the moving ones (the same objects, parents notified the same way). ``self.params`` keeps all of
+        them for reading."""
+        keys = [key for key, _ in self._sensor_times] + [b.key for b in self._bindings]
+        keys += [b.name + ".vertex_normals" for b in self._meshes if b.base[1] is not None]
+        moving = self.params.copy()
+        moving.keep([re.escape(key) + "$" for key in keys] or ["$^"])
+        return moving
 
     @property
     def scan_period(self) -> float | None:
@@ -118,7 +131,7 @@ class TimedScene:
         if not self._bindings and not self._sensor_times:
             return
         for key, node in self._sensor_times:
-            self.params[key] = mi.Float(node.phase_time(self.time if view_time is None else float(view_time)))
+            self._moving[key] = mi.Float(node.phase_time(self.time if view_time is None else float(view_time)))
         for b in self._bindings:
             if b.kind == "to_world":
                 # built from a scalar (host) transform: its entries and inverse are literals, which Mitsuba
@@ -128,10 +141,10 @@ class TimedScene:
                 xf = transform_type(scalar_type(self.motion.objects[b.name].matrix(self.time) @ base))
                 if opaque:
                     dr.make_opaque(xf)
-                self.params[b.key] = xf
+                self._moving[b.key] = xf
         if self._meshes:
             self._move_meshes(self._meshes)
-        self.params.update()
+        self._moving.update()
 
     def _move_meshes(self, meshes) -> None:
         """Every moving mesh's positions and normals at ``self.time`` in one kernel, from one host-to-device copy
@@ -151,7 +164,7 @@ class TimedScene:
                 moved.append((b.name + ".vertex_normals", dr.ravel(dr.normalize(xf @ normals))))
         dr.eval(*(v for _, v in moved))   # every mesh's positions and normals in one kernel per step
         for key, value in moved:
-            self.params[key] = value
+            self._moving[key] = value
 
     def describe(self) -> dict:
         """Metadata describing the scene for output files."""
