@@ -87,6 +87,51 @@ def test_h5_chunks_deflated_on_threads_are_what_hdf5_itself_stores(tmp_path, str
             assert ds.shape == (len(stream),) and len(stream) % 4096     # and a partial last chunk, HDF5's
 
 
+@pytest.mark.parametrize("sizes", [[100, 3000, 1024, 5000, 7, 10_869], [20_000], [1024] * 19 + [544],
+                                   [1500, 18_500], [1023, 1, 1025, 17_951]])
+def test_appended_pieces_are_joined_only_up_to_a_chunk_boundary(tmp_path, stream, monkeypatch, sizes):
+    """A flush joins the waiting remainder with the new piece only up to the first chunk boundary; the rest of
+    the piece is deflated from where it lies (no copy of the whole piece on the writer's thread), and the file
+    holds the events in order whatever the piece sizes (under, at and over the chunk size)."""
+    from mitsuba_eventfield.events import hdf5
+    assert sum(sizes) == len(stream)
+    real = hdf5.deflate_chunk
+    shared = []                         # per deflated t chunk: does it lie in the appended array itself?
+    pieces = []
+
+    def deflate(v, *a):
+        if v.dtype == np.int64:
+            shared.append(any(np.shares_memory(v, q) for q in pieces))
+        return real(v, *a)
+    monkeypatch.setattr(hdf5, "deflate_chunk", deflate)
+    path = str(tmp_path / "pieces.h5")
+    with ef.H5EventWriter(path, 64, 48, chunk=1024, threads=2) as w:
+        start = 0
+        for n in sizes:
+            t = stream.t[start:start + n].copy()           # the writer's own copy of the piece, as a chunk is
+            pieces.append(t)
+            w.append(stream.x[start:start + n], stream.y[start:start + n], t, stream.p[start:start + n])
+            start += n
+    assert ef.read_events(path).equals(stream)
+    assert len(shared) == len(stream) // 1024
+    # every chunk past a piece's first boundary comes from the piece itself: with a 1500-event lead, 18
+    # of the 18,500-event piece's chunks; one piece alone: all 19
+    expected = {(20_000,): 19, (1500, 18_500): 18}.get(tuple(sizes))
+    if expected is not None:
+        assert sum(shared) == expected
+
+
+def test_joined_column_slices():
+    from mitsuba_eventfield.events.hdf5 import _Joined
+    pieces = [np.arange(0, 5), np.arange(5, 30)]
+    j = _Joined.of(pieces, 4)                  # lead 5: joined up to 8, the rest a view of the last piece
+    assert len(j) == 30 and j.split == 8 and np.shares_memory(j.body, pieces[1])
+    for a, b in [(0, 4), (4, 8), (8, 12), (6, 10), (0, 30), (12, 30), (29, 30)]:
+        assert np.array_equal(j[a:b], np.arange(a, b))
+    assert np.array_equal(j[13:], np.arange(13, 30)) and np.array_equal(j[3:], np.arange(3, 30))
+    assert np.array_equal(_Joined.of([np.arange(3), np.arange(3, 5)], 4)[0:5], np.arange(5))   # ends short
+
+
 def test_old_lzf_files_still_read(tmp_path, stream):
     """Files written before the switch (LZF, an h5py-only filter) keep reading."""
     path = str(tmp_path / "old.h5")
