@@ -151,13 +151,12 @@ class TimedScene:
         of all their matrices (a Matrix4f per mesh from NumPy copied each of its 16 entries on its own)."""
         mats = np.stack([self.motion.objects[b.name].matrix(self.time) for b in meshes]).astype(np.float32)
         entries = mi.Float(mats.ravel())
-        if self._entry_base is None:      # an opaque 0: entry (opaque + j) is a gather inside the kernel; a
+        if self._entry_base is None:      # an opaque 0: matrix (opaque + i) is a gather inside the kernel; a
             self._entry_base = mi.UInt32(0)   # literal index would read each entry with a copy of its own
             dr.make_opaque(self._entry_base)
         moved = []                     # (parameter key, new vertex array) of every moving mesh
         for i, b in enumerate(meshes):
-            mat = mi.Matrix4f(*[dr.gather(mi.Float, entries, self._entry_base + (16 * i + j)) for j in range(16)])
-            xf = mi.Transform4f(mat)
+            xf = mi.Transform4f(dr.gather(mi.Matrix4f, entries, self._entry_base + i))   # the i-th row-major 4x4
             positions, normals = b.base
             moved.append((b.key, dr.ravel(xf @ positions)))
             if normals is not None:
