@@ -5,8 +5,8 @@ Frame stack: a textured plane translating at 1.5 px per frame plus a bar rotatin
 frames, C = 0.2, ideal pixel: what issue 15 measured on an H100. Throughput is pixel-steps per second of the
 converter (``events_from_frames``: upload, pixel kernel, events, one host copy per chunk), excluding the frame
 synthesis, best of four runs (two rounds over the paths, each a first untimed run for compilation and
-allocation, then two), for four paths: the events left on the device (``on_device=True``: no host copy, the
-events synced before the clock stops), as chosen (frames batched, ``event_batch``), one frame a step
+allocation, then two), for five paths: the frames (uploaded once, untimed) and the events on the device, the
+events left on the device (``on_device=True``: no host copy, the events synced before the clock stops), as chosen (frames batched, ``event_batch``), one frame a step
 (``event_batch.one_frame_a_step()``) and the NumPy host path (``event_integrator.host_path()``). Renders:
 demo and fan scenes, what beyond the radiance render costs (events + motion + write, and the whole wall time,
 as fractions of the render) for the device path with its events left on the device (``on_device=True``), the
@@ -61,22 +61,26 @@ def frame_stack(width, height, frames, rate_hz=2000.0):
     return out, np.arange(frames) / rate_hz
 
 
-def _convert(stack, times, name):
+def _convert(stack, times, name, device_stack=None):
     """One conversion by path ``name``; ``on_device`` keeps the events on the device, synced before the clock
-    stops (the events made, not merely queued)."""
+    stops (the events made, not merely queued); ``device_frames`` does too, from frames already on the device
+    (``device_stack``, uploaded once before the clock starts: what a GPU pipeline has)."""
     import mitsuba_eventfield as ef
-    if name != "on_device":
+    if name not in ("on_device", "device_frames"):
         return ef.events_from_frames(stack, times, threshold=0.2)
     import drjit as dr
-    ev = ef.events_from_frames(stack, times, threshold=0.2, on_device=True)
+    frames = device_stack if name == "device_frames" else stack
+    ev = ef.events_from_frames(frames, times, threshold=0.2, on_device=True)
     dr.eval(ev.xy, ev.t, ev.p)
     dr.sync_thread()
     return ev
 
 
 def converter(width, height, frames):
+    import mitsuba as mi
     stack, times = frame_stack(width, height, frames)
-    paths = ("on_device", "device", "device_per_step", "host")
+    device_stack = mi.TensorXf(stack)
+    paths = ("device_frames", "on_device", "device", "device_per_step", "host")
     walls, streams = {name: float("inf") for name in paths}, {}
     # two rounds over the paths (this VM's speed drifts by 30 % within minutes), in each a path's first
     # conversion untimed (it compiles, and lets the allocator see the sizes: a first full run is 2-5x slower on
@@ -85,10 +89,10 @@ def converter(width, height, frames):
     for _ in range(2):
         for name in paths:
             with _path(name):
-                streams[name] = _convert(stack, times, name)
+                streams[name] = _convert(stack, times, name, device_stack)
                 for _ in range(2):
                     t0 = time.perf_counter()
-                    ev = _convert(stack, times, name)
+                    ev = _convert(stack, times, name, device_stack)
                     walls[name] = min(walls[name], time.perf_counter() - t0)
                     del ev
     res = {name: {"wall_s": walls[name], "events": len(streams[name]),
@@ -97,10 +101,13 @@ def converter(width, height, frames):
     host = res["host"].pop("stream")
     device, per_step = res["device"].pop("stream"), res["device_per_step"].pop("stream")
     on_device = res["on_device"].pop("stream").numpy()
-    same = device.equals(host) and per_step.equals(host) and on_device.equals(device)
+    device_frames = res["device_frames"].pop("stream").numpy()
+    same = device.equals(host) and per_step.equals(host) and on_device.equals(device) and \
+        device_frames.equals(device)
     return {"width": width, "height": height, "frames": frames, "identical": bool(same),
             "difference": {"device_per_step": _difference(device, per_step), "host": _difference(device, host),
-                           "on_device": _difference(device, on_device)},
+                           "on_device": _difference(device, on_device),
+                           "device_frames": _difference(device, device_frames)},
             **res}
 
 
@@ -189,13 +196,14 @@ def main(quick=False):
                        all(c["identical"] for c in conv)}}
     md = [f"# Event engine: device path against host path ({device}, {res['variant']})", "",
           "Converter (synthetic 2 kHz stack, ideal pixel, C = 0.2; Mpix-steps/s):", "",
-          "| film | frames | events | events left on the device | device, batched, to the host | device, a frame "
-          "a step | host | batched / per step | batched / host | all identical |",
-          "|---|---|---|---|---|---|---|---|---|---|"]
+          "| film | frames | events | frames and events on the device | events left on the device | device, "
+          "batched, to the host | device, a frame a step | host | batched / per step | batched / host | all "
+          "identical |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in conv:
-        o, d, s, h = (c[k]["mpix_steps_per_s"] for k in ("on_device", "device", "device_per_step", "host"))
-        md.append(f"| {c['width']}x{c['height']} | {c['frames']} | {c['device']['events']} | {o:.1f} | {d:.1f} | "
-                  f"{s:.1f} | {h:.1f} | {d / s:.2f}x | {d / h:.2f}x | {c['identical']} |")
+        f, o, d, s, h = (c[k]["mpix_steps_per_s"]
+                         for k in ("device_frames", "on_device", "device", "device_per_step", "host"))
+        md.append(f"| {c['width']}x{c['height']} | {c['frames']} | {c['device']['events']} | {f:.1f} | {o:.1f} | "
+                  f"{d:.1f} | {s:.1f} | {h:.1f} | {d / s:.2f}x | {d / h:.2f}x | {c['identical']} |")
     md += ["", "Renders (fastest of the repetitions by wall time; beyond the render: the summary's events + motion "
            "+ write, and the whole wall time, each as % of the render):", "",
            "| scene | steps | events | path | render s | events / motion / write s | beyond render | wall beyond "

@@ -23,7 +23,7 @@ from ..events.io import format_of
 from ..plugins import event_batch, event_fill, pixel_model
 from ..validate import positive
 from .device_stream import check_on_device
-from .frame_sources import FrameSource, from_array, open_frames
+from .frame_sources import FrameSource, from_array, from_device, is_device_array, open_frames
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary
 
@@ -51,7 +51,9 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     """Events of a frame sequence through the event pixel model.
 
     ``frames``: a (T, H, W[, C]) array (intensity: floats linear, integers scaled by their maximum), a path
-    (folder of images, ``.npz`` with ``frames`` and ``times``, or a video), or a ``FrameSource``. ``times``:
+    (folder of images, ``.npz`` with ``frames`` and ``times``, or a video), or a ``FrameSource``; a (T, H, W)
+    float stack already on the device (a Dr.Jit tensor, or PyTorch / CuPy through DLPack) stays there
+    (``frame_sources.from_device``; with ``on_device`` nothing crosses to the host at all). ``times``:
     seconds per frame (arrays), or ``fps``. ``preset`` / ``pixel`` / ``threshold``: the pixel model, as for
     :func:`render_events`. ``srgb=True`` decodes gamma-encoded frames to linear light first.
     ``frames_per_kernel``: frames the pixel model takes per kernel where it can (``event_batch``; the events
@@ -68,7 +70,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     group = None if frames_per_kernel is None else positive(frames_per_kernel, "frames_per_kernel", integer=True)
     source = frames if isinstance(frames, FrameSource) else \
         open_frames(frames, fps, srgb) if isinstance(frames, (str, os.PathLike)) else \
-        from_array(frames, times, fps, srgb)
+        from_device(frames, times, fps, srgb) if is_device_array(frames) else from_array(frames, times, fps, srgb)
     too_large = event_fill.film_limit_error(source.width, source.height)
     if too_large:
         raise EventFieldError(f"{source.name}: {too_large}")
@@ -110,11 +112,11 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
         from tqdm import tqdm
         bar = tqdm(total=source.count, unit="frame", desc="converting")
     group, batched = frames_per_kernel, integ.batchable
-    pending, times = None, []      # the group's frames, copied into one buffer (a source may reuse its own)
+    pending, times = None, []      # the group's frames (_Group) and their times
     t_first = t_prev = t_last_committed = None
     try:
         for t, frame in source.frames():
-            if frame.shape != (source.height, source.width):
+            if not source.device and frame.shape != (source.height, source.width):
                 raise EventFieldError(f"{source.name}: frame size {frame.shape[1]}x{frame.shape[0]} differs from "
                                       f"{source.width}x{source.height}")
             if t_prev is not None and not t > t_prev:
@@ -123,11 +125,11 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
                 group = event_batch.default_frames_per_kernel(source.width * source.height, t - t_first)
             if batched and t_first is not None and group > 1:     # one frame a kernel: the per-step kernel
                 if pending is None:
-                    pending = np.empty((group, source.height, source.width), np.float32)
-                pending[len(times)] = frame
+                    pending = _Group(source, group)
+                pending.put(len(times), frame)
                 times.append(t)
                 if len(times) == group:
-                    _commit_group(integ, sink, summary, pending, [t_last_committed] + times)
+                    _commit_group(integ, sink, summary, pending.values(len(times)), [t_last_committed] + times)
                     t_last_committed, times = t, []
             else:
                 _commit_one(integ, sink, summary, frame, t_prev, t, source)
@@ -137,7 +139,7 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
             if bar is not None:
                 bar.update(1)
         if times:
-            _commit_group(integ, sink, summary, pending[:len(times)], [t_last_committed] + times)
+            _commit_group(integ, sink, summary, pending.values(len(times)), [t_last_committed] + times)
     finally:
         if bar is not None:
             bar.close()
@@ -148,8 +150,8 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
 
 def _commit_one(integ, sink: Sink, summary: RenderSummary, frame, t_prev, t, source: FrameSource) -> None:
     t0 = time.perf_counter()
-    integ.stage_log(pixel_model.linlog(dr, mi.Float(frame.ravel()), integ.config.linlog_threshold),
-                    (source.width, source.height))
+    values = frame if source.device else mi.Float(frame.ravel())
+    integ.stage_log(pixel_model.linlog(dr, values, integ.config.linlog_threshold), (source.width, source.height))
     events = integ.commit_events(t_prev if t_prev is not None else t, t)
     summary.events_s += time.perf_counter() - t0
     if t_prev is not None:
@@ -159,12 +161,34 @@ def _commit_one(integ, sink: Sink, summary: RenderSummary, frame, t_prev, t, sou
         summary.steps += 1
 
 
-def _commit_group(integ, sink: Sink, summary: RenderSummary, frames: np.ndarray, times: list) -> None:
+class _Group:
+    """The frames of one kernel: copied into one host buffer (a source may reuse its own), or, from a device
+    source, joined on the device (``concat_arrays``: one cached kernel)."""
+
+    def __init__(self, source: FrameSource, size: int):
+        self.device = source.device
+        self.frames = [] if self.device else np.empty((size, source.height, source.width), np.float32)
+
+    def put(self, i: int, frame) -> None:
+        if self.device:
+            del self.frames[i:]
+            self.frames.append(frame)
+        else:
+            self.frames[i] = frame
+
+    def values(self, count: int):
+        """The first ``count`` frames as one flat Float of the active backend."""
+        if self.device:
+            return event_fill.concat_arrays(self.frames[:count], mi.Float)
+        return mi.Float(self.frames[:count].ravel())
+
+
+def _commit_group(integ, sink: Sink, summary: RenderSummary, values, times: list) -> None:
     t0 = time.perf_counter()
-    log = pixel_model.linlog(dr, mi.Float(frames.ravel()), integ.config.linlog_threshold)
+    log = pixel_model.linlog(dr, values, integ.config.linlog_threshold)
     events = integ.commit_frames(log, times)
     summary.events_s += time.perf_counter() - t0
     tw = time.perf_counter()
     sink.add_step(events, complete_until_us=int(math.floor(times[-1] * 1e6)))
     summary.write_s += time.perf_counter() - tw
-    summary.steps += len(frames)
+    summary.steps += len(times) - 1

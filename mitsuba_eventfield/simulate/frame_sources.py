@@ -33,6 +33,7 @@ class FrameSource:
     count: int | None
     frames: object          # () -> Iterator[tuple[float, np.ndarray]]
     describe: dict
+    device: bool = False    # frames() yields flat float arrays of the active Dr.Jit backend instead (from_device)
 
 
 def srgb_to_linear(v: np.ndarray) -> np.ndarray:
@@ -100,6 +101,50 @@ def from_array(frames, times=None, fps=None, srgb=False, where="frames") -> Fram
         for i in range(a.shape[0]):
             yield float(t[i]), intensity(a[i], srgb, where=f"{where}[{i}]")
     return FrameSource(where, a.shape[2], a.shape[1], a.shape[0], frames_iter, {"kind": "array"})
+
+
+def is_device_array(frames) -> bool:
+    """A Dr.Jit array or tensor, or another library's array that hands its memory over through DLPack (a
+    PyTorch or CuPy tensor): frames for :func:`from_device`. NumPy arrays and lists stay on the host path."""
+    import drjit as dr
+    return dr.is_array_v(frames) or (hasattr(frames, "__dlpack__") and not isinstance(frames, np.ndarray))
+
+
+def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> FrameSource:
+    """A (T, H, W) stack of linear float intensities already where the active Dr.Jit backend computes: a
+    Dr.Jit tensor, or a PyTorch / CuPy array taken through DLPack. Checked there (finite and >= 0: one
+    reduction) and handed on frame by frame as flat device arrays (a gather at an opaque offset: one kernel
+    whatever the frame), never copied to the host. Colour, integer and sRGB frames take the host path
+    (``from_array``), whose conversions they need."""
+    import drjit as dr
+    import mitsuba as mi
+    if srgb:           # one decoding, srgb_to_linear's: a second one on the device would round otherwise
+        raise EventFieldError(f"{where}: srgb: device frames must be linear already (decode them first, or pass "
+                              "a NumPy array, which srgb=True decodes)")
+    kind = str(getattr(frames, "dtype", "float32"))
+    if "float" not in kind.lower():
+        raise EventFieldError(f"{where}: device frames of type {kind}: expected floats (linear intensity)")
+    try:
+        tensor = frames if isinstance(frames, mi.TensorXf) else mi.TensorXf(frames)
+    except Exception as e:          # whatever the conversion raises: one line
+        raise EventFieldError(f"{where}: not an array the {mi.variant()} backend takes "
+                              f"({' '.join(str(e).split())[:100] or type(e).__name__})") from None
+    shape = tuple(tensor.shape)
+    if len(shape) != 3 or shape[0] < 2:
+        raise EventFieldError(f"{where}: shape {shape}: device frames must be (T, H, W) with T >= 2")
+    t = check_times(times, shape[0], where) if times is not None else np.arange(shape[0]) / _uniform_rate(fps, where)
+    flat = tensor.array
+    if bool(dr.any(~dr.isfinite(flat) | (flat < 0))[0]):
+        raise EventFieldError(f"{where}: intensities must be finite and >= 0")
+    n = shape[1] * shape[2]
+
+    def frames_iter():
+        pixel = dr.arange(mi.UInt32, n)
+        for i in range(shape[0]):
+            offset = mi.UInt32(i * n)
+            dr.make_opaque(offset)
+            yield float(t[i]), dr.gather(mi.Float, flat, pixel + offset)
+    return FrameSource(where, shape[2], shape[1], shape[0], frames_iter, {"kind": "device array"}, device=True)
 
 
 def from_npz(path: str, fps=None, srgb=False) -> FrameSource:

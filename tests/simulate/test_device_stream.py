@@ -101,3 +101,41 @@ def test_a_render_left_on_the_device_equals_the_host_render(name, monkeypatch):
     assert (sum(uploads) > 0) == ("galvo_static" in name)       # the reused periods came from the host
     with pytest.raises(ef.EventFieldError, match="on_device keeps the events on the device"):
         ef.render_events(ef.load_scene(path, width=8, height=6), 0.001, steps=2, output="x.h5", on_device=True)
+
+
+@pytest.mark.parametrize("frames_per_kernel", [None, 1], ids=["batched", "a_frame_a_step"])
+def test_frames_already_on_the_device_give_the_host_events(frames_per_kernel):
+    """A Dr.Jit tensor of frames (where a GPU pipeline has them) converts without a host copy of the frames,
+    to the events of the same frames as a NumPy array, batched or a frame a step, into the host or left on the
+    device; against the closed-form ramp instants too."""
+    import mitsuba as mi
+    stack, t = _stack(frames=24, seed=5)
+    host = ef.events_from_frames(stack, t, threshold=C, frames_per_kernel=frames_per_kernel)
+    tensor = mi.TensorXf(stack)
+    dev = ef.events_from_frames(tensor, t, threshold=C, frames_per_kernel=frames_per_kernel)
+    assert len(host) > 20_000 and dev.equals(host) and dev.meta["source"] == {"kind": "device array"}
+    assert ef.events_from_frames(tensor, t, threshold=C, on_device=True,
+                                 frames_per_kernel=frames_per_kernel).equals(host)
+    ramp, rt, rates = _ramps()
+    ev = ef.events_from_frames(mi.TensorXf(ramp), rt, threshold=C)
+    truth = _ramp_truth(rates, rt[-1])
+    assert len(ev) == 3 * sum(len(v) for v in truth.values())
+    for x, expected in truth.items():
+        got = np.sort(ev.t[(ev.x == x) & (ev.y == 1)])
+        assert len(got) == len(expected) and np.abs(got - expected).max() <= 1.0
+
+
+@pytest.mark.parametrize("make, kw, message", [
+    (lambda mi: mi.TensorXf(np.full((3, 4, 4), np.nan, np.float32)), {"fps": 10}, "finite and >= 0"),
+    (lambda mi: mi.TensorXf(np.full((3, 4, 4), -1.0, np.float32)), {"fps": 10}, "finite and >= 0"),
+    (lambda mi: mi.TensorXf(np.ones((3, 4, 4, 3), np.float32)), {"fps": 10}, r"shape \(3, 4, 4, 3\)"),
+    (lambda mi: mi.TensorXf(np.ones((1, 4, 4), np.float32)), {"fps": 10}, "T >= 2"),
+    (lambda mi: mi.TensorXf(np.ones((3, 4, 4), np.float32)), {"fps": 10, "srgb": True}, "srgb"),
+    (lambda mi: mi.TensorXf(np.ones((3, 4, 4), np.float32)), {}, "frame rate"),
+    (lambda mi: mi.TensorXf(np.ones((3, 4, 4), np.float32)), {"times": [0, 1, 1]}, "strictly increasing"),
+], ids=["nan", "negative", "colour", "one_frame", "srgb", "no_rate", "times"])
+def test_bad_device_frames_are_one_line(make, kw, message):
+    import mitsuba as mi
+    with pytest.raises(ef.EventFieldError, match=message) as e:
+        ef.events_from_frames(make(mi), threshold=C, **kw)
+    assert "\n" not in str(e.value) and str(e.value).startswith("frames: ")
