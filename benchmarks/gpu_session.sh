@@ -34,23 +34,31 @@ step() {   # step NAME SECONDS COMMAND...: the command's output to $W/NAME.txt, 
     pack
 }
 
+known_failures() {   # the tests that failed under CUDA on the H200 (2026-11-26; benchmarks/results/gpu_h200.md)
+    step tests_known "${KNOWN_LIMIT:-150}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -v \
+        --tb=long -rfEs -p no:cacheprovider -n 4 --timeout 120 \
+        "tests/plugins/test_event_batch.py::test_batched_events_bit_identical_to_the_host_path" \
+        "tests/plugins/test_event_batch.py::test_a_chunk_whose_few_firing_pixels_are_filled_alone_equals_the_host_path" \
+        "tests/optics/test_scan.py::test_numpy_and_drjit_agree" \
+        "tests/simulate/test_frozen_render.py::test_frozen_steps_give_the_same_events" \
+        "tests/apps/test_highspeed.py::test_fan_refocus_every_period_matches_rendered_views_and_selects_its_plane" \
+        "tests/test_docs.py::test_every_example_runs_as_written"
+}
+
 case "$stage" in
+    known)
+        # those failures alone, with their tracebacks (-v --tb=long)
+        known_failures
+        grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 40 ;;
     tests)
         # the default LLVM suite under cuda_ad_mono, spread over the machine's cores (each worker its own CUDA
         # context; Dr.Jit's kernel cache on disk is shared); the regression references were made on LLVM and are
         # compared with the other-backend tolerances there (evaluation/regression.py); extras the image lacks
         # are skipped with their reason
         n=${TEST_WORKERS:-8}
-        # first the tests that failed under CUDA on the H200 (2026-11-26; benchmarks/results/gpu_h200.md), with
-        # their tracebacks, so that their causes come back even if the whole suite runs out of time
-        step tests_known "${KNOWN_LIMIT:-150}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -v \
-            --tb=long -rfEs -p no:cacheprovider -n 4 --timeout 120 \
-            "tests/plugins/test_event_batch.py::test_batched_events_bit_identical_to_the_host_path" \
-            "tests/plugins/test_event_batch.py::test_a_chunk_whose_few_firing_pixels_are_filled_alone_equals_the_host_path" \
-            "tests/optics/test_scan.py::test_numpy_and_drjit_agree" \
-            "tests/simulate/test_frozen_render.py::test_frozen_steps_give_the_same_events" \
-            "tests/apps/test_highspeed.py::test_fan_refocus_every_period_matches_rendered_views_and_selects_its_plane" \
-            "tests/test_docs.py::test_every_example_runs_as_written"
+        # first the tests that failed under CUDA, with their tracebacks, so that their causes come back even if
+        # the whole suite runs out of time
+        known_failures
         # (-v: each test's outcome as it ends; a run cut short still names what failed; TESTS picks a subset)
         step tests_cuda "${TEST_LIMIT:-300}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -v \
             --tb=short -rfEs -p no:cacheprovider -n "$n" --timeout 240 ${TESTS:-tests}
@@ -72,6 +80,8 @@ case "$stage" in
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         # HDF5 writing on the host's cores against HDF5's own filters on one thread
         [ -z "$quick" ] && step writer 60 $PY benchmarks/bench_writer.py
-        cat "$W/steps.txt"; tail -n 30 "$W/event_engine.txt" "$W/fan_render.txt" ;;
-    *) echo "usage: gpu_session.sh tests|bench [--quick]" >&2; exit 2 ;;
+        # motion a step: Mitsuba's update against ours, meshes against instances, the loop's sync after a render
+        step motion 150 $PY benchmarks/bench_motion.py $quick
+        cat "$W/steps.txt"; tail -n 30 "$W/event_engine.txt" "$W/fan_render.txt" "$W/motion.txt" ;;
+    *) echo "usage: gpu_session.sh tests|known|bench [--quick]" >&2; exit 2 ;;
 esac
