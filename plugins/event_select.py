@@ -11,12 +11,30 @@ import drjit as dr
 import mitsuba as mi
 
 
+def rounded(product, fusing: bool | None = None):
+    """``product`` (Float64) rounded on its own before the add that follows it, as NumPy and LLVM round it.
+    Dr.Jit writes a CUDA multiply without a rounding modifier (``mul.f64``), which leaves ptxas free to fuse it
+    with the next add into one FMA (one rounding instead of two): on an H100 that moved refractory pixels'
+    last-emission times by an ulp against the host path (2026-11-26; docs/design.md). A select between the two,
+    on a predicate only the running kernel knows, is an instruction ptxas cannot fold. It is written as
+    "NaN where the product is NaN, else the product": the same value for every input, and nothing Dr.Jit
+    simplifies away. The first form, a select on an opaque True, made the bits equal on an H100, but with
+    it Dr.Jit refused to record the chunk passes there (most likely the opaque value's upload, made inside
+    a recording). This form has not run on a GPU yet: the next session's ``gpu_session.sh known`` checks
+    both. On LLVM nothing is fused and the product is returned as it is (``fusing`` overrides the
+    backend's choice: a test runs the CUDA form on the CPU)."""
+    if not (dr.backend_v(product) == dr.JitBackend.CUDA if fusing is None else fusing):
+        return product
+    return dr.select(dr.isnan(product), dr.nan, product)
+
+
 def crossing_time(k, sign, lp, ln, ref, step, t0, t1):
     """Seconds (Float64) of crossing ``k`` (1-based) of a pixel: where its step's linear segment meets level
-    ``ref + sign k C``; the same operations, order and precision as ``pixel_model.expand_crossings``."""
-    frac = (ref + mi.Float64(mi.Int64(sign) * mi.Int64(k)) * step - lp) / (ln - lp)
+    ``ref + sign k C``; the same operations, order, precision and roundings as
+    ``pixel_model.expand_crossings`` (``rounded``)."""
+    frac = (ref + rounded(mi.Float64(mi.Int64(sign) * mi.Int64(k)) * step) - lp) / (ln - lp)
     frac = dr.clip(dr.select(dr.isnan(frac), 1.0, frac), 0.0, 1.0)
-    return t0 + frac * (t1 - t0)
+    return t0 + rounded(frac * (t1 - t0))
 
 
 @dataclass
@@ -91,7 +109,7 @@ def select_events(n, log_prev, log_now, log_ref, c_on, c_off, t0_d, t1_d, last_e
         sel.kept, sel.last_emit = mi.UInt32(kept_f), new_last
     if noise is not None:
         hit, u_pol, u_t = noise[:3]
-        nt = t0_d + mi.Float64(u_t) * (t1_d - t0_d)
+        nt = t0_d + rounded(mi.Float64(u_t) * (t1_d - t0_d))
         if last_emit is not None:
             hit = hit & (nt >= last_emit + period) & (~dr.isfinite(first_kept) | (nt <= first_kept - period)
                                                       | (nt >= new_last + period))

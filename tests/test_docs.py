@@ -62,9 +62,17 @@ def scratch(tmp_path, monkeypatch):
     return tmp_path
 
 
+def _variant_missing(command: str) -> bool:
+    """A command that forces a backend this Mitsuba build lacks (the GPU machine's bundle has the CUDA variants
+    only: ../shared/gpu, docs/design.md); it runs wherever that backend is installed, CI included."""
+    import importlib.util
+    forced = re.search(r"--variant\s+(llvm|cuda)\b", command)
+    return bool(forced) and importlib.util.find_spec(f"mitsuba.{forced[1]}_ad_mono") is None
+
+
 def _run_bash(path, line_no, block, scratch):
     for command in _commands(block):
-        if command.startswith("./run") or NOT_RUN in command:
+        if command.startswith("./run") or NOT_RUN in command or _variant_missing(command):
             continue
         command = _simulated(command)
         film = FILM_MARK.search(command)

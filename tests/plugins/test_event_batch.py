@@ -343,7 +343,7 @@ def test_chunk_passes_are_replayed_and_equal_the_traced_ones(pixel, monkeypatch)
             # 40 chunks of one shape: a new integrator's first chunk, whose state was made on the host, records
             # again, and so may a first chunk of sparse frames (measured: 2-4 recordings a pass); then replays
             assert all(0 < fn.n_recordings <= 8 and fn.refused is None for fn in passes.values()), \
-                {key[0][0]: fn.n_recordings for key, fn in passes.items()}
+                {key[0][0]: (fn.n_recordings, fn.refused) for key, fn in passes.items()}
             if pixel:
                 # another seed: other thresholds and generator streams, which are arguments: the same passes,
                 # replayed after at most a new integrator's first-chunk recordings

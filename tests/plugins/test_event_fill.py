@@ -220,3 +220,18 @@ def test_device_matches_host_on_still_frames(pixel):
     assert total > 2 * W * H if "leak_rate_hz" in pixel else total > 20
     assert (device.refractory_dropped > W * H) == ("refractory_s" in pixel)
     assert (device.noise_events == total) == ("shot_noise_hz" in pixel)
+
+
+def test_rounded_hands_every_product_on_bit_for_bit():
+    """``event_select.rounded`` in its CUDA form (a select on an opaque True, which ptxas cannot fold into an FMA)
+    returns each product as it is: finite, signed zero, infinite and NaN. That it stops the fusion is checked
+    under CUDA by test_event_batch's refractory cases (their float64 state was an ulp off without it)."""
+    import drjit as dr
+    import mitsuba as mi
+    from mitsuba_eventfield.plugins.event_select import rounded
+    values = np.array([1.5, -0.0, np.inf, -np.inf, np.nan, 1e-300, 0.1, -7.25e7])
+    x = mi.Float64(values)
+    for fusing in (True, False, None):
+        got = rounded(x * mi.Float64(3.0), fusing=fusing)
+        assert dr.width(got) == len(values)
+        assert np.array_equal(got.numpy().view(np.int64), (values * 3.0).view(np.int64)), fusing

@@ -53,7 +53,12 @@ def test_frozen_steps_give_the_same_events(name, monkeypatch):
         assert np.array_equal(getattr(frozen, column), getattr(plain, column)), column
     fell_back = [n for n in frozen.meta["render"]["notes"] if "could not be frozen" in n]
     if name == "cards_not_frozen":
-        assert fell_back and "virtual function call" in fell_back[0] and recordings[0] is None
+        # Dr.Jit's refusal differs by backend: LLVM meets the nested virtual calls first; CUDA (H100, 2026-11-26)
+        # an emitter's texture upload it cannot place ("Tried to record a memcpy_async operation, but the source
+        # pointer ... is unknown"). Either way the render falls back to tracing, with the same events (above)
+        import mitsuba as mi
+        cause = "memcpy_async" if mi.variant().startswith("cuda") else "virtual function call"
+        assert fell_back and cause in fell_back[0] and recordings[0] is None, fell_back
         return
     assert not fell_back
     # recorded twice (the first frame; then once more, as a freshly loaded scene's first render changes the layout
