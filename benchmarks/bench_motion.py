@@ -10,8 +10,11 @@ one process:
    lost twice: docs/design.md). The XML is rewritten here, for this measurement only.
 3. Whole renders (``render_events``, device path, in memory) of both forms: render / motion / events time,
    the wall time, and the events' count (the two forms differ by float rounding of the transforms only).
-   Also with the render loop's sync after each render removed, which lets the host prepare the next step
-   while the GPU renders (the summary's render/motion split is then not meaningful; the wall time is).
+   Also with every sync of the render loop removed (``no_sync_after_render``), which lets the host prepare
+   the next step while the device renders: the first measurement (H100, 2026-11-26, the loop then synced
+   after each render) made the loop overlap on CUDA (``backend.overlaps_steps``), so on CUDA the two columns
+   now differ only by the wait the overlapped loop keeps before Mitsuba's update. The summary's split is then
+   not meaningful; the wall time is.
 
 Writes benchmarks/results/motion.json and .md. Usage: python benchmarks/bench_motion.py [--quick]
 """
@@ -89,7 +92,7 @@ def update_split(timed, steps, duration):
 
 @contextlib.contextmanager
 def no_sync_after_render():
-    """The render loop's ``dr.sync_thread()`` after each render made a no-op (the loop's module only)."""
+    """The render loop's ``dr.sync_thread()`` calls made no-ops (the loop's module only)."""
     from mitsuba_eventfield.simulate import render as loop
 
     class _NoSync:
@@ -171,7 +174,8 @@ def main(quick=False):
     md = [f"# Motion a step: meshes against instances ({device}, {mi.variant()}, one run)", "",
           "set_time alone, synced (ms a step): our part (transforms, vertex kernel) + Mitsuba's update(). "
           "Renders (device path, in memory, best of 2): wall, and the summary's render / motion / events "
-          "(s); without the loop's sync after each render only the wall counts.", "",
+          "(s); without the loop's syncs only the wall counts. The loop overlaps host and device: "
+          f"{__import__('mitsuba_eventfield').backend.overlaps_steps()}.", "",
           "| scene | steps | form | ours ms | update ms | render / motion / events s | wall s | wall, no sync s "
           "| events |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:

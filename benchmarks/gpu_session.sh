@@ -1,14 +1,18 @@
 #!/usr/bin/env bash
-# What issue 15 still needs measured on a CUDA GPU, in two device commands (device minutes are scarce; each
+# What issue 15 still needs measured on a CUDA GPU, in a few device commands (device minutes are scarce; each
 # command must finish within the device tool's 10 minutes). After ../shared/gpu/prepare.sh, from the device tool:
+#   run(command="bash benchmarks/gpu_session.sh known", carry=[".gpu"])   the tests to check first, with tracebacks
+#   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, pixel, fan
+#                                                                         1280x720, memory, motion
 #   run(command="bash benchmarks/gpu_session.sh tests", carry=[".gpu"])   the suite under cuda_ad_mono
-#   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, pixel, fan 1280x720
 # Everything lands in one tarball under $OUT (the device tool brings it back): logs, the benchmarks' results
-# files (written there, not into benchmarks/results/), nvidia-smi. Copy the results files into benchmarks/results/ here and
-# commit them: they carry the GPU's name.
-# Measured on an H200 (2026-11-26): the bench stage takes about 150 s, the machine's start about 30 s; the tests
-# stage runs the known CUDA failures first (KNOWN_LIMIT, 150 s) then the suite (TEST_LIMIT, 300 s; the whole
-# suite needs more on 14 workers: TESTS picks a subset). Both fit in one session's 15 minutes.
+# files (written there, not into benchmarks/results/), nvidia-smi. Copy the results files into
+# benchmarks/results/ here and commit them: they carry the GPU's name.
+# Measured on an H100 (2026-11-26): the machine's start about 30 s; the bench stage about 170 s; the known
+# stage 25 s on a warm machine, 150 s on a fresh one (kernels compiled); the whole suite on 14 workers more
+# than 340 s (821 tests had passed by then). The known stage, the bench stage, then the suite with what is
+# left (TEST_LIMIT; KNOWN_LIMIT=1 skips the known tests there; SIGINT first, so pytest prints what ran) fit
+# in one session's 15 minutes if each command follows the last while the machine is warm (30 s).
 # A dry run on the CPU checks the script itself: PY=.venv/bin/python OUT=/tmp/gpu_dry bash benchmarks/gpu_session.sh bench --quick
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -34,15 +38,17 @@ step() {   # step NAME SECONDS COMMAND...: the command's output to $W/NAME.txt, 
     pack
 }
 
-known_failures() {   # the tests that failed under CUDA on the H200 (2026-11-26; benchmarks/results/gpu_h200.md)
+known_failures() {   # what failed under CUDA on the H100 (2026-11-26: benchmarks/results/gpu_h100.md) or changed
+    # for CUDA since without being run there: the event-batch file (rounded(), frozen chunk passes), the
+    # DLPack columns, the overlapped loop, the scan tolerance, the freeze refusal (the README examples test
+    # needs more than 120 s on a fresh machine: it runs in the suite)
     step tests_known "${KNOWN_LIMIT:-150}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -v \
         --tb=long -rfEs -p no:cacheprovider -n 4 --timeout 120 \
-        "tests/plugins/test_event_batch.py::test_batched_events_bit_identical_to_the_host_path" \
-        "tests/plugins/test_event_batch.py::test_a_chunk_whose_few_firing_pixels_are_filled_alone_equals_the_host_path" \
+        "tests/plugins/test_event_batch.py" \
+        "tests/simulate/test_device_stream.py" \
+        "tests/simulate/test_determinism.py::test_overlapped_steps_give_the_same_events" \
         "tests/optics/test_scan.py::test_numpy_and_drjit_agree" \
-        "tests/simulate/test_frozen_render.py::test_frozen_steps_give_the_same_events" \
-        "tests/apps/test_highspeed.py::test_fan_refocus_every_period_matches_rendered_views_and_selects_its_plane" \
-        "tests/test_docs.py::test_every_example_runs_as_written"
+        "tests/simulate/test_frozen_render.py::test_frozen_steps_give_the_same_events"
 }
 
 case "$stage" in

@@ -9,6 +9,7 @@ drops the messages that are expected and say nothing to our users.
 """
 from __future__ import annotations
 
+import os
 import sys
 
 from . import _llvm
@@ -130,3 +131,23 @@ def ensure_variant(color: bool = False) -> str:
     if _active is not None and mi.variant() == _active:
         return _active
     return set_variant(color=color)
+
+
+OVERLAP_ENV = "EVENTFIELD_OVERLAP"
+OVERLAP_NOTE = ("the host prepared each step while the GPU rendered the one before: the render time is the wait "
+                "for it, and a stage that waited first (a chunk of events read back) holds some of it; the "
+                "wall time is the measure")
+
+
+def overlaps_steps() -> bool:
+    """Whether a render loop stages a step's motion while the device still renders the step before (CUDA), or
+    syncs after each render (LLVM): ``simulate/render.py``. On an H100 the sync after each render kept the host
+    idle while the GPU rendered; without it the demo's 100 steps took 0.201 s instead of 0.223 s, and the fan's
+    400 at 1280x720 took 2.44 s instead of 2.63 s (benchmarks/results/motion_h100.md). On the 2-core CPU it
+    gained nothing, and the render's time moved into whichever stage waited first (events 0.02 -> 0.29 s in a
+    demo render), so the CPU keeps its exact split. ``EVENTFIELD_OVERLAP=1`` / ``0`` chooses either on any
+    backend (A/B runs)."""
+    choice = os.environ.get(OVERLAP_ENV, "")
+    if choice in ("0", "1"):
+        return choice == "1"
+    return mi.variant().startswith("cuda")

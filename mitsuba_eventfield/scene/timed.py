@@ -123,10 +123,12 @@ class TimedScene:
         raise EventFieldError(f"{src}: objects.{name}: the scene {self.path or ''} has no movable object with "
                               f"id '{name}' (movable ids: {', '.join(self.movable_ids()) or 'none'})")
 
-    def set_time(self, t: float, view_time: float | None = None) -> None:
+    def set_time(self, t: float, view_time: float | None = None, apply: bool = True) -> None:
         """Move every object to its pose at time ``t`` (seconds); the view (a scanning sensor) to its phase at
         ``view_time`` when given (objects and view at different instants: ``static_pixels`` casts each pose
-        from one scan phase), else at ``t``."""
+        from one scan phase), else at ``t``. ``apply=False`` stages the new values (traced, a moving mesh's
+        kernel launched) and leaves Mitsuba's ``update()`` to :meth:`apply_time`: the render loop stages a step
+        on a GPU while the device still renders the step before (``simulate/render.py``)."""
         self.time = float(t)
         if not self._bindings and not self._sensor_times:
             return
@@ -144,7 +146,14 @@ class TimedScene:
                 self._moving[b.key] = xf
         if self._meshes:
             self._move_meshes(self._meshes)
-        self._moving.update()
+        if apply:
+            self._moving.update()
+
+    def apply_time(self) -> None:
+        """Mitsuba's ``update()`` of the values ``set_time(..., apply=False)`` staged: bounding boxes and
+        acceleration structures rebuilt (on CUDA a moved mesh's box is read back, a sync)."""
+        if self._bindings or self._sensor_times:
+            self._moving.update()
 
     def _move_meshes(self, meshes) -> None:
         """Every moving mesh's positions and normals at ``self.time`` in one kernel, from one host-to-device copy

@@ -113,6 +113,9 @@ class _Loop:
         self.static = None if not reuse or allocation is not None or checkpoints is not None else \
             static_pixels.plan(timed, st, integ, summary.notes)
         self.renderer = FrameRenderer(integ.inner, st.spp, allocation, summary.notes, self.static, frozen)
+        self.overlap = backend.overlaps_steps()
+        if self.overlap:
+            summary.notes.append(backend.OVERLAP_NOTE)
         self.first_frame = first if allocation is None and self.static is None else None   # the probe's: step 0's
         self.reuse = None if st.steps is None or not reuse or st.seed_mode != "fixed" else \
             reuse_plan(timed, st.duration, st.steps, self.width, self.height, summary.notes)
@@ -133,16 +136,25 @@ class _Loop:
             integ.stage_log(self.cache[step_index % self.reuse], (self.width, self.height))
             summary.reused_steps += 1
             return
+        overlap = self.overlap
         t0 = time.perf_counter()
-        if step_index or self.first_frame is None:      # the probe's first frame needs no scene at this instant
-            self.timed.set_time(t)
+        moving = step_index or self.first_frame is None  # the probe's first frame needs no scene at this instant
+        if moving:
+            self.timed.set_time(t, apply=not overlap)
         t1 = time.perf_counter()
+        if overlap:                                      # the step before rendered meanwhile: the render's time
+            dr.sync_thread()
+        t2 = time.perf_counter()
+        if moving and overlap:
+            self.timed.apply_time()
+        t3 = time.perf_counter()
         self.render_frame(self.st.seed if self.st.seed_mode == "fixed" else self.st.seed + step_index,
                           step=step_index)
-        dr.sync_thread()
-        t2 = time.perf_counter()
-        summary.motion_s += t1 - t0
-        summary.render_s += t2 - t1
+        if not overlap or self.batch is None:            # (a step's own events read back would wait anyway)
+            dr.sync_thread()
+        t4 = time.perf_counter()
+        summary.motion_s += (t1 - t0) + (t3 - t2)
+        summary.render_s += (t2 - t1) + (t4 - t3)
         if self.reuse:
             frame = mi.Float(integ.staged)
             dr.eval(frame)
