@@ -223,9 +223,10 @@ def test_device_matches_host_on_still_frames(pixel):
 
 
 def test_rounded_hands_every_product_on_bit_for_bit():
-    """``event_select.rounded`` in its CUDA form (a select on an opaque True, which ptxas cannot fold into an FMA)
-    returns each product as it is: finite, signed zero, infinite and NaN. That it stops the fusion is checked
-    under CUDA by test_event_batch's refractory cases (their float64 state was an ulp off without it)."""
+    """``event_select.rounded`` in its CUDA form (a select on the product's own NaN test, which ptxas cannot fold
+    into an FMA) returns each product as it is: finite, signed zero, infinite and NaN. That it stops the fusion
+    is checked under CUDA by test_event_batch's refractory cases (their float64 state was an ulp off without
+    it)."""
     import drjit as dr
     import mitsuba as mi
     from mitsuba_eventfield.plugins.event_select import rounded
