@@ -40,7 +40,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..scene import bundled_scene, load_scene
-from ..scene.coverage import shape_masks
+from ..scene.coverage import shape_masks, unseen
 from ..simulate.render import render_events, render_frames
 from ..validate import MAX_SPP, MAX_VIEWS, number
 from .designs_outputs import compare_figure, compare_report, grid_figure, grid_report, write_compare, write_grid
@@ -281,6 +281,10 @@ def compare(galvo_scene: str | None = None, kaleidoscope_scene: str | None = Non
     moving_ids = {n for n, o in (g.motion.objects if g.motion else {}).items() if not o.is_static}
     if not moving_ids or not {s.id() for s in g.scene.shapes()} - moving_ids:
         raise ConfigError(f"{galvo_scene}: needs moving and static shapes (moving: {sorted(moving_ids) or 'none'})")
+    hidden = unseen(g, moving_ids)
+    if hidden:
+        raise ConfigError(f"{galvo_scene}: objects {', '.join(hidden)}: a moving object must be a shape (not an "
+                          "instance or the sensor): its pixels are found with the shape-index AOV")
     arguments = {"film": film, "speeds": list(speeds), "periods": periods, "views": views, "spp": spp, "depth": depth}
     depth = depth or float(k.sensor.optics_metadata()["focus_distance"])
     split, per_speed, images = {}, [], []

@@ -18,6 +18,15 @@ def _index(shape) -> float:
     return float(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])
 
 
+def unseen(timed, ids) -> list:
+    """Those of ``ids`` whose pixels the shape-index AOV cannot show: not a shape of the scene (the sensor), or
+    a Mitsuba ``instance``, for which the AOV writes the index of the shapegroup's own shape. That shape is not
+    among the scene's shapes, and every instance of a group shares it. An instance's mask would be empty and its
+    pixels taken as still, so the callers refuse it or do without the masks."""
+    kinds = {s.id(): s.class_name() for s in timed.scene.shapes()}
+    return sorted(i for i in ids if kinds.get(i, "Instance") == "Instance")
+
+
 def shape_masks(timed, t: float, sensor=None, view_time: float | None = None) -> dict:
     """{shape id: bool (H, W)}: the pixels each shape covers at time ``t``, from Mitsuba's ``shape_index`` AOV
     (one sample per pixel) through ``sensor`` (default: the scene's own), a scanning view at its phase of

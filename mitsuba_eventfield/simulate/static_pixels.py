@@ -234,9 +234,9 @@ def _dynamic_masks(timed, st, steps_per_period, inner, threshold, linlog):
     instance, the sensor)."""
     import cv2
 
-    from ..scene.coverage import covered_over_time
+    from ..scene.coverage import covered_over_time, unseen
     moving = _moving_ids(timed)
-    if not set(moving) <= {s.id() for s in timed.scene.shapes()}:
+    if unseen(timed, moving):
         return None
     times, gap_px = _pose_times(timed, st.t_start, st.duration)
     if times is None:

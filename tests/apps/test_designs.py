@@ -148,3 +148,21 @@ def test_cli_bad_values_are_one_line(tmp_path, capsys):
     assert not out.exists()
     with pytest.raises(EventFieldError):
         designs.grid_experiment(texture=str(tmp_path / "none.png"))
+
+
+def test_a_moving_instance_is_refused_before_rendering(tmp_path):
+    """The moving card as a Mitsuba instance: its pixels cannot be found with the shape-index AOV (which
+    writes the shapegroup's own shape), so the comparison's moving region would be empty; refused in one line."""
+    import shutil
+    folder = tmp_path / "designs"
+    shutil.copytree(os.path.dirname(GALVO), folder)
+    shapes = (folder / "shapes.xml").read_text()
+    start = shapes.index('<shape type="rectangle" id="moving">')
+    end = shapes.index("</shape>", start) + len("</shape>")
+    card = shapes[start:end].replace('id="moving"', 'id="moving_card"')
+    (folder / "shapes.xml").write_text(shapes[:start] + f'<shape type="shapegroup" id="moving_group">{card}</shape>'
+                                       '<shape type="instance" id="moving"><ref id="moving_group"/></shape>'
+                                       + shapes[end:])
+    with pytest.raises(ConfigError) as err:
+        designs.compare(galvo_scene=str(folder / "galvo.xml"), kaleidoscope_scene=str(folder / "kaleidoscope.xml"))
+    assert "objects moving" in str(err.value) and "instance" in str(err.value) and "\n" not in str(err.value)

@@ -171,3 +171,23 @@ def test_the_frozen_coverage_is_the_traced_one(ball_scene):
     frozen = covered_over_time(timed, times, ["ball"], view_time=0.001)
     traced = np.logical_or.reduce([shape_masks(timed, float(t), view_time=0.001)["ball"] for t in times])
     assert frozen.sum() > 50 and np.array_equal(frozen, traced)
+
+
+def test_a_moving_instance_declines_the_split(ball_scene, tmp_path):
+    """The ball as a Mitsuba instance: the shape-index AOV writes the index of the shapegroup's own shape, so
+    the instance's mask is empty although the ball is in view, and a split from it would take the ball's pixels
+    as static. ``coverage.unseen`` names it, and the split is declined with the reason."""
+    from mitsuba_eventfield.scene.coverage import unseen
+    text = open(ball_scene["lit"]).read()
+    start, end = text.index('<shape type="sphere" id="ball">'), text.index("</scene>")
+    ball = text[start:end].replace('id="ball"', 'id="ball_shape"')
+    path = tmp_path / "ball_instance.xml"
+    path.write_text(text[:start] + f'<shape type="shapegroup" id="ball_group">{ball}</shape>'
+                    '<shape type="instance" id="ball"><ref id="ball_group"/></shape></scene>')
+    (tmp_path / "ball_instance.motion.toml").write_text("version = 1\n[objects.ball]\nvelocity = [10.0, 0, 0]\n")
+    timed, plan, notes = _plan(str(path))
+    assert unseen(timed, ["ball", "wall", "camera"]) == ["ball", "camera"]
+    masks = shape_masks(timed, 0.0)
+    plain = shape_masks(ef.load_scene(ball_scene["lit"]), 0.0)
+    assert plain["ball"].sum() > 20 and masks["ball"].sum() == 0          # in view, yet no pixel of its own
+    assert plan is None and any("shape-index AOV" in n for n in notes), notes
