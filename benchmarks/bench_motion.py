@@ -5,9 +5,9 @@ one process:
 1. ``set_time`` alone, synced before and after each step, split into our part (the new transforms and the
    mesh's vertex kernel, traced from Python) and Mitsuba's ``update()`` of the moved parameters (on a GPU:
    a sync, the moved mesh's bounding box as reductions read back, the acceleration structures rebuilt).
-2. The same with the moving shapes wrapped as Mitsuba instances (``shapegroup`` + ``instance``, moved by the
-   instance's ``to_world``: no vertex kernel, no mesh bounding box, no geometry rebuilt; on the CPU this
-   lost twice: docs/design.md). The XML is rewritten here, for this measurement only.
+2. The same with the moving shapes loaded as Mitsuba instances (``scene/instancing.py``: ``shapegroup`` +
+   ``instance``, moved by the instance's ``to_world``: no vertex kernel, no mesh bounding box, no geometry
+   rebuilt). The first measurement (H100) made it CUDA's default; on the CPU it lost twice (docs/design.md).
 3. Whole renders (``render_events``, device path, in memory) of both forms: render / motion / events time,
    the wall time, and the events' count (the two forms differ by float rounding of the transforms only).
    Also with every sync of the render loop removed (``no_sync_after_render``), which lets the host prepare
@@ -21,11 +21,7 @@ Writes benchmarks/results/motion.json and .md. Usage: python benchmarks/bench_mo
 import contextlib
 import os
 import sys
-import tempfile
 import time
-import xml.etree.ElementTree as ET
-
-import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
@@ -33,31 +29,6 @@ from _report import write_results  # noqa: E402
 from bench_event_engine import device_name  # noqa: E402
 
 SCENES = os.path.join(os.path.dirname(HERE), "scenes")
-
-
-def instanced_xml(xml_path, ids, out_dir):
-    """A copy of the scene with each moving ``<shape id=...>`` (one with no emitter) moved into a
-    ``shapegroup`` and placed by an ``instance`` of the same id, so the motion binds the instance's
-    ``to_world``; relative file paths resolve against the original's folder (added to the file resolver)."""
-    tree = ET.parse(xml_path)
-    root = tree.getroot()
-    wrapped = []
-    for i, el in enumerate(list(root)):
-        if el.tag != "shape" or el.get("id") not in ids or el.find("emitter") is not None:
-            continue
-        sid = el.get("id")
-        group = ET.Element("shape", type="shapegroup", id=f"{sid}__group")
-        el.set("id", f"{sid}__shape")
-        root.remove(el)
-        group.append(el)
-        inst = ET.Element("shape", type="instance", id=sid)
-        ET.SubElement(inst, "ref", id=f"{sid}__group")
-        root.insert(i, group)
-        root.insert(i + 1, inst)
-        wrapped.append(sid)
-    out = os.path.join(out_dir, os.path.basename(xml_path))
-    tree.write(out)
-    return out, wrapped
 
 
 def update_split(timed, steps, duration):
@@ -130,28 +101,25 @@ def render_row(timed, duration, steps, sync=True):
 
 
 def scene_rows(xml, duration, steps, update_steps, **defines):
-    import mitsuba as mi
-
+    """Both forms of the scene: its moving shapes as they are, and as instances (``scene/instancing.py``, chosen
+    by ``EVENTFIELD_INSTANCES`` for each load)."""
     import mitsuba_eventfield as ef
-    from mitsuba_eventfield.scene.motion import motion_path_for
+    from mitsuba_eventfield.scene import instancing
     res = {"scene": os.path.relpath(xml, SCENES), "steps": steps, "film": defines or "the scene's"}
-    with tempfile.TemporaryDirectory() as tmp:
-        motion = motion_path_for(xml)
-        base = ef.load_scene(xml, **defines)
-        ids = [n for n, o in base.motion.objects.items() if not o.is_static]
-        inst_xml, wrapped = instanced_xml(xml, ids, tmp)
-        mi.file_resolver().append(os.path.dirname(xml))
-        inst = ef.load_scene(inst_xml, motion=motion, **defines)
-        res["instanced"] = wrapped
-        forms = {"meshes": base, "instances": inst}
-        for name, timed in forms.items():
-            res[name] = {"update": update_split(timed, update_steps, duration)}
-        streams = {}
-        for name, timed in forms.items():
-            res[name]["render"], streams[name] = render_row(timed, duration, steps)
-            res[name]["render_no_sync"], _ = render_row(timed, duration, steps, sync=False)
-        a, b = streams["meshes"], streams["instances"]
-        res["events_differ"] = None if a.equals(b) else f"{len(a)} against {len(b)} events"
+    forms = {}
+    for name, forced in (("meshes", "0"), ("instances", "1")):
+        os.environ[instancing.ENV] = forced
+        forms[name] = ef.load_scene(xml, **defines)
+    os.environ.pop(instancing.ENV)
+    res["instanced"] = forms["instances"].instanced
+    for name, timed in forms.items():
+        res[name] = {"update": update_split(timed, update_steps, duration)}
+    streams = {}
+    for name, timed in forms.items():
+        res[name]["render"], streams[name] = render_row(timed, duration, steps)
+        res[name]["render_no_sync"], _ = render_row(timed, duration, steps, sync=False)
+    a, b = streams["meshes"], streams["instances"]
+    res["events_differ"] = None if a.equals(b) else f"{len(a)} against {len(b)} events"
     return res
 
 

@@ -40,13 +40,15 @@ step() {   # step NAME SECONDS COMMAND...: the command's output to $W/NAME.txt, 
 
 known_failures() {   # what failed under CUDA on the H100 (2026-11-26: benchmarks/results/gpu_h100.md) or changed
     # for CUDA since without being run there: the event-batch file (rounded(), frozen chunk passes), the
-    # DLPack columns, the overlapped loop, the scan tolerance, the freeze refusal (the README examples test
-    # needs more than 120 s on a fresh machine: it runs in the suite)
+    # DLPack columns, the overlapped loop, moving shapes as instances (CUDA's default: the instancing file and
+    # the static-pixel split), the scan tolerance, the freeze refusal (the README examples test needs more
+    # than 120 s on a fresh machine: it runs in the suite)
     step tests_known "${KNOWN_LIMIT:-150}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -v \
         --tb=long -rfEs -p no:cacheprovider -n 4 --timeout 120 \
         "tests/plugins/test_event_batch.py" \
         "tests/simulate/test_device_stream.py" \
         "tests/simulate/test_determinism.py::test_overlapped_steps_give_the_same_events" \
+        "tests/scene/test_instancing.py" "tests/simulate/test_static_pixels.py" \
         "tests/optics/test_scan.py::test_numpy_and_drjit_agree" \
         "tests/simulate/test_frozen_render.py::test_frozen_steps_give_the_same_events"
 }

@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import backend
 from ..errors import EventFieldError
+from . import instancing
 from . import sampler as sampler_module
 from .motion import Motion, load_motion, motion_path_for, parse_motion
 
@@ -34,7 +35,7 @@ class _Binding:
 class TimedScene:
     """A loaded Mitsuba scene whose objects follow a :class:`~mitsuba_eventfield.motion.Motion` in time."""
 
-    def __init__(self, scene, motion: Motion | None = None, path: str | None = None):
+    def __init__(self, scene, motion: Motion | None = None, path: str | None = None, instanced=()):
         if not isinstance(scene, mi.Scene):
             raise EventFieldError(f"TimedScene: scene must be a loaded mi.Scene (load_scene loads files), got "
                                   f"{type(scene).__name__}")
@@ -44,6 +45,7 @@ class TimedScene:
         self.scene = scene
         self.motion = motion
         self.path = path
+        self.instanced = list(instanced)   # moving shapes loaded as instances (scene/instancing.py)
         self.params = mi.traverse(scene)
         self.time = 0.0
         self.sampler_choice = "the scene's own"
@@ -184,6 +186,8 @@ class TimedScene:
         if self.motion is not None:
             d["motion_path"] = self.motion.source
             d["motion"] = self.motion.raw
+        if self.instanced:
+            d["instanced"] = self.instanced
         return d
 
 
@@ -202,38 +206,46 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
         backend.set_variant(variant, color)
     else:
         backend.ensure_variant()
-    path = None
-    if isinstance(scene, (str, os.PathLike)):
-        path = os.fspath(scene)
-        if not os.path.isfile(path):
-            raise EventFieldError(f"{path}: scene file not found")
+    path = os.fspath(scene) if isinstance(scene, (str, os.PathLike)) else None
+    if path is not None and not os.path.isfile(path):
+        raise EventFieldError(f"{path}: scene file not found")
+    if path is None and not isinstance(scene, mi.Scene):
+        raise EventFieldError(f"load_scene: expected a path or mi.Scene, got {type(scene).__name__}")
+    motion = _resolve_motion(motion, path)     # before the scene: which shapes move decides how it is loaded
+    sampler_choice, instanced = "the scene's own", []
+    if path is not None:
         xml_params = {k: str(v) for k, v in _film_override(path, xml_params).items()}
         try:
             with open(path) as f:
-                text, sampler_choice = sampler_module.choose(f.read(), sampler)
+                original = f.read()
+            text, sampler_choice = sampler_module.choose(original, sampler)
+            if motion is not None and instancing.wanted():
+                moving = [n for n, o in motion.objects.items() if not o.is_static]
+                rewritten, instanced = instancing.rewrite(text or original, moving)
+                text = rewritten or text
             scene = mi.load_file(path, **xml_params) if text is None else \
                 sampler_module.load_text(mi, text, path, xml_params)
         except (OSError, UnicodeDecodeError) as e:
             raise EventFieldError(f"{path}: cannot read the scene ({e.strerror or type(e).__name__})") from None
         except Exception as e:  # Mitsuba reports XML/plugin errors as RuntimeError with a long trace
             raise EventFieldError(f"{path}: {_mitsuba_message(e)}") from None
-    elif not isinstance(scene, mi.Scene):
-        raise EventFieldError(f"load_scene: expected a path or mi.Scene, got {type(scene).__name__}")
-    else:
-        sampler_choice = "the scene's own"
-    if isinstance(motion, str) and motion == "auto":
-        candidate = motion_path_for(path) if path else None
-        motion = load_motion(candidate) if candidate and os.path.isfile(candidate) else None
-    elif isinstance(motion, (str, os.PathLike)):
-        motion = load_motion(os.fspath(motion))
-    elif isinstance(motion, dict):
-        motion = parse_motion(motion)
-    elif motion is not None and not isinstance(motion, Motion):
-        raise EventFieldError(f"load_scene: motion = {motion!r}: expected 'auto', None, a motion file path, a dict "
-                              "or a Motion")
-    timed = TimedScene(scene, motion, path)
+    timed = TimedScene(scene, motion, path, instanced)
     timed.sampler_choice = sampler_choice
     return timed
+
+
+def _resolve_motion(motion, path: str | None) -> Motion | None:
+    if isinstance(motion, str) and motion == "auto":
+        candidate = motion_path_for(path) if path else None
+        return load_motion(candidate) if candidate and os.path.isfile(candidate) else None
+    if isinstance(motion, (str, os.PathLike)):
+        return load_motion(os.fspath(motion))
+    if isinstance(motion, dict):
+        return parse_motion(motion)
+    if motion is not None and not isinstance(motion, Motion):
+        raise EventFieldError(f"load_scene: motion = {motion!r}: expected 'auto', None, a motion file path, a dict "
+                              "or a Motion")
+    return motion
 
 
 FILM_ENV = "EVENTFIELD_FILM"

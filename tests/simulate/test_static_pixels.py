@@ -187,7 +187,28 @@ def test_a_moving_instance_declines_the_split(ball_scene, tmp_path):
     (tmp_path / "ball_instance.motion.toml").write_text("version = 1\n[objects.ball]\nvelocity = [10.0, 0, 0]\n")
     timed, plan, notes = _plan(str(path))
     assert unseen(timed, ["ball", "wall", "camera"]) == ["ball", "camera"]
-    masks = shape_masks(timed, 0.0)
+    import drjit as dr
+    import mitsuba as mi
+    from mitsuba_eventfield.scene.coverage import _aov
+    timed.set_time(0.0)
+    index = np.array(mi.render(timed.scene, integrator=_aov(), spp=1))[..., 0]
+    ball = next(s for s in timed.scene.shapes() if s.id() == "ball")
     plain = shape_masks(ef.load_scene(ball_scene["lit"]), 0.0)
-    assert plain["ball"].sum() > 20 and masks["ball"].sum() == 0          # in view, yet no pixel of its own
+    # in view, yet no pixel carries the instance's own index; the masks leave it out
+    own = float(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(ball))[0])
+    assert plain["ball"].sum() > 20 and not (index == own).any()
+    assert "ball" not in shape_masks(timed, 0.0)
     assert plan is None and any("shape-index AOV" in n for n in notes), notes
+
+
+def test_the_split_of_an_instanced_ball_is_the_meshes(ball_scene, monkeypatch):
+    """The ball loaded as an instance by the package (scene/instancing.py, CUDA's default): the coverage finds
+    it through its group's shape, so the split is made and its dynamic mask is that of the plain ball."""
+    from mitsuba_eventfield.scene import instancing
+    plans = {}
+    for forced in ("0", "1"):
+        monkeypatch.setenv(instancing.ENV, forced)
+        timed, plans[forced], notes = _plan(ball_scene["lit"])
+        assert timed.instanced == (["ball"] if forced == "1" else []) and plans[forced] is not None, notes
+    plain, inst = plans["0"].dynamic, plans["1"].dynamic
+    assert 0.01 < plain.mean() < 0.85 and (plain & inst).sum() >= 0.99 * (plain | inst).sum()
