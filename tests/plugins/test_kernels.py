@@ -45,3 +45,25 @@ def test_kernel_history_sees_a_real_recompilation(demo_small):
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     assert misses
+
+
+def test_no_recompilation_with_moving_instances(monkeypatch):
+    """The same with the demo's moving shapes loaded as instances (CUDA's default, forced here): an instance's
+    new ``to_world`` each step, built from host scalars, compiles nothing new once the steps run."""
+    from conftest import DEMO
+
+    from mitsuba_eventfield.scene import instancing
+    monkeypatch.setenv(instancing.ENV, "1")
+    timed = ef.load_scene(DEMO, width=48, height=36)
+    assert timed.instanced == ["ball", "cube"]
+    steps = 12
+    ef.render_events(timed, 0.002, steps=3)
+    dr.kernel_history()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        ev = ef.render_events(timed, 0.012, steps=steps)
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    steady, late_misses = steady_state_kernels(history, steps)
+    assert len(ev) > 0 and len(steady) >= 8 and late_misses == []
