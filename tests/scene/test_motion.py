@@ -71,9 +71,12 @@ def test_missing_target_id_lists_movable_ids():
         ef.load_scene(DEMO, motion={"objects": {"ghost": {"velocity": [1, 0, 0]}}}, width=16, height=12)
 
 
-def test_mesh_and_shape_updates_follow_the_pose():
+def test_mesh_and_shape_updates_follow_the_pose(monkeypatch):
     import drjit as dr
     import mitsuba as mi
+
+    from mitsuba_eventfield.scene import instancing
+    monkeypatch.setenv(instancing.ENV, "0")     # the mesh form (CUDA loads moving shapes as instances)
     timed = ef.load_scene(DEMO, width=16, height=12)
     # a step writes and updates the moving parameters alone (3 of the demo's 40); what follows reads them back
     # through the full set and ray-casts the scene, so the objects and their parents saw the update
