@@ -12,7 +12,9 @@
 # stage 25 s on a warm machine, 150 s on a fresh one (kernels compiled); the whole suite on 14 workers more
 # than 340 s (821 tests had passed by then). The known stage, the bench stage, then the suite with what is
 # left (TEST_LIMIT; KNOWN_LIMIT=1 skips the known tests there; SIGINT first, so pytest prints what ran) fit
-# in one session's 15 minutes if each command follows the last while the machine is warm (30 s).
+# in one session's 15 minutes if each command follows the last while the machine is warm (30 s). Two calls
+# save a machine start: "bash benchmarks/gpu_session.sh known; bash benchmarks/gpu_session.sh bench" (each
+# stage packs its own tarball), then "KNOWN_LIMIT=1 TEST_LIMIT=330 TEST_WORKERS=14 bash ... tests".
 # A dry run on the CPU checks the script itself: PY=.venv/bin/python OUT=/tmp/gpu_dry bash benchmarks/gpu_session.sh bench --quick
 set -uo pipefail
 cd "$(dirname "$0")/.."
