@@ -53,7 +53,7 @@ def rewrite(text: str, ids) -> tuple[str | None, list]:
         root = ET.fromstring(text)
     except ET.ParseError:
         return None, []                  # Mitsuba's own loader reports the error, with its line
-    wrapped = []
+    wrapped, shift = [], 0           # shift: elements added before the current one (a group each)
     for i, el in enumerate(list(root)):
         sid = el.get("id")
         if el.tag != "shape" or sid not in ids or el.get("type") in _NOT_WRAPPED or el.find("emitter") is not None:
@@ -64,8 +64,9 @@ def rewrite(text: str, ids) -> tuple[str | None, list]:
         group.append(el)
         instance = ET.Element("shape", {"type": "instance", "id": sid})
         ET.SubElement(instance, "ref", {"id": group_id(sid)})
-        root.insert(i, group)
-        root.insert(i + 1, instance)
+        root.insert(i + shift, group)      # in the shape's place: what it refers to stays defined before it
+        root.insert(i + shift + 1, instance)
+        shift += 1
         wrapped.append(sid)
     if not wrapped:
         return None, []

@@ -2,6 +2,7 @@
 rewrite wraps, that the render moves them as the mesh form does (the same events but for the transforms' float
 rounding), and that the shape-index coverage still finds an instanced object."""
 import os
+import xml.etree.ElementTree as ET
 
 import pytest
 from conftest import DEMO, ROOT
@@ -27,6 +28,11 @@ def test_the_rewrite_wraps_moving_shapes_without_emitters():
     assert '<shape type="instance" id="ball"><ref id="ball__group" /></shape>' in text
     assert 'id="lamp"' in text and 'id="still"' in text and 'id="copy"' in text
     assert instancing.rewrite(SCENE, ["lamp", "still_not"]) == (None, [])
+    # each group and its instance take the shape's place: a shape may refer to what is defined above it
+    text, wrapped = instancing.rewrite(SCENE, ["ball", "still"])
+    order = [el.get("id") for el in ET.fromstring(text)]
+    assert wrapped == ["ball", "still"]
+    assert order == ["ball__group", "ball", "lamp", "still__group", "still", "copy"]
     assert instancing.rewrite("<scene", ["ball"]) == (None, [])      # Mitsuba's loader reports bad XML
 
 
