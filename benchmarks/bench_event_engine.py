@@ -10,7 +10,8 @@ events left on the device (``on_device=True``: no host copy, the events synced b
 (``event_batch.one_frame_a_step()``) and the NumPy host path (``event_integrator.host_path()``). Renders:
 demo and fan scenes, what beyond the radiance render costs (events + motion + write, and the whole wall time,
 as fractions of the render) for the device path with its events left on the device (``on_device=True``), the
-device path (steps committed in batches, ``simulate/step_batch.py``), the device path a step at a time, and the
+device path (steps committed in batches, ``simulate/step_batch.py``), the same with the render loop's other
+choice of overlapping host and device (``backend.overlaps_steps``), the device path a step at a time, and the
 host path. Every run compares the paths' events (on the same frames for
 the converter; renders also compare the renderer with itself).
 
@@ -33,13 +34,35 @@ SCENES = os.path.join(os.path.dirname(HERE), "scenes")
 
 def _path(name):
     """``device`` (and ``on_device``, its events left on the device): as the code chooses (the converter
-    batches frames, ``event_batch``); ``device_per_step``: the device path one frame a kernel; ``host``: the
-    NumPy path."""
+    batches frames, ``event_batch``); ``device_other_loop``: the same with the render loop's other choice
+    of ``backend.overlaps_steps`` (overlapped on the CPU, synced after each render on CUDA);
+    ``device_per_step``: the device path one frame a kernel; ``host``: the NumPy path."""
     import contextlib
     from mitsuba_eventfield.plugins.event_batch import one_frame_a_step
     from mitsuba_eventfield.plugins.event_integrator import host_path
+    if name == "device_other_loop":
+        return _other_loop()
     return host_path() if name == "host" else one_frame_a_step() if name == "device_per_step" else \
         contextlib.nullcontext()
+
+
+def _other_loop():
+    import contextlib
+
+    from mitsuba_eventfield import backend
+
+    @contextlib.contextmanager
+    def flipped():
+        before = os.environ.get(backend.OVERLAP_ENV)
+        os.environ[backend.OVERLAP_ENV] = "0" if backend.overlaps_steps() else "1"
+        try:
+            yield
+        finally:
+            if before is None:
+                os.environ.pop(backend.OVERLAP_ENV)
+            else:
+                os.environ[backend.OVERLAP_ENV] = before
+    return flipped()
 
 
 def frame_stack(width, height, frames, rate_hz=2000.0):
@@ -121,7 +144,7 @@ def render_overhead(scene, duration, steps, reps=3, **defines):
     import drjit as dr
 
     import mitsuba_eventfield as ef
-    paths = ("on_device", "device", "device_per_step", "host")
+    paths = ("on_device", "device", "device_other_loop", "device_per_step", "host")
     scenes, best, streams = {}, {}, {}
     for name in paths:
         scenes[name] = ef.load_scene(scene, **defines)
@@ -239,7 +262,9 @@ def main(quick=False):
            "+ write, and the whole wall time, each as % of the render):", "",
            "| scene | steps | events | path | render s | events / motion / write s | beyond render | wall beyond "
            "render | wall beyond the renders alone |", "|---|---|---|---|---|---|---|---|---|"]
+    other = "synced after each render" if renders and renders[0]["overlapped"] else "overlapped"
     labels = {"on_device": "device, events left there", "device": "device, steps in batches",
+              "device_other_loop": f"device, steps in batches, loop {other}",
               "device_per_step": "device, a step a commit", "host": "host"}
     for r in renders:
         for k, label in labels.items():
