@@ -42,7 +42,8 @@ def shape_masks(timed, t: float, sensor=None, view_time: float | None = None) ->
     timed.set_time(t, view_time)
     index = np.array(mi.render(timed.scene, sensor=timed.sensor if sensor is None else sensor, integrator=_aov(),
                                spp=1))[..., 0]
-    return {s.id(): index == _index(timed, s) for s in timed.scene.shapes() if _index(timed, s) is not None}
+    indices = {s.id(): _index(timed, s) for s in timed.scene.shapes()}
+    return {sid: index == value for sid, value in indices.items() if value is not None}
 
 
 def covered_over_time(timed, times, ids, view_time: float | None = None) -> np.ndarray:

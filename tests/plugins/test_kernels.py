@@ -12,20 +12,25 @@ def _misses(history):
     return jit, [k for k in jit if not k.get("cache_hit") or k.get("cache_disk")]
 
 
+def _steady_render(timed, steps=12):
+    """(events, steady-state JIT kernels, those compiled late) of a 12-step render after a warm-up render
+    that compiles every kernel once, with Dr.Jit's kernel history on."""
+    ef.render_events(timed, 0.002, steps=3)
+    dr.kernel_history()                                     # clear
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        ev = ef.render_events(timed, 0.001 * steps, steps=steps)
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return (ev, *steady_state_kernels(history, steps))
+
+
 def test_no_recompilation_in_steady_state(demo_small):
     """After the first steps, every kernel comes from the in-memory cache. (Within the first steps Dr.Jit can
     meet a variant of a kernel keyed on a buffer's runtime memory alignment, an unaligned load: once per
     process, not per step.)"""
-    steps = 12
-    ef.render_events(demo_small, 0.002, steps=3)          # warm-up compiles every kernel once
-    dr.kernel_history()                                     # clear
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    try:
-        ev = ef.render_events(demo_small, 0.012, steps=steps)
-        history = dr.kernel_history()
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
-    steady, late_misses = steady_state_kernels(history, steps)
+    ev, steady, late_misses = _steady_render(demo_small)
     assert len(ev) > 0
     assert len(steady) >= 8                                 # kernels did run (the check is not vacuous)
     assert late_misses == []
@@ -56,14 +61,5 @@ def test_no_recompilation_with_moving_instances(monkeypatch):
     monkeypatch.setenv(instancing.ENV, "1")
     timed = ef.load_scene(DEMO, width=48, height=36)
     assert timed.instanced == ["ball", "cube"]
-    steps = 12
-    ef.render_events(timed, 0.002, steps=3)
-    dr.kernel_history()
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    try:
-        ev = ef.render_events(timed, 0.012, steps=steps)
-        history = dr.kernel_history()
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
-    steady, late_misses = steady_state_kernels(history, steps)
+    ev, steady, late_misses = _steady_render(timed)
     assert len(ev) > 0 and len(steady) >= 8 and late_misses == []
