@@ -5,6 +5,7 @@
 #   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, pixel, fan
 #                                                                         1280x720, memory, motion
 #   run(command="bash benchmarks/gpu_session.sh tests", carry=[".gpu"])   the suite under cuda_ad_mono
+#   run(command="bash benchmarks/gpu_session.sh verify", carry=[".gpu"])  known tests, fan to HDF5, memory, overlap
 # Everything lands in one tarball under $OUT (the device tool brings it back): logs, the benchmarks' results
 # files (written there, not into benchmarks/results/), nvidia-smi. Copy the results files into
 # benchmarks/results/ here and commit them: they carry the GPU's name.
@@ -52,7 +53,17 @@ known_failures() {   # what failed under CUDA on the H100 (2026-11-26: benchmark
         "tests/simulate/test_determinism.py::test_overlapped_steps_give_the_same_events" \
         "tests/scene/test_instancing.py" "tests/simulate/test_static_pixels.py" \
         "tests/optics/test_scan.py::test_numpy_and_drjit_agree" \
-        "tests/simulate/test_frozen_render.py::test_frozen_steps_give_the_same_events"
+        "tests/simulate/test_frozen_render.py::test_frozen_steps_give_the_same_events" \
+        "tests/simulate/test_sink.py" "tests/events/test_writer.py"
+}
+
+fan_to_hdf5() {   # issue 15's own row through the CLI: the fan at 1280x720, 400 steps, to HDF5 (render / events /
+    # motion / write split, and whether the writer or the render was the bottleneck)
+    local sizes="-D width=1280 -D height=720" steps=400
+    if [ -n "$quick" ]; then sizes="-D width=96 -D height=72"; steps=80; fi
+    step fan_render 90 $PY -m mitsuba_eventfield.cli render scenes/fan/fan.xml -o /tmp/fan_gpu.h5 $sizes \
+        --duration 0.02 --steps $steps
+    rm -f /tmp/fan_gpu.h5
 }
 
 case "$stage" in
@@ -77,13 +88,7 @@ case "$stage" in
         # engine + converter (device, per step, host) and issue 15's render rows (demo 0.1 s; fan 1280x720,
         # 400 steps) with their cost beyond the radiance render
         step event_engine 240 $PY benchmarks/bench_event_engine.py $quick
-        # issue 15's own row through the CLI: the fan at 1280x720, 400 steps, to HDF5 (render / events / motion /
-        # write split, and whether the writer or the render was the bottleneck)
-        sizes="-D width=1280 -D height=720"; steps=400
-        if [ -n "$quick" ]; then sizes="-D width=96 -D height=72"; steps=80; fi
-        step fan_render 90 $PY -m mitsuba_eventfield.cli render scenes/fan/fan.xml -o /tmp/fan_gpu.h5 $sizes \
-            --duration 0.02 --steps $steps
-        rm -f /tmp/fan_gpu.h5
+        fan_to_hdf5
         # the realistic pixel (every effect, batched) against the ideal one
         step pixel 90 $PY benchmarks/bench_pixel.py
         # host and GPU memory for 10x the duration (fan 346x260, every pixel, to HDF5)
@@ -92,6 +97,17 @@ case "$stage" in
         [ -z "$quick" ] && step writer 60 $PY benchmarks/bench_writer.py
         # motion a step: Mitsuba's update against ours, meshes against instances, the loop's sync after a render
         step motion 150 $PY benchmarks/bench_motion.py $quick
-        cat "$W/steps.txt"; tail -n 30 "$W/event_engine.txt" "$W/fan_render.txt" "$W/motion.txt" ;;
-    *) echo "usage: gpu_session.sh tests|known|bench [--quick]" >&2; exit 2 ;;
+        # the loop's overlap of host and device, overlapped against synced in alternating pairs
+        step overlap 150 $PY benchmarks/bench_overlap.py $quick
+        cat "$W/steps.txt"; tail -n 30 "$W/event_engine.txt" "$W/fan_render.txt" "$W/motion.txt" "$W/overlap.txt" ;;
+    verify)
+        # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
+        # memory against the duration, and the overlap's A/B; about 300 s on a fresh machine
+        known_failures
+        fan_to_hdf5
+        [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
+        step overlap 150 $PY benchmarks/bench_overlap.py $quick
+        grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
+        cat "$W/steps.txt"; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt" ;;
+    *) echo "usage: gpu_session.sh tests|known|bench|verify [--quick]" >&2; exit 2 ;;
 esac

@@ -47,10 +47,9 @@ class DeviceEvents:
         """(x uint16, y uint16, t int64 us, p int8) NumPy arrays. On the CPU these are views of the Dr.Jit
         arrays (no copy; x and y strided halves of ``xy``); from a GPU, one device-to-host copy into Dr.Jit's
         pinned host memory. ``owned``: NumPy's own memory instead, one host copy more, and Dr.Jit's buffers
-        released here. For arrays that another thread frees (the background writer): Dr.Jit returns a freed
-        pinned buffer to its cache through the freeing thread's CUDA state, and the fan's peak host memory grew
-        with the events written (an H200: 1.2 GB over 0.05 s, 7.1 GB over 0.5 s; flat on the CPU, also with
-        16 writer threads; docs/design.md)."""
+        released here: for a result that any thread may free later (``DeviceEventStream.numpy``). Dr.Jit returns
+        a freed pinned buffer to its cache through the freeing thread's CUDA state; freed elsewhere, it is never
+        reused (the background writer, before it borrowed its chunks: events/writer.py, docs/design.md)."""
         if self.count == 0:
             return (np.empty(0, np.uint16), np.empty(0, np.uint16), np.empty(0, np.int64), np.empty(0, np.int8))
         xy = self.xy.numpy()

@@ -11,6 +11,14 @@ The chunks then come from the heap, where blocks freed by another thread fragmen
 peaked at 342 MB over 0.05 s and 421 MB over 0.5 s (1.23x). With the threshold held at 1 MiB
 (:func:`hold_mmap_threshold`) every chunk is its own mapping, given back when freed: 300 and 312 MB (1.04x), in
 98.7 against 96.8 s over 0.5 s (benchmarks/results/memory.md; within the run-to-run spread).
+
+Chunks from a GPU arrive in Dr.Jit's pinned host memory, which must be freed on the thread that allocated it
+(Dr.Jit returns a freed buffer to that thread's cache; freed on the writer's thread, the buffers were never
+reused and an H200's host memory grew 5.8x over 10x the duration). :meth:`BackgroundWriter.append_borrowed`
+takes such arrays without a copy on the caller's thread: the worker copies them into NumPy's memory, drops its
+references, then tells the caller, who drops the last reference on its own thread (:meth:`release_copied`,
+called at each hand-over and at the end). The copy (a page fault per fresh page, 0.3-0.5 s for the fan's
+2.1 GB of events) then runs beside the render instead of on its thread.
 """
 from __future__ import annotations
 
@@ -20,6 +28,8 @@ import queue
 import sys
 import threading
 import time
+
+import numpy as np
 
 MMAP_THRESHOLD = 1 << 20          # bytes: larger blocks are mapped on their own and unmapped when freed
 _M_MMAP_THRESHOLD = -3            # mallopt's parameter number (malloc.h)
@@ -58,6 +68,11 @@ def hold_mmap_threshold() -> bool:
     return _held
 
 
+def _own(a):
+    """``a`` in NumPy's own memory (a fresh C-ordered copy)."""
+    return np.array(a, copy=True, order="C")
+
+
 class BackgroundWriter:
     """Runs ``writer.append`` (any object with ``append(x, y, t, p, complete_until_us)``, ``close(end_us,
     meta)`` and ``abort()``, e.g. ``H5EventWriter``) on a worker thread. An error raised there (a full disk, an
@@ -71,7 +86,12 @@ class BackgroundWriter:
         self.error: BaseException | None = None
         self.wait_s = 0.0      # the caller's time blocked on a full queue: the writer did not keep up
         self.tail_s = 0.0      # the caller's time draining the queue: at checkpoints and at the end
-        self.busy_s = 0.0      # the worker's time writing
+        self.busy_s = 0.0      # the worker's time writing (and copying borrowed chunks)
+        # borrowed chunks by hand-over number, held here until the worker has copied them: the caller's
+        # thread drops them (release_copied), so the last reference never goes on the worker's thread
+        self._borrowed: dict[int, tuple] = {}
+        self._copied: queue.SimpleQueue = queue.SimpleQueue()
+        self._handed = 0
         self.thread = threading.Thread(target=self._work, name="eventfield-writer", daemon=True)
         self.thread.start()
 
@@ -80,13 +100,20 @@ class BackgroundWriter:
             item = self.queue.get()
             if item is None:
                 return
+            t0 = time.perf_counter()
+            borrowed, item = item[0], item[1:]
+            if borrowed is not None:          # copy first, drop every reference, then tell the caller
+                x, y, t, p, until = item
+                item = (*(_own(c) if self.error is None else None for c in (x, y, t, p)), until)
+                del x, y, t, p
+                self._copied.put(borrowed)
             if self.error is None:            # after an error keep draining: the caller never blocks on it
-                t0 = time.perf_counter()
                 try:
                     self.writer.append(*item)
                 except BaseException as e:    # noqa: BLE001 - handed to the caller's thread
                     self.error = e
-                self.busy_s += time.perf_counter() - t0
+            del item
+            self.busy_s += time.perf_counter() - t0
             self.queue.task_done()
 
     def _raise(self):
@@ -94,9 +121,29 @@ class BackgroundWriter:
             raise self.error
 
     def append(self, x, y, t, p, complete_until_us: int | None = None):
+        self._put((None, x, y, t, p, complete_until_us))
+
+    def append_borrowed(self, x, y, t, p, complete_until_us: int | None = None):
+        """Like :meth:`append` for arrays whose memory must be freed on this thread (Dr.Jit's pinned host
+        buffers): the worker copies them, and this thread drops them at a later hand-over or at the end."""
+        self.release_copied()
+        self._handed += 1
+        self._borrowed[self._handed] = (x, y, t, p)
+        self._put((self._handed, x, y, t, p, complete_until_us))
+
+    def release_copied(self) -> None:
+        """Drop, on the calling thread, the borrowed chunks the worker has copied."""
+        while True:
+            try:
+                del self._borrowed[self._copied.get_nowait()]
+            except queue.Empty:
+                return
+
+    def _put(self, item):
         self._raise()
         t0 = time.perf_counter()
-        self.queue.put((x, y, t, p, complete_until_us))
+        self.queue.put(item)
+        del item
         self.wait_s += time.perf_counter() - t0
 
     def _stop(self):
@@ -105,6 +152,7 @@ class BackgroundWriter:
             self.queue.put(None)
             self.thread.join()
             self.tail_s += time.perf_counter() - t0     # the last chunks: written after any render, not a pace
+        self.release_copied()
 
     def wait(self):
         """Wait until every queued chunk is written, keeping the worker for more (a checkpoint: a drain the
@@ -112,6 +160,7 @@ class BackgroundWriter:
         t0 = time.perf_counter()
         self.queue.join()
         self.tail_s += time.perf_counter() - t0
+        self.release_copied()
         self._raise()
 
     def drain(self):

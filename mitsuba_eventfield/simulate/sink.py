@@ -84,12 +84,14 @@ class Sink:
             for part in parts:
                 self._add_host(*part.numpy(), until)
             return
-        # to a writer on the CPU (the device is the host): join the parts' views once there; from a GPU join
-        # them on the device first, so that one copy crosses; a writer frees the chunk on its own thread, so it
-        # gets NumPy's memory, not Dr.Jit's pinned buffers (DeviceEvents.numpy)
-        host = DeviceEvents.host_columns(parts) if _cpu() else \
-            DeviceEvents.concat(parts).numpy(owned=self.writer is not None)
-        self._add_host(*host, until)
+        if _cpu():      # to a writer on the CPU (the device is the host): the parts' views joined once there
+            self._add_host(*DeviceEvents.host_columns(parts), until)
+            return
+        # from a GPU the parts are joined on the device first, so that one copy crosses into Dr.Jit's pinned
+        # host memory. A writer borrows that chunk: its thread copies it out and this thread frees it, where
+        # Dr.Jit can reuse it (events.writer: freed on the writer's thread, host memory grew with the events)
+        host = DeviceEvents.concat(parts).numpy()
+        self._add_host(*host, until, borrowed=True)
 
     def add_step(self, events, complete_until_us: int) -> None:
         """A step's events from ``EventIntegrator.commit_events``: device-side ones are buffered there."""
@@ -108,7 +110,7 @@ class Sink:
             self.count(chunk.p.numpy())          # the ON / OFF totals: one byte an event crosses, not thirteen
             self.device_chunks.append(chunk)
 
-    def _add_host(self, x, y, t, p, complete_until_us):
+    def _add_host(self, x, y, t, p, complete_until_us, borrowed: bool = False):
         if self.on_device:                      # a host-side step's events (a sequential pixel model) go up
             import mitsuba as mi
             xy, t, p = numpy_columns(x, y, t, p)
@@ -118,7 +120,7 @@ class Sink:
             return
         self.count(p)
         if self.writer is not None:
-            self.writer.append(x, y, t, p, complete_until_us)
+            (self.writer.append_borrowed if borrowed else self.writer.append)(x, y, t, p, complete_until_us)
         elif len(t):
             self.memory.append(x, y, t, p)
 

@@ -1,11 +1,15 @@
-"""The sink's GPU branch (simulate/sink.py), run on the CPU by making the sink take it: a chunk handed to the
-background writer is in NumPy's own memory, so the writer's thread never frees a Dr.Jit buffer (on a GPU that
-left the pinned buffers out of Dr.Jit's reuse, and the fan's host memory grew with its events: DeviceEvents.numpy),
-and the file holds the same events as the in-memory render."""
+"""The sink's GPU branch (simulate/sink.py), run on the CPU by making the sink take it. A chunk from the device
+arrives in Dr.Jit's memory (pinned host buffers on a GPU) and is lent to the background writer: the writer's
+thread copies it into NumPy's own memory before writing, and the render's thread drops the last reference to the
+borrowed buffers (on a GPU, buffers freed on the writer's thread left Dr.Jit's reuse, and the fan's host memory
+grew with its events: events/writer.py). The file holds the same events as the in-memory render."""
+import threading
+
 import numpy as np
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield.events import writer as writer_mod
+from mitsuba_eventfield.events import hdf5 as hdf5_mod
+from mitsuba_eventfield.plugins.event_fill import DeviceEvents
 from mitsuba_eventfield.simulate import sink as sink_mod
 
 
@@ -15,27 +19,50 @@ def _owns_its_memory(a) -> bool:
     return a.base is None          # a view of Dr.Jit's memory ends in Dr.Jit's capsule, not in None
 
 
-def test_chunks_for_the_writer_are_numpys_own_memory_on_the_gpu_branch(tmp_path, demo_small, monkeypatch):
-    seen = []
-    real_append = writer_mod.BackgroundWriter.append
+class _Tracked:
+    """A buffer that records the thread which frees it (the stand-in for a Dr.Jit pinned buffer)."""
 
-    def append(self, x, y, t, p, complete_until_us=None):
-        seen.append([_owns_its_memory(c) for c in (x, y, t, p)] if len(t) else None)
-        return real_append(self, x, y, t, p, complete_until_us)
-    monkeypatch.setattr(writer_mod.BackgroundWriter, "append", append)
+    def __init__(self, a, freed):
+        self.a, self.freed = a, freed
+        self.__array_interface__ = a.__array_interface__
+
+    def __del__(self):
+        self.freed.append(threading.get_ident())
+
+
+def test_the_writer_copies_borrowed_chunks_and_the_render_thread_frees_them(tmp_path, demo_small, monkeypatch):
     memory = ef.render_events(demo_small, 0.02, steps=200, event_buffer_mb=0.0005)
 
-    out = str(tmp_path / "gpu_branch.h5")
+    freed, lent, written = [], [0], []
+    real_numpy, real_append = DeviceEvents.numpy, hdf5_mod.H5EventWriter.append
+
+    def tracked_numpy(self, owned=False):
+        cols = real_numpy(self, owned)
+        if not owned and self.count:
+            lent[0] += 1
+            cols = tuple(np.asarray(_Tracked(np.array(c), freed)) for c in cols)
+        return cols
+
+    def append(self, x, y, t, p, complete_until_us=None):
+        if len(t):
+            written.append((threading.get_ident(), [_owns_its_memory(c) for c in (x, y, t, p)]))
+        return real_append(self, x, y, t, p, complete_until_us)
+    monkeypatch.setattr(DeviceEvents, "numpy", tracked_numpy)
+    monkeypatch.setattr(hdf5_mod.H5EventWriter, "append", append)
     monkeypatch.setattr(sink_mod, "_cpu", lambda: False)
+    out = str(tmp_path / "gpu_branch.h5")
     ef.render_events(demo_small, 0.02, steps=200, output=out, event_buffer_mb=0.0005)
-    chunks = [s for s in seen if s is not None]
-    assert len(chunks) > 3 and all(all(s) for s in chunks)
+
+    render_thread = threading.get_ident()
+    assert lent[0] > 3 and len(written) >= lent[0]
+    assert all(thread != render_thread and all(owned) for thread, owned in written)   # copied on the writer's
+    assert len(freed) == 4 * lent[0] and set(freed) == {render_thread}                 # freed on the render's
     assert ef.read_events(out).equals(memory) and len(memory) > 500
 
     # and the check itself tells Dr.Jit's memory from NumPy's: the CPU branch's in-memory path hands views
     import mitsuba as mi
 
-    from mitsuba_eventfield.plugins.event_fill import DeviceEvents, polarity
+    from mitsuba_eventfield.plugins.event_fill import polarity
     ev = DeviceEvents(mi.UInt32([1 | 2 << 16, 3 | 4 << 16]), mi.Int64([5, 6]), polarity(mi.Bool([True, False])), 2)
     assert not any(_owns_its_memory(c) for c in ev.numpy())
     assert all(_owns_its_memory(c) for c in ev.numpy(owned=True))
