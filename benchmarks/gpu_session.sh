@@ -102,12 +102,14 @@ case "$stage" in
         cat "$W/steps.txt"; tail -n 30 "$W/event_engine.txt" "$W/fan_render.txt" "$W/motion.txt" "$W/overlap.txt" ;;
     verify)
         # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
-        # memory against the duration, and the overlap's A/B; about 300 s on a fresh machine
+        # memory against the duration, the overlap's A/B, the converter's profile; about 300 s on a fresh machine
         known_failures
         fan_to_hdf5
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         step overlap 150 $PY benchmarks/bench_overlap.py $quick
+        # the converter kernel by kernel (what bounds its pixel-steps a second)
+        step profile 90 $PY benchmarks/profile_converter.py $quick
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
-        cat "$W/steps.txt"; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt" ;;
+        cat "$W/steps.txt"; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt"; head -n 30 "$W/profile.txt" ;;
     *) echo "usage: gpu_session.sh tests|known|bench|verify [--quick]" >&2; exit 2 ;;
 esac
