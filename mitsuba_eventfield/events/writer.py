@@ -15,10 +15,10 @@ peaked at 342 MB over 0.05 s and 421 MB over 0.5 s (1.23x). With the threshold h
 Chunks from a GPU arrive in Dr.Jit's pinned host memory, which must be freed on the thread that allocated it
 (Dr.Jit returns a freed buffer to that thread's cache; freed on the writer's thread, the buffers were never
 reused and an H200's host memory grew 5.8x over 10x the duration). :meth:`BackgroundWriter.append_borrowed`
-takes such arrays without a copy on the caller's thread: the worker copies them into NumPy's memory, drops its
-references, then tells the caller, who drops the last reference on its own thread (:meth:`release_copied`,
-called at each hand-over and at the end). The copy (a page fault per fresh page, 0.3-0.5 s for the fan's
-2.1 GB of events) then runs beside the render instead of on its thread.
+takes such arrays without a copy on the caller's thread: a copier thread copies them into NumPy's memory, drops
+its references, then tells the caller, who drops the last reference on its own thread (:meth:`release_copied`,
+called at each hand-over and at the end). The copy (a page fault per fresh page: 0.35 s of the H200 fan's
+render thread, 0.8 s on a busy writer's) then runs beside the render and the writing.
 """
 from __future__ import annotations
 
@@ -77,43 +77,71 @@ class BackgroundWriter:
     """Runs ``writer.append`` (any object with ``append(x, y, t, p, complete_until_us)``, ``close(end_us,
     meta)`` and ``abort()``, e.g. ``H5EventWriter``) on a worker thread. An error raised there (a full disk, an
     out-of-order chunk) is raised again in the caller's thread at the next ``append`` or at ``close``; chunks
-    after it are dropped and ``abort`` removes the partial file."""
+    after it are dropped and ``abort`` removes the partial file.
+
+    From the first borrowed chunk (:meth:`append_borrowed`) on, chunks pass a copier thread on their way (in
+    order): it copies the borrowed ones and passes the others on. Copying on the writer's own thread made it the
+    GPU fan's bottleneck (an H200: busy 3.5 s against 2.7 s, the render waiting 0.9 s for it); on a thread of
+    its own it runs beside both. Up to ``depth`` chunks wait for each of the two threads then."""
 
     def __init__(self, writer, depth: int = 2):
         hold_mmap_threshold()                 # chunks freed on another thread must not fragment the heap
         self.writer = writer
-        self.queue: queue.Queue = queue.Queue(maxsize=max(1, int(depth)))
+        depth = max(1, int(depth))
+        self.inbox: queue.Queue = queue.Queue(maxsize=depth)     # to the copier
+        self.queue: queue.Queue = queue.Queue(maxsize=depth)     # to the writer
         self.error: BaseException | None = None
         self.wait_s = 0.0      # the caller's time blocked on a full queue: the writer did not keep up
         self.tail_s = 0.0      # the caller's time draining the queue: at checkpoints and at the end
-        self.busy_s = 0.0      # the worker's time writing (and copying borrowed chunks)
-        # borrowed chunks by hand-over number, held here until the worker has copied them: the caller's
-        # thread drops them (release_copied), so the last reference never goes on the worker's thread
+        self.busy_s = 0.0      # the worker's time writing
+        self.copy_s = 0.0      # the copier's time copying borrowed chunks
+        # borrowed chunks by hand-over number, held here until the copier has copied them: the caller's
+        # thread drops them (release_copied), so the last reference never goes on another thread
         self._borrowed: dict[int, tuple] = {}
         self._copied: queue.SimpleQueue = queue.SimpleQueue()
         self._handed = 0
+        self.copier: threading.Thread | None = None       # started by the first borrowed chunk
         self.thread = threading.Thread(target=self._work, name="eventfield-writer", daemon=True)
         self.thread.start()
+
+    def _copy(self):
+        while True:
+            item = self.inbox.get()
+            end = item is None
+            if not end and item[0] is not None:   # borrowed: copied, every reference dropped, the caller told
+                t0 = time.perf_counter()
+                number, x, y, t, p, until = item
+                del item
+                owned = None
+                if self.error is None:
+                    try:
+                        owned = (None, _own(x), _own(y), _own(t), _own(p), until)
+                    except BaseException as e:    # noqa: BLE001 - handed to the caller's thread (a MemoryError)
+                        self.error = e
+                del x, y, t, p
+                self._copied.put(number)
+                self.copy_s += time.perf_counter() - t0
+                item = owned
+            if end or item is not None:
+                self.queue.put(item)
+            del item
+            self.inbox.task_done()
+            if end:
+                return
 
     def _work(self):
         while True:
             item = self.queue.get()
             if item is None:
                 return
-            t0 = time.perf_counter()
-            borrowed, item = item[0], item[1:]
-            if borrowed is not None:          # copy first, drop every reference, then tell the caller
-                x, y, t, p, until = item
-                item = (*(_own(c) if self.error is None else None for c in (x, y, t, p)), until)
-                del x, y, t, p
-                self._copied.put(borrowed)
             if self.error is None:            # after an error keep draining: the caller never blocks on it
+                t0 = time.perf_counter()
                 try:
-                    self.writer.append(*item)
+                    self.writer.append(*item[1:])
                 except BaseException as e:    # noqa: BLE001 - handed to the caller's thread
                     self.error = e
+                self.busy_s += time.perf_counter() - t0
             del item
-            self.busy_s += time.perf_counter() - t0
             self.queue.task_done()
 
     def _raise(self):
@@ -121,18 +149,21 @@ class BackgroundWriter:
             raise self.error
 
     def append(self, x, y, t, p, complete_until_us: int | None = None):
-        self._put((None, x, y, t, p, complete_until_us))
+        self._put((None, x, y, t, p, complete_until_us))    # through the copier once it runs: in order
 
     def append_borrowed(self, x, y, t, p, complete_until_us: int | None = None):
         """Like :meth:`append` for arrays whose memory must be freed on this thread (Dr.Jit's pinned host
-        buffers): the worker copies them, and this thread drops them at a later hand-over or at the end."""
+        buffers): the copier copies them, and this thread drops them at a later hand-over or at the end."""
         self.release_copied()
+        if self.copier is None and self.thread.is_alive():
+            self.copier = threading.Thread(target=self._copy, name="eventfield-copier", daemon=True)
+            self.copier.start()
         self._handed += 1
         self._borrowed[self._handed] = (x, y, t, p)
         self._put((self._handed, x, y, t, p, complete_until_us))
 
     def release_copied(self) -> None:
-        """Drop, on the calling thread, the borrowed chunks the worker has copied."""
+        """Drop, on the calling thread, the borrowed chunks the copier has copied."""
         while True:
             try:
                 del self._borrowed[self._copied.get_nowait()]
@@ -142,14 +173,18 @@ class BackgroundWriter:
     def _put(self, item):
         self._raise()
         t0 = time.perf_counter()
-        self.queue.put(item)
+        (self.queue if self.copier is None else self.inbox).put(item)
         del item
         self.wait_s += time.perf_counter() - t0
 
     def _stop(self):
         if self.thread.is_alive():
             t0 = time.perf_counter()
-            self.queue.put(None)
+            if self.copier is None:
+                self.queue.put(None)
+            else:
+                self.inbox.put(None)          # passed on to the writer after the copies
+                self.copier.join()
             self.thread.join()
             self.tail_s += time.perf_counter() - t0     # the last chunks: written after any render, not a pace
         self.release_copied()
@@ -158,6 +193,8 @@ class BackgroundWriter:
         """Wait until every queued chunk is written, keeping the worker for more (a checkpoint: a drain the
         render asked for, counted with the final one in ``tail_s``, not a pace)."""
         t0 = time.perf_counter()
+        if self.copier is not None:
+            self.inbox.join()
         self.queue.join()
         self.tail_s += time.perf_counter() - t0
         self.release_copied()

@@ -91,8 +91,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
         tw = time.perf_counter()
         sink.drain()
         summary.write_s += time.perf_counter() - tw
-        summary.writer_wait_s, summary.writer_busy_s = sink.writer_wait_s, sink.writer_busy_s
-        summary.writer_tail_s = sink.writer_tail_s
+        sink.report(summary)
         summary.wall_s = time.perf_counter() - wall0
         meta.update({"t_start_us": int(round(t_first * 1e6)), "duration_us": int(round(summary.duration_s * 1e6))})
         meta["render"] = summary.as_dict()
@@ -115,7 +114,7 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
     pending, times = None, []      # the group's frames (_Group) and their times
     t_first = t_prev = t_last_committed = None
     try:
-        for t, frame in source.frames():
+        for index, (t, frame) in enumerate(_frames(source)):
             if not source.device and frame.shape != (source.height, source.width):
                 raise EventFieldError(f"{source.name}: frame size {frame.shape[1]}x{frame.shape[0]} differs from "
                                       f"{source.width}x{source.height}")
@@ -126,13 +125,14 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
             if batched and t_first is not None and group > 1:     # one frame a kernel: the per-step kernel
                 if pending is None:
                     pending = _Group(source, group)
-                pending.put(len(times), frame)
+                pending.put(len(times), frame, index)
                 times.append(t)
                 if len(times) == group:
                     _commit_group(integ, sink, summary, pending.values(len(times)), [t_last_committed] + times)
                     t_last_committed, times = t, []
             else:
-                _commit_one(integ, sink, summary, frame, t_prev, t, source)
+                _commit_one(integ, sink, summary, source.block(index, 1) if frame is None else frame, t_prev, t,
+                            source)
                 t_last_committed = t
             t_first = t if t_first is None else t_first
             t_prev = t
@@ -146,6 +146,14 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
     if t_first is None or t_first == t_prev:
         raise EventFieldError(f"{source.name}: fewer than 2 frames: no step to make events from")
     return t_first, t_prev
+
+
+def _frames(source: FrameSource):
+    """(t, frame) of every frame; from a source with ``block`` the frame is None (taken by ``block`` where it is
+    needed: tracing a gather a frame cost more host time than the whole group's kernels, issue 15)."""
+    if source.block is None:
+        return source.frames()
+    return ((float(t), None) for t in source.times)
 
 
 def _commit_one(integ, sink: Sink, summary: RenderSummary, frame, t_prev, t, source: FrameSource) -> None:
@@ -162,14 +170,19 @@ def _commit_one(integ, sink: Sink, summary: RenderSummary, frame, t_prev, t, sou
 
 
 class _Group:
-    """The frames of one kernel: copied into one host buffer (a source may reuse its own), or, from a device
-    source, joined on the device (``concat_arrays``: one cached kernel)."""
+    """The frames of one kernel: copied into one host buffer (a source may reuse its own); from a device
+    source that holds its frames in one buffer, one gather of the group's consecutive frames (``block``: on an
+    H200 a kernel a frame was the converter's most launched kernel, 199 of 287 for 200 frames); from another
+    device source, joined on the device (``concat_arrays``: one cached kernel)."""
 
     def __init__(self, source: FrameSource, size: int):
-        self.device = source.device
+        self.device, self.block, self.first = source.device, source.block, None
         self.frames = [] if self.device else np.empty((size, source.height, source.width), np.float32)
 
-    def put(self, i: int, frame) -> None:
+    def put(self, i: int, frame, index: int) -> None:
+        """Frame ``index`` of the source as the group's ``i``-th (the group's frames are consecutive)."""
+        if i == 0:
+            self.first = index
         if self.device:
             del self.frames[i:]
             self.frames.append(frame)
@@ -178,6 +191,8 @@ class _Group:
 
     def values(self, count: int):
         """The first ``count`` frames as one flat Float of the active backend."""
+        if self.block is not None:
+            return self.block(self.first, count)
         if self.device:
             return event_fill.concat_arrays(self.frames[:count], mi.Float)
         return mi.Float(self.frames[:count].ravel())

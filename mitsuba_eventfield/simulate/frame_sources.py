@@ -34,6 +34,10 @@ class FrameSource:
     frames: object          # () -> Iterator[tuple[float, np.ndarray]]
     describe: dict
     device: bool = False    # frames() yields flat float arrays of the active Dr.Jit backend instead (from_device)
+    # (first, count) -> frames first .. first + count - 1 as one flat array of the backend, where the source
+    # holds them in one buffer (from_device): a group of frames is then one gather, not one kernel a frame
+    block: object = None
+    times: object = None    # the frames' times in seconds where known before reading them (with ``block``)
 
 
 def srgb_to_linear(v: np.ndarray) -> np.ndarray:
@@ -113,8 +117,8 @@ def is_device_array(frames) -> bool:
 def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> FrameSource:
     """A (T, H, W) stack of linear float intensities already where the active Dr.Jit backend computes: a
     Dr.Jit tensor, or a PyTorch / CuPy array taken through DLPack. Checked there (finite and >= 0: one
-    reduction) and handed on frame by frame as flat device arrays (a gather at an opaque offset: one kernel
-    whatever the frame), never copied to the host. Colour, integer and sRGB frames take the host path
+    reduction) and handed on as flat device arrays, a frame or a group of consecutive frames at a time (``block``:
+    a gather at an opaque offset, one cached kernel whatever the offset), never copied to the host. Colour, integer and sRGB frames take the host path
     (``from_array``), whose conversions they need."""
     import drjit as dr
     import mitsuba as mi
@@ -138,13 +142,16 @@ def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> Fra
         raise EventFieldError(f"{where}: intensities must be finite and >= 0")
     n = shape[1] * shape[2]
 
+    def block(first: int, count: int):
+        offset = mi.UInt32(first * n)
+        dr.make_opaque(offset)          # one cached kernel whatever the offset
+        return dr.gather(mi.Float, flat, dr.arange(mi.UInt32, count * n) + offset)
+
     def frames_iter():
-        pixel = dr.arange(mi.UInt32, n)
         for i in range(shape[0]):
-            offset = mi.UInt32(i * n)
-            dr.make_opaque(offset)
-            yield float(t[i]), dr.gather(mi.Float, flat, pixel + offset)
-    return FrameSource(where, shape[2], shape[1], shape[0], frames_iter, {"kind": "device array"}, device=True)
+            yield float(t[i]), block(i, 1)
+    return FrameSource(where, shape[2], shape[1], shape[0], frames_iter, {"kind": "device array"}, device=True,
+                       block=block, times=t)
 
 
 def from_npz(path: str, fps=None, srgb=False) -> FrameSource:

@@ -304,8 +304,7 @@ class _Loop:
             total = summary.events + summary.dropped_readout
             summary.notes.append(f"readout cap dropped {summary.dropped_readout} of {total} events "
                                  f"({100 * summary.dropped_readout / total:.1f}%)")
-        summary.writer_wait_s, summary.writer_busy_s = self.sink.writer_wait_s, self.sink.writer_busy_s
-        summary.writer_tail_s = self.sink.writer_tail_s
+        self.sink.report(summary)
         meta["render"] = summary.as_dict()
         tw = time.perf_counter()
         stream = self.sink.finish(int(round((self.st.t_start + self.st.duration) * 1e6)), {"render": meta["render"]})

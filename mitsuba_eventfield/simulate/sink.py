@@ -51,17 +51,10 @@ class Sink:
         self.count = count or (lambda p: None)
         self.device_parts, self.device_events, self.until = [], 0, None
 
-    @property
-    def writer_wait_s(self) -> float:
-        return self.writer.wait_s if self.writer is not None else 0.0
-
-    @property
-    def writer_tail_s(self) -> float:
-        return self.writer.tail_s if self.writer is not None else 0.0
-
-    @property
-    def writer_busy_s(self) -> float:
-        return self.writer.busy_s if self.writer is not None else 0.0
+    def report(self, summary) -> None:
+        """The background writer's timings into a ``RenderSummary`` (after ``drain``; zero without a writer)."""
+        for name in ("wait_s", "busy_s", "tail_s", "copy_s"):
+            setattr(summary, f"writer_{name}", getattr(self.writer, name) if self.writer is not None else 0.0)
 
     def add_device(self, events: DeviceEvents, complete_until_us: int) -> None:
         """Keep a step's device-side events; move the buffer to the host when it is full."""
@@ -90,8 +83,9 @@ class Sink:
         # from a GPU the parts are joined on the device first, so that one copy crosses into Dr.Jit's pinned
         # host memory. A writer borrows that chunk: its thread copies it out and this thread frees it, where
         # Dr.Jit can reuse it (events.writer: freed on the writer's thread, host memory grew with the events)
-        host = DeviceEvents.concat(parts).numpy()
-        self._add_host(*host, until, borrowed=True)
+        chunk = DeviceEvents.concat(parts)
+        self.count(chunk.p)                     # on the device: the host's count of 161 M events took 0.1 s
+        self._add_host(*chunk.numpy(), until, borrowed=True, counted=True)
 
     def add_step(self, events, complete_until_us: int) -> None:
         """A step's events from ``EventIntegrator.commit_events``: device-side ones are buffered there."""
@@ -107,10 +101,10 @@ class Sink:
 
     def _keep_on_device(self, chunk: DeviceEvents) -> None:
         if chunk.count:
-            self.count(chunk.p.numpy())          # the ON / OFF totals: one byte an event crosses, not thirteen
+            self.count(chunk.p)                  # the ON / OFF totals, counted on the device
             self.device_chunks.append(chunk)
 
-    def _add_host(self, x, y, t, p, complete_until_us, borrowed: bool = False):
+    def _add_host(self, x, y, t, p, complete_until_us, borrowed: bool = False, counted: bool = False):
         if self.on_device:                      # a host-side step's events (a sequential pixel model) go up
             import mitsuba as mi
             xy, t, p = numpy_columns(x, y, t, p)
@@ -118,7 +112,8 @@ class Sink:
                 self._keep_on_device(DeviceEvents(device_copy(xy, mi.UInt32), device_copy(t, mi.Int64),
                                                   device_copy(p, int8_array()), len(t)))
             return
-        self.count(p)
+        if not counted:
+            self.count(p)
         if self.writer is not None:
             (self.writer.append_borrowed if borrowed else self.writer.append)(x, y, t, p, complete_until_us)
         elif len(t):

@@ -34,6 +34,7 @@ class RenderSummary:
     motion_s: float = 0.0
     write_s: float = 0.0        # the render thread's time handing events over (device-to-host copy, queue)
     writer_busy_s: float = 0.0  # the background writer's time compressing and writing (overlaps the render)
+    writer_copy_s: float = 0.0  # its copier's time copying chunks out of Dr.Jit's memory (a GPU's; overlaps too)
     writer_wait_s: float = 0.0  # the render thread's time blocked on the writer: > 0 means the disk set the pace
     writer_tail_s: float = 0.0  # the render thread's drains of the queue, checkpoints and the end (not a pace)
     image_motion_px_per_step: dict | None = None  # scan and objects, pixels per step (uniform stepping)
@@ -45,12 +46,18 @@ class RenderSummary:
     output: str | None = None
     notes: list = field(default_factory=list)
 
-    def count(self, p: np.ndarray) -> None:
-        """Add one batch of events (their polarities) to the counts."""
-        n_on = int(np.count_nonzero(p > 0))
-        self.events += len(p)
+    def count(self, p) -> None:
+        """Add one batch of events (their polarities: NumPy, or an array of the active Dr.Jit backend, counted
+        there so that one number crosses, not a byte an event) to the counts."""
+        if isinstance(p, np.ndarray):
+            n, n_on = len(p), int(np.count_nonzero(p > 0))
+        else:
+            import drjit as dr
+            n = dr.width(p)
+            n_on = int(dr.count(p > 0)[0]) if n else 0
+        self.events += n
         self.on += n_on
-        self.off += len(p) - n_on
+        self.off += n - n_on
 
     @property
     def rate(self) -> float:
@@ -74,7 +81,9 @@ class RenderSummary:
                          f"write {self.write_s:.2f} s")
         if self.writer_busy_s:
             pace = "the disk writer set the pace" if self.writer_wait_s > 0.05 * self.wall_s else "it kept up"
-            lines.append(f"file writer: {self.writer_busy_s:.2f} s on its own thread, the render waited "
+            copier = f" (and {self.writer_copy_s:.2f} s copying chunks from the GPU on another)" \
+                if self.writer_copy_s else ""
+            lines.append(f"file writer: {self.writer_busy_s:.2f} s on its own thread{copier}, the render waited "
                          f"{self.writer_wait_s:.2f} s for it ({pace}), and {self.writer_tail_s:.2f} s for its queue "
                          "to drain (checkpoints, the last chunks)")
         if self.output:

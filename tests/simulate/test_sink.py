@@ -51,13 +51,16 @@ def test_the_writer_copies_borrowed_chunks_and_the_render_thread_frees_them(tmp_
     monkeypatch.setattr(hdf5_mod.H5EventWriter, "append", append)
     monkeypatch.setattr(sink_mod, "_cpu", lambda: False)
     out = str(tmp_path / "gpu_branch.h5")
-    ef.render_events(demo_small, 0.02, steps=200, output=out, event_buffer_mb=0.0005)
+    summary = ef.render_events(demo_small, 0.02, steps=200, output=out, event_buffer_mb=0.0005)
 
     render_thread = threading.get_ident()
     assert lent[0] > 3 and len(written) >= lent[0]
     assert all(thread != render_thread and all(owned) for thread, owned in written)   # copied on the writer's
     assert len(freed) == 4 * lent[0] and set(freed) == {render_thread}                 # freed on the render's
     assert ef.read_events(out).equals(memory) and len(memory) > 500
+    assert summary.writer_copy_s > 0 and "copying chunks from the GPU" in summary.format()
+    # the ON / OFF totals, counted on the device before the chunk crossed
+    assert (summary.on, summary.off) == (np.count_nonzero(memory.p > 0), np.count_nonzero(memory.p < 0))
 
     # and the check itself tells Dr.Jit's memory from NumPy's: the CPU branch's in-memory path hands views
     import mitsuba as mi
