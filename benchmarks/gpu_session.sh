@@ -16,6 +16,8 @@
 # in one session's 15 minutes if each command follows the last while the machine is warm (30 s). Two calls
 # save a machine start: "bash benchmarks/gpu_session.sh known; bash benchmarks/gpu_session.sh bench" (each
 # stage packs its own tarball), then "KNOWN_LIMIT=1 TEST_LIMIT=330 TEST_WORKERS=14 bash ... tests".
+# On an H200 (2026-11-26, ninth session): verify 100 s, verify + bench 332 s, each on a fresh machine (Dr.Jit's
+# kernel cache on that machine's disk was kept between them: the known stage took 30 s each time).
 # A dry run on the CPU checks the script itself: PY=.venv/bin/python OUT=/tmp/gpu_dry bash benchmarks/gpu_session.sh bench --quick
 set -uo pipefail
 cd "$(dirname "$0")/.."

@@ -143,11 +143,12 @@ def overlaps_steps() -> bool:
     """Whether a render loop stages a step's motion while the device still renders the step before (CUDA), or
     syncs after each render (LLVM): ``simulate/render.py``. On an H100 the sync after each render kept the host
     idle while the GPU rendered; without it the demo's 100 steps took 0.201 s instead of 0.223 s, and the fan's
-    400 at 1280x720 took 2.44 s instead of 2.63 s (benchmarks/results/motion_h100.md). On the 2-core CPU
-    the evidence is mixed: no gain in a first A/B (two runs), then 7 % (demo) and 13 % (fan) by the best of
-    four alternating runs, the overlap faster in 7 of 8 pairs (docs/design.md). There the render's time
-    moves into whichever stage waits first (events 0.02 -> 0.29 s in a demo render), so the CPU keeps its
-    exact split by default. ``EVENTFIELD_OVERLAP=1`` / ``0`` chooses either on any backend."""
+    400 at 1280x720 took 2.44 s instead of 2.63 s (benchmarks/results/motion_h100.md); on an H200, in
+    interleaved pairs, faster in 6 of 6 on both scenes (overlap_h200.md). On the 2-core CPU the evidence is
+    mixed: no gain in a first A/B (two runs), then 7 % (demo) and 13 % (fan) by the best of four alternating
+    runs, then +0.9 % and +4.2 % by medians in 6 interleaved pairs (overlap.md, docs/design.md). There the
+    render's time moves into whichever stage waits first (events 0.02 -> 0.29 s in a demo render), so the CPU
+    keeps its exact split by default. ``EVENTFIELD_OVERLAP=1`` / ``0`` chooses either on any backend."""
     choice = os.environ.get(OVERLAP_ENV, "")
     if choice in ("0", "1"):
         return choice == "1"
