@@ -65,16 +65,16 @@ def _other_loop():
     return flipped()
 
 
-def frame_stack(width, height, frames, rate_hz=2000.0):
-    """Textured translation + rotating bar, linear intensity in [0.05, 1]."""
+def frame_stack(width, height, frames, rate_hz=2000.0, speed=1.5):
+    """Textured translation (``speed`` px a frame) + rotating bar, linear intensity in [0.05, 1]."""
     rng = np.random.default_rng(0)
-    tex = rng.random((height // 4 + 2, (width + int(1.5 * frames)) // 4 + 4)).astype(np.float32)
+    tex = rng.random((height // 4 + 2, (width + int(speed * frames)) // 4 + 4)).astype(np.float32)
     import cv2
     tex = cv2.resize(tex, (tex.shape[1] * 4, tex.shape[0] * 4), interpolation=cv2.INTER_CUBIC)
     yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
     out = np.empty((frames, height, width), np.float32)
     for i in range(frames):
-        shift = 1.5 * i
+        shift = speed * i
         x0 = int(shift)
         a = shift - x0
         img = (1 - a) * tex[:height, x0:x0 + width] + a * tex[:height, x0 + 1:x0 + 1 + width]
