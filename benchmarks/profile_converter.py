@@ -1,10 +1,9 @@
 """Where the converter's time goes on the active backend (issue 15, the converter's pixel-steps target): the
 frames-and-events-on-the-device path of ``bench_event_engine`` (the same synthetic 2 kHz stack, ideal pixel,
 C = 0.2; and the same translating ten times slower, a sparser stack) with Dr.Jit's kernel history on. Per
-film: the wall time, the kernels' summed execution time, and the
-kernels grouped by kind and size class (a sort pass, the count pass and the fill each show as their own rows),
-so that the gap between the wall time and the kernels (host tracing, launches, syncs) and the costliest
-kernels read off one table. A profile, not a target: it writes only benchmarks/results/converter_profile.md and
+film: the wall time, the kernels' summed execution time, and the kernels grouped by kind and size class (a
+sort pass, the count pass and the fill each show as their own rows), so that the gap between the wall time
+and the kernels (host tracing, launches, syncs) and the costliest kernels read off one table. A profile, not a target: it writes only benchmarks/results/converter_profile.md and
 .json. Usage: python benchmarks/profile_converter.py [--quick]
 """
 import collections
