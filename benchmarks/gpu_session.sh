@@ -104,7 +104,7 @@ case "$stage" in
         cat "$W/steps.txt"; tail -n 30 "$W/event_engine.txt" "$W/fan_render.txt" "$W/motion.txt" "$W/overlap.txt" ;;
     verify)
         # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
-        # memory against the duration, the overlap's A/B, the converter's profile; about 300 s on a fresh machine
+        # memory against the duration, the overlap's A/B, the converter's profile; 100 s on an H200
         known_failures
         fan_to_hdf5
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only

@@ -117,9 +117,9 @@ def is_device_array(frames) -> bool:
 def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> FrameSource:
     """A (T, H, W) stack of linear float intensities already where the active Dr.Jit backend computes: a
     Dr.Jit tensor, or a PyTorch / CuPy array taken through DLPack. Checked there (finite and >= 0: one
-    reduction) and handed on as flat device arrays, a frame or a group of consecutive frames at a time (``block``:
-    a gather at an opaque offset, one cached kernel whatever the offset), never copied to the host. Colour, integer and sRGB frames take the host path
-    (``from_array``), whose conversions they need."""
+    reduction) and handed on as flat device arrays, a frame or a group of consecutive frames at a time
+    (``block``: a gather at an opaque offset, one cached kernel whatever the offset), never copied to the host.
+    Colour, integer and sRGB frames take the host path (``from_array``), whose conversions they need."""
     import drjit as dr
     import mitsuba as mi
     if srgb:           # one decoding, srgb_to_linear's: a second one on the device would round otherwise

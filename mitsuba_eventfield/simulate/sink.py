@@ -81,10 +81,10 @@ class Sink:
             self._add_host(*DeviceEvents.host_columns(parts), until)
             return
         # from a GPU the parts are joined on the device first, so that one copy crosses into Dr.Jit's pinned
-        # host memory. A writer borrows that chunk: its thread copies it out and this thread frees it, where
-        # Dr.Jit can reuse it (events.writer: freed on the writer's thread, host memory grew with the events)
+        # host memory. A writer borrows that chunk: its copier thread copies it out and this thread frees it,
+        # where Dr.Jit can reuse it (events.writer: freed on the writer's thread, host memory grew with the events)
         chunk = DeviceEvents.concat(parts)
-        self.count(chunk.p)                     # on the device: the host's count of 161 M events took 0.1 s
+        self.count(chunk.p)                     # on the device: one number crosses, not a byte an event
         self._add_host(*chunk.numpy(), until, borrowed=True, counted=True)
 
     def add_step(self, events, complete_until_us: int) -> None:
