@@ -108,24 +108,15 @@ def test_a_writer_slower_than_the_steps_blocks_the_render():
     assert w.wait_s > 0.2 and w.tail_s < 0.2
 
 
-class _Lent:
-    """A buffer that records the thread which frees it (the stand-in for Dr.Jit's pinned host memory)."""
-
-    def __init__(self, a, freed):
-        self.a, self.freed = a, freed
-        self.__array_interface__ = a.__array_interface__
-
-    def __del__(self):
-        self.freed.append(__import__("threading").get_ident())
-
-
 def test_borrowed_chunks_are_copied_in_order_and_freed_by_the_caller():
     """Borrowed chunks (append_borrowed) mixed with ordinary ones reach the target in the order handed over, as
     NumPy's own memory, copied on the copier's thread; the borrowed buffers are freed on the caller's thread
     (freed on another, Dr.Jit's pinned buffers were never reused on a GPU), none before its copy."""
     import threading
+    import time
 
     import numpy as np
+    from conftest import FreedOn
 
     from mitsuba_eventfield.events.writer import BackgroundWriter
 
@@ -136,14 +127,14 @@ def test_borrowed_chunks_are_copied_in_order_and_freed_by_the_caller():
         def append(self, x, y, t, p, complete_until_us=None):
             own = all(c.base is None for c in (x, y, t, p))
             self.seen.append((int(t[0]), own, threading.current_thread().name))
-            __import__("time").sleep(0.002)
+            time.sleep(0.002)
 
     freed, target = [], Target()
     w = BackgroundWriter(target)
 
     def chunk(i, lent):
         cols = (np.full(3, i, np.uint16), np.full(3, i, np.uint16), np.full(3, i, np.int64), np.ones(3, np.int8))
-        return tuple(np.asarray(_Lent(c, freed)) for c in cols) if lent else cols
+        return tuple(np.asarray(FreedOn(c, freed)) for c in cols) if lent else cols
     for i in range(12):
         if i % 3 == 2:
             w.append(*chunk(i, False))

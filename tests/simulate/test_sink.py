@@ -1,11 +1,12 @@
 """The sink's GPU branch (simulate/sink.py), run on the CPU by making the sink take it. A chunk from the device
-arrives in Dr.Jit's memory (pinned host buffers on a GPU) and is lent to the background writer: the writer's
+arrives in Dr.Jit's memory (pinned host buffers on a GPU) and is lent to the background writer: its copier
 thread copies it into NumPy's own memory before writing, and the render's thread drops the last reference to the
 borrowed buffers (on a GPU, buffers freed on the writer's thread left Dr.Jit's reuse, and the fan's host memory
 grew with its events: events/writer.py). The file holds the same events as the in-memory render."""
 import threading
 
 import numpy as np
+from conftest import FreedOn
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.events import hdf5 as hdf5_mod
@@ -19,17 +20,6 @@ def _owns_its_memory(a) -> bool:
     return a.base is None          # a view of Dr.Jit's memory ends in Dr.Jit's capsule, not in None
 
 
-class _Tracked:
-    """A buffer that records the thread which frees it (the stand-in for a Dr.Jit pinned buffer)."""
-
-    def __init__(self, a, freed):
-        self.a, self.freed = a, freed
-        self.__array_interface__ = a.__array_interface__
-
-    def __del__(self):
-        self.freed.append(threading.get_ident())
-
-
 def test_the_writer_copies_borrowed_chunks_and_the_render_thread_frees_them(tmp_path, demo_small, monkeypatch):
     memory = ef.render_events(demo_small, 0.02, steps=200, event_buffer_mb=0.0005)
 
@@ -40,7 +30,7 @@ def test_the_writer_copies_borrowed_chunks_and_the_render_thread_frees_them(tmp_
         cols = real_numpy(self, owned)
         if not owned and self.count:
             lent[0] += 1
-            cols = tuple(np.asarray(_Tracked(np.array(c), freed)) for c in cols)
+            cols = tuple(np.asarray(FreedOn(np.array(c), freed)) for c in cols)
         return cols
 
     def append(self, x, y, t, p, complete_until_us=None):
