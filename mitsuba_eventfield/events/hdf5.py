@@ -207,13 +207,15 @@ class H5EventWriter:
             return
         cols = [_Joined.of([b[i] for b in self._buffer], self.chunk) for i in range(4)]
         deflated = self._deflated_chunks(cols, n)
+        end = self.written + n
         for i in range(0, n, self.chunk):
             m = min(self.chunk, n - i)
             with self._writing(self._pending_bytes(m)):
                 n0, n1 = self.written, self.written + m
                 stored = next(deflated) if deflated is not None and m == self.chunk else None
                 for k, v in zip("xytp", cols):
-                    self.ds[k].resize((n1,))
+                    if i == 0:       # the extent once a flush (a resize a chunk and column cost 22 us each:
+                        self.ds[k].resize((end,))    # 0.2 s of a GPU render's 161 M events on the writer)
                     if stored is not None:
                         self.ds[k].id.write_direct_chunk((n0,), stored[k], 0)
                     else:
