@@ -160,7 +160,11 @@ class BackgroundWriter:
             self.copier.start()
         self._handed += 1
         self._borrowed[self._handed] = (x, y, t, p)
-        self._put((self._handed, x, y, t, p, complete_until_us))
+        try:
+            self._put((self._handed, x, y, t, p, complete_until_us))
+        except BaseException:            # refused (the worker's error): not lent, so not kept either
+            del self._borrowed[self._handed]
+            raise
 
     def release_copied(self) -> None:
         """Drop, on the calling thread, the borrowed chunks the copier has copied."""

@@ -145,3 +145,39 @@ def test_borrowed_chunks_are_copied_in_order_and_freed_by_the_caller():
     assert all(own for _, own, _ in target.seen) and {s[2] for s in target.seen} == {"eventfield-writer"}
     assert len(freed) == 4 * 8 and set(freed) == {threading.get_ident()}
     assert w.copy_s > 0 and w.copier is not None and not w.copier.is_alive()
+
+
+def test_a_failing_writer_with_borrowed_chunks_raises_in_the_caller_and_frees_there():
+    """The target fails on its second chunk (a full disk): the error reaches the caller's thread at a later
+    hand-over or at the drain, nothing hangs, and every borrowed buffer is still freed on the caller's thread."""
+    import threading
+    import time
+
+    import numpy as np
+    import pytest
+    from conftest import FreedOn
+
+    from mitsuba_eventfield.events.writer import BackgroundWriter
+
+    class Failing:
+        def __init__(self):
+            self.calls = 0
+
+        def append(self, x, y, t, p, complete_until_us=None):
+            self.calls += 1
+            if self.calls == 2:
+                raise OSError("no space left on device")
+
+        def abort(self):
+            pass
+
+    freed, w = [], BackgroundWriter(Failing())
+    with pytest.raises(OSError, match="no space"):
+        for i in range(50):
+            cols = (np.full(3, i, np.uint16), np.full(3, i, np.uint16), np.full(3, i, np.int64), np.ones(3, np.int8))
+            w.append_borrowed(*(np.asarray(FreedOn(c, freed)) for c in cols))
+            time.sleep(0.002)
+        w.drain()
+    w.abort()
+    assert not w.thread.is_alive() and not w.copier.is_alive() and not w._borrowed
+    assert freed and len(freed) % 4 == 0 and set(freed) == {threading.get_ident()}
