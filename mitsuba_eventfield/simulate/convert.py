@@ -151,7 +151,7 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
 def _frames(source: FrameSource):
     """(t, frame) of every frame; from a source with ``block`` the frame is None (taken by ``block`` where it is
     needed: tracing a gather a frame cost more host time than the whole group's kernels, issue 15)."""
-    if source.block is None:
+    if source.block is None or source.times is None:
         return source.frames()
     return ((float(t), None) for t in source.times)
 
