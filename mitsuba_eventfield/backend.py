@@ -149,7 +149,13 @@ def overlaps_steps() -> bool:
     runs, then +0.9 % and +4.2 % by medians in 6 interleaved pairs (overlap.md, docs/design.md). There the
     render's time moves into whichever stage waits first (events 0.02 -> 0.29 s in a demo render), so the CPU
     keeps its exact split by default. ``EVENTFIELD_OVERLAP=1`` / ``0`` chooses either on any backend."""
-    choice = os.environ.get(OVERLAP_ENV, "")
+    return on_cuda_unless(OVERLAP_ENV)
+
+
+def on_cuda_unless(env: str) -> bool:
+    """A choice that is on under a CUDA variant and off elsewhere, unless the environment variable ``env`` is
+    ``1`` (on) or ``0`` (off): the render loop's overlap, moving shapes as instances (``scene/instancing.py``)."""
+    choice = os.environ.get(env, "")
     if choice in ("0", "1"):
         return choice == "1"
     return mi.variant().startswith("cuda")

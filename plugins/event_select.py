@@ -20,8 +20,8 @@ def rounded(product, fusing: bool | None = None):
     "NaN where the product is NaN, else the product": the same value for every input, and nothing Dr.Jit
     simplifies away. The first form, a select on an opaque True, made the bits equal on an H100, but with
     it Dr.Jit refused to record the chunk passes there (most likely the opaque value's upload, made inside
-    a recording). This form has not run on a GPU yet: the next session's ``gpu_session.sh known`` checks
-    both. On LLVM nothing is fused and the product is returned as it is (``fusing`` overrides the
+    a recording). This form passes both on an H200 (``gpu_session.sh known``, benchmarks/results/
+    gpu_h200.md). On LLVM nothing is fused and the product is returned as it is (``fusing`` overrides the
     backend's choice: a test runs the CUDA form on the CPU)."""
     if not (dr.backend_v(product) == dr.JitBackend.CUDA if fusing is None else fusing):
         return product

@@ -20,7 +20,6 @@ gives that shape, so the pixel coverage (``scene/coverage.py``) still finds an i
 """
 from __future__ import annotations
 
-import os
 import xml.etree.ElementTree as ET
 
 from .. import backend
@@ -40,10 +39,7 @@ def member_id(sid: str) -> str:
 def wanted() -> bool:
     """Whether moving shapes are loaded as instances: on CUDA (module docstring); ``EVENTFIELD_INSTANCES``
     forces it (``1``) or not (``0``)."""
-    choice = os.environ.get(ENV, "")
-    if choice in ("0", "1"):
-        return choice == "1"
-    return backend.mi.variant().startswith("cuda")
+    return backend.on_cuda_unless(ENV)
 
 
 def rewrite(text: str, ids) -> tuple[str | None, list]:
