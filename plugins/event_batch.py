@@ -10,11 +10,9 @@ frames at once:
    lane's kept count, frame-major, each pixel's events in the chunk, and the state after the last step;
 2. prefix sum over the lanes; one sync reads every step's last slot (the total is the last);
 3. fill and time order: ``event_fill.fill``, the one fill of every device path. Its crossing writer
-   (``Chunk.write``) steps the pixels again from the chunk's first state, so nothing but the counts is stored
-   between the passes (storing each lane's levels and reading them back cost more than stepping twice: the
-   converter's kernels at 346x260, 4 frames a kernel, 53 against 113 M pixel-steps/s), and only the pixels
-   that fired in the chunk when they are fewer than half (a still pixel writes nothing); one stable radix
-   sort of the chunk by microsecond;
+   (``Chunk.write``) steps the pixels again from the chunk's first state (storing each lane's levels cost
+   more: 53 against 113 M pixel-steps/s), only those that fired when they are fewer than half; one stable
+   radix sort of the chunk by microsecond;
 4. the readout cap, where the pixel model has one, on the whole chunk at once
    (``readout.ReadoutLimiter.filter_device``: the drops of step-by-step filtering).
 
@@ -50,13 +48,11 @@ from mitsuba_eventfield.plugins.frozen import FrozenCache
 
 # Lane-steps (pixels x frames) per kernel by backend, and the fewest frames. CPU (converter kernels alone, 2 kHz
 # stack, 2 cores, best of 6; M pixel-steps/s by frames a kernel): 346x260 1: 53, 2: 97, 3: 112, 4: 118, 6: 115,
-# 8: 114, 11: 102, 16: 97; 640x480 1: 104, 2: 118, 3: 119; 1280x720 1: 100, 2: 112, 3: 124, 4: 120. One frame a
-# kernel pays about eight launches a frame (~0.8 ms at any size); past a few hundred thousand lane-steps the
-# chunk's events leave the cache. CUDA: enough lanes to fill the GPU and few launches and syncs per frame, which
-# is where batching is for (not measured on a GPU).
+# 8: 114, 11: 102, 16: 97; 640x480 1: 104, 2: 118, 3: 119; 1280x720 1: 100, 2: 112, 3: 124, 4: 120: a frame a
+# kernel pays ~0.8 ms of launches, past a few 100 k lane-steps the events leave the cache. CUDA: enough lanes
+# to fill the GPU with few launches and syncs per frame.
 LANE_STEPS = {"llvm": 360_000, "cuda": 16_000_000}
-MIN_FRAMES_PER_KERNEL = 3
-MAX_FRAMES_PER_KERNEL = 64
+MIN_FRAMES_PER_KERNEL, MAX_FRAMES_PER_KERNEL = 3, 64
 
 
 def default_frames_per_kernel(n_pix: int, frame_interval_s: float) -> int:
@@ -387,19 +383,24 @@ class Chunk:
     def write(self, ends, slots) -> None:
         """``event_fill``'s crossing writer: the pixels stepped again, each step's crossings into their slots,
         then its noise events (only the firing pixels when :meth:`only_firing` chose them); one frozen
-        function per model and chunk shape (:func:`_frozen`)."""
-        shape = (self.width, self.n_pix, self.steps, self.intensity, dr.width(self.frames), slots.packed)
+        function per model, chunk shape and slot capacity (:func:`_frozen`). It makes the slot arrays and
+        returns them, replacing ``slots``' own: a frozen function copies any input it scatters into, and bakes
+        the length of an array it makes, hence ``event_fill.slot_capacity`` in the key (docs/design.md)."""
+        capacity, packed = event_fill.slot_capacity(dr.width(slots.key)), slots.packed
+        shape = (self.width, self.n_pix, self.steps, self.intensity, dr.width(self.frames), packed, capacity)
         model, width, n_pix, intensity, steps = self.view.model(), self.width, self.n_pix, self.intensity, self.steps
 
         def make():     # the cached pass keeps the model and the shape, not this chunk's arrays
-            def write_pass(arrays, state, frames, t_d, dts, ends, pixels, slot_arrays):
+            def write_pass(arrays, state, frames, t_d, dts, ends, pixels, base, start):
                 chunk = Chunk(model.bind(arrays), state, frames, None, t_d, dts, width, n_pix, intensity,
                               steps=steps, pixels=pixels)
-                chunk._write(ends, event_fill.Slots(**slot_arrays))
+                made = event_fill.Slots.allocate(capacity, packed, base, start)
+                chunk._write(ends, made)
+                return made.key, made.word
             return write_pass
         fn = _frozen("write", self.view, shape, make)
-        fn(self.view.arrays(), self.state, self.frames, self.t_d, self.dts, ends, self.pixels,
-           {"key": slots.key, "word": slots.word, "base": slots.base, "start": slots.start})
+        slots.key, slots.word = fn(self.view.arrays(), self.state, self.frames, self.t_d, self.dts, ends,
+                                   self.pixels, slots.base, slots.start)
 
     def _write(self, ends, slots) -> None:
         lanes_d, n_d = event_fill._opaque(self.lanes_per_step, mi.UInt32), event_fill._opaque(self.n_pix, mi.UInt32)

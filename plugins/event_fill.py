@@ -325,6 +325,12 @@ class Slots:
     base: object
     start: object
 
+    @staticmethod
+    def allocate(count: int, packed: bool, base, start) -> "Slots":
+        """Slots for ``count`` events (unallocated until first written), the key and word in one array where
+        ``packed``."""
+        return Slots(dr.empty(mi.UInt64, count), None if packed else dr.empty(mi.UInt32, count), base, start)
+
     @property
     def packed(self) -> bool:
         return self.word is None
@@ -367,8 +373,9 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
     key_bound = int(math.ceil((cr.times[-1] - cr.times[0]) * 1e6)) + 3
     # a span of 2^32 us (71.6 minutes: time-lapse frames) does not fit the 32-bit key: 64 bits, Dr.Jit's sort
     packed = key_bound < 1 << 32
-    slots = Slots(_evaluated(dr.empty(mi.UInt64, count)), None if packed else _evaluated(dr.empty(mi.UInt32, count)),
-                  _opaque(base_us, mi.Int64), _opaque(start_us, mi.Int64))
+    # the arrays are made where they are first written (a writer may replace them with longer ones of its own:
+    # event_batch's frozen pass; only the first ``count`` slots are read)
+    slots = Slots.allocate(count, packed, _opaque(base_us, mi.Int64), _opaque(start_us, mi.Int64))
     if total:
         cr.write(ends, slots)
     if noise is not None:
@@ -376,15 +383,16 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
         slot = dr.prefix_reduce(dr.ReduceOp.Add, mi.UInt32(noise.hit), exclusive=True) + _opaque(total, mi.UInt32)
         slots.put(slot, noise.t, event_word(xy, noise.on), noise.hit)
     if packed:
-        keys = mi.UInt32(slots.key >> 32)
+        keys = mi.UInt32(_first(slots.key, count, mi.UInt64) >> 32)
         dr.eval(keys)
         both = dr.gather(mi.UInt64, slots.key, stable_order(keys, key_bound))
         key, word = mi.UInt32(both >> 32), mi.UInt32(both & 0xFFFFFFFF)
         t_us = mi.Int64(key) + slots.start
     else:
-        dr.eval(slots.key, slots.word)
-        order = dr.argsort(slots.key)        # stable, as stable_order
-        key, word = dr.gather(mi.UInt64, slots.key, order), dr.gather(mi.UInt32, slots.word, order)
+        first_key = _first(slots.key, count, mi.UInt64)
+        dr.eval(first_key)
+        order = dr.argsort(first_key)        # stable, as stable_order
+        key, word = dr.gather(mi.UInt64, first_key, order), dr.gather(mi.UInt32, slots.word, order)
         t_us = mi.Int64(key) + slots.start
     if resolution_us:              # the sensor clock, after ordering by true time (as the host's readout)
         res = _opaque(resolution_us, mi.Float64)
@@ -394,7 +402,16 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
     return DeviceEvents(xy, t_us, p, count=count, **(stats or {}))
 
 
-def _evaluated(array):
-    """``array`` with memory of its own (a frozen writer scatters into it: an argument, not a literal)."""
-    dr.eval(array)
-    return array
+def slot_capacity(count: int) -> int:
+    """Slots to allocate for ``count`` events where the length is baked into a recording (``event_batch``'s
+    frozen write pass): ``count`` rounded up to a quarter of its power of two (at most a third more memory
+    than the events, and a handful of lengths, so of recordings, for chunks of similar counts)."""
+    quarter = max(1, 1 << max(0, int(count - 1).bit_length() - 2))
+    return max(1024, -(-int(count) // quarter) * quarter)
+
+
+def _first(array, count: int, cls):
+    """The first ``count`` entries of ``array`` (itself where it holds no more)."""
+    if dr.width(array) == count:
+        return array
+    return dr.gather(cls, array, dr.arange(mi.UInt32, count))

@@ -70,8 +70,9 @@ class Sink:
             return
         parts, until = self.device_parts, self.until
         self.device_parts, self.device_events, self.until = [], 0, None
-        if self.on_device:
-            self._keep_on_device(DeviceEvents.concat(parts))
+        if self.on_device:       # kept as they are: joined once, at the end (a join per flush copied them twice)
+            for part in parts:
+                self._keep_on_device(part)
             return
         if _cpu() and self.writer is None:      # in memory on the CPU: each part's views copied into the buffer
             for part in parts:
