@@ -5,7 +5,8 @@
 #   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, pixel, fan
 #                                                                         1280x720, memory, motion
 #   run(command="bash benchmarks/gpu_session.sh tests", carry=[".gpu"])   the suite under cuda_ad_mono
-#   run(command="bash benchmarks/gpu_session.sh verify", carry=[".gpu"])  known tests, fan to HDF5, memory, overlap
+#   run(command="bash benchmarks/gpu_session.sh verify", carry=[".gpu"])  known tests, fan to HDF5, memory, overlap,
+#                                                                         the converter's profile and chunk shape
 # Everything lands in one tarball under $OUT (the device tool brings it back): logs, the benchmarks' results
 # files (written there, not into benchmarks/results/), nvidia-smi. Copy the results files into
 # benchmarks/results/ here and commit them: they carry the GPU's name.
@@ -109,9 +110,11 @@ case "$stage" in
         fan_to_hdf5
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         step overlap 150 $PY benchmarks/bench_overlap.py $quick
-        # the converter kernel by kernel (what bounds its pixel-steps a second)
+        # the converter kernel by kernel (what bounds its pixel-steps a second), then its chunk shape: frames a
+        # kernel against the sort's pass width (fewer syncs against a longer key; CPU: results/chunk_shape.md)
         step profile 90 $PY benchmarks/profile_converter.py $quick
+        step chunk_shape 150 $PY benchmarks/bench_chunk_shape.py $quick
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
-        cat "$W/steps.txt"; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt"; head -n 30 "$W/profile.txt" ;;
+        cat "$W/steps.txt"; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt"; head -n 30 "$W/profile.txt"; head -n 40 "$W/chunk_shape.txt" ;;
     *) echo "usage: gpu_session.sh tests|known|bench|verify [--quick]" >&2; exit 2 ;;
 esac
