@@ -232,10 +232,10 @@ class PixelView:
     UNTRACED = ("seed",)
 
     def key(self) -> tuple:
-        """The model, as a frozen function's key: every value its kernels bake in."""
-        fields = {k: v for k, v in self.config.as_dict().items() if k not in self.UNTRACED}
-        return (tuple(sorted(fields.items())), self.linlog_threshold,
-                tuple(getattr(self, k) is not None for k in self.CONSTANTS), mi.variant())
+        """The model, as a frozen function's key: every value its kernels bake in. From the configuration's
+        own fields (numbers and the preset's name), not ``as_dict``, whose deep copies cost 0.16 ms a chunk."""
+        return (tuple(sorted((k, v) for k, v in vars(self.config).items() if k not in self.UNTRACED)),
+                self.linlog_threshold, tuple(getattr(self, k) is not None for k in self.CONSTANTS), mi.variant())
 
     def model(self) -> "PixelView":
         """The model alone, without arrays (what a cached frozen pass may keep)."""
