@@ -57,12 +57,13 @@ class Sink:
             setattr(summary, f"writer_{name}", getattr(self.writer, name) if self.writer is not None else 0.0)
 
     def add_device(self, events: DeviceEvents, complete_until_us: int) -> None:
-        """Keep a step's device-side events; move the buffer to the host when it is full."""
+        """Keep a step's device-side events; move the buffer to the host when it is full (left on the device,
+        they stay as they are until the end)."""
         if events.count:
             self.device_parts.append(events)
             self.device_events += events.count
         self.until = complete_until_us
-        if self.device_events >= self.capacity:
+        if self.device_events >= self.capacity and not self.on_device:
             self.flush_device()
 
     def flush_device(self) -> None:
@@ -70,9 +71,11 @@ class Sink:
             return
         parts, until = self.device_parts, self.until
         self.device_parts, self.device_events, self.until = [], 0, None
-        if self.on_device:       # kept as they are: joined once, at the end (a join per flush copied them twice)
-            for part in parts:
-                self._keep_on_device(part)
+        if self.on_device:
+            # at the end (or a checkpoint): every step joined once and its ON events counted with one read. A
+            # join at each full buffer and again at the end copied each event twice; a count a part read one
+            # number back a chunk, each a sync with the device
+            self._keep_on_device(DeviceEvents.concat(parts))
             return
         if _cpu() and self.writer is None:      # in memory on the CPU: each part's views copied into the buffer
             for part in parts:
@@ -96,7 +99,16 @@ class Sink:
             self.add(*events.numpy(), complete_until_us)
 
     def add(self, x, y, t, p, complete_until_us):
-        """A chunk already on the host (after anything still buffered on the device: time order is kept)."""
+        """A chunk already on the host (after anything still buffered on the device: time order is kept). Left on
+        the device, it goes up (a sequential pixel model's steps, a galvo's reused periods) and joins the device's
+        steps in order."""
+        if self.on_device:
+            import mitsuba as mi
+            xy, t, p = numpy_columns(x, y, t, p)
+            if len(t):
+                self.add_device(DeviceEvents(device_copy(xy, mi.UInt32), device_copy(t, mi.Int64),
+                                             device_copy(p, int8_array()), len(t)), complete_until_us)
+            return
         self.flush_device()
         self._add_host(x, y, t, p, complete_until_us)
 
@@ -106,13 +118,6 @@ class Sink:
             self.device_chunks.append(chunk)
 
     def _add_host(self, x, y, t, p, complete_until_us, borrowed: bool = False, counted: bool = False):
-        if self.on_device:                      # a host-side step's events (a sequential pixel model) go up
-            import mitsuba as mi
-            xy, t, p = numpy_columns(x, y, t, p)
-            if len(t):
-                self._keep_on_device(DeviceEvents(device_copy(xy, mi.UInt32), device_copy(t, mi.Int64),
-                                                  device_copy(p, int8_array()), len(t)))
-            return
         if not counted:
             self.count(p)
         if self.writer is not None:

@@ -143,22 +143,34 @@ def test_device_frames_are_taken_a_group_at_a_time():
     assert not [size for (kind, size), n in kinds.items() if kind == "Memcpy" and size >= 8 * 1000], kinds
 
 
-def test_events_left_on_the_device_are_joined_once(monkeypatch):
-    """Every event is copied into the result once: the sink keeps a full buffer's steps as they are and joins
-    them all at the end (joined at each flush and again at the end, each event was copied twice: 0.56 ms of
-    a 3.3 ms chunk at 346x260 on the CPU)."""
+def test_events_left_on_the_device_are_joined_once_and_counted_with_one_read(monkeypatch):
+    """Every event is copied into the result once, and the ON / OFF totals take one read from the device: the
+    sink keeps the steps as they are, however small its buffer, and joins and counts them at the end (joined
+    at each full buffer and again at the end, each event was copied twice: 0.56 ms of a 3.3 ms chunk at
+    346x260 on the CPU; counted a part at a time, each chunk synced with the device)."""
     from mitsuba_eventfield.plugins.event_fill import DeviceEvents
+    from mitsuba_eventfield.simulate.summary import RenderSummary
     stack, t = _stack(frames=40, seed=3)
-    joined, real_concat = [], DeviceEvents.concat
+    copied, counted, real_concat, real_count = [], [], DeviceEvents.concat, RenderSummary.count
 
     def concat(parts):
-        joined.append(sum(q.count for q in parts))
+        full = [q.count for q in parts if q.count]
+        copied.append(sum(full) if len(full) > 1 else 0)      # one part is returned as it is
         return real_concat(parts)
+
+    def count(self, p):
+        counted.append(type(p).__module__.split(".")[0])
+        return real_count(self, p)
     monkeypatch.setattr(DeviceEvents, "concat", staticmethod(concat))
+    monkeypatch.setattr(RenderSummary, "count", count)
     ev = ef.events_from_frames(stack, t, threshold=C, on_device=True, event_buffer_mb=0.05, frames_per_kernel=3)
-    assert len(ev) > 40_000 > 0.05 * (1 << 20) / 13          # several flushes of the device buffer
-    assert sum(joined) == len(ev), joined
-    assert ev.numpy().equals(ef.events_from_frames(stack, t, threshold=C))
+    assert len(ev) > 40_000 > 0.05 * (1 << 20) / 13          # the buffer would have been full many times
+    assert sum(copied) == len(ev), copied
+    assert counted == ["drjit"], counted
+    host = ef.events_from_frames(stack, t, threshold=C)
+    assert ev.numpy().equals(host)
+    assert (ev.meta["render"]["on"], ev.meta["render"]["off"]) == (np.count_nonzero(host.p > 0),
+                                                                   np.count_nonzero(host.p < 0))
 
 
 @pytest.mark.parametrize("frames_per_kernel", [None, 1], ids=["batched", "a_frame_a_step"])
