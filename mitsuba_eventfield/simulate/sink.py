@@ -3,7 +3,8 @@ of about ``buffer_events`` has gathered (one device-to-host copy per chunk, not 
 (HDF5, npz, text, AEDAT4: ``events.streaming``) by a background thread (``events.writer``) while the next steps
 render. Camera recordings (RAW, DAT) are written at the end. In memory, each chunk is copied into one
 ``events.buffer.EventBuffer`` as it leaves the device buffer, so the engine's arrays are freed and reused (no
-join at the end, and a peak of one copy of the events)."""
+join at the end, and a peak of one copy of the events). Left on the device (``on_device``), the steps stay as
+they are until the end, then are joined once and their ON events counted with one read."""
 from __future__ import annotations
 
 from ..events.buffer import EventBuffer
