@@ -57,7 +57,23 @@ def profile(width, height, frames, speed=1.5, reps=3):
     return {"width": width, "height": height, "frames": frames, "speed_px": speed, "events": events,
             "events_per_pixel_step": events / (width * height * (frames - 1)), "wall_ms": 1e3 * wall,
             "kernels_ms": kernels_ms, "launches": len(history),
-            "mpix_steps_per_s": width * height * (frames - 1) / wall / 1e6, "groups": rows}
+            "mpix_steps_per_s": width * height * (frames - 1) / wall / 1e6, "groups": rows,
+            "host": host_profile(convert)}
+
+
+def host_profile(convert, top=12):
+    """The host side of one conversion: the Python functions with the most time of their own (cProfile, which
+    slows Python down; a function that waits for the device, a sync, holds the wait as its own time)."""
+    import cProfile
+    import pstats
+    prof = cProfile.Profile()
+    prof.enable()
+    convert()
+    prof.disable()
+    stats = pstats.Stats(prof).stats
+    rows = sorted(({"function": f"{os.path.basename(file)}:{line} {name}", "calls": calls, "own_ms": 1e3 * own}
+                   for (file, line, name), (_, calls, own, _, _) in stats.items()), key=lambda r: -r["own_ms"])
+    return rows[:top]
 
 
 def _size_class(n):
@@ -88,6 +104,9 @@ def main(quick=False):
                "| kernel (kind, operations, size) | launches | ms | share of the kernels |", "|---|---|---|---|"]
         md += [f"| {g['kernel']} | {g['launches']} | {g['ms']:.2f} | {100 * g['ms'] / max(r['kernels_ms'], 1e-9):.0f} % |"
                for g in r["groups"][:15]]
+        md += ["", "The host side of one conversion (cProfile; a function that waits on the device holds the wait):",
+               "", "| function | calls | own ms |", "|---|---|---|"]
+        md += [f"| `{h['function']}` | {h['calls']} | {h['own_ms']:.2f} |" for h in r["host"]]
         md.append("")
     write_results("converter_profile", {"device": device, "variant": mi.variant(), "films": res}, md)
 
