@@ -182,6 +182,7 @@ def _opaque(value, cls):
 # one pass (8.5 ms) where two 11-bit passes and their gathers took 34. CUDA: 11 bits, Dr.Jit's own radix width
 # (wide passes not measured there).
 PASS_BITS = {"llvm": 20, "cuda": 11}
+SMALL_SORT = 65_536      # fewer keys than this: CUDA's narrow passes on the CPU too (docs/design.md)
 
 
 def stable_order(key, key_bound: int):
@@ -191,7 +192,7 @@ def stable_order(key, key_bound: int):
     ``dr.argsort`` on 32 bits always makes three."""
     n = dr.width(key)
     bits = max(1, int(key_bound).bit_length())
-    width = PASS_BITS["cuda" if dr.backend_v(key) == dr.JitBackend.CUDA else "llvm"]
+    width = PASS_BITS["cuda" if dr.backend_v(key) == dr.JitBackend.CUDA or n < SMALL_SORT else "llvm"]
     if bits <= width:                        # one pass: the key is its own digit
         return dr.detail.block_mkperm(key, n, 1 << bits)
     width = -(-bits // -(-bits // width))    # as few passes, of equal width: 2 x 11 bits for 22, not 20 + 2
@@ -206,9 +207,8 @@ def stable_order(key, key_bound: int):
 
 def _read(values, cls=None) -> list:
     """Up to four device scalars as Python ints (always four: zeros past ``values``), in one array of ``cls``
-    (default UInt32): one device-to-host copy (the chunk's only sync). The array is one kernel selecting among
-    the scalars: a scatter a value cost a launch each, and a memset (4 launches of a read's 11, 28 -> 20 us on
-    the CPU; every step of the per-step path reads once)."""
+    (default UInt32): one device-to-host copy (the chunk's only sync), made by one kernel selecting among the
+    scalars (a scatter each and a memset took 11 launches a read, not 7: 28 against 20 us on the CPU)."""
     cls = cls or mi.UInt32
     index, packed = dr.arange(mi.UInt32, 4), dr.zeros(cls, 4)
     for i, v in enumerate(values):

@@ -149,15 +149,16 @@ def test_background_writer_error_reaches_the_caller_and_leaves_no_file(tmp_path)
 
 @pytest.mark.parametrize("pass_bits", [20, 11], ids=["llvm-width", "cuda-width"])
 @pytest.mark.parametrize("bound", [700, 50_000, 3_000_000, 3_000_000_000])
-def test_stable_order_is_numpy_stable_argsort(bound, pass_bits, monkeypatch):
-    """One to three radix passes of either backend's width: the permutation NumPy's stable sort gives (ties in
-    index order)."""
+@pytest.mark.parametrize("n", [5000, 70_000], ids=["small", "large"])
+def test_stable_order_is_numpy_stable_argsort(bound, pass_bits, n, monkeypatch):
+    """One to three radix passes of either backend's width (or the narrow ones of a small sort,
+    ``event_fill.SMALL_SORT``): the permutation NumPy's stable sort gives (ties in index order)."""
     import mitsuba as mi
     from mitsuba_eventfield.plugins import event_fill
     from mitsuba_eventfield.plugins.event_fill import stable_order
     monkeypatch.setitem(event_fill.PASS_BITS, "llvm", pass_bits)
     rng = np.random.default_rng(bound % 97)
-    key = rng.integers(0, bound, 5000, dtype=np.int64).astype(np.uint32)
+    key = rng.integers(0, bound, n, dtype=np.int64).astype(np.uint32)
     key[::7] = key[3]                                   # many ties
     got = stable_order(mi.UInt32(key), bound).numpy()
     assert np.array_equal(got, np.argsort(key, kind="stable"))
