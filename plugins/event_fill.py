@@ -406,8 +406,8 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
 
 def slot_capacity(count: int) -> int:
     """Slots to allocate for ``count`` events where the length is baked into a recording (``event_batch``'s
-    frozen write pass): ``count`` rounded up to a quarter of its power of two (at most a third more memory
-    than the events, and a handful of lengths, so of recordings, for chunks of similar counts)."""
+    frozen write pass): ``count`` rounded up to a multiple of a quarter of the power of two above it (at most
+    half as much again as the events, and a few lengths, so few recordings, for chunks of similar counts)."""
     quarter = max(1, 1 << max(0, int(count - 1).bit_length() - 2))
     return max(1024, -(-int(count) // quarter) * quarter)
 
