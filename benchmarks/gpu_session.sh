@@ -7,6 +7,8 @@
 #   run(command="bash benchmarks/gpu_session.sh tests", carry=[".gpu"])   the suite under cuda_ad_mono
 #   run(command="bash benchmarks/gpu_session.sh verify", carry=[".gpu"])  known tests, fan to HDF5, memory, overlap,
 #                                                                         the converter's profile and chunk shape
+#   run(command="bash benchmarks/gpu_session.sh engine", carry=[".gpu"])  known tests, chunk shape, engine, fan to
+#                                                                         HDF5, memory, pixel
 # Everything lands in one tarball under $OUT (the device tool brings it back): logs, the benchmarks' results
 # files (written there, not into benchmarks/results/), nvidia-smi. Copy the results files into
 # benchmarks/results/ here and commit them: they carry the GPU's name.
@@ -57,7 +59,8 @@ known_failures() {   # what failed under CUDA on the H100 (2026-11-26: benchmark
         "tests/scene/test_instancing.py" "tests/simulate/test_static_pixels.py" \
         "tests/optics/test_scan.py::test_numpy_and_drjit_agree" \
         "tests/simulate/test_frozen_render.py::test_frozen_steps_give_the_same_events" \
-        "tests/simulate/test_sink.py" "tests/events/test_writer.py"
+        "tests/simulate/test_sink.py" "tests/events/test_writer.py" \
+        "tests/plugins/test_event_fill.py::test_stable_order_is_numpy_stable_argsort"
 }
 
 fan_to_hdf5() {   # issue 15's own row through the CLI: the fan at 1280x720, 400 steps, to HDF5 (render / events /
@@ -103,6 +106,18 @@ case "$stage" in
         # the loop's overlap of host and device, overlapped against synced in alternating pairs
         step overlap 150 $PY benchmarks/bench_overlap.py $quick
         cat "$W/steps.txt"; tail -n 30 "$W/event_engine.txt" "$W/fan_render.txt" "$W/motion.txt" "$W/overlap.txt" ;;
+    engine)
+        # after a change to the event engine's chunking or sort (about 230 s on an H200): the known tests, the
+        # chunk shape, the engine and its renders, the fan to HDF5, memory against the duration, the pixel
+        known_failures
+        step chunk_shape 150 $PY benchmarks/bench_chunk_shape.py $quick
+        step event_engine 240 $PY benchmarks/bench_event_engine.py $quick
+        fan_to_hdf5
+        [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
+        step pixel 90 $PY benchmarks/bench_pixel.py
+        grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
+        cat "$W/steps.txt"; head -n 40 "$W/chunk_shape.txt"; tail -n 25 "$W/event_engine.txt"
+        grep -v "rendering:" "$W/fan_render.txt" | tail -n 6; tail -n 8 "$W/memory.txt" "$W/pixel.txt" ;;
     verify)
         # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
         # memory against the duration, the overlap's A/B, the converter's profile; 100 s on an H200
@@ -116,5 +131,5 @@ case "$stage" in
         step chunk_shape 150 $PY benchmarks/bench_chunk_shape.py $quick
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
         cat "$W/steps.txt"; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt"; head -n 30 "$W/profile.txt"; head -n 40 "$W/chunk_shape.txt" ;;
-    *) echo "usage: gpu_session.sh tests|known|bench|verify [--quick]" >&2; exit 2 ;;
+    *) echo "usage: gpu_session.sh tests|known|bench|verify|engine [--quick]" >&2; exit 2 ;;
 esac

@@ -50,10 +50,12 @@ from mitsuba_eventfield.plugins.pixel_view import PixelView
 # Lane-steps (pixels x frames) per kernel by backend, and the fewest frames. CPU (converter kernels alone, 2 kHz
 # stack, 2 cores, best of 6; M pixel-steps/s by frames a kernel): 346x260 1: 53, 2: 97, 3: 112, 4: 118, 6: 115,
 # 8: 114, 11: 102, 16: 97; 640x480 1: 104, 2: 118, 3: 119; 1280x720 1: 100, 2: 112, 3: 124, 4: 120: a frame a
-# kernel pays ~0.8 ms of launches, past a few 100 k lane-steps the events leave the cache. CUDA: enough lanes
-# to fill the GPU with few launches and syncs per frame.
-LANE_STEPS = {"llvm": 360_000, "cuda": 16_000_000}
-MIN_FRAMES_PER_KERNEL, MAX_FRAMES_PER_KERNEL = 3, 64
+# kernel pays ~0.8 ms of launches, past a few 100 k lane-steps the events leave the cache. CUDA (H200,
+# benchmarks/results/chunk_shape_h200.md): a chunk's fixed cost (its syncs, ~90 launches) is what the frames
+# share; 17 -> 64 frames at 1280x720 and 64 -> 200 at 346x260 gained 15-25 % on a sparse stack (0.2-0.3
+# events a pixel-step), nothing either way on a dense one (1.1).
+LANE_STEPS = {"llvm": 360_000, "cuda": 60_000_000}
+MIN_FRAMES_PER_KERNEL, MAX_FRAMES_PER_KERNEL = 3, {"llvm": 64, "cuda": 200}
 
 
 def default_frames_per_kernel(n_pix: int, frame_interval_s: float) -> int:
@@ -63,8 +65,9 @@ def default_frames_per_kernel(n_pix: int, frame_interval_s: float) -> int:
     ``event_fill.PASS_BITS`` per pass: 2^20 us, about a second, in one; a second pass costs more than the fewer
     launches save there; on a GPU a pass is cheap next to the launches and syncs batching saves)."""
     cuda = mi.variant().startswith("cuda")
-    frames = round(LANE_STEPS["cuda" if cuda else "llvm"] / n_pix)
-    frames = int(min(MAX_FRAMES_PER_KERNEL, max(MIN_FRAMES_PER_KERNEL, frames)))
+    backend = "cuda" if cuda else "llvm"
+    frames = round(LANE_STEPS[backend] / n_pix)
+    frames = int(min(MAX_FRAMES_PER_KERNEL[backend], max(MIN_FRAMES_PER_KERNEL, frames)))
     while not cuda and frames > 1 and _passes(frames * frame_interval_s) > _passes(frame_interval_s):
         frames -= 1
     return frames

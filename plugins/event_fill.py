@@ -177,22 +177,23 @@ def _opaque(value, cls):
     return v
 
 
-# bits a counting-sort pass takes at most. LLVM (one block_mkperm over 10.5 M keys, 2 threads): 5.2 ms for 2^11
-# buckets, 8.5 ms for 2^16, 15 ms for 2^18 and 2^20, 110 ms for 2^22; so a 100-frame chunk's 16-bit key sorts in
-# one pass (8.5 ms) where two 11-bit passes and their gathers took 34. CUDA: 11 bits, Dr.Jit's own radix width
-# (wide passes not measured there).
-PASS_BITS = {"llvm": 20, "cuda": 11}
-SMALL_SORT = 65_536      # fewer keys than this: CUDA's narrow passes on the CPU too (docs/design.md)
+# bits a counting-sort pass takes at most. LLVM: 20 (block_mkperm over 10.5 M keys, 2 threads: 5.2 ms for 2^11
+# buckets, 8.5 for 2^16, 15 for 2^20, 110 for 2^22). CUDA: 8, for stability: Dr.Jit's CUDA block_mkperm is
+# stable only while a histogram per warp fits in shared memory (2^8 buckets: 32 KiB; 2^11: 256 KiB, beyond any
+# GPU), and an LSD radix sort needs every pass stable (docs/design.md, "The time sort on CUDA").
+PASS_BITS = {"llvm": 20, "cuda": 8}
+SMALL_SORT, SMALL_SORT_BITS = 65_536, 11     # fewer keys than SMALL_SORT on the CPU: 11-bit passes (design.md)
 
 
 def stable_order(key, key_bound: int):
     """Stable sorting permutation of UInt32 ``key`` whose values are all below ``key_bound``: a least-
     significant-digit radix sort with only the passes that bound needs, of equal width up to ``PASS_BITS``
     (fixed shifts and masks for a bound's bit count: the same cached kernels whatever the chunk's length), where
-    ``dr.argsort`` on 32 bits always makes three."""
+    ``dr.argsort`` on 32 bits always makes three (LLVM) or four (CUDA)."""
     n = dr.width(key)
     bits = max(1, int(key_bound).bit_length())
-    width = PASS_BITS["cuda" if dr.backend_v(key) == dr.JitBackend.CUDA or n < SMALL_SORT else "llvm"]
+    cuda = dr.backend_v(key) == dr.JitBackend.CUDA
+    width = PASS_BITS["cuda"] if cuda else SMALL_SORT_BITS if n < SMALL_SORT else PASS_BITS["llvm"]
     if bits <= width:                        # one pass: the key is its own digit
         return dr.detail.block_mkperm(key, n, 1 << bits)
     width = -(-bits // -(-bits // width))    # as few passes, of equal width: 2 x 11 bits for 22, not 20 + 2

@@ -329,17 +329,17 @@ def test_device_events_join_on_the_device_and_on_the_host():
 
 
 def test_default_grouping_keeps_one_radix_pass_on_the_cpu():
-    """The default frames per kernel: about LANE_STEPS lane-steps, at least 3, capped at 64, and on the CPU
-    never a chunk whose span needs more radix passes than one frame (2^20 us a pass: at 30 fps 31 frames fit
-    one; 0.4 s frames: 2)."""
+    """The default frames per kernel: about LANE_STEPS lane-steps, at least 3, capped at 64 (CUDA: 200), and on
+    the CPU never a chunk whose span needs more radix passes than one frame (2^20 us a pass: at 30 fps 31 frames
+    fit one; 0.4 s frames: 2)."""
     import mitsuba as mi
 
     from mitsuba_eventfield.plugins import event_batch
     if mi.variant().startswith("cuda"):
-        # on a GPU (the suite under EVENTFIELD_TEST_VARIANT=cuda_ad_mono): 16 M lane-steps, no radix-pass limit
-        assert event_batch.default_frames_per_kernel(1280 * 720, 1 / 2000) == 17
-        assert event_batch.default_frames_per_kernel(1280 * 720, 0.4) == 17
-        assert event_batch.default_frames_per_kernel(346 * 260, 1 / 30) == 64
+        # on a GPU (the suite under EVENTFIELD_TEST_VARIANT=cuda_ad_mono): 60 M lane-steps, no radix-pass limit
+        assert event_batch.default_frames_per_kernel(1280 * 720, 1 / 2000) == 65
+        assert event_batch.default_frames_per_kernel(1280 * 720, 0.4) == 65
+        assert event_batch.default_frames_per_kernel(346 * 260, 1 / 30) == 200
         return
     assert event_batch.default_frames_per_kernel(346 * 260, 1 / 2000) == 4
     assert event_batch.default_frames_per_kernel(346 * 260, 1 / 30) == 4

@@ -147,12 +147,14 @@ def test_background_writer_error_reaches_the_caller_and_leaves_no_file(tmp_path)
 
 
 
-@pytest.mark.parametrize("pass_bits", [20, 11], ids=["llvm-width", "cuda-width"])
-@pytest.mark.parametrize("bound", [700, 50_000, 3_000_000, 3_000_000_000])
+@pytest.mark.parametrize("pass_bits", [20, 11, 8], ids=["llvm-width", "11-bit", "cuda-width"])
+@pytest.mark.parametrize("bound", [256, 700, 50_000, 3_000_000, 3_000_000_000])
 @pytest.mark.parametrize("n", [5000, 70_000], ids=["small", "large"])
 def test_stable_order_is_numpy_stable_argsort(bound, pass_bits, n, monkeypatch):
-    """One to three radix passes of either backend's width (or the narrow ones of a small sort,
-    ``event_fill.SMALL_SORT``): the permutation NumPy's stable sort gives (ties in index order)."""
+    """One to four radix passes of each width (or the narrow ones of a small sort, ``event_fill.SMALL_SORT``):
+    the permutation NumPy's stable sort gives (ties in index order). Under CUDA (EVENTFIELD_TEST_VARIANT) the
+    CPU width set here does not apply and the CUDA width is what is tested: its passes must be stable
+    (a pass too wide for Dr.Jit's stable CUDA histogram reorders ties)."""
     import mitsuba as mi
     from mitsuba_eventfield.plugins import event_fill
     from mitsuba_eventfield.plugins.event_fill import stable_order
@@ -162,6 +164,15 @@ def test_stable_order_is_numpy_stable_argsort(bound, pass_bits, n, monkeypatch):
     key[::7] = key[3]                                   # many ties
     got = stable_order(mi.UInt32(key), bound).numpy()
     assert np.array_equal(got, np.argsort(key, kind="stable"))
+
+
+def test_cuda_pass_width_keeps_dr_jits_stable_histogram():
+    """Dr.Jit's CUDA block_mkperm is stable only while one histogram per warp, 32 warps of a 1024-thread block,
+    fits in a block's shared memory; 48 KiB is what every CUDA GPU gives. A wider pass runs the form that is
+    stable only within 32 elements, and an LSD radix sort then misorders ties (seen at 15 bits on an H200)."""
+    from mitsuba_eventfield.plugins import event_fill
+    buckets = 1 << event_fill.PASS_BITS["cuda"]
+    assert buckets * 4 * 32 <= 48 * 1024
 
 
 @pytest.mark.parametrize("pixel", [PIXELS["ideal"], PIXELS["refractory-noise-cap"], PIXELS["davis346"]],
