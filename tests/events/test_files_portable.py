@@ -87,6 +87,36 @@ def test_h5_chunks_deflated_on_threads_are_what_hdf5_itself_stores(tmp_path, str
             assert ds.shape == (len(stream),) and len(stream) % 4096     # and a partial last chunk, HDF5's
 
 
+@pytest.mark.parametrize("coder", ["isal", "zlib"])
+def test_h5_chunks_from_either_deflate_read_back(tmp_path, stream, monkeypatch, coder):
+    """ISA-L's deflate (python-isal, levels 1-3) and zlib both make the zlib stream HDF5's deflate filter
+    decodes: files written on threads with either read back as the stream at every level; ISA-L takes only the
+    levels it has (its 0 compresses where zlib's 0 stores; it has no 4-9)."""
+    from mitsuba_eventfield.events import hdf5
+    levels = []
+    if coder == "isal":
+        isal_zlib = pytest.importorskip("isal.isal_zlib", reason="python-isal not installed (setup.cfg needs it)")
+
+        class Counted:
+            @staticmethod
+            def compress(data, level):
+                levels.append(level)
+                return isal_zlib.compress(data, level)
+        monkeypatch.setattr(hdf5, "_isal", Counted)
+    else:
+        monkeypatch.setattr(hdf5, "_isal", None)
+    for level in (0, 1, 3, 6):
+        path = str(tmp_path / f"{coder}{level}.h5")
+        with ef.H5EventWriter(path, 64, 48, chunk=4096, threads=2, level=level) as w:
+            for k in range(0, len(stream), 7000):
+                w.append(stream.x[k:k + 7000], stream.y[k:k + 7000], stream.t[k:k + 7000], stream.p[k:k + 7000])
+        assert ef.read_events(path).equals(stream)
+        with h5py.File(path) as f:
+            assert f["events"]["t"].compression_opts == level
+    whole = len(stream) // 4096 * 4                     # whole chunks of the four columns, a level
+    assert sorted(levels) == ([1] * whole + [3] * whole if coder == "isal" else [])
+
+
 @pytest.mark.parametrize("sizes", [[100, 3000, 1024, 5000, 7, 10_869], [20_000], [1024] * 19 + [544],
                                    [1500, 18_500], [1023, 1, 1025, 17_951]])
 def test_appended_pieces_are_joined_only_up_to_a_chunk_boundary(tmp_path, stream, monkeypatch, sizes):

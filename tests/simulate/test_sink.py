@@ -10,6 +10,7 @@ from conftest import FreedOn
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.events import hdf5 as hdf5_mod
+from mitsuba_eventfield.plugins import event_batch
 from mitsuba_eventfield.plugins.event_fill import DeviceEvents
 from mitsuba_eventfield.simulate import sink as sink_mod
 
@@ -21,6 +22,9 @@ def _owns_its_memory(a) -> bool:
 
 
 def test_the_writer_copies_borrowed_chunks_and_the_render_thread_frees_them(tmp_path, demo_small, monkeypatch):
+    # at most 16 steps a chunk on either backend (CUDA's default of up to 200 would make the 200 steps one or
+    # two chunks), so that several chunks are lent
+    monkeypatch.setattr(event_batch, "MAX_FRAMES_PER_KERNEL", {"llvm": 16, "cuda": 16})
     memory = ef.render_events(demo_small, 0.02, steps=200, event_buffer_mb=0.0005)
 
     freed, lent, written = [], [0], []
