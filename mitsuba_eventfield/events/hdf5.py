@@ -19,7 +19,7 @@ from .stream import MAX_SENSOR, EventStream
 
 try:    # ISA-L's deflate: a zlib stream like zlib's, 5.8x its speed at level 1 on the fan's events, same size
     from isal import isal_zlib as _isal
-except ImportError:     # a platform without python-isal's wheel: zlib itself (docs/design.md, "HDF5 writing")
+except ImportError:     # no python-isal wheel for the platform: zlib (docs/design.md, "HDF5 chunks deflated")
     _isal = None
 ISAL_LEVELS = (1, 2, 3)     # the levels ISA-L has (its 0 compresses, zlib's 0 stores): others go to zlib
 
@@ -115,8 +115,9 @@ class H5EventWriter:
     readable everywhere; ``level`` 0-9) or None; "lzf" is accepted but only h5py reads it. ``threads``: how many
     threads deflate whole chunks at once (default :func:`default_compression_threads`; ISA-L's deflate for
     levels 1-3 where python-isal is installed); they are stored with ``write_direct_chunk`` in the form HDF5's
-    own shuffle + deflate filters store them (a zlib stream), so every reader decodes them with its own filters. The last, partial chunk goes through
-    HDF5's own filters; ``threads=0`` sends every chunk through them, on the writing thread.
+    own shuffle + deflate filters store them (a zlib stream), so every reader decodes them with its own
+    filters. The last, partial chunk goes through HDF5's own filters; ``threads=0`` sends every chunk through
+    them, on the writing thread.
     """
 
     def __init__(self, path: str, width: int, height: int, meta: dict | None = None, chunk: int = 1 << 16,
