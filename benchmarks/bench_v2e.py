@@ -1,7 +1,9 @@
 """Frames to events against v2e (issue 15): our converter and v2e's emulator on the CPU, same frames, one run.
 
 Frames: ``bench_event_engine.frame_stack`` (textured plane translating 1.5 px per frame plus a rotating bar,
-linear intensity in [0.05, 1], 2 kHz), C = 0.2, ideal pixel in both. Ours: ``events_from_frames`` on a Mitsuba
+linear intensity in [0.05, 1], 2 kHz; about 1.2 events a pixel-step), C = 0.2, ideal pixel in both; and the
+same at 346x260 translating 0.15 px a frame (about 0.3 events a pixel-step; the issue's reference kernel made
+0.05-0.13), which shows how each converter's cost follows the events. Ours: ``events_from_frames`` on a Mitsuba
 LLVM variant. v2e: ``v2ecore.emulator.EventEmulator`` (sigma_thres, cutoff, leak, shot noise and refractory
 period all 0, device 'cpu', no output files), ``generate_events(luma, t)`` per frame; it runs in its own
 virtualenv (v2e is no dependency of ours), driven by this file in a subprocess.
@@ -207,19 +209,21 @@ def _arrays_left_in_drjit(ef, frames, times):
     return {k: np.from_dlpack(v) for k, v in dev.columns().items()}
 
 
-def one_size(width, height, frames, eight_bit):
+def one_size(width, height, frames, eight_bit, speed=1.5):
     """Throughput (``timed``) and agreement over the whole stack (one run each; v2e on 1 thread, which gives
-    the same events and is immune to thread oversubscription on a busy machine)."""
+    the same events and is immune to thread oversubscription on a busy machine). ``speed``: the texture's
+    translation in px a frame (1.5: the dense stack; 0.15: the sparse one, as in bench_chunk_shape)."""
     import mitsuba_eventfield as ef
     from bench_event_engine import frame_stack
-    stack, times = frame_stack(width, height, frames)
+    stack, times = frame_stack(width, height, frames, speed=speed)
     assert stack.min() >= 1e-3          # ours is pure ln I above its linlog threshold (1e-3): same as the reference
     n_pix = width * height
     ref = reference(stack, times)
     ev = ef.events_from_frames(stack, times, threshold=C)
     mine = as_events(ev.x, ev.y, ev.t.astype(np.float64), ev.p, width)
     del ev
-    res = {"width": width, "height": height, "frames": frames, "ours": compare(mine, ref, n_pix)}
+    res = {"width": width, "height": height, "frames": frames, "speed_px": speed,
+           "events_per_pixel_step": len(mine["pix"]) / (n_pix * (frames - 1)), "ours": compare(mine, ref, n_pix)}
     with tempfile.TemporaryDirectory() as folder:
         np.save(os.path.join(folder, "frames.npy"), stack)
         np.save(os.path.join(folder, "times.npy"), times)
@@ -257,6 +261,10 @@ def _row(name, r):
             f"{r['dt_us_p50']:.2f} / {r['dt_us_p99']:.2f} / {r['dt_us_max']:.2f} | {r['polarity_agree']:.4f} |")
 
 
+def _film(s):
+    return f"{s['width']}x{s['height']} ({s['speed_px']:g} px, {s['events_per_pixel_step']:.2f} events a pixel-step)"
+
+
 def markdown(res):
     h = res["host"]
     v = res["sizes"][0]["v2e"]["versions"]
@@ -274,7 +282,7 @@ def markdown(res):
     for s in res["sizes"]:
         t = s["timing"]
         frames = t["ours"]["frames"] - 1
-        md.append(f"| {s['width']}x{s['height']} | {t['ours']['mpix_steps_per_s']:.2f} | "
+        md.append(f"| {_film(s)} | {t['ours']['mpix_steps_per_s']:.2f} | "
                   f"{1e3 * t['ours']['events_s'] / frames:.2f} / {1e3 * t['ours']['host_result_s'] / frames:.2f} | "
                   f"{t['v2e']['mpix_steps_per_s']:.2f} | **{t['v2e']['ours_over_this']:.1f}x** | "
                   f"{t['v2e_1_thread']['mpix_steps_per_s']:.2f} | {t['v2e_1_thread']['ours_over_this']:.1f}x | "
@@ -288,12 +296,12 @@ def markdown(res):
            "| film, frames: converter | events | pixels with count != ref | time error vs ref, us | "
            "polarity agree |", "|---|---|---|---|---|"]
     for s in res["sizes"]:
-        film = f"{s['width']}x{s['height']}, {s['frames']}"
+        film = f"{_film(s)}, {s['frames']}"
         md.append(_row(f"{film}: ours", s["ours"]))
         for name in ("v2e", "v2e_8bit"):
             if name in s:
                 md.append(_row(f"{film}: {name} (luma = {s[name]['luma_per_unit_intensity']:g} I)", s[name]))
-    md += [""] + [f"{s['width']}x{s['height']}: {s['pixels_with_a_tie']} of {s['width'] * s['height']} pixels have "
+    md += [""] + [f"{_film(s)}: {s['pixels_with_a_tie']} of {s['width'] * s['height']} pixels have "
                   "a tie (a step ending within 2e-7 in ln I of a level of the reference lattice, mostly exactly on "
                   "it, from clipping at 0.05 / 1); there the float64 reference fires and a float32 model's "
                   "rounding decides. Pixels "
@@ -305,7 +313,7 @@ def markdown(res):
         for name in ("v2e", "v2e_8bit"):
             if name in s:
                 a = s[name]["against_ours"]
-                md.append(f"| {s['width']}x{s['height']} | {name} | {a['pixels_count_differs']} "
+                md.append(f"| {_film(s)} | {name} | {a['pixels_count_differs']} "
                           f"({a['sum_abs_count_diff']}, {a['max_abs_count_diff']}) | {a['net_count_diff']:+d} | "
                           f"{a['dt_us_p50']:.1f} / {a['dt_us_p99']:.1f} / {a['dt_us_max']:.1f} |")
     md += ["", *res["notes"], ""]
@@ -340,16 +348,19 @@ def main(quick=False):
     from _report import write_results
     import mitsuba_eventfield as ef
     ef.set_variant(os.environ.get("EVENTFIELD_VARIANT") or "llvm")
-    sizes = [(346, 260, 60, True)] if quick else [(346, 260, 300, True), (640, 480, 200, False)]
+    # the dense stack at two film sizes (the target's measure), and the 346x260 stack moving ten times slower
+    sizes = [(346, 260, 60, True)] if quick else [(346, 260, 300, True), (640, 480, 200, False),
+                                                  (346, 260, 300, False, 0.15)]
     load0 = os.getloadavg()[0]
     res = {"host": cpu_info(), "threshold": C, "rate_hz": 2000.0, "sizes": [one_size(*s) for s in sizes],
            "notes": NOTES}
     res["host"]["loadavg_1min_start_end"] = [load0, os.getloadavg()[0]]
     first = res["sizes"][0]
+    dense = [s for s in res["sizes"] if s["speed_px"] == 1.5]
     res["targets"] = {
-        f"ours >= 10x v2e ({TORCH_THREADS} threads) on the CPU ({first['width']}x{first['height']}: "
+        f"ours >= 10x v2e ({TORCH_THREADS} threads) on the CPU, dense stack ({first['width']}x{first['height']}: "
         f"{first['speedup']:.1f}x)":
-            all(s["speedup"] >= 10 for s in res["sizes"]),
+            all(s["speedup"] >= 10 for s in dense),
         "every pixel's event count exact against the ideal reference":
             all(s["ours"]["pixels_count_differs"] == 0 for s in res["sizes"]),
         "p99 timestamp error <= 1 us": all(s["ours"]["dt_us_p99"] <= 1.0 for s in res["sizes"])}
