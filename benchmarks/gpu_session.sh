@@ -110,7 +110,7 @@ case "$stage" in
     engine)
         # after a change to the event engine's chunking or sort (about 230 s on an H200): the known tests, the
         # chunk shape, the engine and its renders, the fan to HDF5, memory against the duration, the pixel, the
-        # writer (with its serial floor)
+        # writer (with its serial floor), the demo's render profile
         known_failures
         step chunk_shape 150 $PY benchmarks/bench_chunk_shape.py $quick
         step event_engine 240 $PY benchmarks/bench_event_engine.py $quick
@@ -118,6 +118,8 @@ case "$stage" in
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         step pixel 90 $PY benchmarks/bench_pixel.py
         [ -z "$quick" ] && step writer 60 $PY benchmarks/bench_writer.py
+        # the demo's host time by function (its wall is well above its renders alone: where does it go?)
+        step render_profile 60 $PY benchmarks/profile_render.py
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
         cat "$W/steps.txt"; head -n 40 "$W/chunk_shape.txt"; tail -n 25 "$W/event_engine.txt"
         grep -v "rendering:" "$W/fan_render.txt" | tail -n 6; tail -n 8 "$W/memory.txt" "$W/pixel.txt" ;;
