@@ -102,7 +102,8 @@ def _add_pixel_options(r) -> None:
                         "see docs/pixel_model.md)")
     r.add_argument("--variant", help="Mitsuba variant or backend: cuda, llvm, llvm_ad_mono, ... (default: auto)")
     r.add_argument("--event-buffer-mb", type=num(0, 1e6, lo_open=True), default=64.0,
-                   help="device memory for events before they move to the host and the file writer (default 64)")
+                   help="device memory for events before they move to the host and the file writer, and the most "
+                        "that crosses at once (default 64)")
 
 
 def _add_convert(sub) -> None:

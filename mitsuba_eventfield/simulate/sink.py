@@ -1,5 +1,6 @@
 """Where a render's events go: memory, or an event file. Steps made on the device are kept there until a chunk
-of about ``buffer_events`` has gathered (one device-to-host copy per chunk, not per step); chunks are written
+of about ``buffer_events`` has gathered (one device-to-host copy per chunk, not per step; from a GPU, a kernel
+batch larger than that crosses in pieces of that size); chunks are written
 (HDF5, npz, text, AEDAT4: ``events.streaming``) by a background thread (``events.writer``) while the next steps
 render. Camera recordings (RAW, DAT) are written at the end. In memory, each chunk is copied into one
 ``events.buffer.EventBuffer`` as it leaves the device buffer, so the engine's arrays are freed and reused (no
@@ -24,6 +25,27 @@ DEVICE_BYTES_PER_EVENT = 13          # xy (UInt32), t (Int64), p (Int8) while an
 def _cpu() -> bool:
     import mitsuba as mi
     return not mi.variant().startswith("cuda")
+
+
+def _pieces(chunk: DeviceEvents, size: int):
+    """``chunk`` as pieces of at most ``size`` events, each with whether it is the last: the buffer is the
+    user's bound on a chunk that crosses to the host, and one kernel batch can make more events than that (on
+    CUDA up to 60 M pixel-steps a batch: ``event_batch.LANE_STEPS``). Each piece is gathered on the device
+    when it is asked for (its start an opaque scalar: one kernel for every piece), so that only one extra
+    piece exists at a time."""
+    if chunk.count <= size:
+        yield chunk, True
+        return
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..plugins.event_fill import _opaque
+    for start in range(0, chunk.count, size):
+        n = min(size, chunk.count - start)
+        index = dr.arange(mi.UInt32, n) + _opaque(start, mi.UInt32)
+        cols = [dr.gather(type(c), c, index) for c in (chunk.xy, chunk.t, chunk.p)]
+        dr.eval(*cols)
+        yield DeviceEvents(*cols, count=n), start + n == chunk.count
 
 
 def buffer_events(buffer_mb: float) -> int:
@@ -90,7 +112,8 @@ class Sink:
         # where Dr.Jit can reuse it (events.writer: freed on the writer's thread, host memory grew with the events)
         chunk = DeviceEvents.concat(parts)
         self.count(chunk.p)                     # on the device: one number crosses, not a byte an event
-        self._add_host(*chunk.numpy(), until, borrowed=True, counted=True)
+        for piece, last in _pieces(chunk, self.capacity):
+            self._add_host(*piece.numpy(), until if last else None, borrowed=True, counted=True)
 
     def add_step(self, events, complete_until_us: int) -> None:
         """A step's events from ``EventIntegrator.commit_events``: device-side ones are buffered there."""

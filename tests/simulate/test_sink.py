@@ -64,3 +64,25 @@ def test_the_writer_copies_borrowed_chunks_and_the_render_thread_frees_them(tmp_
     assert not any(_owns_its_memory(c) for c in ev.numpy())
     assert all(_owns_its_memory(c) for c in ev.numpy(owned=True))
     assert [c.tolist() for c in ev.numpy(owned=True)] == [[1, 3], [2, 4], [5, 6], [1, -1]]
+
+
+def test_a_batch_larger_than_the_buffer_crosses_in_pieces_of_the_buffer(tmp_path, demo_small, monkeypatch):
+    """The event buffer bounds every chunk that crosses to the host, also when one kernel batch makes more
+    events than it holds (CUDA batches up to 200 frames): the batch is handed over in pieces of the buffer's
+    size, in order, and the file holds the in-memory render's events."""
+    monkeypatch.setattr(event_batch, "MAX_FRAMES_PER_KERNEL", {"llvm": 64, "cuda": 64})
+    memory = ef.render_events(demo_small, 0.02, steps=128)
+    capacity = sink_mod.buffer_events(0.01)                      # 806 events
+    sizes = []
+    real_append = hdf5_mod.H5EventWriter.append
+
+    def append(self, x, y, t, p, complete_until_us=None):
+        sizes.append(len(t))
+        return real_append(self, x, y, t, p, complete_until_us)
+    monkeypatch.setattr(hdf5_mod.H5EventWriter, "append", append)
+    monkeypatch.setattr(sink_mod, "_cpu", lambda: False)
+    out = str(tmp_path / "pieces.h5")
+    ef.render_events(demo_small, 0.02, steps=128, output=out, event_buffer_mb=0.01)
+    assert len(memory) > 4 * capacity                        # the two batches each hold several buffers' worth
+    assert max(sizes) <= capacity and sum(sizes) == len(memory) and sizes.count(capacity) >= 4
+    assert ef.read_events(out).equals(memory)
