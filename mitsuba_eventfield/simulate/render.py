@@ -368,7 +368,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     "shot_noise_hz": 2}``) choose the event pixel; default: the scene's own.
 
     ``event_buffer_mb``: device memory for events before they move to the host (and the file writer) in one
-    chunk, and the most that crosses at once (a larger kernel batch crosses in pieces of it). ``checkpoint_s``: save the render's state every so many wall seconds (HDF5 output), so that an
+    chunk, and the most that crosses at once (a larger kernel batch crosses in pieces of it).
+    ``checkpoint_s``: save the render's state every so many wall seconds (HDF5 output), so that an
     interrupted render goes on with ``resume=True`` to the events of an uninterrupted one (``checkpoint.py``).
     ``spp_changing``: samples where they matter: pixels whose brightness changes (found by probe renders) get
     this many samples per step, the others ``spp`` (``sample_allocation.py``).
