@@ -13,7 +13,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from _report import write_results  # noqa: E402
+from _report import profile_rows, write_results  # noqa: E402
 from bench_event_engine import device_name, frame_stack  # noqa: E402
 
 
@@ -70,10 +70,7 @@ def host_profile(convert, top=12):
     prof.enable()
     convert()
     prof.disable()
-    stats = pstats.Stats(prof).stats
-    rows = sorted(({"function": f"{os.path.basename(file)}:{line} {name}", "calls": calls, "own_ms": 1e3 * own}
-                   for (file, line, name), (_, calls, own, _, _) in stats.items()), key=lambda r: -r["own_ms"])
-    return rows[:top]
+    return profile_rows(pstats.Stats(prof), "tottime", top)
 
 
 def _size_class(n):

@@ -15,24 +15,10 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from _report import write_results  # noqa: E402
+from _report import profile_rows, write_results  # noqa: E402
 from bench_event_engine import device_name  # noqa: E402
 
 ROOT = os.path.dirname(HERE)
-
-
-def _rows(stats, key, count):
-    """The first ``count`` functions of ``stats`` sorted by ``key``, as dicts (function, calls, own and
-    cumulative ms)."""
-    stats.sort_stats(key)
-    rows = []
-    for func in stats.fcn_list[:count]:
-        calls, _, own, cumulative, _ = stats.stats[func]
-        path, line, name = func
-        where = f"{os.path.relpath(path, ROOT) if path.startswith(ROOT) else os.path.basename(path)}:{line}"
-        rows.append({"function": f"{where} {name}", "calls": calls, "own_ms": 1e3 * own,
-                     "cumulative_ms": 1e3 * cumulative})
-    return rows
 
 
 def main(argv=None):
@@ -59,7 +45,7 @@ def main(argv=None):
     res = {"device": device_name(), "variant": mi.variant(), "scene": os.path.relpath(args.scene, ROOT),
            "steps": args.steps, "duration_s": args.duration, "wall_s": wall, "events": len(stream),
            "summary": {k: summary.get(k) for k in ("render_s", "events_s", "motion_s", "write_s", "wall_s")},
-           "by_cumulative": _rows(stats, "cumulative", 40), "by_own": _rows(stats, "tottime", 25)}
+           "by_cumulative": profile_rows(stats, "cumulative", 40), "by_own": profile_rows(stats, "tottime", 25)}
     s = res["summary"]
     md = [f"# A render's host time, function by function ({res['device']}, {res['variant']})", "",
           f"{res['scene']}, {args.steps} steps over {args.duration} s, {len(stream)} events: wall {wall:.3f} s "
