@@ -66,11 +66,13 @@ known_failures() {   # what failed under CUDA on the H100 (2026-11-26: benchmark
 }
 
 fan_to_hdf5() {   # issue 15's own row through the CLI: the fan at 1280x720, 400 steps, to HDF5 (render / events /
-    # motion / write split, and whether the writer or the render was the bottleneck)
-    local sizes="-D width=1280 -D height=720" steps=400
+    # motion / write split, and whether the writer or the render was the bottleneck); with an argument N, the
+    # writer deflating on N threads (EVENTFIELD_WRITER_THREADS), in fan_render_wN.txt
+    local sizes="-D width=1280 -D height=720" steps=400 name=fan_render threads=()
     if [ -n "$quick" ]; then sizes="-D width=96 -D height=72"; steps=80; fi
-    step fan_render 90 $PY -m mitsuba_eventfield.cli render scenes/fan/fan.xml -o /tmp/fan_gpu.h5 $sizes \
-        --duration 0.02 --steps $steps
+    if [ -n "${1:-}" ]; then name="fan_render_w$1"; threads=(env "EVENTFIELD_WRITER_THREADS=$1"); fi
+    step "$name" 90 "${threads[@]}" $PY -m mitsuba_eventfield.cli render scenes/fan/fan.xml -o /tmp/fan_gpu.h5 \
+        $sizes --duration 0.02 --steps $steps
     rm -f /tmp/fan_gpu.h5
 }
 
@@ -117,6 +119,8 @@ case "$stage" in
         step chunk_shape 150 $PY benchmarks/bench_chunk_shape.py $quick
         step event_engine 240 $PY benchmarks/bench_event_engine.py $quick
         fan_to_hdf5
+        # the same with the writer on fewer threads (16 deflated slower than 2 in bench_writer on the H200)
+        for n in ${FAN_WRITER_THREADS:-4 8}; do fan_to_hdf5 "$n"; done
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         step pixel 90 $PY benchmarks/bench_pixel.py
         [ -z "$quick" ] && step writer 60 $PY benchmarks/bench_writer.py
@@ -124,7 +128,8 @@ case "$stage" in
         step render_profile 60 $PY benchmarks/profile_render.py
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
         cat "$W/steps.txt"; head -n 40 "$W/chunk_shape.txt"; tail -n 25 "$W/event_engine.txt"
-        grep -v "rendering:" "$W/fan_render.txt" | tail -n 6; tail -n 8 "$W/memory.txt" "$W/pixel.txt" ;;
+        for f in "$W"/fan_render*.txt; do echo "== $f"; grep -E "^[0-9]+ steps|^file writer" "$f"; done
+        tail -n 8 "$W/memory.txt" "$W/pixel.txt"; grep -E "^\| [0-9]|floor" "$W/writer.txt" ;;
     verify)
         # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
         # memory against the duration, the overlap's A/B, the converter's profile; 100 s on an H200

@@ -30,32 +30,49 @@ H5_COMPRESSIONS = ("gzip", "lzf", None)
 MAX_COMPRESSION_THREADS = 64
 
 
+WRITER_THREADS_ENV = "EVENTFIELD_WRITER_THREADS"
+
+
 def default_compression_threads() -> int:
-    """Threads that deflate an HDF5 writer's chunks: every core this process may run on. On a GPU machine the
-    host's cores are idle while the GPU renders, and HDF5 itself deflates on one thread (~13 M events/s,
-    docs/design.md), far below what a GPU makes; on the CPU the render's own threads share the cores, and
-    deflating outside HDF5 is cheaper anyway (one thread 1.08x faster than HDF5's filters on the fan's events:
-    benchmarks/results/writer.md)."""
+    """Threads that deflate an HDF5 writer's chunks: ``EVENTFIELD_WRITER_THREADS`` where it is set (0: HDF5's
+    own filters on the writing thread; a shared machine's share of the cores), else every core this process
+    may run on. On a GPU machine the host's cores are idle while the GPU renders, and HDF5 itself deflates on
+    one thread (~13 M events/s, docs/design.md), far below what a GPU makes; on the CPU the render's own
+    threads share the cores, and deflating outside HDF5 is cheaper anyway (one thread 1.08x faster than HDF5's
+    filters on the fan's events: benchmarks/results/writer.md)."""
+    chosen = os.environ.get(WRITER_THREADS_ENV, "").strip()
+    if chosen:
+        return int(number(chosen, f"environment variable {WRITER_THREADS_ENV}", 0, MAX_COMPRESSION_THREADS,
+                          integer=True))
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()   # not the
     return max(1, min(MAX_COMPRESSION_THREADS, cores or 1))     # host's cores where the process is pinned to fewer
 
 
-def _shuffled(values: np.ndarray) -> bytes:
+def _shuffled(values: np.ndarray) -> np.ndarray:
     """HDF5's shuffle filter: every value's first byte, then every second byte, ... (one-byte values as they
-    are), so the slowly varying high bytes of coordinates and timestamps sit together for deflate."""
-    size = values.dtype.itemsize
+    are), so the slowly varying high bytes of coordinates and timestamps sit together for deflate. Returned as
+    a contiguous uint8 array, which the deflaters read as a buffer (no ``bytes`` copy; one-byte columns and
+    unshuffled chunks as they lie)."""
     contiguous = np.ascontiguousarray(values)
-    return contiguous.tobytes() if size == 1 else contiguous.view(np.uint8).reshape(-1, size).T.tobytes()
+    if values.dtype.itemsize == 1:
+        return contiguous.view(np.uint8)
+    return np.ascontiguousarray(contiguous.view(np.uint8).reshape(-1, values.dtype.itemsize).T)
 
 
 def deflate_chunk(values: np.ndarray, level: int, shuffle: bool) -> bytes:
     """One chunk of a column as HDF5's shuffle + deflate filters store it (a zlib stream at ``level``, made by
     ISA-L where it is installed and has that level), for ``write_direct_chunk``: HDF5 and every reader decode
-    it with their own filters."""
-    data = _shuffled(values) if shuffle else np.ascontiguousarray(values).tobytes()
+    it with their own filters. Both deflaters release the GIL while they compress (they scale with threads)."""
+    data = _shuffled(values) if shuffle else np.ascontiguousarray(values)
     if _isal is not None and level in ISAL_LEVELS:
         return _isal.compress(data, level)
     return zlib.compress(data, level)
+
+
+def _deflate_columns(columns: dict, level: int, shuffle: bool) -> dict:
+    """One chunk of every column (:func:`deflate_chunk` each), as one task of the writer's pool: a task a
+    column made four futures a chunk for the writer thread to submit and collect."""
+    return {k: deflate_chunk(v, level, shuffle) for k, v in columns.items()}
 
 
 def _json(meta: dict) -> str:
@@ -248,8 +265,8 @@ class H5EventWriter:
         level, shuffle, ahead = *self._deflate, 2 * self._threads
 
         def submit(j):
-            return {k: self._pool.submit(deflate_chunk, v[j * self.chunk:(j + 1) * self.chunk], level, shuffle)
-                    for k, v in zip("xytp", cols)}
+            return self._pool.submit(_deflate_columns, {k: v[j * self.chunk:(j + 1) * self.chunk]
+                                                        for k, v in zip("xytp", cols)}, level, shuffle)
 
         def in_order():
             window = collections.deque(submit(j) for j in range(min(ahead, whole)))
@@ -257,7 +274,7 @@ class H5EventWriter:
                 done = window.popleft()
                 if j + ahead < whole:
                     window.append(submit(j + ahead))
-                yield {k: f.result() for k, f in done.items()}
+                yield done.result()
         return in_order()
 
     def _stop_pool(self):

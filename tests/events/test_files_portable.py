@@ -63,7 +63,7 @@ def test_h5_chunks_deflated_on_threads_are_what_hdf5_itself_stores(tmp_path, str
             f.create_dataset(k, data=v, chunks=(4096,), compression="gzip", compression_opts=1, shuffle=True)
         for k, v in values.items():
             _, raw = f[k].id.read_direct_chunk((4096,))
-            assert zlib.decompress(raw) == hdf5._shuffled(v[4096:8192])
+            assert zlib.decompress(raw) == bytes(hdf5._shuffled(v[4096:8192]))
             assert zlib.decompress(hdf5.deflate_chunk(v[4096:8192], 1, True)) == zlib.decompress(raw)
     deflated = []                       # the writer's own deflating, counted: HDF5's filters would pass too
     monkeypatch.setattr(hdf5, "deflate_chunk", lambda v, *a: deflated.append(len(v)) or hdf5_deflate(v, *a))
@@ -115,6 +115,33 @@ def test_h5_chunks_from_either_deflate_read_back(tmp_path, stream, monkeypatch, 
             assert f["events"]["t"].compression_opts == level
     whole = len(stream) // 4096 * 4                     # whole chunks of the four columns, a level
     assert sorted(levels) == ([1] * whole + [3] * whole if coder == "isal" else [])
+
+
+@pytest.mark.parametrize("setting, deflating_threads", [("0", 0), ("1", 1), (" 3 ", 3)])
+def test_writer_threads_from_the_environment(tmp_path, stream, monkeypatch, setting, deflating_threads):
+    """``EVENTFIELD_WRITER_THREADS`` sets how many threads deflate a writer's chunks (0: HDF5's own filters on
+    the writing thread): the threads that deflated are counted by name, and the file reads back."""
+    import threading
+
+    from mitsuba_eventfield.events import hdf5
+    real, names = hdf5.deflate_chunk, set()
+    monkeypatch.setattr(hdf5, "deflate_chunk", lambda v, *a: names.add(threading.current_thread().name)
+                        or real(v, *a))
+    monkeypatch.setenv("EVENTFIELD_WRITER_THREADS", setting)
+    path = str(tmp_path / "env.h5")
+    with ef.H5EventWriter(path, 64, 48, chunk=1024) as w:
+        for k in range(0, len(stream), 5000):
+            w.append(stream.x[k:k + 5000], stream.y[k:k + 5000], stream.t[k:k + 5000], stream.p[k:k + 5000])
+    assert ef.read_events(path).equals(stream)
+    assert len(names) == deflating_threads and all(n.startswith("h5-deflate") for n in names)
+
+
+@pytest.mark.parametrize("setting", ["many", "65", "-1", "2.5"])
+def test_bad_writer_threads_setting_is_one_line_before_any_file(tmp_path, monkeypatch, setting):
+    monkeypatch.setenv("EVENTFIELD_WRITER_THREADS", setting)
+    with pytest.raises(ef.ConfigError, match=r"^environment variable EVENTFIELD_WRITER_THREADS = .*\[0, 64\]"):
+        ef.H5EventWriter(str(tmp_path / "bad.h5"), 64, 48)
+    assert os.listdir(tmp_path) == []
 
 
 @pytest.mark.parametrize("sizes", [[100, 3000, 1024, 5000, 7, 10_869], [20_000], [1024] * 19 + [544],
