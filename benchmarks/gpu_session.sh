@@ -9,7 +9,10 @@
 #                                                                         the converter's profile and chunk shape
 #   run(command="bash benchmarks/gpu_session.sh engine", carry=[".gpu"])  known tests, chunk shape, engine, fan to
 #                                                                         HDF5, memory, pixel, writer, the demo's
-#                                                                         render profile
+#                                                                         and the fan's render profiles
+#   run(command="bash benchmarks/gpu_session.sh write", carry=[".gpu"])   known tests, fan to HDF5 (default and
+#                                                                         fewer writer threads), writer, memory,
+#                                                                         the fan's render profile
 # Everything lands in one tarball under $OUT (the device tool brings it back): logs, the benchmarks' results
 # files (written there, not into benchmarks/results/), nvidia-smi. Copy the results files into
 # benchmarks/results/ here and commit them: they carry the GPU's name.
@@ -76,6 +79,13 @@ fan_to_hdf5() {   # issue 15's own row through the CLI: the fan at 1280x720, 400
     rm -f /tmp/fan_gpu.h5
 }
 
+fan_profile() {   # the render thread's host time by function, the fan at 1280x720 to HDF5 (three renders)
+    local sizes="-D width=1280 -D height=720" steps=400
+    if [ -n "$quick" ]; then sizes="-D width=96 -D height=72"; steps=80; fi
+    step render_profile_fan 120 $PY benchmarks/profile_render.py scenes/fan/fan.xml --steps $steps \
+        --duration 0.02 --output /tmp/fan_profile.h5 $sizes
+}
+
 case "$stage" in
     known)
         # those failures alone, with their tracebacks (-v --tb=long)
@@ -126,10 +136,26 @@ case "$stage" in
         [ -z "$quick" ] && step writer 60 $PY benchmarks/bench_writer.py
         # the demo's host time by function (its wall is well above its renders alone: where does it go?)
         step render_profile 60 $PY benchmarks/profile_render.py
+        fan_profile
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
         cat "$W/steps.txt"; head -n 40 "$W/chunk_shape.txt"; tail -n 25 "$W/event_engine.txt"
         for f in "$W"/fan_render*.txt; do echo "== $f"; grep -E "^[0-9]+ steps|^file writer" "$f"; done
         tail -n 8 "$W/memory.txt" "$W/pixel.txt"; grep -E "^\| [0-9]|floor" "$W/writer.txt" ;;
+    write)
+        # after a change to the event files' writer (80 s on a warm H200 without the known tests): the known
+        # tests, the fan to HDF5 with the default and fewer deflating threads, the writer's own rows, memory
+        # against the duration, and the render thread's profile of the fan to HDF5 (what handing chunks over
+        # costs it)
+        known_failures
+        fan_to_hdf5
+        for n in ${FAN_WRITER_THREADS:-4 8}; do fan_to_hdf5 "$n"; done
+        step writer 90 $PY benchmarks/bench_writer.py
+        [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
+        fan_profile
+        grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
+        cat "$W/steps.txt"
+        for f in "$W"/fan_render*.txt; do echo "== $f"; grep -E "^[0-9]+ steps|^file writer" "$f"; done
+        grep -E "^\| [0-9]|floor" "$W/writer.txt"; tail -n 8 "$W/memory.txt"; head -n 45 "$W/render_profile_fan.md" ;;
     verify)
         # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
         # memory against the duration, the overlap's A/B, the converter's profile; 100 s on an H200
@@ -143,5 +169,5 @@ case "$stage" in
         step chunk_shape 150 $PY benchmarks/bench_chunk_shape.py $quick
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
         cat "$W/steps.txt"; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt"; head -n 30 "$W/profile.txt"; head -n 40 "$W/chunk_shape.txt" ;;
-    *) echo "usage: gpu_session.sh tests|known|bench|verify|engine [--quick]" >&2; exit 2 ;;
+    *) echo "usage: gpu_session.sh tests|known|bench|verify|engine|write [--quick]" >&2; exit 2 ;;
 esac
