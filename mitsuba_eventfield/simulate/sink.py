@@ -20,6 +20,13 @@ from .device_stream import DeviceEventStream, numpy_columns
 
 DEFAULT_EVENT_BUFFER_MB = 64.0
 DEVICE_BYTES_PER_EVENT = 13          # xy (UInt32), t (Int64), p (Int8) while an event waits on the device
+# Chunks that may wait for each of the background writer's threads (``BackgroundWriter``'s depth), on the CPU
+# and from a GPU. From a GPU a step batch's events cross at once, in several pieces of the buffer's size (the
+# fan at 1280x720: about 16 M events a batch, three pieces): with 2 the render waited 0.43 s of its 2.5 s for
+# the queue although the writer was busy only 1.8 s, with 4 it waited 0.09 s (an H200, the best of two
+# alternating renders each: benchmarks/results/fan_writer_h200.md). On the CPU the writer keeps up with 2.
+# Host memory is what depth costs: up to that many buffers' worth of events more, whatever the duration.
+WRITER_DEPTH = {"cpu": 2, "gpu": 4}
 
 
 def _cpu() -> bool:
@@ -66,10 +73,11 @@ class Sink:
         # on_device (no output): chunks stay on the device, joined there at the end (simulate/device_stream.py)
         self.on_device = bool(on_device) and not output
         self.device_chunks: list = []
+        depth = WRITER_DEPTH["cpu" if _cpu() else "gpu"]
         if segments is not None:         # a checkpointed render: segments under <output>.resume, merged at the end
-            self.writer = BackgroundWriter(SegmentWriter(output, width, height, meta, segments))
+            self.writer = BackgroundWriter(SegmentWriter(output, width, height, meta, segments), depth=depth)
         elif self.fmt in STREAMED:       # HDF5, npz, text, AEDAT4: written while rendering
-            self.writer = BackgroundWriter(open_writer(output, self.fmt, width, height, meta))
+            self.writer = BackgroundWriter(open_writer(output, self.fmt, width, height, meta), depth=depth)
         self.memory = EventBuffer() if self.writer is None and not self.on_device else None   # in-memory result
         self.count = count or (lambda p: None)
         self.device_parts, self.device_events, self.until = [], 0, None

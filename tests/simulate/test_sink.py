@@ -86,3 +86,18 @@ def test_a_batch_larger_than_the_buffer_crosses_in_pieces_of_the_buffer(tmp_path
     assert len(memory) > 4 * capacity                        # the two batches each hold several buffers' worth
     assert max(sizes) <= capacity and sum(sizes) == len(memory) and sizes.count(capacity) >= 4
     assert ef.read_events(out).equals(memory)
+
+
+def test_the_writer_queues_are_deeper_from_a_gpu(tmp_path, monkeypatch):
+    """From a GPU a step batch's events cross at once in several buffer-sized pieces: each of the writer's
+    queues (to its copier, to its writing thread) takes ``WRITER_DEPTH["gpu"]`` chunks there, 2 on the CPU
+    (benchmarks/results/fan_writer_h200.md), for every streamed format and for checkpoint segments."""
+    import os
+    assert sink_mod.WRITER_DEPTH == {"cpu": 2, "gpu": 4}
+    for cpu, depth in ((True, 2), (False, 4)):
+        monkeypatch.setattr(sink_mod, "_cpu", lambda cpu=cpu: cpu)
+        for name, segments in (("events.h5", None), ("events.npz", None), ("resumable.h5", [])):
+            sink = sink_mod.Sink(str(tmp_path / name), None, 64, 48, {}, segments=segments)
+            assert sink.writer.queue.maxsize == sink.writer.inbox.maxsize == depth, (name, cpu)
+            sink.abort()
+    assert not [f for f in os.listdir(tmp_path) if not f.endswith(".resume")]
