@@ -7,7 +7,8 @@ ones read off one table. A profile, not a target: it writes only benchmarks/resu
 With ``--output FILE`` the events go to that file (written by the background writer: the profile is the
 render thread's, so it shows what handing chunks over costs that thread: the joins, the device-to-host copies,
 the waits on a full queue); ``-D NAME=VALUE`` sets the scene's XML defaults (a film size). A scene other than
-the demo writes render_profile_<its name>.md.
+the demo writes render_profile_<its name>.md; ``--preset NAME`` renders with that pixel model (a preset of
+``pixel_model.PRESETS``, e.g. davis346) and adds _<NAME> to the file's name.
 Usage: python benchmarks/profile_render.py [SCENE] [--steps N] [--duration S] [--output F] [-D NAME=VALUE]...
 (default: the demo, 100 steps, 0.1 s, in memory)
 """
@@ -33,11 +34,13 @@ def main(argv=None):
     parser.add_argument("--duration", type=float, default=0.1)
     parser.add_argument("--output", default=None, help="an event file (.h5, ...) instead of memory")
     parser.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument("--preset", default=None, help="a pixel-model preset (default: the ideal pixel)")
     args = parser.parse_args(argv)
     xml = dict(d.split("=", 1) for d in args.defines)
     default_scene = os.path.abspath(args.scene) == os.path.join(ROOT, "scenes", "demo", "demo.xml")
     name = "render_profile" if default_scene else \
         "render_profile_" + os.path.splitext(os.path.basename(args.scene))[0]
+    name += f"_{args.preset}" if args.preset else ""
     import mitsuba as mi
 
     import mitsuba_eventfield as ef
@@ -45,7 +48,8 @@ def main(argv=None):
     scene = ef.load_scene(args.scene, **xml)
 
     def render():
-        result = ef.render_events(scene, args.duration, steps=args.steps, output=args.output)
+        result = ef.render_events(scene, args.duration, steps=args.steps, output=args.output,
+                                  pixel={"preset": args.preset} if args.preset else None)
         if args.output is None:
             return len(result), result.meta["render"]
         return result.events, result.as_dict()
@@ -63,11 +67,12 @@ def main(argv=None):
     res = {"device": device_name(), "variant": mi.variant(), "scene": os.path.relpath(args.scene, ROOT),
            "steps": args.steps, "duration_s": args.duration, "wall_s": wall, "events": events,
            "output": os.path.splitext(args.output)[1] if args.output else "memory", "defines": xml,
+           "pixel": args.preset or "ideal",
            "summary": {k: summary.get(k) for k in ("render_s", "events_s", "motion_s", "write_s", "wall_s")},
            "by_cumulative": profile_rows(stats, "cumulative", 40), "by_own": profile_rows(stats, "tottime", 25)}
     s = res["summary"]
     md = [f"# A render's host time, function by function ({res['device']}, {res['variant']})", "",
-          f"{res['scene']} ({' '.join(args.defines) or 'as it is'}), {args.steps} steps over {args.duration} s, {events} "
+          f"{res['scene']} ({' '.join(args.defines) or 'as it is'}; pixel: {res['pixel']}), {args.steps} steps over {args.duration} s, {events} "
           f"events to {res['output']}: wall {wall:.3f} s "
           f"unprofiled; the summary's render {s['render_s']:.3f}, events {s['events_s']:.3f}, motion "
           f"{s['motion_s']:.3f}, write {s['write_s']:.3f} s. The profiled run (cProfile adds its own cost):", ""]

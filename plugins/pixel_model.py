@@ -186,6 +186,18 @@ def pixel_config(preset: str = "ideal", where: str = "pixel model", **overrides)
     return PixelConfig(preset=preset, **values).validate(where)
 
 
+def preset_and_overrides(preset: str | None, pixel: dict | None, where: str = "pixel model") -> tuple:
+    """(preset, the other parameters) of a ``pixel`` dict that may name its preset itself, as
+    ``PixelConfig.as_dict()`` and a render's metadata do: its name is taken where ``preset`` is None or the
+    same; two different names are refused (one line). ``preset`` None stays None (the caller's default)."""
+    values = dict(pixel or {})
+    named = values.pop("preset", None)
+    if named is not None and preset is not None and named != preset:
+        raise ConfigError(f"{where}: pixel['preset'] = {named!r} and preset = {preset!r}: name one preset "
+                          f"(allowed: {', '.join(PRESETS)})")
+    return (preset if preset is not None else named), values
+
+
 def sample_thresholds(rng: np.random.Generator, n: int, nominal: float, sigma: float) -> np.ndarray:
     """Per-pixel thresholds ~ N(nominal, sigma), floored at nominal / 10 so none is ever <= 0."""
     if sigma == 0:

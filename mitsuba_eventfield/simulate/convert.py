@@ -30,10 +30,11 @@ from .summary import RenderSummary
 mi, dr = backend.mi, backend.dr
 
 
-def pixel_integrator(preset: str = "ideal", pixel: dict | None = None, threshold: float | None = None):
-    """An ``eventfield`` integrator with this pixel model, for feeding frames (no scene needed). A bad preset or
-    parameter is one ``EventFieldError`` naming it (checked before the plugin is built)."""
-    overrides = dict(pixel or {})
+def pixel_integrator(preset: str | None = None, pixel: dict | None = None, threshold: float | None = None):
+    """An ``eventfield`` integrator with this pixel model, for feeding frames (no scene needed): ``preset``
+    (None: the one ``pixel`` names, else "ideal"). A bad preset or parameter is one ``EventFieldError`` naming
+    it (checked before the plugin is built)."""
+    preset, overrides = pixel_model.preset_and_overrides(preset, pixel)
     if threshold is not None:
         overrides.setdefault("threshold_on", float(threshold))
         overrides.setdefault("threshold_off", float(threshold))
@@ -43,7 +44,7 @@ def pixel_integrator(preset: str = "ideal", pixel: dict | None = None, threshold
     return integ
 
 
-def events_from_frames(frames, times=None, *, fps: float | None = None, preset: str = "ideal",
+def events_from_frames(frames, times=None, *, fps: float | None = None, preset: str | None = None,
                        pixel: dict | None = None, threshold: float | None = None, srgb: bool = False,
                        output: str | None = None, fmt: str | None = None, progress: bool = False,
                        event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, meta: dict | None = None,

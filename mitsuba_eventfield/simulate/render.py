@@ -69,14 +69,15 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
     integ = timed.scene.integrator()
     if not is_event_integrator(integ):  # any scene: wrap its radiance integrator
         integ = integrator_class()(_props_with_inner(integ))
+    if pixel is not None and not isinstance(pixel, dict):
+        raise ConfigError(f"pixel model: pixel = {pixel!r}: must be a dict of pixel parameters (a preset's name "
+                          "goes in preset=)")
+    preset, pixel = pixel_model.preset_and_overrides(preset, pixel)
     overrides = {} if preset is not None else dict(integ.scene_overrides)
     explicit = {"threshold_on": threshold_on if threshold_on is not None else threshold,
                 "threshold_off": threshold_off if threshold_off is not None else threshold,
                 "linlog_threshold": linlog_threshold}
-    if pixel is not None and not isinstance(pixel, dict):
-        raise ConfigError(f"pixel model: pixel = {pixel!r}: must be a dict of pixel parameters (a preset's name "
-                          "goes in preset=)")
-    explicit.update(pixel or {})
+    explicit.update(pixel)
     for name, v in explicit.items():
         if v is not None:
             overrides[name] = v

@@ -132,3 +132,25 @@ def test_progress_and_long_inputs_stream(tmp_path):
     summary = ef.events_from_frames(src, output=out, progress=True, event_buffer_mb=1e-6)
     assert seen == list(range(50)) and summary.events == len(ef.read_events(out)) > 0
     assert os.listdir(tmp_path) == ["g.h5"]
+
+
+def test_a_pixel_dict_may_name_its_preset(demo_small):
+    """A pixel model given as a dict that names its preset (``PixelConfig.as_dict()``, a render's metadata) is
+    taken as that preset and its values: the converter and a render make the events of ``preset=`` with the
+    same values, and two different preset names are one line. (The readout cap is off: scaled to these tiny
+    films, davis346's would pass almost nothing.)"""
+    from mitsuba_eventfield.plugins.pixel_model import pixel_config
+    values = {"shot_noise_hz": 50.0, "readout_cap": 0.0}
+    described = pixel_config("davis346", **values).as_dict()
+    assert described["preset"] == "davis346"
+    stack, t, _ = _ramps(frames=12, duration=0.012)
+    by_name = ef.events_from_frames(stack, t, preset="davis346", pixel=values)
+    assert len(by_name) > 50 and ef.events_from_frames(stack, t, pixel=described).equals(by_name)
+    assert not ef.events_from_frames(stack, t, pixel=values).equals(by_name)        # the ideal pixel + noise
+    rendered = ef.render_events(demo_small, 0.004, steps=4, reuse=False, preset="davis346", pixel=values)
+    assert len(rendered) > 50 and ef.render_events(demo_small, 0.004, steps=4, reuse=False,
+                                                   pixel=described).equals(rendered)
+    for call in (lambda: ef.events_from_frames(stack, t, preset="ideal", pixel=described),
+                 lambda: ef.render_events(demo_small, 0.004, steps=4, preset="prophesee_gen4", pixel=described)):
+        with pytest.raises(ef.ConfigError, match=r"^pixel model: pixel\['preset'\] = 'davis346' and preset = "):
+            call()
