@@ -10,9 +10,9 @@
 #   run(command="bash benchmarks/gpu_session.sh engine", carry=[".gpu"])  known tests, chunk shape, engine, fan to
 #                                                                         HDF5, memory, pixel, writer, the demo's
 #                                                                         and the fan's render profiles
-#   run(command="bash benchmarks/gpu_session.sh write", carry=[".gpu"])   known tests, fan to HDF5 (default and
-#                                                                         fewer writer threads), writer, memory,
-#                                                                         the fan's render profile
+#   run(command="bash benchmarks/gpu_session.sh write", carry=[".gpu"])   known tests, fan to HDF5 (and one writer
+#                                                                         setting changed at a time), writer,
+#                                                                         memory, render profiles, pixel
 # Everything lands in one tarball under $OUT (the device tool brings it back): logs, the benchmarks' results
 # files (written there, not into benchmarks/results/), nvidia-smi. Copy the results files into
 # benchmarks/results/ here and commit them: they carry the GPU's name.
@@ -142,20 +142,25 @@ case "$stage" in
         for f in "$W"/fan_render*.txt; do echo "== $f"; grep -E "^[0-9]+ steps|^file writer" "$f"; done
         tail -n 8 "$W/memory.txt" "$W/pixel.txt"; grep -E "^\| [0-9]|floor" "$W/writer.txt" ;;
     write)
-        # after a change to the event files' writer (80 s on a warm H200 without the known tests): the known
-        # tests, the fan to HDF5 with the default and fewer deflating threads, the writer's own rows, memory
-        # against the duration, and the render thread's profile of the fan to HDF5 (what handing chunks over
-        # costs it)
+        # after a change to the event files' writer or the sink (about 120 s on a fresh H200): the known tests,
+        # the fan to HDF5 through the CLI, the same with one writer setting changed at a time (queue depth, GIL
+        # switch interval, deflating threads), the writer's own rows, memory against the duration, the render
+        # thread's profile of the fan to HDF5, and the demo's render profile with the ideal and a realistic pixel
+        # (where the realistic pixel's host time goes: the pixel-cost target), and that cost
         known_failures
         fan_to_hdf5
-        for n in ${FAN_WRITER_THREADS:-4 8}; do fan_to_hdf5 "$n"; done
+        step fan_writer 150 $PY benchmarks/bench_fan_writer.py $( [ -n "$quick" ] && echo "--width 96 --height 72 --steps 80" )
         step writer 90 $PY benchmarks/bench_writer.py
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         fan_profile
+        step render_profile 60 $PY benchmarks/profile_render.py
+        step render_profile_davis346 60 $PY benchmarks/profile_render.py --preset davis346
+        step pixel 90 $PY benchmarks/bench_pixel.py
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
         cat "$W/steps.txt"
         for f in "$W"/fan_render*.txt; do echo "== $f"; grep -E "^[0-9]+ steps|^file writer" "$f"; done
-        grep -E "^\| [0-9]|floor" "$W/writer.txt"; tail -n 8 "$W/memory.txt"; head -n 45 "$W/render_profile_fan.md" ;;
+        grep -E "^\| " "$W/fan_writer.md"; grep -E "^\| [0-9]|floor" "$W/writer.txt"; tail -n 8 "$W/memory.txt"
+        tail -n 12 "$W/pixel.txt" ;;
     verify)
         # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
         # memory against the duration, the overlap's A/B, the converter's profile; 100 s on an H200
