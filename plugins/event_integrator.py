@@ -182,7 +182,7 @@ class _EventIntegratorMethods:
         if too_large:
             raise ValueError(f"film {too_large}")
         cfg, n_pix = self.config, width * height
-        rng = np.random.default_rng(cfg.seed)
+        sensor = pixel_model.sensor_constants(cfg, n_pix)
         self.size = (width, height)
         self.log_prev = mi.Float(log_now)
         self.anchor = mi.Float(log_now)
@@ -190,17 +190,14 @@ class _EventIntegratorMethods:
         # per-pixel constants drawn in NumPy, copied into Dr.Jit's memory (event_fill.device_copy): an array on
         # NumPy's memory has that memory's alignment, a kernel variant of its own and, in the frozen chunk passes
         # (event_batch), now and then another recording
-        self.c_on = event_fill.device_copy(
-            pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_on, cfg.threshold_sigma), mi.Float)
-        self.c_off = event_fill.device_copy(
-            pixel_model.sample_thresholds(rng, n_pix, cfg.threshold_off, cfg.threshold_sigma), mi.Float)
+        self.c_on = event_fill.device_copy(sensor["c_on"], mi.Float)
+        self.c_off = event_fill.device_copy(sensor["c_off"], mi.Float)
         if cfg.leak_rate_hz or cfg.threshold_jitter:
             self.offset = dr.zeros(mi.Float, n_pix)
         if cfg.leak_rate_hz:
-            rates = cfg.leak_rate_hz * np.maximum(1 + cfg.leak_jitter * rng.standard_normal(n_pix), 0)
-            self.leak_rate = event_fill.device_copy(rates.astype(np.float32), mi.Float)
+            self.leak_rate = event_fill.device_copy(sensor["leak_rate"], mi.Float)
             # a sensor in steady state has its pixels at random phases of their leak cycle
-            self.offset = -mi.Float(rng.random(n_pix).astype(np.float32)) * self.c_on
+            self.offset = -mi.Float(sensor["leak_phase"]) * self.c_on
         if cfg.shot_noise_hz or cfg.threshold_jitter:
             self.rng = mi.PCG32(size=n_pix, initstate=mi.UInt64((cfg.seed * 2654435761 + 12345) % 2**64),
                                 initseq=dr.arange(mi.UInt64, n_pix))

@@ -94,6 +94,7 @@ def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: floa
 # Every effect below is off in the ``ideal`` preset. Dense per-pixel state evolves in Dr.Jit (low-pass,
 # leak, noise draws); the sparse steps act on the few events of a step in NumPy (refractory, readout cap).
 
+import functools  # noqa: E402
 from dataclasses import asdict, dataclass, fields  # noqa: E402
 
 
@@ -203,6 +204,34 @@ def sample_thresholds(rng: np.random.Generator, n: int, nominal: float, sigma: f
     if sigma == 0:
         return np.full(n, nominal, np.float32)
     return np.maximum(rng.normal(nominal, sigma, n), nominal / 10).astype(np.float32)
+
+
+def sensor_constants(config: PixelConfig, n_pix: int) -> dict:
+    """The per-pixel constants of a sensor of ``n_pix`` pixels with this model, drawn from its seed: ON and OFF
+    thresholds (mismatch), and with a leak each pixel's leak rate and its phase in the leak cycle (a sensor in
+    steady state), as read-only float32 arrays ("c_on", "c_off"; "leak_rate", "leak_phase" or None).
+
+    The same seed and model are the same sensor, so the draws are kept for the last few sensors
+    (:func:`_sensor_draws`): drawing them took 4-5 ms at 346x260 on every render (NumPy's normal), the realistic
+    pixel's largest cost on a GPU in a 100-step render (docs/design.md), and sweeps and dataset renders make
+    many renders of one sensor. The values are those of one draw in this order whatever the cache holds."""
+    return _sensor_draws(int(config.seed), int(n_pix), float(config.threshold_on), float(config.threshold_off),
+                         float(config.threshold_sigma), float(config.leak_rate_hz), float(config.leak_jitter))
+
+
+@functools.lru_cache(maxsize=4)
+def _sensor_draws(seed, n_pix, threshold_on, threshold_off, sigma, leak_rate_hz, leak_jitter) -> dict:
+    rng = np.random.default_rng(seed)
+    out = {"c_on": sample_thresholds(rng, n_pix, threshold_on, sigma),
+           "c_off": sample_thresholds(rng, n_pix, threshold_off, sigma), "leak_rate": None, "leak_phase": None}
+    if leak_rate_hz:
+        out["leak_rate"] = (leak_rate_hz * np.maximum(1 + leak_jitter * rng.standard_normal(n_pix), 0)
+                            ).astype(np.float32)
+        out["leak_phase"] = rng.random(n_pix).astype(np.float32)
+    for value in out.values():
+        if value is not None:
+            value.flags.writeable = False          # shared by every render of this sensor
+    return out
 
 
 def lowpass_alpha(dr, intensity, dt, cutoff_hz, bright_intensity, min_fraction):

@@ -174,6 +174,32 @@ def test_thresholds_are_floored_never_negative():
     assert t.min() >= 0.02 and abs(t.std() - 0.049) < 0.001
 
 
+def test_a_sensors_constants_are_drawn_once_per_seed_and_model(monkeypatch):
+    """Per-pixel thresholds, leak rates and leak phases come from the seed, in one order (ON, OFF, rates,
+    phases), whether or not an earlier render of the same sensor left them in the cache; renders of one sensor
+    draw them once, another seed or model draws its own; the shared arrays are read-only."""
+    pm._sensor_draws.cache_clear()
+    draws = []
+    real = pm.sample_thresholds
+    monkeypatch.setattr(pm, "sample_thresholds", lambda *a: draws.append(a[1:]) or real(*a))
+    cfg = pm.pixel_config("davis346", seed=7)
+    timed = ef.load_scene(DEMO, width=24, height=18)
+    first = ef.render_events(timed, 0.004, steps=4, preset="davis346", pixel={"seed": 7, "readout_cap": 0.0})
+    again = ef.render_events(timed, 0.004, steps=4, preset="davis346", pixel={"seed": 7, "readout_cap": 0.0})
+    assert len(first) > 20 and again.equals(first) and len(draws) == 2            # ON and OFF, once
+    rng = np.random.default_rng(7)
+    n = 24 * 18
+    expected = [real(rng, n, 0.2, 0.03), real(rng, n, 0.2, 0.03)]
+    expected.append((0.1 * np.maximum(1 + 0.1 * rng.standard_normal(n), 0)).astype(np.float32))
+    expected.append(rng.random(n).astype(np.float32))
+    got = pm.sensor_constants(cfg, n)
+    for name, value in zip(("c_on", "c_off", "leak_rate", "leak_phase"), expected):
+        assert np.array_equal(got[name], value) and not got[name].flags.writeable, name
+    other = ef.render_events(timed, 0.004, steps=4, preset="davis346", pixel={"seed": 8, "readout_cap": 0.0})
+    assert len(draws) == 4 and not other.equals(first)
+    assert pm.sensor_constants(pm.pixel_config("ideal"), n)["leak_rate"] is None
+
+
 def test_cli_preset_and_bad_preset(tmp_path):
     run = lambda *a: subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "render", DEMO, *a,  # noqa: E731
                                      "-D", "width=32", "-D", "height=24", "--quiet", "--duration", "0.002",
