@@ -1,12 +1,12 @@
 """Where a short render's wall time goes beyond its renders (issue 15, the GPU demo target): on an H200 the
 demo's 100 steps took 0.22 s by wall against 0.13 s for the same instants rendered alone, while the summary's
-events, motion and write came to about 0.05 s. This profiles the render on the host (cProfile, the render
-thread; a function that waits on the device holds the wait) and lists the functions by cumulative and by own
+events, motion and write came to about 0.05 s. This profiles the render on the host (cProfile: the render
+thread, and from Python 3.12 on, where cProfile runs on sys.monitoring, every other thread too: the writer's,
+its pool's; a function that waits on the device holds the wait) and lists the functions by cumulative and by own
 time, with the run's summary, so that fixed costs (set-up, the accuracy-limit frame, the drain) and per-step
 ones read off one table. A profile, not a target: it writes only benchmarks/results/render_profile.md and .json.
-With ``--output FILE`` the events go to that file (written by the background writer: the profile is the
-render thread's, so it shows what handing chunks over costs that thread: the joins, the device-to-host copies,
-the waits on a full queue); ``-D NAME=VALUE`` sets the scene's XML defaults (a film size). A scene other than
+With ``--output FILE`` the events go to that file (written by the background writer: the render thread's
+rows show what handing chunks over costs it: the joins, the device-to-host copies, the waits on a full queue); ``-D NAME=VALUE`` sets the scene's XML defaults (a film size). A scene other than
 the demo writes render_profile_<its name>.md; ``--preset NAME`` renders with that pixel model (a preset of
 ``pixel_model.PRESETS``, e.g. davis346) and adds _<NAME> to the file's name.
 Usage: python benchmarks/profile_render.py [SCENE] [--steps N] [--duration S] [--output F] [-D NAME=VALUE]...
@@ -15,6 +15,7 @@ Usage: python benchmarks/profile_render.py [SCENE] [--steps N] [--duration S] [-
 import argparse
 import cProfile
 import os
+import platform
 import pstats
 import sys
 import time
@@ -67,7 +68,10 @@ def main(argv=None):
     res = {"device": device_name(), "variant": mi.variant(), "scene": os.path.relpath(args.scene, ROOT),
            "steps": args.steps, "duration_s": args.duration, "wall_s": wall, "events": events,
            "output": os.path.splitext(args.output)[1] if args.output else "memory", "defines": xml,
-           "pixel": args.preset or "ideal",
+           "pixel": args.preset or "ideal", "python": platform.python_version(),
+           # cProfile moved onto sys.monitoring in Python 3.12, whose events come from every thread
+           "threads_profiled": "every thread (the writer's and its pool's too)" if sys.version_info >= (3, 12)
+           else "the render thread only",
            "summary": {k: summary.get(k) for k in ("render_s", "events_s", "motion_s", "write_s", "wall_s")},
            "by_cumulative": profile_rows(stats, "cumulative", 40), "by_own": profile_rows(stats, "tottime", 25)}
     s = res["summary"]
@@ -75,7 +79,8 @@ def main(argv=None):
           f"{res['scene']} ({' '.join(args.defines) or 'as it is'}; pixel: {res['pixel']}), {args.steps} steps over {args.duration} s, {events} "
           f"events to {res['output']}: wall {wall:.3f} s "
           f"unprofiled; the summary's render {s['render_s']:.3f}, events {s['events_s']:.3f}, motion "
-          f"{s['motion_s']:.3f}, write {s['write_s']:.3f} s. The profiled run (cProfile adds its own cost):", ""]
+          f"{s['motion_s']:.3f}, write {s['write_s']:.3f} s. The profiled run (cProfile adds its own cost; "
+          f"Python {res['python']}: {res['threads_profiled']}):", ""]
     for title, rows in (("By cumulative time", res["by_cumulative"]), ("By own time", res["by_own"])):
         md += [f"## {title}", "", "| function | calls | own ms | cumulative ms |", "|---|---|---|---|"]
         md += [f"| `{r['function']}` | {r['calls']} | {r['own_ms']:.2f} | {r['cumulative_ms']:.2f} |" for r in rows]
