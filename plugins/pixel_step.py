@@ -48,9 +48,12 @@ def advance(integ, log_prev, k_on, k_off, offset, log_in, intensity, dt, thresho
     return PixelLevels(log_now, log_ref, n, k_on + dr.maximum(n, 0), k_off + dr.maximum(-n, 0), offset), c_on, c_off
 
 
-# a jittered threshold is clamped to at least 0.1 of the pixel's own (``step``): a step whose rise is below half
-# of that in both directions crosses nothing whatever the jitter draws
-QUIET_FRACTION = 0.05
+# The jitter's normal pair (Mitsuba's Box-Muller, ``warp.square_to_std_normal``) never exceeds 5.77 in magnitude:
+# over every uniform a PCG32 float draw can give (2^24 values, checked on LLVM; sqrt(-2 ln 2^-24) = 5.768), so a
+# jittered threshold is at least max(c - 6 jitter, c / 10), the clamp (``_jittered``). A step whose rise stays
+# below that, less a margin for the float32 division's rounding, crosses nothing whatever the draws.
+NORMAL_BOUND = 6.0
+QUIET_MARGIN = 0.999
 
 
 @dataclass
@@ -70,10 +73,10 @@ def step(integ, log_prev, k_on, k_off, offset, rng, log_in, intensity, dt) -> Pi
     (needed by the low-pass and shot noise). Lazy: the caller evaluates.
 
     The jitter's normal pair (Box-Muller: a log, a square root, a sine and a cosine) is made only where the
-    step's rise could cross a jittered threshold (a symbolic branch: the CPU skips it in every packet of still
-    pixels; the demo's frames with jitter alone, kernels 0.38-0.48 -> 0.31 ms a frame, ideal 0.23): elsewhere the
-    pixel's own thresholds stand in, which give the same count (none) and, multiplied by it, the same offset;
-    the draws are made either way, so the generator's stream does not change."""
+    step's rise could cross a jittered threshold, i.e. reach the lowest value the jitter can give it (a symbolic
+    branch: the CPU skips it in every packet of pixels that cannot cross): elsewhere the pixel's own thresholds
+    stand in, which give the same count (none) and, multiplied by it, the same offset; the draws are made either
+    way, so the generator's stream does not change."""
     cfg = integ.config
     thresholds = (integ.c_on, integ.c_off)
     if cfg.threshold_jitter:
@@ -102,9 +105,14 @@ def _jittered(integ, jitter: float, u):
 
         def own(c_on, c_off, u):
             return c_on, c_off
-        quiet = (rise < QUIET_FRACTION * integ.c_on) & (-rise < QUIET_FRACTION * integ.c_off)
+        quiet = (rise < _lowest(integ.c_on, jitter)) & (-rise < _lowest(integ.c_off, jitter))
         return dr.if_stmt((integ.c_on, integ.c_off, u), ~quiet, jitter_them, own)
     return thresholds
+
+
+def _lowest(c, jitter: float):
+    """Below the lowest threshold ``c`` jittered by ``jitter`` can become (``NORMAL_BOUND``, ``QUIET_MARGIN``)."""
+    return dr.maximum(c - NORMAL_BOUND * jitter, c * 0.1) * QUIET_MARGIN
 
 
 def needs_intensity(cfg) -> bool:
