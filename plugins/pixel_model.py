@@ -212,9 +212,10 @@ def sensor_constants(config: PixelConfig, n_pix: int) -> dict:
     steady state), as read-only float32 arrays ("c_on", "c_off"; "leak_rate", "leak_phase" or None).
 
     The same seed and model are the same sensor, so the draws are kept for the last few sensors
-    (:func:`_sensor_draws`): drawing them took 4-5 ms at 346x260 on every render (NumPy's normal), the realistic
-    pixel's largest cost on a GPU in a 100-step render (docs/design.md), and sweeps and dataset renders make
-    many renders of one sensor. The values are those of one draw in this order whatever the cache holds."""
+    (:func:`_sensor_draws`): drawing them took 4-5 ms at 346x260 and 45 ms at 1280x720 on every render (NumPy's
+    normal), the largest single item of the realistic pixel's host time in an H200's 100-step demo profile
+    (docs/design.md), and sweeps and dataset renders make many renders of one sensor. The values are those of
+    one draw in this order whatever the cache holds."""
     return _sensor_draws(int(config.seed), int(n_pix), float(config.threshold_on), float(config.threshold_off),
                          float(config.threshold_sigma), float(config.leak_rate_hz), float(config.leak_jitter))
 
