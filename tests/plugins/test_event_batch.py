@@ -165,7 +165,7 @@ def test_a_chunk_whose_few_firing_pixels_are_filled_alone_equals_the_host_path(p
                          ids=["large_jitter", "everything"])
 def test_the_jitter_skipped_in_still_pixels_changes_no_event(pixel, monkeypatch):
     """The jitter's normal pair is made only where a step's rise could reach the lowest jittered threshold
-    (``pixel_step._lowest``: 0.02 with the largest jitter allowed, C / 4, and 0.14 with every effect's 0.01).
+    (``pixel_step._lowest``: 0.02 with the largest jitter allowed, C / 4, and about 0.08 with "everything"'s 0.02).
     Against the model that makes it everywhere (no step quiet), on frames whose steps rise by less than either
     bound, by about it and by several thresholds: the same events, batched and a step at a time, and the same
     state."""
