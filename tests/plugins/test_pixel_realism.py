@@ -91,6 +91,48 @@ def test_noise_rates_on_a_static_scene(effect, capsys):
     assert on_fraction == 1.0 if effect == "leak" else abs(on_fraction - 0.5) < 0.03
 
 
+def _dark_noise(rate_hz, duration, steps, size=32, seed=3):
+    """Shot noise alone: a dark, still stack (every pixel at the dark rate) through the converter."""
+    times = np.linspace(0.0, duration, steps + 1)
+    frames = np.zeros((steps + 1, size, size), np.float32)
+    return ef.events_from_frames(frames, times, pixel={"shot_noise_hz": rate_hz, "seed": seed})
+
+
+def test_shot_noise_keeps_its_mean_rate_at_coarse_steps():
+    """Shot noise fires at most one event a pixel a step, with probability rate x dt: at 0.25 a pixel a step its
+    mean rate is still the configured one (a Poisson count capped at one a step would lose
+    1 - (1 - e^-0.25) / 0.25 = 11.5 %)."""
+    rate, duration, size = 10.0, 2.0, 64
+    ev = _dark_noise(rate, duration, steps=80, size=size)
+    expected = rate * duration * size * size                    # 81,920; Poisson sd 286, 0.35 %
+    assert abs(len(ev) - expected) / expected < 0.02, len(ev)
+
+
+def test_shot_noise_is_a_poisson_process():
+    """A pixel's noise at fine steps (0.02 a pixel a step) is close to a Poisson process: from any instant the
+    wait for its next event is exponential at the rate (memoryless; KS distance of 3 x 1024 waits, whose 1 %
+    critical value is 0.03), its count over the second has the variance of its mean, and polarities are even.
+    (Intervals between events within a finite window are not exponential: the long ones run past its end.)"""
+    rate = 20.0
+    ev = _dark_noise(rate, duration=1.0, steps=1000)
+    key = ev.y.astype(np.int64) * 32 + ev.x
+    waits = []
+    for start_us in (0, 250_000, 500_000):
+        after = ev.t >= start_us
+        first = np.full(32 * 32, np.inf)
+        np.minimum.at(first, key[after], ev.t[after].astype(np.float64))
+        assert np.isfinite(first).mean() > 0.99
+        waits.append((first[np.isfinite(first)] - start_us) * 1e-6)
+    waits = np.sort(np.concatenate(waits))
+    model = 1.0 - np.exp(-rate * waits)
+    n = len(waits)
+    ks = max(np.max(np.arange(1, n + 1) / n - model), np.max(model - np.arange(n) / n))
+    assert ks < 0.04, ks
+    counts = np.bincount(key, minlength=32 * 32)
+    assert abs(counts.mean() / rate - 1.0) < 0.02 and 0.85 < counts.var() / counts.mean() < 1.15
+    assert abs(np.count_nonzero(ev.p > 0) / len(ev) - 0.5) < 0.02
+
+
 def test_readout_cap_holds_in_every_millisecond(capsys):
     timed = ef.load_scene(DEMO, width=96, height=72)
     ideal = ef.render_events(timed, 0.01, steps=40)
