@@ -26,6 +26,8 @@
 # On an H200 (2026-11-26, ninth session): verify 100 s, verify + bench 332 s, each on a fresh machine (Dr.Jit's
 # kernel cache on that machine's disk was kept between them: the known stage took 30 s each time).
 # Eleventh session (H200): verify + bench in one command 379 s; engine 210 s, each on a fresh machine.
+# Twelfth session (H200): engine 194 s, write 82 s (before fan_writer and the profiles joined it), then 141 s;
+# bench_fan_writer alone 41 s; each on a fresh machine (start about 30 s more).
 # A dry run on the CPU checks the script itself: PY=.venv/bin/python OUT=/tmp/gpu_dry bash benchmarks/gpu_session.sh bench --quick
 set -uo pipefail
 cd "$(dirname "$0")/.."
