@@ -131,7 +131,8 @@ case "$stage" in
         step chunk_shape 150 $PY benchmarks/bench_chunk_shape.py $quick
         step event_engine 240 $PY benchmarks/bench_event_engine.py $quick
         fan_to_hdf5
-        # the same with the writer on fewer threads (16 deflated slower than 2 in bench_writer on the H200)
+        # the same with the writer on fewer threads (with a task a column, 16 deflated slower than 2 on the
+        # H200's host; with a task a chunk, 4, 8 and 16 agree: results/gpu_h200.md)
         for n in ${FAN_WRITER_THREADS:-4 8}; do fan_to_hdf5 "$n"; done
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         step pixel 90 $PY benchmarks/bench_pixel.py
