@@ -19,7 +19,7 @@ from ..focus.depth import depth_from_focus
 from ..focus.refocus import refocus
 from ..scene import bundled_scene
 from .capture import capture
-from .result import AppResult
+from .result import AppResult, time_split_line
 
 DEMO_SCENE = "offaxis_cards/offaxis_cards.xml"
 CARDS = {"near card": 0.5, "far card": 1.2}          # their depths in the scene file (m)
@@ -41,7 +41,7 @@ class DemoResult(AppResult):
         for name, c in self.cards.items():
             lines.append(f"  {name}: depth from focus {c['measured_m']:.3f} m, Mitsuba's depth {c['true_m']:.3f} m "
                          f"(error {100 * c['error']:.1f} %, {100 * c['confident']:.0f} % of its pixels confident)")
-        lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
+        lines.append(time_split_line(self.meta["time_split_s"]))
         return "\n".join(lines)
 
     def write(self, out_dir: str) -> dict:

@@ -20,6 +20,7 @@ import os
 import numpy as np
 
 from ..images import save_figure
+from .result import time_split_line
 
 LABELS = {"kaleidoscope": "kaleidoscope, events", "galvo": "galvo, events",
           "galvo_rendered_views": "galvo, rendered views"}
@@ -66,7 +67,7 @@ def compare_report(r) -> str:
         lines.append(f"  {sp:4g}x {e['kaleidoscope'] / 1e6:8.3f} {e['galvo'] / 1e6:8.3f} "
                      f"{e['galvo'] / max(e['kaleidoscope'], 1e-9):7.1f}x {st['kaleidoscope']:10.1f} "
                      f"{st['galvo']:10.1f}")
-    lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in m["time_split_s"].items()))
+    lines.append(time_split_line(m["time_split_s"]))
     return "\n".join(lines)
 
 
@@ -217,7 +218,7 @@ def grid_report(r) -> str:
     for d, x in r.rates.items():
         lines.append(f"{d:<14s} {x['horizontal']:12.1f} {x['vertical']:12.1f} {x['ratio']:10.3f}   "
                      f"({x['pixels']['horizontal']}, {x['pixels']['vertical']})")
-    lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in m["time_split_s"].items()))
+    lines.append(time_split_line(m["time_split_s"]))
     return "\n".join(lines)
 
 

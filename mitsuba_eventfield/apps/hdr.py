@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..scene.timed import load_scene
 from ..simulate.render import render_events, render_frames
-from .result import AppResult
+from .result import AppResult, time_split_line
 
 LDR_BITS = 8
 WELL_EXPOSED = (10, 245)        # codes a frame records with < 10% quantisation error and no clipping
@@ -66,7 +66,7 @@ class HDRComparison(AppResult):
         for name, e in self.errors.items():
             lines.append(f"  {name:<14} {e['all']:9.3f} {e['bright']:9.3f} {e['dark']:7.3f} {e['worst_region']:9.3f}")
         if "time_split_s" in self.meta:
-            lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
+            lines.append(time_split_line(self.meta["time_split_s"]))
         return "\n".join(lines)
 
     def write(self, out_dir: str) -> dict:

@@ -50,7 +50,7 @@ from ..scene import bundled_scene
 from ..simulate.render import render_events, render_frames
 from ..validate import MAX_SPP, MAX_STEPS, MAX_VIEWS, number
 from .hdr import LDR_BITS, WELL_EXPOSED, ldr_codes, ldr_exposures, ldr_to_linear, load_static_scan, scene_argument
-from .result import AppResult
+from .result import AppResult, time_split_line
 
 DEFAULT_SCENE = bundled_scene("hdr_depth/hdr_depth.xml")
 DEFAULT_DEPTHS = (0.6, 1.5)          # scenes/hdr_depth: the card with its LEDs, the wall with its LEDs
@@ -87,8 +87,7 @@ class HDRLightField(AppResult):
             f"{r['depth']:g}: {'ok' if r['sharpest_at_own_depth'] else 'FAILED'} ("
             + (f"x{r['ratio_to_next_best']:.2f} the next best, " if len(self.depths) > 1 else "")
             + f"{r['pixels']} px)" for r in self.focus["regions"]))
-        lines.append("time split: " + ", ".join(f"{k.replace('_', ' ')} {v:.1f} s"
-                                                for k, v in m["time_split_s"].items()))
+        lines.append(time_split_line(m["time_split_s"]))
         return "\n".join(lines)
 
     def write(self, out_dir: str) -> dict:

@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import EventFieldError
 from .capture import START_METHODS, Capture, _check_positive, capture  # noqa: F401  (the shared capture stage)
 from .highspeed_outputs import planes_figure, track_figure, write_planes, write_track  # noqa: F401  (outputs)
-from .result import AppResult
+from .result import AppResult, time_split_line
 
 # The fan's documented set-up (docs/gallery): larger film and scan than the scene's own defaults, two planes.
 FAN_DEFAULTS = {"define": ["width=240", "height=180", "amplitude=2", "mirror_distance=0.2"],
@@ -75,7 +75,7 @@ class PlaneRefocus(AppResult):
                          "from the instant it is centred on by "
                          + ", ".join(f"{100 * v:.0f}% on the {n}" for n, v in self.conventional_blur.items())
                          + " (motion blur; and it cannot refocus)")
-        lines.append("  time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
+        lines.append(time_split_line(self.meta["time_split_s"], indent="  "))
         return "\n".join(lines)
 
     def write(self, out_dir: str) -> dict:
@@ -191,7 +191,7 @@ class FocusTrack(AppResult):
             lines.append(f"  {k:4d} {t * 1e3:8.2f} {z:10.3f} {zt:8.3f} ({a:.3f}-{b:.3f}) {abs(z - zt) / zt:12.3f}")
         e = self.relative_errors
         lines.append(f"median |relative depth error| {np.median(e):.3f}, max {e.max():.3f}")
-        lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.meta["time_split_s"].items()))
+        lines.append(time_split_line(self.meta["time_split_s"]))
         return "\n".join(lines)
 
     def write(self, out_dir: str) -> dict:

@@ -16,3 +16,9 @@ class AppResult:
 
     def figure(self, path: str) -> str:
         raise NotImplementedError
+
+
+def time_split_line(split: dict, indent: str = "") -> str:
+    """The report's line of where an application's time went (``meta["time_split_s"]``: stage -> seconds), in
+    one form for every application: "time split: render events 0.8 s, light field 2.2 s"."""
+    return indent + "time split: " + ", ".join(f"{k.replace('_', ' ')} {v:.1f} s" for k, v in split.items())

@@ -52,7 +52,7 @@ from ..plugins.pixel_model import PRESETS
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events
 from ..validate import number
-from .result import AppResult
+from .result import AppResult, time_split_line
 
 SCENE = "fan/fan.xml"                                    # bundled (scene.bundled_scene)
 PLANES = {"fan": 0.6, "wall": 1.5}                      # the fan's planes (its XML: fan at 0.6 m, wall at 1.5 m)
@@ -170,7 +170,7 @@ class ScanFrequencySweep(AppResult):
             lines.append(f"  {r['frequency_hz']:<6g} {r['periods']:>4}     {r['offered_ev_s'] / 1e6:8.1f} "
                          f"({r['peak_1ms_ev_s'] / 1e6:6.1f})       {100 * r['dropped_fraction']:5.1f}% | "
                          + "; ".join(parts))
-        lines.append("  time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in m["time_split_s"].items()))
+        lines.append(time_split_line(m["time_split_s"], indent="  "))
         return "\n".join(lines)
 
     def paper_rows(self) -> list:

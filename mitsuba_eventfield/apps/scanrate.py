@@ -27,7 +27,7 @@ import numpy as np
 from ..focus.depth import depth_from_focus
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events
-from .result import AppResult
+from .result import AppResult, time_split_line
 
 
 @dataclass
@@ -60,8 +60,7 @@ class ScanRateDepth(AppResult):
                          f"{100 * e['coverage']:.0f}% of textured pixels "
                          f"confident; near object median z {e['near_truth_z']:.3f} m (estimated "
                          f"{e['near_estimate_z']:.3f} m)")
-        ts = self.meta["time_split_s"]
-        lines.append("time split: " + ", ".join(f"{k} {v:.1f} s" for k, v in ts.items()))
+        lines.append(time_split_line(self.meta["time_split_s"]))
         return "\n".join(lines)
 
     def write(self, out_dir: str) -> dict:

@@ -67,7 +67,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events, render_frames
-from .result import AppResult
+from .result import AppResult, time_split_line
 from .slomorf_outputs import figure, to_display, write_outputs  # noqa: F401  (the outputs: their own module)
 
 DEFAULT_SCENE = bundled_scene("falling/falling.xml")
@@ -110,8 +110,7 @@ class SloMoRFResult(AppResult):
         lines.append("focus check (region at each depth sharpest when refocused there): " + ", ".join(
             f"{c['depth']:g}: {'ok' if c['sharpest_at_own_depth'] else 'FAILED'} (x{c['ratio_to_next_best']:.2f}, "
             f"{c['pixels']} px)" for c in fc["regions"]))
-        ts = self.meta["time_split_s"]
-        lines.append("time split: " + ", ".join(f"{k.replace('_', ' ')} {v:.1f} s" for k, v in ts.items()))
+        lines.append(time_split_line(self.meta["time_split_s"]))
         return "\n".join(lines)
 
     def write(self, out_dir: str) -> dict:
