@@ -22,10 +22,10 @@ DEFAULT_EVENT_BUFFER_MB = 64.0
 DEVICE_BYTES_PER_EVENT = 13          # xy (UInt32), t (Int64), p (Int8) while an event waits on the device
 # Chunks that may wait for each of the background writer's threads (``BackgroundWriter``'s depth), on the CPU
 # and from a GPU. From a GPU a step batch's events cross at once, in several pieces of the buffer's size (the
-# fan at 1280x720: about 16 M events a batch, three pieces): on one H200 machine the render waited 0.43 s of its
-# 2.5 s for a queue of 2 although the writer was busy only 1.8 s, and 0.09 s with 4; on another, 0.09 s with
-# either (best of two alternating renders each: benchmarks/results/fan_writer_h200.md). On the CPU the writer
-# keeps up with 2. Host memory is what depth costs: up to that many buffers' worth of events more, whatever
+# fan at 1280x720: about 16 M events a batch, three pieces): on an H200 the render waited 0.43 s of its 2.5 s
+# for a queue of 2 although the writer was busy only 1.8 s, and 0.09 s with 4 (best of two alternating renders
+# each: benchmarks/results/fan_writer_h200.md; the second run there tried no depth but 4). On the CPU the
+# writer keeps up with 2. Host memory is what depth costs: up to that many buffers' worth of events more, whatever
 # the duration (the H200's fan stayed flat over 10x the duration: 1.050x).
 WRITER_DEPTH = {"cpu": 2, "gpu": 4}
 
