@@ -5,7 +5,8 @@
 #   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, pixel, fan
 #                                                                         1280x720, memory, motion
 #   run(command="bash benchmarks/gpu_session.sh tests", carry=[".gpu"])   the suite under cuda_ad_mono
-#   run(command="bash benchmarks/gpu_session.sh verify", carry=[".gpu"])  known tests, fan to HDF5, memory, overlap,
+#   run(command="bash benchmarks/gpu_session.sh verify", carry=[".gpu"])  known tests, fan to HDF5, the main job
+#                                                                         (`./run demo`) timed, memory, overlap,
 #                                                                         the converter's profile and chunk shape
 #   run(command="bash benchmarks/gpu_session.sh engine", carry=[".gpu"])  known tests, chunk shape, engine, fan to
 #                                                                         HDF5, memory, pixel, writer, the demo's
@@ -81,6 +82,16 @@ fan_to_hdf5() {   # issue 15's own row through the CLI: the fan at 1280x720, 400
     rm -f /tmp/fan_gpu.h5
 }
 
+main_demo() {   # the README's main job (`./run demo`: the off-axis cards, one galvo period, refocus, depth) timed
+    # end to end, twice (the first compiles; issue 16 asks for the demo's speed on a named GPU)
+    local sizes=""
+    if [ -n "$quick" ]; then sizes="--width 48 --height 36 --views 8"; fi
+    for k in 1 2; do
+        step "main_demo_$k" 120 bash -c "TIMEFORMAT='real %R s'; time $PY -m mitsuba_eventfield.cli demo -o /tmp/main_demo $sizes"
+    done
+    rm -rf /tmp/main_demo
+}
+
 fan_profile() {   # the render thread's host time by function, the fan at 1280x720 to HDF5 (three renders)
     local sizes="-D width=1280 -D height=720" steps=400
     if [ -n "$quick" ]; then sizes="-D width=96 -D height=72"; steps=80; fi
@@ -152,6 +163,7 @@ case "$stage" in
         # (where the realistic pixel's host time goes: the pixel-cost target), and that cost
         known_failures
         fan_to_hdf5
+        main_demo
         step fan_writer 150 $PY benchmarks/bench_fan_writer.py $( [ -n "$quick" ] && echo "--width 96 --height 72 --steps 80" )
         step writer 90 $PY benchmarks/bench_writer.py
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
@@ -160,7 +172,7 @@ case "$stage" in
         step render_profile_davis346 60 $PY benchmarks/profile_render.py --preset davis346
         step pixel 90 $PY benchmarks/bench_pixel.py
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
-        cat "$W/steps.txt"
+        cat "$W/steps.txt"; grep -E "^real" "$W"/main_demo_*.txt
         for f in "$W"/fan_render*.txt; do echo "== $f"; grep -E "^[0-9]+ steps|^file writer" "$f"; done
         grep -E "^\| " "$W/fan_writer.md"; grep -E "^\| [0-9]|floor" "$W/writer.txt"; tail -n 8 "$W/memory.txt"
         tail -n 12 "$W/pixel.txt" ;;
@@ -169,6 +181,7 @@ case "$stage" in
         # memory against the duration, the overlap's A/B, the converter's profile; 100 s on an H200
         known_failures
         fan_to_hdf5
+        main_demo
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         step overlap 150 $PY benchmarks/bench_overlap.py $quick
         # the converter kernel by kernel (what bounds its pixel-steps a second), then its chunk shape: frames a
@@ -176,6 +189,6 @@ case "$stage" in
         step profile 90 $PY benchmarks/profile_converter.py $quick
         step chunk_shape 150 $PY benchmarks/bench_chunk_shape.py $quick
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
-        cat "$W/steps.txt"; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt"; head -n 30 "$W/profile.txt"; head -n 40 "$W/chunk_shape.txt" ;;
+        cat "$W/steps.txt"; grep -E "^real" "$W"/main_demo_*.txt; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt"; head -n 30 "$W/profile.txt"; head -n 40 "$W/chunk_shape.txt" ;;
     *) echo "usage: gpu_session.sh tests|known|bench|verify|engine|write [--quick]" >&2; exit 2 ;;
 esac

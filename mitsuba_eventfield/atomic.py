@@ -27,9 +27,19 @@ def check_writable(path: str, what: str = "output") -> str:
             raise EventFieldError(f"{what} path {path}: {existing} is a file, not a directory")
         raise EventFieldError(f"{what} path {path}: directory {parent} does not exist (create it first, e.g. "
                               f"mkdir -p {os.path.relpath(parent)})")
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not os.access(parent, os.W_OK | os.X_OK) or _stores_nothing(parent):
         raise EventFieldError(f"{what} path {path}: directory {parent} is not writable")
     return path
+
+
+def _stores_nothing(directory: str) -> bool:
+    """A file system with no storage at all (/proc, /sys): root passes ``os.access`` there, and the free-space
+    check then called it a full disk. (Any other file system reporting no blocks was refused as full anyway.)"""
+    try:
+        st = os.statvfs(directory)
+    except OSError:
+        return False
+    return st.f_blocks == 0 and st.f_bavail == 0
 
 
 def check_output_dir(path: str, what: str = "output directory") -> str:

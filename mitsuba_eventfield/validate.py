@@ -16,6 +16,7 @@ from .errors import ConfigError, EventFieldError
 
 # Limits that are not physics but budgets: past them a call runs for hours or cannot fit in memory.
 MAX_DURATION_S = 3600.0        # simulated seconds per render: the file's ms index and hours of rendering per second
+MAX_CONVERT_S = 86400.0        # seconds of frames per conversion: a day (its HDF5 ms index alone is 0.7 GB)
 MAX_STEPS = 10_000_000         # time steps per render (each costs a render of the whole film)
 MAX_VIEWS = 4096               # views per scan period / frames per light field
 MAX_PLANES = 1000              # depth planes searched

@@ -124,7 +124,7 @@ def run_convert(a) -> int:
     from ..backend import set_variant
     from ..simulate.convert import events_from_frames
     set_variant(a.variant)
-    summary = events_from_frames(a.input, fps=a.fps, preset=a.preset or "ideal", pixel=pixel_overrides(a.pixel),
+    summary = events_from_frames(a.input, fps=a.fps, preset=a.preset, pixel=pixel_overrides(a.pixel),
                                  threshold=a.threshold, srgb=a.srgb, output=a.output, progress=not a.quiet,
                                  event_buffer_mb=a.event_buffer_mb)
     print(summary.format())
@@ -132,9 +132,13 @@ def run_convert(a) -> int:
 
 
 def pixel_overrides(items) -> dict:
-    """--pixel NAME=NUMBER values as numbers (integers for the integer fields)."""
+    """--pixel NAME=NUMBER values as numbers (integers for the integer fields); ``preset=NAME`` as text (the
+    preset those values change, as ``--preset``)."""
     out = {}
     for name, value in pairs(items, "--pixel").items():
+        if name == "preset":
+            out[name] = value
+            continue
         try:
             out[name] = int(value) if name in PIXEL_INTEGERS else float(value)
         except ValueError:

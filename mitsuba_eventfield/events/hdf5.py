@@ -28,6 +28,7 @@ H5_GZIP_LEVEL = 1   # deflate level: 2-4x faster to write than level 4+, within 
 H5_BYTES_PER_EVENT = 13        # x, y uint16 + t int64 + p uint8
 H5_COMPRESSIONS = ("gzip", "lzf", None)
 MAX_COMPRESSION_THREADS = 64
+MS_INDEX_BLOCK = 1 << 22        # ms_to_idx entries (8 bytes each) made at once: 32 MiB
 
 
 WRITER_THREADS_ENV = "EVENTFIELD_WRITER_THREADS"
@@ -292,12 +293,18 @@ class H5EventWriter:
         self._ms_buffer = []
 
     def _write_ms_index(self, t_chunk, chunk_start, until_us):
+        """Index entries up to ``until_us``, buffered until the next flush; a long quiet span (hours of
+        time-lapse frames between two chunks) is made and written in blocks of ``MS_INDEX_BLOCK``, so memory
+        holds at most about two blocks of entries, not the whole span at once."""
         last_ms = until_us // 1000
-        if last_ms < self._ms_written:
-            return
-        bounds = np.arange(self._ms_written, last_ms + 1, dtype=np.int64) * 1000
-        self._ms_buffer.append((chunk_start + np.searchsorted(t_chunk, bounds, side="left")).astype(np.uint64))
-        self._ms_written = last_ms + 1   # entries decided (buffered until the next flush)
+        while self._ms_written <= last_ms:
+            end = min(last_ms + 1, self._ms_written + MS_INDEX_BLOCK)
+            bounds = np.arange(self._ms_written, end, dtype=np.int64) * 1000
+            self._ms_buffer.append((chunk_start + np.searchsorted(t_chunk, bounds, side="left")).astype(np.uint64))
+            self._ms_written = end       # entries decided (buffered until the next flush)
+            if end <= last_ms:
+                with self._writing(self._pending_bytes(0)):
+                    self._flush_ms_index()
 
     def close(self, end_us: int | None = None, meta: dict | None = None):
         """Finish the index up to ``end_us`` (default: last event), write the metadata and publish the file."""

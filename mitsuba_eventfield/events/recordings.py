@@ -133,20 +133,47 @@ def read_aedat4_faery(path: str) -> EventStream:
     return _stream(decoder, decoder.dimensions(), {})
 
 
+# Bits of microseconds a format's words hold: EVT 3.0 24 (TIME_HIGH and TIME_LOW words, 12 bits each), EVT 2.0
+# 34 (TIME_HIGH's 28 bits above an event's 6), DAT 32. Times past that wrap, and a reader must count the wraps.
+# faery's EVT 3.0 round trip lost them wherever events were sparse (1 s apart over 20 s read back 16.0 s for
+# 19.0 s; a 30 s gap; checked 2026-11-26 with faery's own reader), and no reader can count the wraps before a
+# stream's first event: times then go in relative to the header's t0 (which faery's reader adds back).
+TIME_BITS = {"evt3": 24, "evt2": 34, "dat2": 32}
+VERSION_NAMES = {"evt3": "EVT 3.0", "evt2": "EVT 2.0", "dat2": "DAT"}
+
+
+def recording_version(path: str, events: EventStream, fmt: str) -> str:
+    """The faery version that holds ``events``' timestamps exactly: ``raw`` is EVT 3.0 for streams spanning less
+    than 2^24 us (16.8 s) and EVT 2.0 for longer ones; an explicit version (or DAT) that cannot hold the span is
+    one line."""
+    version = "dat2" if fmt == "dat" else ("evt3" if fmt == "raw" else fmt)
+    if version == "evt2.1":
+        raise EventFieldError(f"{path}: writing EVT 2.1 is not supported (faery reads it, writes evt2 and evt3)")
+    span = int(events.t.max()) - int(events.t.min()) if len(events) else 0
+    if span >= 1 << TIME_BITS[version]:
+        if fmt == "raw":
+            return "evt2"
+        hold = (1 << TIME_BITS[version]) / 1e6
+        raise EventFieldError(f"{path}: the events span {span / 1e6:.6g} s: {VERSION_NAMES[version]} timestamps hold "
+                              f"less than {hold:.6g} s; write .raw (EVT 2.0 for long streams) or .h5")
+    return version
+
+
 def write_recording(path: str, events: EventStream, fmt: str) -> None:
-    """RAW (``fmt`` raw = evt3, or evt2, evt3) or DAT (dat2) through faery. Absolute timestamps in the
-    words (``zero_t0=False``), so readers that ignore the header's t0 see the same times; metadata is not kept."""
+    """RAW (``fmt`` raw: EVT 3.0, or EVT 2.0 past its span, :func:`recording_version`; or evt2, evt3) or DAT
+    (dat2) through faery. Timestamps go into the words as they are where they fit them, so readers that ignore
+    the header's t0 see the same times; past that, relative to the header's t0 (``TIME_BITS``). Metadata is
+    not kept."""
     import faery
     if len(events) and int(events.t.min()) < 0:
         raise EventFieldError(f"{path}: {fmt} files hold timestamps >= 0 only (the stream starts at "
                               f"{int(events.t.min())} us)")
-    version = "dat2" if fmt == "dat" else ("evt3" if fmt == "raw" else fmt)
-    if version == "evt2.1":
-        raise EventFieldError(f"{path}: writing EVT 2.1 is not supported (faery reads it, writes evt2 and evt3)")
+    version = recording_version(path, events, fmt)
+    relative = len(events) > 0 and int(events.t.max()) >= 1 << TIME_BITS[version]
     a = np.zeros(len(events), faery.EVENTS_DTYPE)
     a["t"], a["x"], a["y"], a["on"] = events.t, events.x, events.y, events.p > 0
     need = RECORDING_BYTES_PER_EVENT * len(events) + HEADER_BYTES
     check_space(path, need)
     with atomic_output(path, "event file") as tmp, disk_errors(path, need):
         faery.events_stream_from_array(a, (events.width, events.height)).to_file(
-            tmp, version=version, zero_t0=False, file_type="dat" if fmt == "dat" else "evt")
+            tmp, version=version, zero_t0=relative, file_type="dat" if fmt == "dat" else "evt")

@@ -23,7 +23,7 @@ from ..events.io import format_of
 from ..plugins import event_batch, event_fill, pixel_model
 from ..validate import positive
 from .device_stream import check_on_device
-from .frame_sources import FrameSource, from_array, from_device, is_device_array, open_frames
+from .frame_sources import FrameSource, check_span, from_array, from_device, is_device_array, open_frames
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary
 
@@ -36,8 +36,9 @@ def pixel_integrator(preset: str | None = None, pixel: dict | None = None, thres
     it (checked before the plugin is built)."""
     preset, overrides = pixel_model.preset_and_overrides(preset, pixel)
     if threshold is not None:
-        overrides.setdefault("threshold_on", float(threshold))
-        overrides.setdefault("threshold_off", float(threshold))
+        threshold = positive(threshold, "threshold")
+        overrides.setdefault("threshold_on", threshold)
+        overrides.setdefault("threshold_off", threshold)
     config = pixel_model.pixel_config(preset or "ideal", "pixel model", **overrides)   # ConfigError if bad
     integ = mi.load_dict({"type": "eventfield"})
     integ.configure(config)
@@ -75,9 +76,12 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     too_large = event_fill.film_limit_error(source.width, source.height)
     if too_large:
         raise EventFieldError(f"{source.name}: {too_large}")
+    check_span(source.name, source.span_s)
     if output:
         check_writable(output, "event file")
         format_of(output, fmt)
+        if isinstance(frames, (str, os.PathLike)) and os.path.abspath(output) == os.path.abspath(frames):
+            raise EventFieldError(f"{output}: the output is the input: choose another event file")
     integ = pixel_integrator(preset, pixel, threshold)
     summary = RenderSummary(width=source.width, height=source.height, output=os.path.abspath(output) if output else None)
     meta = {"package": "mitsuba-eventfield", "package_version": __version__, "variant": mi.variant(),
@@ -121,6 +125,8 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
                                       f"{source.width}x{source.height}")
             if t_prev is not None and not t > t_prev:
                 raise EventFieldError(f"{source.name}: frame times must increase ({t} s after {t_prev} s)")
+            if t_first is not None:           # where the span was not known before (a video's own count)
+                check_span(source.name, t - t_first)
             if batched and t_first is not None and group is None:     # the first interval sets the default
                 group = event_batch.default_frames_per_kernel(source.width * source.height, t - t_first)
             if batched and t_first is not None and group > 1:     # one frame a kernel: the per-step kernel

@@ -9,6 +9,7 @@ which is what a photoreceptor sees; the default leaves values as they are (the c
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from dataclasses import dataclass
@@ -17,6 +18,7 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import EventFieldError
+from ..validate import MAX_CONVERT_S, number
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr", ".pgm", ".ppm")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg")
@@ -38,6 +40,7 @@ class FrameSource:
     # holds them in one buffer (from_device): a group of frames is then one gather, not one kernel a frame
     block: object = None
     times: object = None    # the frames' times in seconds where known before reading them (with ``block``)
+    span_s: float | None = None     # last frame's time minus the first's, where known before reading them
 
 
 def srgb_to_linear(v: np.ndarray) -> np.ndarray:
@@ -51,12 +54,16 @@ def intensity(frame: np.ndarray, srgb: bool = False, bgr: bool = False, where: s
         pass
     elif a.ndim != 2:
         raise EventFieldError(f"{where}: shape {a.shape}: expected (H, W) or (H, W, 1|3|4)")
-    if np.issubdtype(a.dtype, np.integer):
+    if a.dtype in (np.uint8, np.uint16):
         v = a.astype(np.float32) / np.float32(np.iinfo(a.dtype).max)
+    elif np.issubdtype(a.dtype, np.integer):
+        # scaled by its type's maximum, an int64 array (NumPy's default integer) of 8-bit values made no events
+        raise EventFieldError(f"{where}: pixel type {a.dtype}: integer frames must be uint8 or uint16 (scaled by "
+                              "their maximum); give other values as floats (linear intensity)")
     elif np.issubdtype(a.dtype, np.floating):
         v = a.astype(np.float32)
     else:
-        raise EventFieldError(f"{where}: pixel type {a.dtype}: expected integers or floats")
+        raise EventFieldError(f"{where}: pixel type {a.dtype}: expected uint8, uint16 or floats")
     if not np.isfinite(v).all() or (v < 0).any():
         raise EventFieldError(f"{where}: intensities must be finite and >= 0")
     if srgb:
@@ -74,9 +81,7 @@ def _uniform_rate(fps: float | None, where: str) -> float:
     """The frame rate, checked: frames without times need one."""
     if fps is None:
         raise EventFieldError(f"{where}: give the frame rate (--fps / fps=): the frames carry no times")
-    if not (np.isfinite(fps) and fps > 0):
-        raise EventFieldError(f"{where}: fps = {fps!r}: must be a finite number > 0")
-    return float(fps)
+    return number(fps, f"{where}: fps", 0, lo_open=True, error=EventFieldError)
 
 
 def _uniform_times(fps: float | None, where: str):
@@ -85,7 +90,10 @@ def _uniform_times(fps: float | None, where: str):
 
 
 def check_times(times, count: int, where: str) -> np.ndarray:
-    t = np.asarray(times, dtype=np.float64).ravel()
+    try:
+        t = np.asarray(times, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise EventFieldError(f"{where}: times: expected numbers (seconds), got {np.asarray(times).dtype}") from None
     if len(t) != count:
         raise EventFieldError(f"{where}: times: {len(t)} values for {count} frames")
     if not np.isfinite(t).all() or (len(t) > 1 and (np.diff(t) <= 0).any()):
@@ -95,16 +103,20 @@ def check_times(times, count: int, where: str) -> np.ndarray:
 
 def from_array(frames, times=None, fps=None, srgb=False, where="frames") -> FrameSource:
     """An in-memory stack (T, H, W[, C]) with times in seconds (or a frame rate)."""
-    a = np.asarray(frames)
-    if a.ndim not in (3, 4) or a.shape[0] < 2:
-        raise EventFieldError(f"{where}: shape {a.shape}: expected (T, H, W) or (T, H, W, C) with T >= 2")
+    try:
+        a = np.asarray(frames)
+    except ValueError:       # a list of frames of different sizes
+        raise EventFieldError(f"{where}: the frames differ in size (a stack needs one size)") from None
+    if a.ndim not in (3, 4) or a.shape[0] < 2 or 0 in a.shape[1:3]:
+        raise EventFieldError(f"{where}: shape {a.shape}: expected (T, H, W) or (T, H, W, C) with T >= 2, H, W >= 1")
     t = check_times(times, a.shape[0], where) if times is not None else \
         np.arange(a.shape[0]) / _uniform_rate(fps, where)
 
     def frames_iter():
         for i in range(a.shape[0]):
             yield float(t[i]), intensity(a[i], srgb, where=f"{where}[{i}]")
-    return FrameSource(where, a.shape[2], a.shape[1], a.shape[0], frames_iter, {"kind": "array"})
+    return FrameSource(where, a.shape[2], a.shape[1], a.shape[0], frames_iter, {"kind": "array"},
+                       span_s=float(t[-1] - t[0]))
 
 
 def is_device_array(frames) -> bool:
@@ -134,8 +146,8 @@ def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> Fra
         raise EventFieldError(f"{where}: not an array the {mi.variant()} backend takes "
                               f"({' '.join(str(e).split())[:100] or type(e).__name__})") from None
     shape = tuple(tensor.shape)
-    if len(shape) != 3 or shape[0] < 2:
-        raise EventFieldError(f"{where}: shape {shape}: device frames must be (T, H, W) with T >= 2")
+    if len(shape) != 3 or shape[0] < 2 or 0 in shape[1:]:
+        raise EventFieldError(f"{where}: shape {shape}: device frames must be (T, H, W) with T >= 2, H, W >= 1")
     t = check_times(times, shape[0], where) if times is not None else np.arange(shape[0]) / _uniform_rate(fps, where)
     flat = tensor.array
     if bool(dr.any(~dr.isfinite(flat) | (flat < 0))[0]):
@@ -151,7 +163,7 @@ def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> Fra
         for i in range(shape[0]):
             yield float(t[i]), block(i, 1)
     return FrameSource(where, shape[2], shape[1], shape[0], frames_iter, {"kind": "device array"}, device=True,
-                       block=block, times=t)
+                       block=block, times=t, span_s=float(t[-1] - t[0]))
 
 
 def from_npz(path: str, fps=None, srgb=False) -> FrameSource:
@@ -163,8 +175,19 @@ def from_npz(path: str, fps=None, srgb=False) -> FrameSource:
             from None
     if "frames" not in data:
         raise EventFieldError(f"{path}: no 'frames' array (found: {', '.join(data.files) or 'nothing'})")
-    times = data["times"] if "times" in data else (data["timestamps_us"] * 1e-6 if "timestamps_us" in data else None)
-    src = from_array(data["frames"], times, fps, srgb, where=path)
+    times_key = next((k for k in ("times", "timestamps_us") if k in data), None)
+    if times_key and fps is not None:
+        raise EventFieldError(f"{path}: fps = {fps!r}: this stack carries its own times ('{times_key}'); the frame "
+                              "rate is for image folders and videos")
+    try:     # the members are read here, not by np.load: a damaged or pickled one fails now
+        frames = data["frames"]
+        times = None if times_key is None else data[times_key]
+    except Exception as e:
+        raise EventFieldError(f"{path}: not a readable .npz ({' '.join(str(e).split())[:100] or type(e).__name__})") \
+            from None
+    if times_key == "timestamps_us":
+        times = check_times(times, len(times), path) * 1e-6
+    src = from_array(frames, times, fps, srgb, where=path)
     src.describe = {"kind": "npz", "path": os.path.abspath(path)}
     return src
 
@@ -206,35 +229,100 @@ def from_folder(path: str, fps=None, srgb=False) -> FrameSource:
                 raise EventFieldError(f"{f}: size {img.shape[1]}x{img.shape[0]}, the first image is {w}x{h}")
             yield time_of(i), img
     return FrameSource(path, w, h, len(names), frames_iter,
-                       {"kind": "image folder", "path": os.path.abspath(path), "fps": fps})
+                       {"kind": "image folder", "path": os.path.abspath(path), "fps": fps},
+                       span_s=time_of(len(names) - 1))
+
+
+# containers whose frame count OpenCV reads from the file (FFmpeg's nb_frames): a video that ends before it is
+# cut or damaged. Matroska / WebM counts are estimated from duration x rate (one frame of slack); MPEG program
+# streams' estimates were off by 29 of 30 frames (an under-count: nothing to check against).
+VIDEO_COUNT_SLACK = {".avi": 0, ".mp4": 0, ".mov": 0, ".m4v": 0, ".mkv": 1, ".webm": 1}
+FFMPEG_LOGLEVEL_ENV = "OPENCV_FFMPEG_LOGLEVEL"
+
+
+@contextlib.contextmanager
+def _quiet_opencv():
+    """OpenCV's and FFmpeg's own lines kept off the terminal while a video is opened or read: a damaged file
+    made them print lines of raw bytes before the one-line error. FFmpeg takes its log level once per process,
+    from ``OPENCV_FFMPEG_LOGLEVEL`` at its first use (too late where the process used OpenCV's video I/O
+    before), and OpenCV's AVI parser writes to the file descriptor directly, so standard error's descriptor
+    points at the null device meanwhile (this thread only writes there in between: a progress bar's lines
+    stay)."""
+    import sys
+
+    import cv2
+    os.environ.setdefault(FFMPEG_LOGLEVEL_ENV, "-8")        # AV_LOG_QUIET, where FFmpeg has not started yet
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    sys.stderr.flush()
+    saved, null = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 2)
+    try:
+        yield cv2
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+        cv2.utils.logging.setLogLevel(level)
+
+
+def _open_video(path: str):
+    """An opened ``cv2.VideoCapture`` (FFmpeg's reader where OpenCV was built with it, else whichever it
+    has), or None."""
+    with _quiet_opencv() as cv2:
+        backend = cv2.CAP_FFMPEG if cv2.videoio_registry.hasBackend(cv2.CAP_FFMPEG) else cv2.CAP_ANY
+        cap = cv2.VideoCapture(path, backend)
+        if cap.isOpened():
+            return cap
+        cap.release()
+    return None
 
 
 def from_video(path: str, fps=None, srgb=False) -> FrameSource:
-    """A video through OpenCV; frame times from ``fps`` when given, else from the container's frame rate."""
+    """A video through OpenCV; frame times from ``fps`` when given, else from the container's frame rate. A
+    video that ends before the frame count its container states is refused as cut or damaged (one line, and
+    the conversion's output file is not written), not converted in part."""
     import cv2
-    cap = cv2.VideoCapture(path)
-    if not cap.isOpened():
+    cap = _open_video(path)
+    if cap is None:
         raise EventFieldError(f"{path}: OpenCV cannot open this video")
     rate = fps if fps is not None else cap.get(cv2.CAP_PROP_FPS)
-    count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) or None
+    count = max(0, int(cap.get(cv2.CAP_PROP_FRAME_COUNT))) or None
     w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
     cap.release()
     time_of = _uniform_times(rate if rate and rate > 0 else None, path)
+    slack = VIDEO_COUNT_SLACK.get(os.path.splitext(path)[1].lower())
 
     def frames_iter() -> Iterator[tuple[float, np.ndarray]]:
-        video = cv2.VideoCapture(path)
+        video = _open_video(path)
+        if video is None:
+            raise EventFieldError(f"{path}: OpenCV cannot open this video")
         try:
             i = 0
             while True:
-                ok, img = video.read()
+                with _quiet_opencv():
+                    ok, img = video.read()
                 if not ok:
+                    if count and slack is not None and i < count - slack:
+                        raise EventFieldError(f"{path}: frame {i + 1} of {count} unreadable (the video is cut or "
+                                              "damaged): nothing written")
                     return
                 yield time_of(i), intensity(img, srgb, bgr=True, where=f"{path} frame {i}")
                 i += 1
         finally:
             video.release()
     return FrameSource(path, w, h, count, frames_iter, {"kind": "video", "path": os.path.abspath(path),
-                                                         "fps": float(rate)})
+                                                         "fps": float(rate)},
+                       span_s=time_of(count - 1) if count else None)
+
+
+def check_span(where: str, span_s: float | None) -> None:
+    """Frames spanning more than ``MAX_CONVERT_S`` are refused (before any work where the span is known, else
+    when a frame passes it): an HDF5 file indexes every millisecond (8 bytes each), and ``--fps 1e-9`` asked
+    for 36 TiB of index."""
+    if span_s is not None and span_s > MAX_CONVERT_S:
+        raise EventFieldError(f"{where}: the frames span {span_s:.6g} s: allowed up to {MAX_CONVERT_S:g} s in one "
+                              "conversion (check the times' unit or the frame rate; split longer inputs)")
 
 
 def open_frames(path: str, fps=None, srgb=False) -> FrameSource:

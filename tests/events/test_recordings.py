@@ -52,6 +52,40 @@ def test_written_recording_round_trips(tmp_path, stream, ext, fmt):
     assert ef.read_events(path, fmt).equals(stream) if fmt else True
 
 
+def _times(t):
+    t = np.asarray(t, np.int64)
+    n = len(t)
+    return ef.EventStream(np.full(n, 3), np.full(n, 4), t, np.ones(n, np.int8), 32, 24)
+
+
+@pytest.mark.parametrize("name, t, raw_version", [
+    ("starts after 2^24 us", 20_000_000 + np.arange(0, 1_000_000, 1000), "evt3"),
+    ("a 30 s gap", [0, 1_000_000, 30_000_000], "evt2"),
+    ("sparse past 2^24 us", np.arange(0, 20_000_000, 1_000_000), "evt2"),
+    ("starts after 2^32 us", [100_000_000_000, 100_000_001_000], "evt3"),
+])
+def test_recording_times_past_the_words_range_round_trip(tmp_path, name, t, raw_version):
+    """EVT 3.0 words hold 24 bits of microseconds, DAT 32: such streams went in wrapped and came back wrong
+    (20.0 s read back as 12.6 s) with exit 0. Now a start past the words' range goes in relative to the
+    header's t0, and a .raw spanning 2^24 us or more is EVT 2.0 (34 bits)."""
+    ev = _times(t)
+    for ext in ("raw", "dat"):
+        path = str(tmp_path / f"w.{ext}")
+        ef.write_events(path, ev)
+        back = ef.read_events(path)
+        assert np.array_equal(back.t, ev.t), (name, ext)
+        assert back.meta["recording"]["format"] == (raw_version if ext == "raw" else "dat2")
+
+
+def test_recording_that_cannot_hold_the_span_is_one_line(tmp_path):
+    long = _times([0, 1 << 24])                 # one microsecond past EVT 3.0's words
+    with pytest.raises(ef.EventFieldError, match=r"x\.raw: the events span 16\.7772 s: EVT 3\.0 timestamps hold "):
+        ef.write_events(str(tmp_path / "x.raw"), long, "evt3")
+    with pytest.raises(ef.EventFieldError, match=r"x\.dat: the events span 4294\.97 s: DAT timestamps hold "):
+        ef.write_events(str(tmp_path / "x.dat"), _times([0, 1 << 32]))
+    assert os.listdir(tmp_path) == []
+
+
 def test_named_version_must_match_the_header(tmp_path, stream):
     path = _faery_file(tmp_path / "a.raw", stream, "evt3")
     with pytest.raises(ef.EventFieldError, match=r"a\.raw: .*header says evt3, not evt2"):

@@ -1,0 +1,160 @@
+"""The converter's inputs a user gets wrong, or that are damaged (a reviewer's findings, 2026-11-26): each is one
+line naming the file and the field, exit 2 from the command line, and no output file; never a partial
+conversion that exits 0."""
+import os
+
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.cli.main import main as cli
+
+
+def _video(path, frames=30, fps=100):
+    cv2 = pytest.importorskip("cv2")
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, (32, 24))
+    for k in range(frames):
+        img = np.full((24, 32, 3), 40, np.uint8)
+        img[:, k % 32] = 220                                  # a bright column sweeping right
+        writer.write(img)
+    writer.release()
+    return str(path)
+
+
+def _cli(args, capfd):
+    """Exit code and the whole of stderr, OpenCV's and FFmpeg's own lines included (they write to the file
+    descriptor, not to Python's sys.stderr)."""
+    try:
+        code = cli(["convert"] + [str(a) for a in args] + ["--quiet"])
+    except SystemExit as e:
+        code = e.code
+    return code, capfd.readouterr().err.strip()
+
+
+def test_a_cut_video_is_refused_not_converted_in_part(tmp_path, capfd):
+    whole = _video(tmp_path / "whole.avi")
+    data = open(whole, "rb").read()
+    cut = tmp_path / "cut.avi"
+    cut.write_bytes(data[:len(data) * 6 // 10])            # the container still says 30 frames
+    ok, _ = _cli([whole, "-o", tmp_path / "whole.h5"], capfd)
+    assert ok == 0 and len(ef.read_events(str(tmp_path / "whole.h5"))) > 100
+    code, err = _cli([cut, "-o", tmp_path / "cut.h5"], capfd)
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert err.startswith(f"eventfield: error: {cut}: frame ") and "of 30 unreadable" in err
+    assert not (tmp_path / "cut.h5").exists()
+
+
+def test_an_unreadable_video_is_one_line_without_decoder_noise(tmp_path, capfd):
+    """A video OpenCV cannot open printed FFmpeg's and OpenCV's parser lines (raw bytes among them) first."""
+    whole = open(_video(tmp_path / "whole.avi"), "rb").read()
+    for name, data in (("head.avi", whole[:4000]), ("garbage.mp4", b"garbage" * 100)):
+        (tmp_path / name).write_bytes(data)
+        code, err = _cli([tmp_path / name, "-o", tmp_path / "o.h5"], capfd)
+        assert code == 2 and err == f"eventfield: error: {tmp_path / name}: OpenCV cannot open this video", err
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_frames_spanning_more_than_a_day_are_refused_before_any_file(tmp_path, capfd):
+    """--fps 1e-9 asked the HDF5 index for 36 TiB (a MemoryError with a traceback); a few frames an hour
+    apart are a time-lapse and convert."""
+    from mitsuba_eventfield.validate import MAX_CONVERT_S
+    frames = np.full((6, 8, 8), 0.1, np.float32)
+    frames[:, 2, 3] = [0.01 * 2 ** k for k in range(6)]
+    with pytest.raises(ef.EventFieldError, match=r"^frames: the frames span 5e\+09 s: allowed up to 86400 s"):
+        ef.events_from_frames(frames, fps=1e-9, output=str(tmp_path / "a.h5"))
+    np.savez(tmp_path / "us.npz", frames=frames, times=np.arange(6) * 1e6)      # microseconds given as seconds
+    code, err = _cli([tmp_path / "us.npz", "-o", tmp_path / "b.h5"], capfd)
+    assert code == 2 and "the frames span 5e+06 s" in err and len(err.splitlines()) == 1
+    assert os.listdir(tmp_path) == ["us.npz"]
+    hourly = ef.events_from_frames(frames, fps=1 / 3600.0)
+    assert len(hourly) == 17 and hourly.t[-1] > 3600e6 and 5 * 3600 <= MAX_CONVERT_S
+
+
+def test_a_long_quiet_span_writes_its_index_in_blocks(tmp_path, monkeypatch):
+    """Hours between two frames: the DSEC index (an entry a millisecond) is made a block at a time, and equals
+    the one made at once."""
+    from mitsuba_eventfield.events import hdf5
+    frames = np.full((3, 4, 4), 0.1, np.float32)
+    frames[:, 1, 1] = [0.1, 0.5, 0.05]
+    times = [0.0, 7.3, 12.9]
+    whole = str(tmp_path / "whole.h5")
+    ef.events_from_frames(frames, times, output=whole)
+    monkeypatch.setattr(hdf5, "MS_INDEX_BLOCK", 1000)
+    blocked = str(tmp_path / "blocked.h5")
+    ef.events_from_frames(frames, times, output=blocked)
+    import h5py
+    with h5py.File(whole) as a, h5py.File(blocked) as b:
+        assert len(a["ms_to_idx"]) == 12_901 and np.array_equal(a["ms_to_idx"][()], b["ms_to_idx"][()])
+        t = a["events"]["t"][()]
+        for ms in (0, 7300, 7301, 12_900):
+            assert a["ms_to_idx"][ms] == np.searchsorted(t, 1000 * ms)
+
+
+@pytest.mark.parametrize("members, message", [
+    ({"frames": np.ones((3, 4, 4)), "times": np.array(list("abc"))}, "times: expected numbers (seconds)"),
+    ({"frames": np.zeros((3, 0, 4), np.float32), "times": [0, 0.01, 0.02]}, "with T >= 2, H, W >= 1"),
+    ({"frames": np.ones((3, 4, 4), np.int64), "times": [0, 0.01, 0.02]}, "pixel type int64: integer frames must be"),
+])
+def test_npz_contents_are_checked(tmp_path, capfd, members, message):
+    np.savez(tmp_path / "s.npz", **members)
+    code, err = _cli([tmp_path / "s.npz", "-o", tmp_path / "o.h5"], capfd)
+    assert code == 2 and message in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_damaged_or_pickled_npz_is_one_line(tmp_path, capfd):
+    np.savez(tmp_path / "good.npz", frames=np.random.default_rng(0).random((8, 24, 32)), times=np.arange(8) / 100)
+    data = bytearray((tmp_path / "good.npz").read_bytes())
+    data[2000:2400] = bytes(400)                                 # inside the frames member: a bad CRC
+    (tmp_path / "crc.npz").write_bytes(bytes(data))
+    frames = np.empty(2, object)
+    frames[0], frames[1] = np.ones((4, 4)), np.ones((4, 4))
+    np.savez(tmp_path / "obj.npz", frames=frames, times=[0.0, 1.0])
+    for name in ("crc.npz", "obj.npz"):
+        code, err = _cli([tmp_path / name, "-o", tmp_path / "o.h5"], capfd)
+        assert code == 2 and err.startswith(f"eventfield: error: {tmp_path / name}: not a readable .npz ("), err
+        assert len(err.splitlines()) == 1
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_python_arguments_are_checked():
+    ones = np.ones((3, 4, 4), np.float32)
+    cases = [(dict(frames=ones, fps="abc"), r"^frames: fps = 'abc': must be a number \(0, inf\]$"),
+             (dict(frames=ones, fps=100, threshold="x"), r"^threshold = 'x': must be a number"),
+             (dict(frames=[np.ones((24, 32)), np.ones((20, 30))], fps=100), r"^frames: the frames differ in size"),
+             (dict(frames=np.ones((3, 4, 4), np.int32), fps=100), r"^frames\[0\]: pixel type int32: integer frames")]
+    for kwargs, message in cases:
+        with pytest.raises(ef.EventFieldError, match=message):
+            ef.events_from_frames(**kwargs)
+    # 8-bit frames are scaled by 255: 1 -> 101 -> 201 DN fire floor(ln 201 / C) = 26 ON events in each pixel
+    eight_bit = (np.arange(3)[:, None, None] * 100 + np.ones((3, 4, 4))).astype(np.uint8)
+    ev = ef.events_from_frames(eight_bit, fps=100, threshold=0.2)
+    assert len(ev) == 16 * 26 and (ev.p == 1).all()
+
+
+def test_output_that_is_the_input_or_fps_given_twice(tmp_path, capfd):
+    np.savez(tmp_path / "s.npz", frames=np.random.default_rng(1).random((4, 6, 8)), times=[0, 0.01, 0.02, 0.03])
+    before = (tmp_path / "s.npz").read_bytes()
+    code, err = _cli([tmp_path / "s.npz", "-o", tmp_path / "s.npz"], capfd)
+    assert code == 2 and "the output is the input" in err and (tmp_path / "s.npz").read_bytes() == before
+    code, err = _cli([tmp_path / "s.npz", "-o", tmp_path / "o.h5", "--fps", "50"], capfd)
+    assert code == 2 and "carries its own times ('times')" in err and not (tmp_path / "o.h5").exists()
+
+
+def test_pixel_preset_on_the_command_line(tmp_path, capfd):
+    """``--pixel preset=NAME`` (the error for an unknown --pixel name lists it) works as ``--preset NAME``."""
+    np.savez(tmp_path / "s.npz", frames=np.random.default_rng(2).random((10, 12, 16)) + 0.05,
+             times=np.arange(10) / 1000)
+    out = {k: tmp_path / f"{k}.h5" for k in ("preset", "pixel")}
+    assert _cli([tmp_path / "s.npz", "-o", out["preset"], "--preset", "davis346"], capfd)[0] == 0
+    assert _cli([tmp_path / "s.npz", "-o", out["pixel"], "--pixel", "preset=davis346"], capfd)[0] == 0
+    a, b = (ef.read_events(str(p)) for p in out.values())
+    assert len(a) > 10 and a.equals(b) and a.meta["pixel_model"]["preset"] == "davis346"
+
+
+def test_a_virtual_file_system_is_not_called_a_full_disk():
+    from mitsuba_eventfield.atomic import check_writable
+    if not os.path.isdir("/proc"):
+        pytest.skip("no /proc on this system")
+    with pytest.raises(ef.EventFieldError, match=r"^event file path /proc/e\.h5: directory /proc is not writable$"):
+        check_writable("/proc/e.h5", "event file")
