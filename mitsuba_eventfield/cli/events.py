@@ -35,7 +35,7 @@ def _add_render(sub) -> None:
     r = sub.add_parser("render", help="render the event stream of a Mitsuba scene")
     r.add_argument("scene", help="Mitsuba scene XML (motion from <scene>.motion.toml if present)")
     r.add_argument("-o", "--output", required=True,
-                   help="event file: .h5 (DSEC layout, streamed), .npz, .txt, .aedat4")
+                   help="event file: .h5 (DSEC layout, streamed), .npz, .txt, .aedat4; .raw / .dat (Prophesee)")
     r.add_argument("--motion", help="motion TOML (default: <scene>.motion.toml if it exists)")
     r.add_argument("--no-motion", action="store_true", help="ignore any motion file (static scene)")
     r.add_argument("--duration", type=num(0, MAX_DURATION_S, lo_open=True),
@@ -111,7 +111,7 @@ def _add_convert(sub) -> None:
                                        ".npz stack (frames, times), through the same pixel model as render")
     c.add_argument("input", help="video file (OpenCV), folder of images (natural name order) or .npz")
     c.add_argument("-o", "--output", required=True, help="event file: .h5 (DSEC layout, streamed), .npz, .txt, "
-                                                         ".aedat4")
+                                                         ".aedat4; .raw / .dat (Prophesee)")
     c.add_argument("--fps", type=num(0, 1e9, lo_open=True),
                    help="frame rate (image folders; overrides a video's own; .npz stacks carry times)")
     c.add_argument("--threshold", type=num(0, 10, lo_open=True), help="contrast threshold C (default: preset's)")
