@@ -83,7 +83,8 @@ def remove_stale_partials(path: str) -> list:
     import sys
     head, tail = os.path.split(os.path.abspath(path))
     root, ext = os.path.splitext(tail)
-    pattern = re.compile(re.escape(root + PARTIAL_TAG) + r"(\d+)-[0-9a-f]+" + re.escape(ext) + "$")
+    # (a library's own temporary name after ours: faery writes <partial>.write and renames it when done)
+    pattern = re.compile(re.escape(root + PARTIAL_TAG) + r"(\d+)-[0-9a-f]+" + re.escape(ext) + r"(\.\w+)?$")
     removed = []
     try:
         names = os.listdir(head)

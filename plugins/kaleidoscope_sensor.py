@@ -54,6 +54,8 @@ class _KaleidoscopeSensorMethods:
             raise ValueError(f"{WHERE}: mode = {self.mode!r}: allowed values are {', '.join(MODES)}")
         size = self.film().size()
         self.film_w, self.film_h = int(size.x), int(size.y)
+        if self.film_w < 1 or self.film_h < 1:           # the tube's default height divides by the width
+            raise ValueError(f"{WHERE}: film {self.film_w}x{self.film_h}: each side must be at least 1 pixel")
         self.tube_width = g("tube_width", 0.012)
         self.tube_height = g("tube_height", 0.012 * self.film_h / self.film_w)
         self.tube_length, self.relay_distance = g("tube_length", 0.06), g("relay_distance", 0.03)

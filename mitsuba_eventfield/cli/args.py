@@ -61,11 +61,20 @@ OUTPUT_FILES = {"render": (("output", "event file"), ("preview", "preview")), "p
 OUTPUT_DIRS = ("demo", "reconstruct", "bench", "hdr", "highspeed", "track-focus", "slomorf", "scanrate-depth", "paper")
 
 
+# outputs whose kind their extension must name: a render's --preview was checked after the render (which had
+# written its event file by then)
+OUTPUT_SUFFIXES = {("render", "preview"): (".png",), ("preview", "output"): (".png",)}
+
+
 def check_outputs(args) -> None:
     from ..atomic import check_output_dir, check_writable
     for name, what in OUTPUT_FILES.get(args.command, ()):
-        if getattr(args, name, None):
-            check_writable(getattr(args, name), what)
+        path = getattr(args, name, None)
+        if path:
+            check_writable(path, what)
+            suffixes = OUTPUT_SUFFIXES.get((args.command, name))
+            if suffixes and not path.lower().endswith(suffixes):
+                raise EventFieldError(f"{path}: {what} must be a {' or '.join(suffixes)} file")
     if args.command in OUTPUT_DIRS:
         check_output_dir(args.output)
 

@@ -15,7 +15,7 @@ from ..atomic import check_writable, remove_stale_partials, temporary_name
 from ..errors import ConfigError, EventFieldError
 from ..validate import number
 from .disk import DISK_MARGIN, HEADER_BYTES, GuardedFile, _disk_full, _free_bytes, _no_space, check_space
-from .stream import MAX_SENSOR, EventStream
+from .stream import MAX_SENSOR, EventStream, chunk_columns
 
 try:    # ISA-L's deflate: a zlib stream like zlib's, 5.8x its speed at level 1 on the fan's events, same size
     from isal import isal_zlib as _isal
@@ -152,6 +152,11 @@ class H5EventWriter:
         self._buffer = []          # small appends are gathered into chunk-sized writes
         self._ms_buffer = []       # ms_to_idx entries waiting for the next flush
         self.last_t = None
+        # /t_offset: the first millisecond of the recording (the declared t_start_us, else the first event or
+        # the first complete_until_us), which /events/t and /ms_to_idx count from. It was always 0, and the
+        # index held an entry for every millisecond since t = 0: 800 MB for three events at t = 1e11 us
+        self.t_offset = None
+        self._complete_until = None     # no later event may come before this (a caller's promise, checked)
         self._ms_written = 0
         self._closed = False
         self.f = self._io = None
@@ -197,30 +202,52 @@ class H5EventWriter:
                 return
         raise _disk_full(self.path, _free_bytes(self.path), int(need) + DISK_MARGIN)
 
+    def _offset(self, first_us: int) -> int:
+        """/t_offset, fixed by the first event or promise (``first_us``): events and promises never go back."""
+        if self.t_offset is None:
+            start = self.meta.get("t_start_us")
+            start = min(int(start), first_us) if isinstance(start, (int, np.integer)) else first_us
+            self.t_offset = (start // 1000) * 1000
+            self.f["t_offset"][()] = np.int64(self.t_offset)
+        return self.t_offset
+
     def append(self, x, y, t, p, complete_until_us: int | None = None):
-        """Append events sorted by t (int64 us). ``complete_until_us``: no later chunk holds an event before it,
-        so ms_to_idx entries up to it can be written now."""
-        t = np.asarray(t, dtype=np.int64)
+        """Append events sorted by t (int64 us; x, y, t, p checked as an EventStream checks them, before any is
+        written). ``complete_until_us``: no later chunk holds an event before it, so ms_to_idx entries up to it
+        can be written now (a later event before it is refused)."""
+        if self._closed:
+            raise EventFieldError(f"{self.path}: the event writer is closed (or was aborted): nothing more can be "
+                                  "appended")
+        x, y, t, p = chunk_columns(f"{self.path}: append", self.width, self.height, x, y, t, p)
         if len(t):
             if self.last_t is not None and t[0] < self.last_t:
                 raise ValueError(f"{self.path}: events must be appended in time order: this chunk starts at "
                                  f"t = {int(t[0])} us, before the last written event at {self.last_t} us")
+            if self._complete_until is not None and t[0] < self._complete_until:
+                raise ValueError(f"{self.path}: events must be appended in time order: this chunk starts at "
+                                 f"t = {int(t[0])} us, before complete_until_us = {self._complete_until} us")
             # a comparison of neighbours, one byte an event: np.diff's int64 array cost 3.5x as much
             if len(t) > 1 and np.less(t[1:], t[:-1]).any():
                 back = np.flatnonzero(np.diff(t) < 0)
                 raise ValueError(f"{self.path}: events must be appended in time order: t = {int(t[back[0] + 1])} us "
                                  f"follows {int(t[back[0]])} us within the chunk")
-            self._buffer.append((np.asarray(x, np.uint16), np.asarray(y, np.uint16), t,
-                                 (np.asarray(p) > 0).astype(np.uint8)))
+        if complete_until_us is not None:
+            complete_until_us = int(complete_until_us)
+            self._complete_until = max(self._complete_until or complete_until_us, complete_until_us)
+        if not len(t) and complete_until_us is None:
+            return
+        offset = self._offset(int(t[0]) if len(t) else complete_until_us)
+        stored = t - offset if offset else t       # the file's t counts from /t_offset
+        if len(t):
+            self._buffer.append((x, y, stored, (p > 0).astype(np.uint8)))
             self.count, self.last_t = self.count + len(t), int(t[-1])
             if self.count - self.written >= self.chunk:
                 self._flush()
         # boundaries up to the last timestamp are final (later events are not earlier), and so are those up
         # to complete_until_us when the caller knows no earlier event will come
-        until = max(int(complete_until_us) if complete_until_us is not None else -1,
-                    int(t[-1]) if len(t) else -1)
+        until = max(v for v in (complete_until_us, int(t[-1]) if len(t) else None) if v is not None) - offset
         if until >= 0:
-            self._write_ms_index(t, self.count - len(t), until)
+            self._write_ms_index(stored, self.count - len(t), until)
 
     def _pending_bytes(self, events: int) -> int:
         """What writing ``events`` buffered events and the buffered index entries takes at most: their
@@ -319,8 +346,10 @@ class H5EventWriter:
     def _close(self, end_us, meta):
         self._flush(final=True)
         self._stop_pool()
-        end = end_us if end_us is not None else (self.last_t or 0)
-        self._write_ms_index(np.empty(0, np.int64), self.count, int(end))
+        end = int(end_us) if end_us is not None else (self.last_t if self.last_t is not None else 0)
+        end -= self._offset(end)
+        if end >= 0:
+            self._write_ms_index(np.empty(0, np.int64), self.count, end)
         if meta:
             self.meta.update(meta)
         meta_json = _json(self.meta)

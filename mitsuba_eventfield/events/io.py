@@ -6,8 +6,8 @@ HDF5 layout (DSEC, plus our metadata)::
     /events/x   uint16        /events/y  uint16
     /events/t   int64  microseconds relative to /t_offset (DSEC uses uint32; int64 never wraps)
     /events/p   uint8  1 = ON, 0 = OFF  (DSEC's convention; in memory we use +1/-1)
-    /t_offset   int64  microseconds
-    /ms_to_idx  uint64 ms_to_idx[m] = index of the first event with t >= m*1000
+    /t_offset   int64  microseconds: the recording's first millisecond (its t_start_us, else its first event)
+    /ms_to_idx  uint64 ms_to_idx[m] = index of the first event with t >= m*1000 (t as stored: from t_offset)
     /eventfield         group; attrs: width, height, format_version, meta_json (all metadata as JSON)
 
 The event datasets are deflate (gzip) compressed with the shuffle filter: filters built into every HDF5 library,
@@ -28,7 +28,7 @@ import warnings
 import numpy as np
 
 from .._version import __version__
-from ..errors import EventFieldError
+from ..errors import ConfigError, EventFieldError
 from ..validate import file_path, instance
 from .aedat import read_aedat4, write_aedat4  # noqa: F401  (re-exported)
 from .disk import DISK_MARGIN, HEADER_BYTES, WRITE_CHUNK, BadFile, GuardedFile, check_space, disk_errors  # noqa: F401
@@ -47,6 +47,10 @@ def format_of(path: str, fmt: str | None = None) -> str:
         if fmt not in set(FORMATS.values()) | NAMED_FORMATS:
             allowed = sorted(set(FORMATS.values()) | NAMED_FORMATS)
             raise EventFieldError(f"{path}: unknown event format '{fmt}'; allowed: {', '.join(allowed)}")
+        named = FORMATS.get(os.path.splitext(path)[1].lower())
+        # a format the extension contradicts made a zip named .h5, which read_events then refused
+        if named is not None and named != fmt and not (named == "raw" and fmt in NAMED_FORMATS):
+            raise EventFieldError(f"{path}: format '{fmt}' does not match the extension (a '{named}' file)")
         return fmt
     ext = os.path.splitext(path)[1].lower()
     if ext not in FORMATS:
@@ -56,8 +60,9 @@ def format_of(path: str, fmt: str | None = None) -> str:
 
 def write_events(path: str, events: EventStream, fmt: str | None = None) -> str:
     """Write a whole stream; the format follows the extension (.h5/.hdf5, .npz, .txt, .aedat4, .raw = EVT 3.0,
-    .dat) or ``fmt`` (evt2, evt2.1, evt3 for a RAW file of that version). RAW, DAT and text keep no metadata.
-    HDF5, npz, text and AEDAT4 go through the same chunk writers a render streams to (``streaming.py``)."""
+    .dat) or ``fmt`` (evt2, evt2.1, evt3 for a RAW file of that version). RAW, DAT, AEDAT4 and text keep no
+    metadata (AEDAT4's reader gives the first event's time as ``t_start_us``). HDF5, npz, text and AEDAT4 go
+    through the same chunk writers a render streams to (``streaming.py``)."""
     path = file_path(path, "write_events: path")
     instance(events, EventStream, "write_events: events", "ef.read_events, ef.render_events, ef.EventStream")
     fmt = format_of(path, fmt)
@@ -72,7 +77,11 @@ def write_events(path: str, events: EventStream, fmt: str | None = None) -> str:
         for i in range(0, max(len(events), 1), WRITE_CHUNK):
             s = slice(i, i + WRITE_CHUNK)
             w.append(events.x[s], events.y[s], events.t[s], events.p[s])
-        w.close(end_us=max(events.duration_us, int(events.t[-1]) if len(events) else 0))
+        # the recorded span ends at t_start_us + duration_us (a duration, not an end time: a stream starting at
+        # 5 ms had its index stop 5 ms early)
+        start = meta.get("t_start_us")
+        start = int(start) if isinstance(start, (int, np.integer)) else (int(events.t[0]) if len(events) else 0)
+        w.close(end_us=max(start + events.duration_us, int(events.t[-1]) if len(events) else start))
     return os.path.abspath(path)
 
 
@@ -145,17 +154,26 @@ def read_events(path: str, fmt: str | None = None) -> EventStream:
         if fmt in ("raw", "dat") or fmt in NAMED_FORMATS:
             return read_recording(path, fmt)
         _check_file(path, fmt)
-        if fmt == "h5":
-            return read_h5(path)
-        if fmt == "npz":
-            return _read_npz(path)
-        if fmt == "txt":
-            return _read_txt(path)
-        return _read_aedat4(path)
+        stream = read_h5(path) if fmt == "h5" else _read_npz(path) if fmt == "npz" else \
+            _read_txt(path) if fmt == "txt" else _read_aedat4(path)
+        _check_time_order(stream)
+        return stream
+    except ConfigError as e:         # the stream's own checks, which know no file name
+        raise EventFieldError(f"{path}: {e}") from None
     except EventFieldError:
         raise
     except Exception as e:  # corrupt or foreign file
         raise EventFieldError(f"{path}: cannot read as {fmt} event file: {_one_line(e)}") from None
+
+
+def _check_time_order(stream) -> None:
+    """Files are read as they are, and everything downstream (time windows, the index, light fields) takes the
+    events in time order: an unsorted foreign file's window [1000, 2500) held its event at 3000."""
+    t = stream.t
+    if len(t) > 1 and np.less(t[1:], t[:-1]).any():
+        i = int(np.flatnonzero(t[1:] < t[:-1])[0]) + 1
+        raise ConfigError(f"events are not in time order: event {i} at t = {int(t[i])} us follows "
+                          f"{int(t[i - 1])} us (sort the file by t)")
 
 
 def _read_aedat4(path):
@@ -172,6 +190,8 @@ def _read_npz(path):
         else:  # a TimeLens file written elsewhere
             t, p = np.rint(z["timestamp"]).astype(np.int64), np.where(z["polarity"] > 0, 1, -1)
         meta = json.loads(str(z["meta_json"])) if "meta_json" in z else {}
+        if not isinstance(meta, dict):
+            raise BadFile(f"meta_json holds a JSON {type(meta).__name__}, not an object")
         w = int(z["width"]) if "width" in z else int(z["x"].max()) + 1
         h = int(z["height"]) if "height" in z else int(z["y"].max()) + 1
         return EventStream(z["x"], z["y"], t, p, w, h, meta)
@@ -180,7 +200,7 @@ def _read_npz(path):
 def _read_txt(path):
     with open(path) as f:
         size = f.readline().split()
-    if len(size) < 2 or not (size[0].isdigit() and size[1].isdigit()):
+    if len(size) != 2 or not (size[0].isdigit() and size[1].isdigit()):
         raise BadFile(f"not an E2VID text event file: the first line must be 'width height', got "
                        f"{' '.join(size)[:40]!r}")
     with warnings.catch_warnings():
@@ -189,7 +209,7 @@ def _read_txt(path):
     rows = rows.reshape(0, 4) if rows.size == 0 else rows
     if rows.shape[1] != 4:
         raise BadFile(f"truncated or malformed: expected 4 columns 't x y p' per line, got {rows.shape[1]}")
-    t = np.rint(rows[:, 0] * 1e6).astype(np.int64)
+    t = np.rint(rows[:, 0] * 1e6)          # as floats: EventStream refuses NaN, inf and out-of-range times
     return EventStream(rows[:, 1], rows[:, 2], t, np.where(rows[:, 3] > 0, 1, -1), int(size[0]), int(size[1]), {})
 
 

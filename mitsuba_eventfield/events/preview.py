@@ -5,7 +5,7 @@ import numpy as np
 
 from ..atomic import atomic_output
 from ..errors import ConfigError, EventFieldError
-from ..validate import file_path, finite, instance, number, positive
+from ..validate import check_allocation, file_path, finite, instance, number, positive
 from .stream import EventStream
 
 
@@ -49,7 +49,11 @@ def write_preview(path: str, events: EventStream, t0_us=None, t1_us=None, scale:
     scale = number(scale, "scale", 1, 64, integer=True)
     _check_window(events, t0_us, t1_us, "write_preview")
     if events.width == 0 or events.height == 0:
-        raise EventFieldError("cannot preview a 0x0 sensor")
+        raise EventFieldError(f"{path}: cannot preview a {events.width}x{events.height} sensor")
+    # the float working image (24 bytes a pixel) and the upscaled one (3 bytes a pixel): a 65536 x 65536
+    # sensor asked for 32 GiB in a MemoryError
+    check_allocation(events.width * events.height * (24 + 3 * scale * scale), f"{path}: a preview of "
+                     f"{events.width}x{events.height} pixels at scale {scale}")
     img = event_frame_rgb(events, t0_us, t1_us)
     if scale > 1:
         img = np.repeat(np.repeat(img, scale, axis=0), scale, axis=1)

@@ -26,6 +26,7 @@ RECORDING_FORMATS = {".raw": "raw", ".evt": "raw", ".dat": "dat"}
 EVT_VERSIONS = ("evt2", "evt2.1", "evt3")
 WORD_BYTES = {"evt2": 4, "evt2.1": 8, "evt3": 2}
 MAX_HEADER = 1 << 20            # a longer "header" is not one (a text file that happens to start with %)
+FAERY_PARTIAL = ".write"         # faery writes to <name>.write and renames it when done
 RECORDING_BYTES_PER_EVENT = 8   # an upper bound: DAT and EVT 2.1 use 8, EVT 2.0 4 (+ time words), EVT 3.0 2-6
 
 
@@ -140,6 +141,10 @@ def read_aedat4_faery(path: str) -> EventStream:
 # stream's first event: times then go in relative to the header's t0 (which faery's reader adds back).
 TIME_BITS = {"evt3": 24, "evt2": 34, "dat2": 32}
 VERSION_NAMES = {"evt3": "EVT 3.0", "evt2": "EVT 2.0", "dat2": "DAT"}
+# The largest sensor side each format's words hold: EVT 2.0 and 3.0 keep x and y in 11 bits, DAT in 14. faery
+# refuses larger sensors, except EVT 3.0 from 2049 to 4096 pixels, where it wrote x modulo 2048 (checked
+# 2026-11-26: x = 4094 read back as 2046).
+SENSOR_LIMIT = {"evt3": 2048, "evt2": 2048, "dat2": 16384}
 
 
 def recording_version(path: str, events: EventStream, fmt: str) -> str:
@@ -169,11 +174,23 @@ def write_recording(path: str, events: EventStream, fmt: str) -> None:
         raise EventFieldError(f"{path}: {fmt} files hold timestamps >= 0 only (the stream starts at "
                               f"{int(events.t.min())} us)")
     version = recording_version(path, events, fmt)
+    side = SENSOR_LIMIT[version]
+    if not (0 < events.width <= side and 0 < events.height <= side):
+        raise EventFieldError(f"{path}: a {events.width}x{events.height} sensor: {VERSION_NAMES[version]} holds "
+                              f"sensors of 1 to {side} pixels a side")
+    if len(events) > 1 and np.less(events.t[1:], events.t[:-1]).any():
+        raise EventFieldError(f"{path}: events must be in time order to be written as {VERSION_NAMES[version]}")
     relative = len(events) > 0 and int(events.t.max()) >= 1 << TIME_BITS[version]
     a = np.zeros(len(events), faery.EVENTS_DTYPE)
     a["t"], a["x"], a["y"], a["on"] = events.t, events.x, events.y, events.p > 0
     need = RECORDING_BYTES_PER_EVENT * len(events) + HEADER_BYTES
     check_space(path, need)
     with atomic_output(path, "event file") as tmp, disk_errors(path, need):
-        faery.events_stream_from_array(a, (events.width, events.height)).to_file(
-            tmp, version=version, zero_t0=relative, file_type="dat" if fmt == "dat" else "evt")
+        try:
+            faery.events_stream_from_array(a, (events.width, events.height)).to_file(
+                tmp, version=version, zero_t0=relative, file_type="dat" if fmt == "dat" else "evt")
+        except Exception as e:       # whatever faery still refuses: one line, and its own partial file gone
+            if os.path.exists(tmp + FAERY_PARTIAL):
+                os.remove(tmp + FAERY_PARTIAL)
+            raise EventFieldError(f"{path}: cannot write {VERSION_NAMES[version]}: {' '.join(str(e).split())[:200]}") \
+                from None

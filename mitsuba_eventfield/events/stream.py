@@ -17,19 +17,47 @@ from ..validate import number
 MAX_SENSOR = 65536         # x, y are uint16
 
 
-def _column(values, name: str, dtype) -> np.ndarray:
+def _column(values, name: str, dtype, where: str = "event stream") -> np.ndarray:
     """One of x, y, t, p as a 1-D array of ``dtype``: refused (ConfigError) when not numbers, not 1-D, not
-    finite, or (x, y) negative, rather than wrapped around or failing inside NumPy."""
+    finite, not whole, outside ``dtype``'s range, or (x, y) negative, rather than wrapped around, truncated
+    or failing inside NumPy (x = 65539 became 3, a uint8 polarity 255 became -1, t = 1.9 became 1)."""
     a = values if isinstance(values, np.ndarray) and values.dtype == dtype else np.asarray(values)
     if a.dtype == dtype and a.ndim == 1:
         return np.ascontiguousarray(a)
     if a.ndim != 1 or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
-        raise ConfigError(f"event stream: {name} must be a 1-D array of numbers (got shape {a.shape}, {a.dtype})")
-    if len(a) and np.issubdtype(a.dtype, np.inexact) and not np.all(np.isfinite(a)):
-        raise ConfigError(f"event stream: {name} contains NaN or infinite values")
-    if len(a) and name in "xy" and a.min() < 0:
-        raise ConfigError(f"event stream: {name} = {a.min()}: coordinates must be >= 0")
+        raise ConfigError(f"{where}: {name} must be a 1-D array of numbers (got shape {a.shape}, {a.dtype})")
+    if not len(a) or a.dtype == bool:
+        return np.ascontiguousarray(a, dtype=dtype)
+    if np.issubdtype(a.dtype, np.complexfloating):
+        raise ConfigError(f"{where}: {name} must be real numbers (got {a.dtype})")
+    if np.issubdtype(a.dtype, np.floating):
+        if not np.all(np.isfinite(a)):
+            raise ConfigError(f"{where}: {name} contains NaN or infinite values")
+        if not np.array_equal(a, np.trunc(a)):
+            raise ConfigError(f"{where}: {name} must be whole numbers (round them first, e.g. np.rint)")
+    lo, hi = a.min(), a.max()
+    if name in "xy" and lo < 0:
+        raise ConfigError(f"{where}: {name} = {lo}: coordinates must be >= 0")
+    info = np.iinfo(dtype)
+    if lo < info.min or hi > info.max or (np.issubdtype(a.dtype, np.floating) and hi >= float(info.max)):
+        bad = lo if lo < info.min else hi
+        raise ConfigError(f"{where}: {name} = {bad}: allowed range is [{info.min}, {info.max}]")
     return np.ascontiguousarray(a, dtype=dtype)
+
+
+def chunk_columns(where: str, width: int, height: int, x, y, t, p) -> tuple:
+    """A chunk handed to an event writer, checked as an :class:`EventStream` checks its columns (and their
+    one length, and the sensor's bounds), before any of it is written: an append of x = 100 to a 4x4 file, or
+    of x and y of different lengths (h5py broadcast the shorter), wrote a file that read back wrong or not at
+    all. Polarity may be +1/-1 or 1/0 (> 0 is ON). Returns (x, y, t, p) as uint16, uint16, int64, int8."""
+    x, y = _column(x, "x", np.uint16, where), _column(y, "y", np.uint16, where)
+    t, p = _column(t, "t", np.int64, where), _column(p, "p", np.int8, where)
+    if not (len(x) == len(y) == len(p) == len(t)):
+        raise ConfigError(f"{where}: x, y, t, p must have one length (got {len(x)}, {len(y)}, {len(t)}, {len(p)})")
+    if len(t) and (x.max() >= width or y.max() >= height):
+        raise ConfigError(f"{where}: coordinates exceed the {width}x{height} sensor (x up to {x.max()}, "
+                          f"y up to {y.max()})")
+    return x, y, t, p
 
 
 @dataclass
@@ -43,6 +71,8 @@ class EventStream:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        if not isinstance(self.meta, dict):
+            raise ConfigError(f"event stream: meta must be a dict (got {type(self.meta).__name__})")
         self.x, self.y = _column(self.x, "x", np.uint16), _column(self.y, "y", np.uint16)
         self.t, self.p = _column(self.t, "t", np.int64), _column(self.p, "p", np.int8)
         self.width = int(number(self.width, "event stream: width", 0, MAX_SENSOR, integer=True, strict=True))
@@ -66,8 +96,9 @@ class EventStream:
     @property
     def duration_us(self) -> int:
         """Rendered duration if recorded in the metadata, else the span of the timestamps."""
-        if "duration_us" in self.meta:
-            return int(self.meta["duration_us"])
+        recorded = self.meta.get("duration_us")
+        if isinstance(recorded, (int, float, np.integer, np.floating)) and np.isfinite(recorded) and recorded >= 0:
+            return int(recorded)
         return int(self.t[-1] - self.t[0]) if len(self) else 0
 
     @property
@@ -76,6 +107,8 @@ class EventStream:
 
     def time_window(self, t0_us=None, t1_us=None) -> "EventStream":
         """Events with t0 <= t < t1 (microseconds; None = open end). Requires sorted timestamps."""
+        t0_us, t1_us = (None if v is None else number(v, f"time_window: {name}", strict=True)
+                        for name, v in (("t0_us", t0_us), ("t1_us", t1_us)))
         i0 = 0 if t0_us is None else int(np.searchsorted(self.t, t0_us, side="left"))
         i1 = len(self) if t1_us is None else int(np.searchsorted(self.t, t1_us, side="left"))
         s = slice(i0, i1)
@@ -101,7 +134,9 @@ class EventStream:
                 "rate_ev_per_s": (len(self) / (dur * 1e-6)) if dur > 0 else 0.0}
 
     def equals(self, other: "EventStream") -> bool:
-        """Same events and same sensor size (metadata ignored)."""
+        """Same events and same sensor size (metadata ignored); False for anything that is not a stream."""
+        if not isinstance(other, EventStream):
+            return False
         return (self.width, self.height) == (other.width, other.height) and len(self) == len(other) and all(
             np.array_equal(a, b) for a, b in ((self.x, other.x), (self.y, other.y), (self.t, other.t), (self.p, other.p)))
 
@@ -113,6 +148,8 @@ class EventStream:
     @staticmethod
     def concatenate(streams) -> "EventStream":
         streams = list(streams)
+        if not streams:
+            raise ConfigError("EventStream.concatenate: no streams given (it takes the first one's sensor size)")
         first = streams[0]
         return EventStream(*(np.concatenate([getattr(s, k) for s in streams]) for k in "xytp"),
                            first.width, first.height, dict(first.meta))

@@ -22,9 +22,11 @@ from ..atomic import check_writable, remove_stale_partials, temporary_name
 from ..errors import EventFieldError
 from .disk import HEADER_BYTES, check_space, disk_errors
 from .hdf5 import H5EventWriter, _json
+from .stream import chunk_columns
 
 NPZ_BYTES_PER_EVENT = 22       # x, y, timestamp (float64), polarity, t, p
 AEDAT4_BYTES_PER_EVENT = 16    # dv::Event: int64 t, int16 x, y, uint8 p, padded
+AEDAT4_MAX_SIDE = 32767        # dv::Event's x, y are int16 (and dv refuses a 0-pixel side with a C++ trace)
 TXT_BYTES_PER_EVENT = 32       # "t.tttttt x y p\n" for timestamps below 10^5 s and sensors below 10^5 px
 COPY_CHUNK = 1 << 20
 
@@ -39,10 +41,21 @@ class _PartialFile:
         self.tmp = temporary_name(self.path)
         self.width, self.height, self.meta = int(width), int(height), dict(meta or {})
         self.count, self.closed = 0, False
+        self.last_t = None
 
-    def _check_order(self, t):
-        if len(t) and np.any(np.diff(t) < 0):
-            raise ValueError(f"{self.path}: events must be appended in time order")
+    def _checked(self, x, y, t, p) -> tuple:
+        """A chunk to append, checked as ``H5EventWriter.append`` checks one (``stream.chunk_columns``), and in
+        time order after the chunks before it: an order checked only within each chunk let a stream whose
+        second 65,536 events started before the first ended be written unsorted."""
+        if self.closed:
+            raise EventFieldError(f"{self.path}: the event writer is closed (or was aborted): nothing more can be "
+                                  "appended")
+        x, y, t, p = chunk_columns(f"{self.path}: append", self.width, self.height, x, y, t, p)
+        if len(t):
+            if (self.last_t is not None and t[0] < self.last_t) or np.less(t[1:], t[:-1]).any():
+                raise ValueError(f"{self.path}: events must be appended in time order")
+            self.last_t = int(t[-1])
+        return x, y, t, p
 
     def _publish(self):
         os.replace(self.tmp, self.path)
@@ -84,12 +97,11 @@ class TxtEventWriter(_PartialFile):
         self.f.write(f"{self.width} {self.height}\n")
 
     def append(self, x, y, t, p, complete_until_us=None):
-        t = np.asarray(t, np.int64)
-        self._check_order(t)
+        x, y, t, p = self._checked(x, y, t, p)
         need = TXT_BYTES_PER_EVENT * len(t)
         check_space(self.path, need)
         with disk_errors(self.path, need):
-            rows = np.column_stack([t * 1e-6, x, y, (np.asarray(p) > 0).astype(np.int64)])
+            rows = np.column_stack([t * 1e-6, x, y, (p > 0).astype(np.int64)])
             np.savetxt(self.f, rows, fmt=["%.6f", "%d", "%d", "%d"])
         self.count += len(t)
 
@@ -114,8 +126,8 @@ class NpzEventWriter(_PartialFile):
         self.columns = {k: open(f"{self.tmp}.{k}", "wb") for k in NPZ_COLUMNS}
 
     def append(self, x, y, t, p, complete_until_us=None):
-        t = np.asarray(t, np.int64)
-        self._check_order(t)
+        x, y, t, p = self._checked(x, y, t, p)
+        p = np.where(p > 0, 1, -1).astype(np.int8)       # +1 / -1 whichever convention came in
         need = 2 * NPZ_BYTES_PER_EVENT * len(t)          # the raw columns now, the zip at close
         check_space(self.path, need)
         with disk_errors(self.path, need):
@@ -171,6 +183,9 @@ class Aedat4EventWriter(_PartialFile):
     for every chunk is checked before the chunk is handed over."""
 
     def __init__(self, path, width, height, meta=None):
+        if not (0 < int(width) <= AEDAT4_MAX_SIDE and 0 < int(height) <= AEDAT4_MAX_SIDE):
+            raise EventFieldError(f"{path}: a {width}x{height} sensor: AEDAT4 holds sensors of 1 to "
+                                  f"{AEDAT4_MAX_SIDE} pixels a side (16-bit signed coordinates)")
         super().__init__(path, width, height, meta)
         try:
             import dv_processing as dv
@@ -183,14 +198,14 @@ class Aedat4EventWriter(_PartialFile):
                 "mitsuba-eventfield", (self.width, self.height)))
 
     def append(self, x, y, t, p, complete_until_us=None):
-        t = np.asarray(t, np.int64)
-        self._check_order(t)
+        x, y, t, p = self._checked(x, y, t, p)
+        if len(t) and t[0] < 0:
+            raise ValueError(f"{self.path}: AEDAT4 holds timestamps >= 0 only (this chunk starts at {int(t[0])} us)")
         need = AEDAT4_BYTES_PER_EVENT * len(t) + HEADER_BYTES
         check_space(self.path, need)
         with disk_errors(self.path, need):
             store = self.dv.EventStore()
-            for ti, xi, yi, pi in zip(t.tolist(), np.asarray(x).tolist(), np.asarray(y).tolist(),
-                                      (np.asarray(p) > 0).tolist()):
+            for ti, xi, yi, pi in zip(t.tolist(), x.tolist(), y.tolist(), (p > 0).tolist()):
                 store.push_back(ti, xi, yi, pi)
             self.writer.writeEvents(store)
         self.count += len(t)

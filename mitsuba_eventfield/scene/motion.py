@@ -19,7 +19,7 @@ File ``<scene>.motion.toml`` (found automatically next to ``<scene>.xml``)::
       { t = 0.05, translate = [0, 0, -1] },
     ]
 
-Units: seconds, scene units, degrees, revolutions per minute. Several kinds may be combined on one object; the
+Units: seconds, scene units, degrees, revolutions per minute (each number at most 1e9 in magnitude). Several kinds may be combined on one object; the
 pose at time t maps the object's t=0 world placement to its placement at t as
 ``Translate(velocity * t) @ Spin(t) @ Keyframes(t)`` (keyframes innermost, so a spinning object that also
 moves spins about its own moving axis).
@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
-from ..validate import finite, positive
+from ..validate import number, positive
 
 try:
     import tomllib
@@ -252,8 +252,15 @@ def _check_keys(table, allowed, source, prefix):
         raise ConfigError(f"{source}: unknown key {prefix}{unknown[0]}; allowed keys here: {', '.join(sorted(allowed))}")
 
 
+# The largest magnitude a motion file's number may have (scene units, seconds, degrees, rpm): "any finite
+# number" let 1e300 rpm reach math.sin as inf, and an axis of 1e300 overflow its norm (both exited with a
+# traceback-less "unexpected" error), and a velocity of 1e30 asked for 1.4e29 steps. A billion is beyond any
+# scene (a billion rpm turns a fan 16.7 million times a second) and keeps every product finite.
+MAX_MOTION_VALUE = 1e9
+
+
 def _finite(value, source, where):
-    return finite(value, f"{source}: {where}")
+    return number(value, f"{source}: {where}", -MAX_MOTION_VALUE, MAX_MOTION_VALUE, strict=True)
 
 
 def _positive(value, source, where):

@@ -42,9 +42,15 @@ class TimedScene:
         if motion is not None and not isinstance(motion, Motion):
             raise EventFieldError(f"TimedScene: motion must be a Motion or None (load_motion / parse_motion make "
                                   f"one), got {type(motion).__name__}")
+        if not scene.sensors():
+            raise EventFieldError(f"{path or 'scene'}: the scene has no <sensor>: events need a camera")
+        width, height = (int(v) for v in scene.sensors()[0].film().crop_size())
+        if width < 1 or height < 1:       # a 0-pixel side divided by zero when the event batches were sized
+            raise EventFieldError(f"{path or 'scene'}: film {width}x{height}: each side must be at least 1 pixel")
         self.scene = scene
         self.motion = motion
         self.path = path
+        self.defines: dict = {}           # the XML's <default> values given at load (-D), recorded and compared on resume
         self.instanced = list(instanced)   # moving shapes loaded as instances (scene/instancing.py)
         self.params = mi.traverse(scene)
         self.time = 0.0
@@ -183,6 +189,8 @@ class TimedScene:
         if self.path and os.path.isfile(self.path):
             with open(self.path, "rb") as f:
                 d["scene_sha256"] = hashlib.sha256(f.read()).hexdigest()
+        if self.defines:
+            d["defines"] = dict(sorted(self.defines.items()))
         if self.motion is not None:
             d["motion_path"] = self.motion.source
             d["motion"] = self.motion.raw
@@ -231,6 +239,7 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
             raise EventFieldError(f"{path}: {_mitsuba_message(e)}") from None
     timed = TimedScene(scene, motion, path, instanced)
     timed.sampler_choice = sampler_choice
+    timed.defines = dict(xml_params) if path is not None else {}
     return timed
 
 

@@ -94,9 +94,10 @@ class SegmentWriter:
             for seg in self.segments:
                 with h5py.File(os.path.join(self.folder, seg["file"]), "r") as f:
                     ev, n = f["events"], seg["events"]
+                    offset = int(f["t_offset"][()])        # a segment's t counts from its own t_offset
                     for i in range(0, n, MERGE_CHUNK):
                         j = min(n, i + MERGE_CHUNK)
-                        out.append(ev["x"][i:j], ev["y"][i:j], ev["t"][i:j], ev["p"][i:j],
+                        out.append(ev["x"][i:j], ev["y"][i:j], ev["t"][i:j] + offset, ev["p"][i:j],
                                    seg["until_us"] if j == n else None)
                 if n == 0:
                     out.append(np.empty(0), np.empty(0), np.empty(0, np.int64), np.empty(0), seg["until_us"])

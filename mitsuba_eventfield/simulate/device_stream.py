@@ -73,7 +73,11 @@ class DeviceEventStream:
 
 
 def check_on_device(on_device: bool, output) -> None:
-    """A device result and an output file exclude each other: one line before any work."""
+    """A device result and an output file exclude each other: one line before any work (and ``on_device`` is a
+    bool: "yes" was taken as true)."""
+    from ..errors import EventFieldError
+    if not isinstance(on_device, (bool, np.bool_)):
+        raise EventFieldError(f"on_device = {on_device!r}: must be True or False")
     if on_device and output:
         from ..errors import EventFieldError
         raise EventFieldError(f"{output}: on_device keeps the events on the device; it takes no output file")

@@ -92,6 +92,9 @@ def stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_ste
         raise EventFieldError(f"seed_mode = {seed_mode!r}: allowed values are {', '.join(SEED_MODES)}")
     if not any(adaptive is m or adaptive == m for m in ADAPTIVE_MODES):
         raise EventFieldError(f"adaptive = {adaptive!r}: allowed values are False, True, 'motion', 'log-change'")
+    if adaptive and steps is not None:      # (the command line's --steps and --adaptive exclude each other)
+        raise EventFieldError(f"steps = {steps!r} and adaptive = {adaptive!r}: give one (adaptive stepping "
+                              "chooses the steps itself)")
     t_start = finite(t_start, "t_start")
     schedule = None
     if adaptive:

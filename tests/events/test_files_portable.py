@@ -120,20 +120,30 @@ def test_h5_chunks_from_either_deflate_read_back(tmp_path, stream, monkeypatch, 
 @pytest.mark.parametrize("setting, deflating_threads", [("0", 0), ("1", 1), (" 3 ", 3)])
 def test_writer_threads_from_the_environment(tmp_path, stream, monkeypatch, setting, deflating_threads):
     """``EVENTFIELD_WRITER_THREADS`` sets how many threads deflate a writer's chunks (0: HDF5's own filters on
-    the writing thread): the threads that deflated are counted by name, and the file reads back."""
+    the writing thread): the pool's size, and the threads that deflated by name (a pool starts a thread only
+    while none is idle, so under load fewer may take part), and the file reads back."""
     import threading
+    from concurrent.futures import ThreadPoolExecutor
 
     from mitsuba_eventfield.events import hdf5
-    real, names = hdf5.deflate_chunk, set()
+    real, names, pools = hdf5.deflate_chunk, set(), []
     monkeypatch.setattr(hdf5, "deflate_chunk", lambda v, *a: names.add(threading.current_thread().name)
                         or real(v, *a))
+
+    class Pool(ThreadPoolExecutor):
+        def __init__(self, workers, **kw):
+            pools.append(workers)
+            super().__init__(workers, **kw)
+    monkeypatch.setattr(hdf5, "ThreadPoolExecutor", Pool)
     monkeypatch.setenv("EVENTFIELD_WRITER_THREADS", setting)
     path = str(tmp_path / "env.h5")
     with ef.H5EventWriter(path, 64, 48, chunk=1024) as w:
         for k in range(0, len(stream), 5000):
             w.append(stream.x[k:k + 5000], stream.y[k:k + 5000], stream.t[k:k + 5000], stream.p[k:k + 5000])
     assert ef.read_events(path).equals(stream)
-    assert len(names) == deflating_threads and all(n.startswith("h5-deflate") for n in names)
+    assert pools == ([deflating_threads] if deflating_threads else [])
+    assert (0 < len(names) <= deflating_threads or len(names) == deflating_threads == 0) and all(
+        n.startswith("h5-deflate") for n in names)
 
 
 @pytest.mark.parametrize("setting", ["many", "65", "-1", "2.5"])

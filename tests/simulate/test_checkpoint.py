@@ -115,6 +115,21 @@ def test_resume_with_other_options_names_the_difference(tmp_path, monkeypatch, c
     assert not os.path.exists(out)
 
 
+def test_a_resume_with_another_define_is_refused(tmp_path, monkeypatch):
+    """The scene's -D values are part of what a resume must repeat (a changed max_depth was resumed into a
+    file that matched neither render); the file's metadata records them."""
+    out = str(tmp_path / "d.h5")
+    _interrupt_at(monkeypatch, 3)
+    with pytest.raises(KeyboardInterrupt):
+        ef.render_events(ef.load_scene(DEMO, width=16, height=12), 0.004, steps=8, output=out, checkpoint_s=1e-9)
+    monkeypatch.undo()
+    other = ef.load_scene(DEMO, width=16, height=12, max_depth=3)
+    with pytest.raises(ef.EventFieldError, match=r"another render: scene\.defines\.max_depth was null, now \"3\""):
+        ef.render_events(other, 0.004, steps=8, output=out, resume=True)
+    ef.render_events(ef.load_scene(DEMO, width=16, height=12), 0.004, steps=8, output=out, resume=True)
+    assert ef.read_events(out).meta["scene"]["defines"] == {"height": "12", "width": "16"}
+
+
 def test_interrupt_before_any_checkpoint_leaves_nothing(tmp_path, monkeypatch):
     timed = ef.load_scene(DEMO, width=16, height=12)
     _interrupt_at(monkeypatch, 2)

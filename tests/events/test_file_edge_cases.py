@@ -1,0 +1,187 @@
+"""Event files at their edges (a reviewer's findings, 2026-11-26): late starts, values that wrapped around, chunks
+that were never checked, foreign files out of order, and writers used after they were closed. Each case is a
+file that reads back as what went in, or one line naming the file before anything is written."""
+import os
+
+import h5py
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.cli.main import main as cli
+from mitsuba_eventfield.events.hdf5 import H5EventWriter
+from mitsuba_eventfield.events.stream import EventStream
+
+
+def _stream(t, x=None, width=64, height=48, meta=None):
+    t = np.asarray(t, np.int64)
+    n = len(t)
+    x = np.arange(n) % width if x is None else x
+    return EventStream(x, np.arange(n) % height, t, np.where(np.arange(n) % 2, -1, 1), width, height, meta or {})
+
+
+def _index(t_rel, entries):
+    """DSEC's ms_to_idx: the first event at or after each millisecond of the stored (relative) times."""
+    return np.searchsorted(t_rel, 1000 * np.arange(entries), side="left")
+
+
+def test_a_late_start_is_stored_from_t_offset(tmp_path):
+    """Three events at t = 1e11 us made an 800 MB file (an index entry for every millisecond since t = 0)."""
+    ev = _stream([10**11, 10**11 + 5, 10**11 + 7000])
+    path = str(tmp_path / "late.h5")
+    ef.write_events(path, ev)
+    assert os.path.getsize(path) < 100_000
+    with h5py.File(path) as f:
+        offset, t_rel, index = int(f["t_offset"][()]), f["events"]["t"][()], f["ms_to_idx"][()]
+    assert offset == 10**11 and np.array_equal(t_rel + offset, ev.t)
+    assert np.array_equal(index, _index(t_rel, len(index))) and len(index) == 8
+    assert ef.read_events(path).equals(ev)
+    early = _stream([-2500, -100, 3000])                 # before zero: an offset below the first event
+    ef.write_events(str(tmp_path / "early.h5"), early)
+    with h5py.File(tmp_path / "early.h5") as f:
+        assert int(f["t_offset"][()]) == -3000 and f["events"]["t"][0] == 500
+    assert ef.read_events(str(tmp_path / "early.h5")).equals(early)
+
+
+def test_a_render_from_zero_keeps_a_zero_offset(tmp_path):
+    """A stream whose metadata starts at 0 (every render) is stored as before: t_offset 0."""
+    ev = _stream([1200, 1500, 2600], meta={"t_start_us": 0, "duration_us": 4000})
+    ef.write_events(str(tmp_path / "r.h5"), ev)
+    with h5py.File(tmp_path / "r.h5") as f:
+        assert int(f["t_offset"][()]) == 0 and list(f["ms_to_idx"][()]) == [0, 0, 2, 3, 3]
+
+
+def test_the_index_covers_start_plus_duration(tmp_path):
+    """``duration_us`` is a duration: a stream from 5 ms for 10 ms is indexed to 15 ms (it stopped at 10)."""
+    ev = _stream([5200, 9000, 14100], meta={"t_start_us": 5000, "duration_us": 10000})
+    ef.write_events(str(tmp_path / "d.h5"), ev)
+    with h5py.File(tmp_path / "d.h5") as f:
+        offset, index = int(f["t_offset"][()]), f["ms_to_idx"][()]
+    assert offset == 5000 and len(index) == 11 and index[-1] == 3 and index[4] == 1
+
+
+@pytest.mark.parametrize("columns, message", [
+    (([65539], [0], [0], [1]), r"x = 65539: allowed range is \[0, 65535\]"),
+    (([1], [0], [0], np.array([255], np.uint8)), r"p = 255: allowed range is \[-128, 127\]"),
+    (([1], [0], [1.9], [1]), "t must be whole numbers"),
+    (([1.7], [0], [0], [1]), "x must be whole numbers"),
+    (([1], [0], [1e19], [1]), r"t = 1e\+19: allowed range"),
+    (([1], [0], np.array([2**63 + 1], np.uint64), [1]), "t = 9223372036854775809: allowed range"),
+])
+def test_values_are_refused_not_wrapped(columns, message):
+    with pytest.raises(ef.ConfigError, match=message):
+        EventStream(*columns, 640, 480)
+    assert EventStream([1.0], [2.0], [3.0], [1.0], 640, 480).x.tolist() == [1]     # whole floats are fine
+
+
+@pytest.mark.parametrize("columns, message", [
+    (([100], [1], [5], [1]), r"coordinates exceed the 4x4 sensor \(x up to 100"),
+    (([1, 2], [1], [5, 6], [1, 1]), r"x, y, t, p must have one length \(got 2, 1, 2, 2\)"),
+    (([1], [1], [5], [np.nan]), "p contains NaN"),
+    (([-1], [1], [5], [1]), "x = -1: coordinates must be >= 0"),
+])
+def test_a_writer_checks_each_chunk_before_writing_it(tmp_path, columns, message):
+    for name in ("a.h5", "a.npz", "a.txt"):
+        path = str(tmp_path / name)
+        with pytest.raises(ef.ConfigError, match=f"^{path}: append: {message}"):
+            with ef.events.io.open_writer(path, ef.events.io.format_of(path), 4, 4) as w:
+                w.append(*columns)
+    assert os.listdir(tmp_path) == []
+
+
+def test_order_is_checked_across_chunks(tmp_path):
+    """Two chunks each sorted, the second starting before the first ends: refused by every writer."""
+    for name in ("a.h5", "a.npz", "a.txt"):
+        path = str(tmp_path / name)
+        with pytest.raises(ValueError, match="in time order"):
+            with ef.events.io.open_writer(path, ef.events.io.format_of(path), 8, 8) as w:
+                w.append([1, 2], [1, 2], [100, 200], [1, -1])
+                w.append([1, 2], [1, 2], [150, 300], [1, -1])
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_closed_writer_and_a_broken_promise(tmp_path):
+    path = str(tmp_path / "w.h5")
+    w = H5EventWriter(path, 8, 8)
+    w.append([1], [1], [1000], [1], complete_until_us=5000)
+    with pytest.raises(ValueError, match="before complete_until_us = 5000 us"):
+        w.append([1], [1], [2000], [1])         # the index up to 5 ms was written as final already
+    w.append([2], [2], [6000], [-1])
+    w.close()
+    with pytest.raises(ef.EventFieldError, match=r"w\.h5: the event writer is closed"):
+        w.append([1], [1], [7000], [1])
+    with h5py.File(path) as f:       # from the first event's millisecond: t_offset 1000 us
+        assert int(f["t_offset"][()]) == 1000 and list(f["ms_to_idx"][()]) == [0, 1, 1, 1, 1, 1]
+    assert len(ef.read_events(path)) == 2
+
+
+def test_foreign_files_out_of_order_or_malformed_are_one_line(tmp_path):
+    with h5py.File(tmp_path / "unsorted.h5", "w") as f:
+        g = f.create_group("events")
+        for k, v in (("x", [1, 2, 3]), ("y", [1, 1, 1]), ("t", [3000, 1000, 2000]), ("p", [1, 0, 1])):
+            g.create_dataset(k, data=np.asarray(v, np.uint16 if k in "xy" else np.int64 if k == "t" else np.uint8))
+    (tmp_path / "nan.txt").write_text("640 480\nnan 5 6 1\n")
+    (tmp_path / "noheader.txt").write_text("100 5 6 1\n200 7 8 0\n")
+    np.savez(tmp_path / "meta.npz", x=np.array([1], np.uint16), y=np.array([1], np.uint16), t=np.array([5]),
+             p=np.array([1], np.int8), width=4, height=4, meta_json="[1, 2]")
+    cases = {"unsorted.h5": "events are not in time order: event 1 at t = 1000 us follows 3000 us",
+             "nan.txt": "t contains NaN", "noheader.txt": "the first line must be 'width height'",
+             "meta.npz": "meta_json holds a JSON list, not an object"}
+    for name, message in cases.items():
+        path = str(tmp_path / name)
+        with pytest.raises(ef.EventFieldError, match=f"^{path}: .*{message}"):
+            ef.read_events(path)
+
+
+def test_recordings_refuse_what_their_words_cannot_hold(tmp_path):
+    pytest.importorskip("faery")
+    unsorted = _stream([5, 3])
+    with pytest.raises(ef.EventFieldError, match=r"a\.raw: events must be in time order"):
+        ef.write_events(str(tmp_path / "a.raw"), unsorted)
+    for name, width, side in (("w.raw", 3000, 2048), ("w.dat", 20000, 16384)):
+        # EVT 3.0 wrote x modulo 2048 for sensors of 2049 to 4096 pixels: x = 2999 read back as 951
+        wide = _stream([1, 2], x=[0, width - 1], width=width)
+        with pytest.raises(ef.EventFieldError, match=f"a {width}x48 sensor: .* holds sensors of 1 to {side} pixels"):
+            ef.write_events(str(tmp_path / name), wide)
+    assert os.listdir(tmp_path) == []
+
+
+def test_aedat4_refuses_what_dv_cannot_hold(tmp_path):
+    pytest.importorskip("dv_processing")
+    with pytest.raises(ef.EventFieldError, match=r"a 40000x48 sensor: AEDAT4 holds sensors of 1 to 32767"):
+        ef.write_events(str(tmp_path / "a.aedat4"), _stream([1], width=40000))
+    with pytest.raises(ValueError, match="AEDAT4 holds timestamps >= 0 only"):
+        ef.write_events(str(tmp_path / "a.aedat4"), _stream([-5, 3]))
+    assert os.listdir(tmp_path) == []
+
+
+def test_stream_helpers_on_odd_arguments(tmp_path, capsys):
+    ev = _stream([1, 2, 3])
+    assert ev.equals(None) is False and ev.equals("x") is False
+    with pytest.raises(ef.ConfigError, match="no streams given"):
+        EventStream.concatenate([])
+    for bad in ("a", float("nan")):
+        with pytest.raises(ef.ConfigError, match="time_window: t0_us"):
+            ev.time_window(bad)
+    assert _stream([1, 2], meta={"duration_us": "abc"}).summary()["duration_s"] == pytest.approx(1e-6)
+    huge = EventStream.empty(65536, 65536)
+    with pytest.raises(ef.EventFieldError, match=r"p\.png: a preview of 65536x65536 pixels at scale 1 needs"):
+        ef.write_preview(str(tmp_path / "p.png"), huge)
+    negative = _stream([-5000, -4000, -1000])
+    ef.write_events(str(tmp_path / "n.h5"), negative)
+    assert cli(["preview", str(tmp_path / "n.h5"), "-o", str(tmp_path / "n.png"), "--t0", "-4.5"]) == 0
+    assert "2 events in the window" in capsys.readouterr().out
+
+
+def test_partials_left_under_a_writers_own_suffix_are_removed(tmp_path, capsys):
+    """A SIGKILLed .npz render leaves its columns as <partial>.npz.x, ...; faery leaves <partial>.raw.write:
+    the next write to the same path removes them as it removes our own partial files."""
+    dead = 4_000_000           # above the kernel's pid limit: no such process
+    left = [f"o.partial-{dead}-abc123.npz.{k}" for k in "xytp"] + [f"r.partial-{dead}-abc123.raw.write"]
+    for name in left:
+        (tmp_path / name).write_bytes(b"left")
+    ef.write_events(str(tmp_path / "o.npz"), _stream([1, 2]))
+    pytest.importorskip("faery")
+    ef.write_events(str(tmp_path / "r.raw"), _stream([1, 2]))
+    assert sorted(os.listdir(tmp_path)) == ["o.npz", "r.raw"]
+    assert capsys.readouterr().err.count("left by an interrupted run") == 5
