@@ -10,6 +10,9 @@ is per chunk, and on a GPU that thread paced the fan to HDF5: results/gpu_h200.m
 writer's time) against render_s, and writer_wait_s (the render blocked on the writer: the measure of a disk or
 compression bottleneck).
 
+Then a GPU-sized stream (the fan tiled $EVENTFIELD_WRITER_TILES times: 16 on 8 or more cores, else 4; 0 skips it)
+at HDF5 chunks of 65,536 to 1 M events, with the serial floor at each.
+
 Writes benchmarks/results/writer.json and .md with the machine's name.  Usage: ./run bench writer
 """
 import os
@@ -44,14 +47,17 @@ def writer_alone(stream, settings, reps=3):
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for threads, chunk in settings:
-            path = os.path.join(tmp, f"t{threads}_{chunk}.h5")
-            best = min(write_once(stream, path, threads, chunk) for _ in range(reps))
+            # a new name each time: ext4 (auto_da_alloc) writes a file out to disk when it is renamed over
+            # another (the writer's last step): 28-43 ms for 50 MB on this machine, against 0.06 ms to a new name
+            paths = [os.path.join(tmp, f"t{threads}_{chunk}_{k}.h5") for k in range(reps)]
+            best = min(write_once(stream, path, threads, chunk) for path in paths)
+            path = paths[0]
             rows.append({"threads": threads, "chunk": chunk, "write_s": best, "mev_per_s": len(stream) / best / 1e6,
                          "mib": os.path.getsize(path) / 2**20, "identical": ef.read_events(path).equals(stream)})
     return rows
 
 
-def serial_floor(stream, threads, reps=3):
+def serial_floor(stream, threads, reps=3, chunk=65536, pieces=16):
     """The same writes with every chunk's deflating replaced by bytes made once (a file that does not read
     back): what is left is the writer thread's own work (appends, joins, HDF5's chunk writes, the file), the
     rate no number of deflating threads can pass."""
@@ -66,10 +72,49 @@ def serial_floor(stream, threads, reps=3):
     hdf5.deflate_chunk = once
     try:
         with tempfile.TemporaryDirectory() as tmp:
-            best = min(write_once(stream, os.path.join(tmp, "floor.h5"), threads) for _ in range(reps))
+            best = min(write_once(stream, os.path.join(tmp, f"floor{k}.h5"), threads, chunk, pieces)
+                       for k in range(reps))     # a new name each time (writer_alone says why)
     finally:
         hdf5.deflate_chunk = real
-    return {"threads": threads, "write_s": best, "mev_per_s": len(stream) / best / 1e6}
+    return {"threads": threads, "chunk": chunk, "write_s": best, "mev_per_s": len(stream) / best / 1e6}
+
+
+GPU_PIECE = 5_161_000     # events a GPU render hands the writer at once (its 64 MiB device buffer, 13 bytes each)
+LARGE_CHUNKS = (65536, 262144, 1 << 20)
+
+
+def tiled(stream, tiles):
+    """The fan's events repeated ``tiles`` times one after another (each copy shifted past the last): a stream
+    of a GPU render's size (the fan at 1280x720 makes 161 M) with a real stream's compressibility."""
+    import numpy as np
+
+    import mitsuba_eventfield as ef
+    span = int(stream.t[-1]) - int(stream.t[0]) + 1
+    t = np.concatenate([stream.t + k * span for k in range(tiles)])
+    return ef.EventStream(np.tile(stream.x, tiles), np.tile(stream.y, tiles), t, np.tile(stream.p, tiles),
+                          stream.width, stream.height)
+
+
+def large_stream_rows(stream, threads, tiles, reps=2):
+    """A GPU-sized stream appended in the pieces a GPU render hands over, at HDF5 chunks of 65,536 (the
+    default) to 1 M events: write time and the writer thread's serial floor at each. The writer thread's
+    work is per chunk (four direct chunk writes, a space check, a future), and on the H200's 16-core host its
+    floor (99-131 M events/s at 65,536) was what paced the fan to HDF5; the 4.8 M-event stream above has too
+    few large chunks to keep 16 threads busy, so larger chunks are judged here."""
+    big = tiled(stream, tiles)
+    pieces = -(-len(big) // GPU_PIECE)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for chunk in LARGE_CHUNKS:
+            best = min(write_once(big, os.path.join(tmp, f"c{chunk}_{k}.h5"), threads, chunk, pieces)
+                       for k in range(reps))
+            mib = os.path.getsize(os.path.join(tmp, f"c{chunk}_0.h5")) / 2**20
+            floor = serial_floor(big, threads, reps, chunk, pieces)
+            rows.append({"chunk": chunk, "threads": threads, "events": len(big), "write_s": best,
+                         "mev_per_s": len(big) / best / 1e6, "mib": mib, "floor_mev_per_s": floor["mev_per_s"]})
+            for name in os.listdir(tmp):
+                os.remove(os.path.join(tmp, name))
+    return rows
 
 
 def render_to_file(threads_label, patch):
@@ -103,10 +148,12 @@ def main():
         + [(cores, BIG_CHUNK)]
     alone = writer_alone(stream, settings)
     floor = serial_floor(stream, cores)
+    tiles = int(os.environ.get("EVENTFIELD_WRITER_TILES", 16 if cores >= 8 else 4))
+    large = large_stream_rows(stream, cores, tiles) if tiles > 0 else []
     renders = [render_to_file(f"default ({cores})", None), render_to_file("0", 0)]
     base = alone[0]                                   # threads 0: HDF5's own filters
     res = {"device": device_name(), "events": len(stream), "writer": alone, "serial_floor": floor,
-           "renders": renders,
+           "large_stream": large, "renders": renders,
            "targets": {"every file reads back as the stream": all(r["identical"] for r in alone),
                        "deflating on threads is faster than HDF5's filters on one":
                            min(r["write_s"] for r in alone if r["threads"]) < base["write_s"]}}
@@ -122,8 +169,15 @@ def main():
                   f"{base['write_s'] / r['write_s']:.2f}x | {r['mib']:.2f} | {r['identical']} |")
     md += ["", f"The writer thread's own work ({cores} threads, every chunk's deflating replaced by bytes made "
            f"once, `serial_floor`): {floor['write_s']:.3f} s, **{floor['mev_per_s']:.0f} M events/s**, the rate no "
-           "number of deflating threads can pass.",
-           "", "The fan rendered to .h5 (one render each, after a warm-up; the writer runs beside the render):", "",
+           "number of deflating threads can pass.", ""]
+    if large:
+        md += [f"A GPU-sized stream: the fan's events {tiles} times over ({large[0]['events']:,} events), appended "
+               f"in pieces of {GPU_PIECE:,} (what a GPU render hands over), {cores} threads, fastest of 2; the "
+               "serial floor as above, at each chunk size:", "",
+               "| chunk, events | write s | M events/s | file MiB | serial floor, M events/s |", "|---|---|---|---|---|"]
+        md += [f"| {r['chunk']:,} | {r['write_s']:.3f} | {r['mev_per_s']:.1f} | {r['mib']:.1f} | "
+               f"{r['floor_mev_per_s']:.0f} |" for r in large] + [""]
+    md += ["The fan rendered to .h5 (one render each, after a warm-up; the writer runs beside the render):", "",
            "| writer threads | events | render s | writer busy s | render blocked on the writer s | tail s |",
            "|---|---|---|---|---|---|"]
     for r in renders:

@@ -127,7 +127,7 @@ case "$stage" in
         # host and GPU memory for 10x the duration (fan 346x260, every pixel, to HDF5)
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         # HDF5 writing on the host's cores against HDF5's own filters on one thread
-        [ -z "$quick" ] && step writer 60 $PY benchmarks/bench_writer.py
+        [ -z "$quick" ] && step writer 150 $PY benchmarks/bench_writer.py
         # motion a step: Mitsuba's update against ours, meshes against instances, the loop's sync after a render
         step motion 150 $PY benchmarks/bench_motion.py $quick
         # the loop's overlap of host and device, overlapped against synced in alternating pairs
@@ -147,7 +147,7 @@ case "$stage" in
         for n in ${FAN_WRITER_THREADS:-4 8}; do fan_to_hdf5 "$n"; done
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         step pixel 90 $PY benchmarks/bench_pixel.py
-        [ -z "$quick" ] && step writer 60 $PY benchmarks/bench_writer.py
+        [ -z "$quick" ] && step writer 150 $PY benchmarks/bench_writer.py
         # the demo's host time by function (its wall is well above its renders alone: where does it go?)
         step render_profile 60 $PY benchmarks/profile_render.py
         fan_profile
@@ -165,7 +165,7 @@ case "$stage" in
         fan_to_hdf5
         main_demo
         step fan_writer 150 $PY benchmarks/bench_fan_writer.py $( [ -n "$quick" ] && echo "--width 96 --height 72 --steps 80" )
-        step writer 90 $PY benchmarks/bench_writer.py
+        step writer 150 $PY benchmarks/bench_writer.py
         [ -z "$quick" ] && step memory 120 $PY benchmarks/bench_memory.py --every-pixel-only
         fan_profile
         step render_profile 60 $PY benchmarks/profile_render.py
