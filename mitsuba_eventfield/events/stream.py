@@ -39,7 +39,9 @@ def _column(values, name: str, dtype, where: str = "event stream") -> np.ndarray
     if name in "xy" and lo < 0:
         raise ConfigError(f"{where}: {name} = {lo}: coordinates must be >= 0")
     info = np.iinfo(dtype)
-    if lo < info.min or hi > info.max or (np.issubdtype(a.dtype, np.floating) and hi >= float(info.max)):
+    # a float at int64's top (2^63 - 1 rounds up to 2^63) overflows the cast: there the bound is exclusive
+    top_rounds_up = np.issubdtype(a.dtype, np.floating) and int(float(info.max)) != info.max
+    if lo < info.min or hi > info.max or (top_rounds_up and hi >= float(info.max)):
         bad = lo if lo < info.min else hi
         raise ConfigError(f"{where}: {name} = {bad}: allowed range is [{info.min}, {info.max}]")
     return np.ascontiguousarray(a, dtype=dtype)

@@ -185,3 +185,11 @@ def test_partials_left_under_a_writers_own_suffix_are_removed(tmp_path, capsys):
     ef.write_events(str(tmp_path / "r.raw"), _stream([1, 2]))
     assert sorted(os.listdir(tmp_path)) == ["o.npz", "r.raw"]
     assert capsys.readouterr().err.count("left by an interrupted run") == 5
+
+
+def test_whole_floats_at_the_top_of_a_column_are_taken():
+    """x = 65535.0 is a valid coordinate on the largest sensor; t = 2^63 as a float is past int64."""
+    ev = EventStream([65535.0], [0.0], [2.0 ** 62], [1.0], 65536, 10)
+    assert ev.x.tolist() == [65535] and ev.t.tolist() == [2 ** 62]
+    with pytest.raises(ef.ConfigError, match=r"t = 9\.223372036854776e\+18: allowed range"):
+        EventStream([1], [0], [2.0 ** 63], [1], 640, 480)
