@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from mitsuba_eventfield.errors import EventFieldError
+from mitsuba_eventfield.errors import ConfigError, EventFieldError
 from mitsuba_eventfield.focus.measures import parabola_offset
 from mitsuba_eventfield.optics.galvo import focal_length_px
 from mitsuba_eventfield.optics.scan import ScanCurve
@@ -102,6 +102,28 @@ class GalvoCalibration:
     frames_used: int = 0
     patches: list = field(default_factory=list)
     optics: dict = field(default_factory=dict)   # what it was made for (optics.optics_record), set when saved
+
+    def __post_init__(self):
+        """Fields checked as they are read back (a calibration file is edited by hand): tau0 = "abc" failed
+        deep in NumPy, NaN as an unnamed LightField error, and a curve edited to another frequency than the
+        optics the file was made for was used as it was."""
+        from mitsuba_eventfield.optics.scan import curve_from_dict, curve_to_dict
+        from mitsuba_eventfield.validate import finite, positive
+
+        from .optics import _same
+        for name in ("t_first", "tau0", "phase_deg", "rms_px"):
+            setattr(self, name, finite(getattr(self, name), f"galvo calibration: {name}"))
+        scale = self.scale_px_per_rad
+        if not isinstance(scale, (tuple, list)) or len(scale) != 2:
+            raise ConfigError(f"galvo calibration: scale_px_per_rad = {scale!r}: expected two numbers (x, y)")
+        self.scale_px_per_rad = tuple(positive(v, "galvo calibration: scale_px_per_rad") for v in scale)
+        if not isinstance(self.curve, dict):
+            raise ConfigError(f"galvo calibration: curve = {self.curve!r}: expected a scan curve record")
+        curve = curve_to_dict(curve_from_dict(self.curve, where="galvo calibration: curve"))
+        scan = self.optics.get("scan") if isinstance(self.optics, dict) else None
+        if isinstance(scan, dict) and not _same(curve, curve_to_dict(curve_from_dict(scan, where="optics.scan"))):
+            raise ConfigError("galvo calibration: its curve differs from the scan of the optics it was made for "
+                              "(optics.scan): re-run eventfield calibrate")
 
     @property
     def quality(self) -> dict:

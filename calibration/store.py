@@ -20,7 +20,7 @@ import os
 import numpy as np
 
 from mitsuba_eventfield.atomic import atomic_output
-from mitsuba_eventfield.errors import EventFieldError
+from mitsuba_eventfield.errors import ConfigError, EventFieldError
 
 from .depth import DepthCalibration
 from .galvo import GalvoCalibration
@@ -118,6 +118,8 @@ def load_calibration(path: str) -> CalibrationFile:
         except TypeError as e:
             raise EventFieldError(f"{path}: the {kind} calibration is not readable ({e}): re-run eventfield "
                                   "calibrate") from None
+        except ConfigError as e:           # a field's value, checked by the calibration's own class
+            raise EventFieldError(f"{path}: {e}") from None
     return CalibrationFile(out, path)
 
 

@@ -63,7 +63,9 @@ OUTPUT_DIRS = ("demo", "reconstruct", "bench", "hdr", "highspeed", "track-focus"
 
 # outputs whose kind their extension must name: a render's --preview was checked after the render (which had
 # written its event file by then)
-OUTPUT_SUFFIXES = {("render", "preview"): (".png",), ("preview", "output"): (".png",)}
+OUTPUT_SUFFIXES = {("render", "preview"): (".png",), ("preview", "output"): (".png",),
+                   ("refocus", "output"): (".png",), ("depth", "output"): (".png",),
+                   ("calibrate", "output"): (".json",)}
 
 
 def check_outputs(args) -> None:

@@ -1,6 +1,8 @@
 """``calibrate galvo | depth | kaleidoscope``: calibrations from the data itself (``calibration/``)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..errors import EventFieldError
@@ -61,9 +63,17 @@ def _depth(a) -> None:
             depth = float(depth)
         except ValueError:
             raise EventFieldError(f"{item!r}: expected FILE:DEPTH") from None
+        if not (math.isfinite(depth) and depth > 0):
+            raise EventFieldError(f"{item!r}: depth = {depth:g}: must be a finite number > 0 (scene units)")
         ev = read_events(path)
         records[path] = cal.optics_record(ev.meta.get("optics"), ev.width, ev.height, where=path)
-        fit = cal.fit_led(ev, samples=a.views, scale_limit=cal.galvo_scale_limit(records[path]))   # events alone
+        if records[path]["design"] != "galvo":      # (a kaleidoscope capture failed on a missing galvo field)
+            raise EventFieldError(f"{path}: {records[path]['design']} optics: a depth calibration fits a galvo's "
+                                  "scan scale, and needs galvo captures")
+        try:
+            fit = cal.fit_led(ev, samples=a.views, scale_limit=cal.galvo_scale_limit(records[path]))   # events alone
+        except EventFieldError as e:
+            raise EventFieldError(f"{path}: {e}") from None
         depths.append(depth)
         scales.append(fit.scale_px_per_rad[0])
         scales_y.append(fit.scale_px_per_rad[1])

@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from ..errors import EventFieldError
+from ..errors import ConfigError, EventFieldError
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import num, save_image, times_ms
 
@@ -61,6 +61,8 @@ def read_input(a):
     none (a camera recording) and no ``--contrast`` is refused in one line."""
     from ..events.io import read_events
     ev = read_events(a.file)
+    if not len(ev):        # refocused, a flat image; as a depth map, no confident pixel: both written as done
+        raise EventFieldError(f"{a.file}: no events: nothing to reconstruct")
     if getattr(a, "contrast", None):
         c = number_list(a.contrast, "--contrast", lo=0, lo_open=True)
         if len(c) not in (1, 2):
@@ -156,12 +158,18 @@ def _lightfield(a, ev):
         raise EventFieldError(f"{a.file}: the recording carries no optics (no light-field metadata): pass "
                               "--calibration, a calibration file made for its set-up")
     calibration = optics = None
+    if getattr(a, "time", None) is not None:
+        _check_times(a, ev, [a.time * 1e-3], "--time")
     if a.calibration:
         calibration = load_calibration(a.calibration)
         if not ev.meta.get("optics"):
             ev.meta["optics"] = recording_optics(calibration, ev, a.file)
         optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
-        check_optics(calibration, optics)
+        kinds = check_optics(calibration, optics)
+        if kinds == ("kaleidoscope",):
+            # its view registration and flat field are not applied to a light field yet: taken, it changed nothing
+            raise EventFieldError(f"{a.calibration}: a kaleidoscope calibration (view registration, flat field) is "
+                                  "not applied by refocus / depth / reconstruct: run without --calibration")
     try:
         lf = from_events(ev, period=a.period, views=a.views, time=None if a.time is None else a.time * 1e-3,
                          method=a.method, log_start=start_log(a.start_frame, ev))
@@ -170,11 +178,45 @@ def _lightfield(a, ev):
     return apply_to_lightfield(lf, calibration, optics) if calibration is not None else lf
 
 
+def _check_times(a, ev, times, option: str) -> None:
+    """Times (seconds) inside the stream, increasing: past its end a reconstruction keeps decaying its
+    high-pass filter on no data, and was written as a result."""
+    t0 = ev.meta.get("t_start_us", 0) * 1e-6
+    t1 = t0 + ev.duration_us * 1e-6
+    for t in times:
+        if not t0 <= t <= t1 + 1e-9:
+            raise EventFieldError(f"{a.file}: {option} {t * 1e3:g} ms: the stream covers {t0 * 1e3:g} to "
+                                  f"{t1 * 1e3:g} ms")
+    if len(times) > 1 and np.any(np.diff(times) <= 0):
+        raise EventFieldError(f"{option} {getattr(a, 'times', '')}: times must be increasing")
+
+
+def _depths_and_paths(a, lf, depths) -> list:
+    """(depth, output root) of every refocused image, each depth checked against the light field and every
+    output path before any image is written (a failure at the second depth left the first one's files)."""
+    from ..atomic import check_writable
+    if len(set(depths)) != len(depths):
+        raise EventFieldError(f"--depth {a.depth}: a depth is given twice")
+    out = []
+    for z in depths:
+        try:
+            z = lf.check_depth(z, "--depth")
+        except ConfigError as e:
+            raise EventFieldError(f"{a.file}: {e}") from None
+        root = os.path.splitext(a.output)[0] + (f"_{z:g}" if len(depths) > 1 else "")
+        for ext in (".png", ".exr"):
+            check_writable(root + ext, "refocused image")
+        out.append((z, root))
+    return out
+
+
 # ------------------------------------------------------------------ commands
 def _reconstruct_times(a, ev):
     t0 = ev.meta.get("t_start_us", 0) * 1e-6
     if a.times:
-        return np.array(times_ms(a.times)) * 1e-3
+        times = np.array(times_ms(a.times)) * 1e-3
+        _check_times(a, ev, times, "--times")
+        return times
     fps = a.fps or 1000.0
     n = max(1, int(round(ev.duration_us * 1e-6 * fps)))
     return t0 + (np.arange(n) + 1) / fps
@@ -216,9 +258,8 @@ def run_refocus(a) -> int:
     ev = read_input(a)
     depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
     lf = _lightfield(a, ev)
-    for z in depths:
-        root = save_image(a.output, refocus(lf, z), _out_meta(a, ev, depth=z, views=len(lf.views)),
-                          f"_{z:g}" if len(depths) > 1 else "")
+    for z, root in _depths_and_paths(a, lf, depths):
+        save_image(root + ".png", refocus(lf, z), _out_meta(a, ev, depth=z, views=len(lf.views)))
         print(f"wrote {root}.png/.exr (refocused at {z:g})")
     return 0
 
@@ -233,11 +274,17 @@ def run_depth(a) -> int:
     if a.measure not in MEASURES:
         raise EventFieldError(f"--measure {a.measure!r}: allowed: {', '.join(MEASURES)}")
     lf = _lightfield(a, ev)
+    try:
+        for value, name in ((a.near, "--near"), (a.far, "--far")):
+            lf.check_depth(value, name)
+    except ConfigError as e:
+        raise EventFieldError(f"{a.file}: {e}") from None
     dm = depth_from_focus(lf, a.near, a.far, a.planes, a.measure)
     root = os.path.splitext(a.output)[0]
     meta = _out_meta(a, ev, near=a.near, far=a.far, planes=a.planes, measure=a.measure, views=len(lf.views))
+    picture = depth_png(dm.depth, dm.confidence, a.near, a.far, a.min_confidence)   # before either file
     write_exr(root + ".exr", {"depth": dm.depth, "confidence": dm.confidence}, meta)
-    write_png(root + ".png", depth_png(dm.depth, dm.confidence, a.near, a.far, a.min_confidence))
+    write_png(root + ".png", picture)
     confident = dm.confidence >= a.min_confidence
     median = float(np.median(dm.depth[confident])) if confident.any() else float("nan")
     print(f"wrote {root}.exr (depth, confidence) and {root}.png; median depth of confident pixels {median:.4g}")

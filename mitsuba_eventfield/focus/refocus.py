@@ -241,6 +241,8 @@ def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None,
     "raise" (ConfigError) or "ignore"."""
     check_lightfield(lf, "refocus")
     depth, alpha, motion = _check_refocus(depth, alpha, motion)
+    if alpha is None:
+        depth = lf.check_depth(depth, "refocus: depth")
     if on_motion not in ON_MOTION:
         raise ConfigError(f"refocus: on_motion = {on_motion!r}: allowed {', '.join(ON_MOTION)}")
     if on_motion != "ignore" and motion is None and alpha is None:

@@ -25,6 +25,10 @@ from ..events.stream import EventStream
 from ..optics.galvo import GalvoGeometry, scan_image_path_px
 from ..optics.scan import curve_from_dict, scan_period
 from ..validate import MAX_VIEWS, array, finite, instance, number
+
+MAX_SHIFT_VIEWS = 1.0      # the largest refocusing shift of a view, in view sizes (beyond: no overlap at all)
+MAX_DEPTH = 1e9            # scene units: farther is infinity (give math.inf), and overflowed the galvo's maps
+RECORDING_SLACK = 0.01     # of a scan period: how far a recording's event span may fall short of whole periods
 from . import reconstruct
 from .views import extract_views
 
@@ -116,6 +120,44 @@ class LightField:
             return out
         return np.stack([self.galvo.array_homography(0.5 * px, 0.5 * py, depth) for px, py in self.positions])
 
+    def depth_range(self) -> tuple:
+        """(nearest, farthest) depths this light field can be refocused at (scene units; inf: no far limit):
+        every view shifted by at most ``MAX_SHIFT_VIEWS`` times the view's size (beyond, no two views overlap:
+        a kaleidoscope refocused at 1e-5 asked for 1 TiB of padding), and a galvo's depths beyond its farther
+        mirror pivot (points at or before the mirrors are not seen through them; at 1e308 its homography
+        overflowed into a constant image). From the disparity model alpha = A + K / z on each axis."""
+        limit = MAX_SHIFT_VIEWS * max(self.shape)
+        near, far = 0.0, math.inf
+        for axis in (0, 1):
+            reach = float(np.abs(self.positions[:, axis]).max()) if len(self.positions) else 0.0
+            a, k = self.disparity.at_infinity[axis], self.disparity.per_inverse_depth[axis]
+            if reach == 0.0 or k == 0.0:
+                continue
+            bound = limit / reach                    # |A + K / z| <= bound, for 1 / z in (0, inf)
+            lo_inv, hi_inv = sorted(((-bound - a) / k, (bound - a) / k))
+            if hi_inv <= 0:
+                return math.inf, math.inf            # no depth keeps the shifts within the views
+            near = max(near, 1.0 / hi_inv)
+            if lo_inv > 0:
+                far = min(far, 1.0 / lo_inv)
+        if self.galvo is not None:
+            near = max(near, self.galvo.pivot_x, self.galvo.pivot_y)
+        return near, far
+
+    def check_depth(self, depth, name: str = "depth") -> float:
+        """``depth`` as a float if the light field can be refocused there (:meth:`depth_range`; finite depths at
+        most ``MAX_DEPTH``, infinity as ``math.inf``), else a ConfigError naming ``name`` and the range."""
+        z = number(depth, name, 0, lo_open=True, strict=True) if not (isinstance(depth, numbers.Real)
+                                                                      and depth == math.inf) else math.inf
+        near, far = self.depth_range()
+        # the ends belong to the range (at a galvo's pivot the views align exactly: a depth search may start there)
+        if not (near * (1 - 1e-9) <= z <= far) or (z != math.inf and z > MAX_DEPTH):
+            top = f"{far:.6g}" if far < MAX_DEPTH else f"{MAX_DEPTH:g} or inf"
+            what = "from its farther mirror pivot on, " if self.galvo is not None else ""
+            raise ConfigError(f"{name} = {depth!r}: this {self.kind} light field refocuses at depths {what}in "
+                              f"[{near:.6g}, {top}] scene units")
+        return z
+
     def subset(self, index) -> "LightField":
         return LightField(self.views[index], self.positions[index], self.times[index], self.disparity, self.kind,
                           dict(self.meta), self.galvo)
@@ -187,9 +229,16 @@ def galvo_period_starts(events, periods=None) -> dict:
     t0 = events.meta.get("t_start_us", 0) * 1e-6
     # whole periods only; the stream's duration is rounded to the microsecond, so two periods of 150 Hz
     # (13,333.3 us) are 13,333 us long and must still count as two
-    n_periods = int(math.floor((events.duration_us + 0.5) * 1e-6 / period + 1e-9))
+    # A camera recording has no recorded duration: its span runs from its first event to its last, short of
+    # the capture by the quiet ends, so a one-period capture counted no whole period. There a period may fall
+    # short by RECORDING_SLACK of itself
+    slack = 0.0 if "duration_us" in events.meta else RECORDING_SLACK
+    n_periods = int(math.floor((events.duration_us + 0.5) * 1e-6 / period + slack + 1e-9))
     if periods is not None and (isinstance(periods, (str, bytes)) or not np.iterable(periods)):
         raise ConfigError(f"periods = {periods!r}: expected a list of scan period indices")
+    if n_periods == 0:
+        raise ConfigError(f"the stream spans {events.duration_us / 1e3:g} ms, less than one whole scan period of "
+                          f"{period * 1e3:g} ms")
     wanted = range(n_periods) if periods is None else periods
     for p in wanted:
         if isinstance(p, bool) or not isinstance(p, numbers.Integral) or not 0 <= p < n_periods:

@@ -1,0 +1,147 @@
+"""The light-field commands on inputs a reviewer found unchecked (2026-11-26): depths a light field cannot be
+refocused at, streams without events, times outside the stream, outputs that were half written, calibrations
+that changed nothing or were edited by hand, and one-period camera recordings."""
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.cli.main import main as cli
+
+GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
+KALEIDO = os.path.join(ROOT, "scenes", "moving_grid", "kaleidoscope.xml")
+
+
+@pytest.fixture(scope="module")
+def captures(tmp_path_factory):
+    d = tmp_path_factory.mktemp("lf_inputs")
+    ev = ef.render_events(ef.load_scene(GALVO, width=48, height=36), 0.004, steps=16)
+    ef.write_events(str(d / "g.h5"), ev)
+    ef.write_events(str(d / "empty.h5"), ev.time_window(0, 0))
+    kal = ef.render_events(ef.load_scene(KALEIDO, views_px=60), 0.01, steps=4)
+    ef.write_events(str(d / "k.h5"), kal)
+    return d, ev, kal
+
+
+def _run(args, capsys):
+    try:
+        code = cli([str(a) for a in args])
+    except SystemExit as e:
+        code = e.code
+    return code, capsys.readouterr().err.strip()
+
+
+def test_each_light_field_knows_the_depths_it_refocuses_at(captures):
+    """A galvo light field refocuses beyond its farther mirror pivot; a kaleidoscope's where no view moves by
+    more than its own size (at 1e-5 it asked for 1 TiB of padding; a galvo at 1e308 made a constant image)."""
+    from mitsuba_eventfield.lightfield.model import MAX_DEPTH, from_events
+    _, ev, kal = captures
+    galvo = from_events(ev, views=8)
+    optics = ev.meta["optics"]
+    near, far = galvo.depth_range()
+    assert near == pytest.approx(optics["mirror_distance"] + optics["mirror_separation"]) and far == math.inf
+    kaleido = from_events(kal)
+    near, far = kaleido.depth_range()
+    assert np.abs(kaleido.shifts(near)).max() == pytest.approx(max(kaleido.shape), rel=1e-9)
+    assert np.abs(kaleido.shifts(1.01 * near)).max() < max(kaleido.shape)
+    for lf, bad in ((galvo, (0.1, 1e308, 2 * MAX_DEPTH)), (kaleido, (0.5 * near, 1e-300))):
+        for z in bad:
+            with pytest.raises(ef.ConfigError, match=r"refocus: depth = .*: this \w+ light field refocuses at"):
+                ef.refocus(lf, z)
+        assert np.isfinite(ef.refocus(lf, math.inf)).all()
+
+
+def test_refocus_checks_every_depth_and_output_before_writing(captures, capsys):
+    d, _, _ = captures
+    out = d / "multi"
+    out.mkdir()
+    (out / "a_0.6.png").mkdir()                            # the second depth's image cannot be written
+    cases = [(["--depth", "0.5,0.6", "-o", out / "a.png"], "a_0.6.png: is a directory"),
+             (["--depth", "0.5,0.5", "-o", out / "b.png"], "--depth 0.5,0.5: a depth is given twice"),
+             (["--depth", "0.5", "-o", out / "c.jpg"], "c.jpg: refocused image must be a .png file"),
+             (["--depth", "0.1", "-o", out / "d.png"], "--depth = 0.1: this galvo light field refocuses at depths "
+                                                       "from its farther mirror pivot on, in [0.11, ")]
+    for extra, message in cases:
+        code, err = _run(["refocus", d / "g.h5", "--views", "8", *extra], capsys)
+        assert code == 2 and message in err and len(err.splitlines()) == 1, err
+    assert os.listdir(out) == ["a_0.6.png"]
+
+
+def test_depth_range_and_empty_streams(captures, capsys):
+    d, _, _ = captures
+    for extra, message in ((["--near", "0.35", "--far", "1e300"], "--far = 1e+300: this galvo light field"),
+                           (["--near", "0.01", "--far", "0.1"], "--near = 0.01: this galvo light field")):
+        code, err = _run(["depth", d / "g.h5", "-o", d / "dm.png", "--views", "8", *extra], capsys)
+        assert code == 2 and message in err, err
+    for command in (["refocus", d / "empty.h5", "-o", d / "e.png", "--depth", "1"],
+                    ["depth", d / "empty.h5", "-o", d / "e.png", "--near", "0.5", "--far", "2"],
+                    ["reconstruct", d / "empty.h5", "-o", d / "erec"]):
+        code, err = _run(command, capsys)
+        assert code == 2 and err.endswith("empty.h5: no events: nothing to reconstruct"), err
+    assert not any(n.startswith(("dm.", "e.", "erec")) for n in os.listdir(d))
+
+
+def test_times_outside_the_stream(captures, capsys):
+    d, _, _ = captures
+    for command, message in ((["reconstruct", d / "g.h5", "-o", d / "r", "--times", "2,30"],
+                              "--times 30 ms: the stream covers 0 to 4 ms"),
+                             (["reconstruct", d / "g.h5", "-o", d / "r", "--times", "2,2"], "times must be increasing"),
+                             (["refocus", d / "k.h5", "-o", d / "k.png", "--depth", "1", "--time", "100"],
+                              "--time 100 ms: the stream covers 0 to 10 ms")):
+        code, err = _run(command, capsys)
+        assert code == 2 and message in err, err
+    assert not (d / "r").exists() and not (d / "k.png").exists()
+
+
+def test_calibrations_that_change_nothing_or_were_edited(captures, capsys, tmp_path):
+    from calibration.galvo import GalvoCalibration
+    d, ev, _ = captures
+    assert cli(["frame", KALEIDO, "-D", "views_px=60", "-o", str(tmp_path / "kf.exr")]) == 0
+    path = str(tmp_path / "k.json")
+    assert cli(["calibrate", "kaleidoscope", str(tmp_path / "kf.exr"), "-o", path]) == 0
+    assert "kaleidoscope" in json.load(open(path))
+    capsys.readouterr()
+    code, err = _run(["refocus", d / "k.h5", "-o", tmp_path / "k.png", "--depth", "0.7", "--calibration", path],
+                     capsys)
+    assert code == 2 and "a kaleidoscope calibration (view registration, flat field) is not applied" in err, err
+    curve = dict(ev.meta["optics"]["scan"])
+    fields = dict(curve=curve, t_first=0.0, tau0=0.0, phase_deg=0.0, scale_px_per_rad=(100.0, 100.0),
+                  optics={"scan": curve})
+    GalvoCalibration(**fields)
+    for edit, message in (({"tau0": "abc"}, "tau0 = 'abc': must be a number"),
+                          ({"scale_px_per_rad": (100.0, -1.0)}, "scale_px_per_rad = -1.0"),
+                          ({"curve": dict(curve, frequency=500.0)}, "its curve differs from the scan of the optics")):
+        with pytest.raises(ef.ConfigError, match=message):
+            GalvoCalibration(**{**fields, **edit})
+
+
+def test_a_one_period_recording_counts_one_period():
+    """A camera recording's span runs from its first event to its last: one 4 ms period captured read as
+    3.996 ms and counted no whole period ("allowed 0..-1")."""
+    from mitsuba_eventfield.lightfield.model import galvo_period_starts
+    optics = {"design": "galvo", "scan": {"curve": "circle", "frequency": 250.0, "amplitude": 0.5}}
+    t = np.arange(3, 4000, 7)
+    recording = ef.EventStream(np.zeros(len(t)), np.zeros(len(t)), t, np.ones(len(t)), 4, 4,
+                               {"optics": optics, "t_start_us": 3})
+    assert galvo_period_starts(recording) == {0: 3e-6}
+    short = recording.time_window(0, 3000)
+    with pytest.raises(ef.ConfigError, match=r"the stream spans 2\.996 ms, less than one whole scan period of 4 ms"):
+        galvo_period_starts(short)
+    rendered = ef.EventStream(np.zeros(len(t)), np.zeros(len(t)), t, np.ones(len(t)), 4, 4,
+                              {"optics": optics, "t_start_us": 0, "duration_us": 3996})
+    with pytest.raises(ef.ConfigError, match="less than one whole scan period"):     # a render's own duration
+        galvo_period_starts(rendered)
+
+
+def test_depth_calibration_needs_galvo_captures(captures, capsys):
+    d, _, _ = captures
+    code, err = _run(["calibrate", "depth", f"{d / 'k.h5'}:1", f"{d / 'g.h5'}:0.8", f"{d / 'g.h5'}:1.6", "-o",
+                      d / "cal.json"], capsys)
+    assert code == 2 and "k.h5: kaleidoscope optics: a depth calibration fits a galvo's scan scale" in err, err
+    code, err = _run(["calibrate", "depth", f"{d / 'g.h5'}:0", "-o", d / "cal.json"], capsys)
+    assert code == 2 and "depth = 0: must be a finite number > 0" in err, err
+    assert not (d / "cal.json").exists()
