@@ -23,8 +23,10 @@ cannot be caught: run ``eventfield device stop`` after one.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import math
 import signal
+import sys
 import threading
 import time
 
@@ -32,6 +34,29 @@ from mitsuba_eventfield.optics.envelope import AxisSine, EnvelopeError, axis_sin
 
 from .dialects import Dialect, dialect
 from .spec import GalvoSpec, SafetyError, finite_number
+
+
+MAX_READBACK_TOLERANCE = 0.05      # relative: a read-back further from the request than this is a mismatch
+OFF_BY_HAND = "switch the generator's outputs off by hand"
+
+
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """SIGINT and SIGTERM held back (pending, delivered at the end) in the main thread while the outputs are
+    being switched off; elsewhere, or where the platform has no signal masks, nothing changes."""
+    held = (signal.SIGINT, signal.SIGTERM)
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
 def sines_from_curve(curve) -> list:
@@ -55,6 +80,11 @@ class GalvoController:
             raise SafetyError(f"ramp_steps = {ramp_steps!r}: allowed range is 1 to 1000")
         if not 0 <= finite_number(ramp_time, "ramp_time") <= 60:
             raise SafetyError(f"ramp_time = {ramp_time!r}: allowed range is 0 to 60 s")
+        # how far a read-back may differ from what was sent: with inf, an 18 Vpp preset the link never changed
+        # passed the check and was switched on
+        if not 0 < finite_number(readback_tolerance, "readback_tolerance") <= MAX_READBACK_TOLERANCE:
+            raise SafetyError(f"readback_tolerance = {readback_tolerance!r}: allowed range is (0, "
+                              f"{MAX_READBACK_TOLERANCE:g}]")
         self.ramp_steps, self.ramp_time, self.tol = ramp_steps, ramp_time, readback_tolerance
         self.sines = None
         self.running = False           # True from the first "output on" until the outputs are confirmed off
@@ -63,7 +93,7 @@ class GalvoController:
         self._closed = False
         self._previous_sigterm = None
         if transport is not None:      # planning-only controllers (no transport) never drive outputs
-            atexit.register(self.close)
+            atexit.register(self._close_at_exit)
 
     def __enter__(self):
         return self
@@ -77,10 +107,33 @@ class GalvoController:
         sines = sines_from_curve(curve)
         for s, axis in zip(sines, "xy"):
             self.spec.check_axis(axis, s.frequency, s.amplitude_deg, s.offset_deg, s.phase_deg)
+        self._check_commands(sines)
         return sines
 
+    def _check_commands(self, sines) -> None:
+        """Every setting command ``start`` will send, as the dialect formats it, through the guard's own
+        channel check on a scratch state: a value checked exactly and sent rounded to ten digits passed the
+        plan at the derated limit and was refused by the guard at the last ramp step, outputs on."""
+        state = {1: {}, 2: {}}
+        for s in sines:
+            cmds = list(self._configure(s, 1.0 / self.ramp_steps))
+            if not s.is_dc:
+                cmds += [c for k in range(2, self.ramp_steps + 1)
+                         for c in self.d.amplitude(s.channel, self._vpp(s, k / self.ramp_steps))]
+            for cmd in cmds:
+                for ch, key, value in self.d.decode(cmd):
+                    if ch is not None and key not in ("unit", "high_z", "output"):
+                        state[ch][key] = value
+                        self._check_state(ch, state[ch], need_all=False)
+
     def _vpp(self, s: AxisSine, fraction: float = 1.0) -> float:
-        return 2.0 * s.amplitude_deg * self.spec.volts_per_deg * fraction
+        """Volts peak to peak, rounded down to 9 significant digits: the dialects send 10, which must never
+        round a value at the limit up past it."""
+        v = 2.0 * float(s.amplitude_deg) * self.spec.volts_per_deg * fraction
+        if v <= 0.0:
+            return v
+        unit = 10.0 ** (math.floor(math.log10(v)) - 8)
+        return math.floor(v / unit) * unit
 
     # ------------------------------------------------------------------ the guard: every byte passes here
     def _send(self, cmds):
@@ -157,6 +210,10 @@ class GalvoController:
         first = 1.0 / self.ramp_steps
         try:
             self.outputs_off()                            # first bytes: whatever the generator held stays dark
+            # outputs confirmed off: what an earlier scan left set is no longer what the guard checks a new
+            # setting against (a second start refused a valid scan, its first bytes sent, the old Vpp at the new
+            # frequency); the whole new state is read back before any output goes on
+            self._commanded = {1: {}, 2: {}}
             self._send(self.d.clear())
             for s in sines:
                 self._send(self.d.high_z(s.channel))
@@ -177,9 +234,14 @@ class GalvoController:
                         self._send(self.d.amplitude(s.channel, self._vpp(s, k / self.ramp_steps)))
                 self._check_errors(f"ramp step {k} of {self.ramp_steps}")
             return self._verify(1.0, outputs_on=True)
-        except BaseException:
-            # outputs off whatever went wrong (refusal, timeout, Ctrl-C); a dead link may refuse this too
-            self._switch_off_quietly()
+        except BaseException as e:
+            # outputs off whatever went wrong (refusal, timeout, Ctrl-C); a dead link may refuse this too, and
+            # then the error says so instead of "outputs off"
+            confirmed = self._switch_off_quietly()
+            if not confirmed:
+                raise SafetyError(f"{_one_line(e)}; the outputs could not be confirmed off: {OFF_BY_HAND}") from None
+            if isinstance(e, SafetyError):
+                raise SafetyError(f"{e} (outputs off)") from None
             raise
 
     def _verify(self, fraction: float, outputs_on: bool) -> dict:
@@ -188,13 +250,13 @@ class GalvoController:
         report["errors"] = errors
         problems = [f"{c}: {m}" for c, m in errors] + report["mismatches"]
         if problems:
-            raise SafetyError("the generator did not confirm the settings (outputs off): " + "; ".join(problems))
+            raise SafetyError("the generator did not confirm the settings: " + "; ".join(problems))
         return report
 
     def _check_errors(self, when: str):
         errors = self.errors()
         if errors:
-            raise SafetyError(f"the generator reported errors at {when} (outputs off): "
+            raise SafetyError(f"the generator reported errors at {when}: "
                               + "; ".join(f"{c}: {m}" for c, m in errors))
 
     def stop(self, sleep=time.sleep) -> None:
@@ -211,35 +273,49 @@ class GalvoController:
             self.outputs_off()
             self._release_sigterm()
 
-    def _switch_off_quietly(self):
+    def _switch_off_quietly(self) -> bool:
         """Outputs off on an error path, whatever the link does: each channel on its own, each tried twice (a
-        flaky link may drop one command), then confirmed by ``outputs_off`` where the link still answers."""
+        flaky link may drop one command), then confirmed by ``outputs_off`` where the link still answers.
+        Ctrl-C and SIGTERM wait until it is done (a second Ctrl-C during the switch-off left both outputs on).
+        Returns whether the outputs were confirmed off; if not, ``running`` stays set so ``close`` tries again."""
         self._armed = False
-        for ch in (1, 2):
-            for _ in range(2):
-                try:
-                    self._send(self.d.output(ch, False))
-                    break
-                except Exception:  # noqa: BLE001
-                    continue
-        try:
-            self.outputs_off()
-        except Exception:  # noqa: BLE001  (a dead link: nothing more we can send)
-            pass
-        self.running = False
+        with _signals_held():
+            for ch in (1, 2):
+                for _ in range(2):
+                    try:
+                        self._send(self.d.output(ch, False))
+                        break
+                    except Exception:  # noqa: BLE001
+                        continue
+            try:
+                self.outputs_off()
+            except Exception:  # noqa: BLE001  (a dead link, or an output still reported on)
+                return False
         self._release_sigterm()
+        return True
 
     def close(self) -> None:
-        """Outputs off (if this controller may have switched them on), then close the connection. Idempotent."""
+        """Outputs off (if this controller may have switched them on), then close the connection. Idempotent.
+        Raises SafetyError when the outputs could not be confirmed off (the connection is closed all the same)."""
         if self._closed or self.t is None:
             return
+        confirmed = True
         try:
             if self.running or self._armed:
-                self._switch_off_quietly()
+                confirmed = self._switch_off_quietly()
         finally:
             self._closed = True
-            atexit.unregister(self.close)
+            atexit.unregister(self._close_at_exit)
+            self._release_sigterm()         # nothing more can be sent: SIGTERM is the program's again
             self.t.close()
+        if not confirmed:
+            raise SafetyError(f"closing the connection: the outputs could not be confirmed off: {OFF_BY_HAND}")
+
+    def _close_at_exit(self) -> None:
+        try:
+            self.close()
+        except SafetyError as e:        # at exit nobody catches it: one line on stderr, not a traceback
+            print(f"eventfield: error: {e}", file=sys.stderr)
 
     # ------------------------------------------------------------------ SIGTERM while scanning
     def _hold_sigterm(self):

@@ -9,19 +9,33 @@ from __future__ import annotations
 import numpy as np
 
 from .controller import GalvoController
-from .spec import GalvoSpec, SafetyError
+from .spec import GalvoSpec, SafetyError, finite_number
+
+MAX_RATE = 10e6                # samples per second and channel: beyond any analog-output card
+MAX_SAMPLES = 10_000_000       # per channel, one period: a 1e-4 Hz circle asked for 7.45 GiB
 
 
 class DAQmxOutput:
     def __init__(self, device: str = "Dev1", channels=("ao0", "ao1"), spec: GalvoSpec | None = None,
                  rate: float = 100_000.0):
-        self.device, self.channels, self.spec, self.rate = device, tuple(channels), spec or GalvoSpec(), float(rate)
+        if (isinstance(channels, (str, bytes)) or not hasattr(channels, "__len__") or len(channels) != 2
+                or not all(isinstance(c, str) and c for c in channels)):
+            # a string "ao0" was taken as the three channels a, o, 0
+            raise SafetyError(f"channels = {channels!r}: expected two channel names (x, y), e.g. ('ao0', 'ao1')")
+        rate = finite_number(rate, "rate")
+        if not 0 < rate <= MAX_RATE:
+            raise SafetyError(f"rate = {rate:g}: allowed range is (0, {MAX_RATE:g}] samples per second")
+        self.device, self.channels, self.spec, self.rate = device, tuple(channels), spec or GalvoSpec(), rate
         self.task = None
 
     def waveform(self, curve) -> np.ndarray:
         """(2, N) volts for one scan period, after the envelope check (raises SafetyError, touches nothing)."""
         GalvoController(None, "keysight", self.spec).plan(curve)
         period = curve.period
+        if period * self.rate > MAX_SAMPLES:
+            raise SafetyError(f"one {period:g} s scan period at {self.rate:g} samples/s needs "
+                              f"{period * self.rate:.3g} samples a channel: at most {MAX_SAMPLES:,} (a faster scan "
+                              "or a lower rate)")
         n = int(round(period * self.rate))
         if abs(period * self.rate - n) > 1e-6 * max(n, 1):
             # the card regenerates the buffer: a partial period would make the mirror jump at every wrap
@@ -37,6 +51,8 @@ class DAQmxOutput:
         return volts
 
     def start(self, curve) -> None:
+        if self.task is not None:      # a second task on the same card would leave the first one running
+            raise SafetyError("the card is already playing a scan: stop() it first")
         volts = self.waveform(curve)
         try:
             import nidaqmx

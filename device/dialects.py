@@ -15,10 +15,21 @@ import re
 from .spec import SafetyError
 
 
+def _on_off(text: str) -> bool:
+    """An output state as the instrument reports it: exactly on or off, else ValueError (counted as on: a stale
+    or garbled answer read as "off" let a dropped OFF pass as confirmed)."""
+    word = text.strip().upper()
+    if word in ("1", "ON"):
+        return True
+    if word in ("0", "OFF"):
+        return False
+    raise ValueError(f"output state {text!r} is neither on nor off")
+
+
 def _g(v: float) -> str:
     """A number as SCPI NR2/NR3 text, always with a decimal point or exponent ("0.0", "250.0", "1e+06"):
     valid for every instrument, and pyvisa-sim's parser rejects a bare "0"."""
-    s = f"{v:.10g}"
+    s = f"{float(v):.10g}"         # (a Fraction or Decimal has no "g" format of its own)
     return s if ("." in s or "e" in s or "n" in s) else s + ".0"
 
 
@@ -96,7 +107,7 @@ class _SourceSubsystem(Dialect):
                 "frequency": (f"{src}:FREQ?", float), "vpp": (f"{src}:VOLT?", float),
                 "offset": (f"{src}:VOLT:OFFS?", float), "phase": (f"{src}:PHAS?", float),
                 "high_z": (f"{out}:LOAD?", _high_z),
-                "output": (f"{out}?", lambda s: s.strip() in ("1", "ON"))}
+                "output": (f"{out}?", _on_off)}
 
     def error_query(self):
         return f"{self.prefix}SYST:ERR?"
@@ -176,7 +187,7 @@ class SiglentSDG(Dialect):
                 "frequency": (q, lambda s: _siglent_field(s, "FRQ")), "vpp": (q, lambda s: _siglent_field(s, "AMP")),
                 "offset": (q, lambda s: _siglent_field(s, "OFST")), "phase": (q, lambda s: _siglent_field(s, "PHSE")),
                 "high_z": (o, _siglent_high_z),
-                "output": (o, lambda s: " ON" in f" {s.split(' ', 1)[-1].split(',')[0]}")}
+                "output": (o, lambda s: _on_off(s.split(" ", 1)[-1].split(",")[0]))}
 
     def decode(self, cmd):
         if cmd in ("*CLS", "MODE PHASE-LOCKED"):
