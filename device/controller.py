@@ -130,7 +130,7 @@ class GalvoController:
         """Volts peak to peak, rounded down to 9 significant digits: the dialects send 10, which must never
         round a value at the limit up past it."""
         v = 2.0 * float(s.amplitude_deg) * self.spec.volts_per_deg * fraction
-        if v <= 0.0:
+        if not v > 1e-290:           # zero, or so small that its digit unit underflows (5e-324 deg: hypothesis)
             return v
         unit = 10.0 ** (math.floor(math.log10(v)) - 8)
         return math.floor(v / unit) * unit
