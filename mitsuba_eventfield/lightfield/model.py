@@ -123,8 +123,8 @@ class LightField:
     def depth_range(self) -> tuple:
         """(nearest, farthest) depths this light field can be refocused at (scene units; inf: no far limit):
         every view shifted by at most ``MAX_SHIFT_VIEWS`` times the view's size (beyond, no two views overlap:
-        a kaleidoscope refocused at 1e-5 asked for 1 TiB of padding), and a galvo's depths beyond its farther
-        mirror pivot (points at or before the mirrors are not seen through them; at 1e308 its homography
+        a kaleidoscope refocused at 1e-5 asked for 1 TiB of padding), and a galvo's depths from its farther
+        mirror pivot on (points before the mirrors are not seen through them; at 1e308 its homography
         overflowed into a constant image). From the disparity model alpha = A + K / z on each axis."""
         limit = MAX_SHIFT_VIEWS * max(self.shape)
         near, far = 0.0, math.inf

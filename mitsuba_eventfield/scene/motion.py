@@ -19,10 +19,10 @@ File ``<scene>.motion.toml`` (found automatically next to ``<scene>.xml``)::
       { t = 0.05, translate = [0, 0, -1] },
     ]
 
-Units: seconds, scene units, degrees, revolutions per minute (each number at most 1e9 in magnitude). Several kinds may be combined on one object; the
-pose at time t maps the object's t=0 world placement to its placement at t as
-``Translate(velocity * t) @ Spin(t) @ Keyframes(t)`` (keyframes innermost, so a spinning object that also
-moves spins about its own moving axis).
+Units: seconds, scene units, degrees, revolutions per minute (each number at most 1e9 in magnitude). Several
+kinds may be combined on one object; the pose at time t maps the object's t=0 world placement to its placement
+at t as ``Translate(velocity * t) @ Spin(t) @ Keyframes(t)`` (keyframes innermost, so a spinning object that
+also moves spins about its own moving axis).
 """
 from __future__ import annotations
 

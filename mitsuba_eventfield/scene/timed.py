@@ -50,7 +50,7 @@ class TimedScene:
         self.scene = scene
         self.motion = motion
         self.path = path
-        self.defines: dict = {}           # the XML's <default> values given at load (-D), recorded and compared on resume
+        self.defines: dict = {}   # the XML's <default> values given at load (-D): recorded, compared on resume
         self.instanced = list(instanced)   # moving shapes loaded as instances (scene/instancing.py)
         self.params = mi.traverse(scene)
         self.time = 0.0
