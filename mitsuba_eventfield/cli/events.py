@@ -182,6 +182,8 @@ def run_render(a) -> int:
     from ..scene import load_scene
     from ..simulate.render import render_events
     set_variant(a.variant, a.color)
+    if a.no_motion and a.motion:      # the file was ignored without a word, even when it did not exist
+        raise EventFieldError(f"--motion {a.motion} and --no-motion: give one")
     motion = None if a.no_motion else (a.motion or "auto")
     scene_defines = defines(a)
     extra = _auto_plan(a, motion, scene_defines) if a.auto or a.timing_accuracy else None

@@ -51,3 +51,6 @@ def test_contradicting_options_are_one_line(tmp_path, capsys):
                 "-o", str(tmp_path / "e.h5"), "--preview", str(tmp_path / "p.jpg"), "--quiet"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.endswith("p.jpg: preview must be a .png file") and os.listdir(tmp_path) == []
+    code = cli(["render", DEMO, "--motion", "nope.toml", "--no-motion", "-o", str(tmp_path / "e.h5"), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.endswith("--motion nope.toml and --no-motion: give one") and not os.listdir(tmp_path)
