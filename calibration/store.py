@@ -81,13 +81,8 @@ def save_calibration(path: str, optics: dict | None = None, **parts) -> str:
 
 
 def load_calibration_dict(path: str) -> dict:
-    try:
-        with open(path) as f:
-            data = json.load(f)
-    except FileNotFoundError:
-        raise EventFieldError(f"{path}: calibration file not found") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise EventFieldError(f"{path}: not a calibration file (invalid JSON: {e})") from None
+    from mitsuba_eventfield.validate import json_file
+    data = json_file(path, "calibration file")
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise EventFieldError(f"{path}: not a version {VERSION} {FORMAT!r} file")
     if data.get("version") == 1:

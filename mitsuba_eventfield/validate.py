@@ -93,6 +93,19 @@ def array(value, name: str, ndim, min_len: int = 1, error=ConfigError):
     return a
 
 
+def json_file(path: str, what: str):
+    """The JSON in the file ``path`` (a calibration, a set-up's optics, ...): a missing file or invalid JSON is
+    one EventFieldError naming the file and ``what`` it should be."""
+    import json
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except FileNotFoundError:
+        raise EventFieldError(f"{path}: {what} not found") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise EventFieldError(f"{path}: not a {what} (invalid JSON: {e})") from None
+
+
 def describe_range(lo, hi, lo_open=False) -> str:
     left = "(" if lo_open else "["
     return f"{left}{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"

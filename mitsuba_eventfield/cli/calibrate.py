@@ -8,7 +8,10 @@ import numpy as np
 from ..errors import EventFieldError
 from ..validate import MAX_VIEWS, number_list
 from .args import num
-from .lightfield import galvo_frames, luminance_channel, start_log
+from .lightfield import galvo_frames, luminance_channel, nominal_optics, start_log, with_contrast
+
+OPTICS_HELP = ("JSON of the set-up's nominal galvo optics (design, fov_x_deg, mirror_distance, mirror_separation, "
+               "scan), for a camera recording that carries none")
 
 
 def add_parsers(sub) -> None:
@@ -21,11 +24,15 @@ def add_parsers(sub) -> None:
                     help="frames reconstructed over the scan period (default 24)")
     cg.add_argument("--period", type=num(0, integer=True), default=0, help="scan period index (default 0)")
     cg.add_argument("--start-frame", help="EXR of the linear frame at the stream start (else: galvo solver)")
+    cg.add_argument("--optics", help=OPTICS_HELP)
+    cg.add_argument("--contrast", help="contrast threshold ON[,OFF] of a recording that carries none (e.g. 0.2)")
     cg.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
     cd = csub.add_parser("depth", help="curve size against known depths from LED captures")
     cd.add_argument("captures", nargs="+", metavar="FILE:DEPTH", help="event file of the LED at DEPTH (scene units)")
     cd.add_argument("--views", type=num(5, MAX_VIEWS, integer=True), default=24,
                     help="instants of the scan period the LED is tracked at (default 24)")
+    cd.add_argument("--optics", help=OPTICS_HELP)
+    cd.add_argument("--contrast", help="contrast threshold ON[,OFF] of recordings that carry none (e.g. 0.2)")
     cd.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
     ck = csub.add_parser("kaleidoscope", help="tile seams, flips, view registration, flat-field from frames")
     ck.add_argument("frame", help="EXR (linear) of a textured target at the focus distance")
@@ -33,10 +40,22 @@ def add_parsers(sub) -> None:
     ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
 
 
+def _capture(path: str, a):
+    """A capture's events, with the nominal optics of ``--optics`` where it carries none (a camera recording:
+    refused in one line without them) and, for the galvo fit, ``--contrast``."""
+    from ..events.io import read_events
+    ev = read_events(path)
+    if not ev.meta.get("optics"):
+        if not a.optics:
+            raise EventFieldError(f"{path}: the recording carries no optics: pass --optics FILE.json, the set-up's "
+                                  "nominal galvo optics (fov_x_deg, mirror_distance, mirror_separation, scan)")
+        ev.meta["optics"] = nominal_optics(a.optics)
+    return with_contrast(ev, a.contrast, path)
+
+
 def _galvo(a) -> None:
     from .. import calibration as cal
-    from ..events.io import read_events
-    ev = read_events(a.file)
+    ev = _capture(a.file, a)
     patches = []
     for p in a.patch:
         xy = number_list(p, "--patch", lo=0)
@@ -55,7 +74,6 @@ def _galvo(a) -> None:
 
 def _depth(a) -> None:
     from .. import calibration as cal
-    from ..events.io import read_events
     depths, scales, scales_y, records = [], [], [], {}
     for item in a.captures:
         path, _, depth = item.rpartition(":")
@@ -65,7 +83,7 @@ def _depth(a) -> None:
             raise EventFieldError(f"{item!r}: expected FILE:DEPTH") from None
         if not (math.isfinite(depth) and depth > 0):
             raise EventFieldError(f"{item!r}: depth = {depth:g}: must be a finite number > 0 (scene units)")
-        ev = read_events(path)
+        ev = _capture(path, a)
         records[path] = cal.optics_record(ev.meta.get("optics"), ev.width, ev.height, where=path)
         if records[path]["design"] != "galvo":      # (a kaleidoscope capture failed on a missing galvo field)
             raise EventFieldError(f"{path}: {records[path]['design']} optics: a depth calibration fits a galvo's "

@@ -63,16 +63,47 @@ def read_input(a):
     ev = read_events(a.file)
     if not len(ev):        # refocused, a flat image; as a depth map, no confident pixel: both written as done
         raise EventFieldError(f"{a.file}: no events: nothing to reconstruct")
-    if getattr(a, "contrast", None):
-        c = number_list(a.contrast, "--contrast", lo=0, lo_open=True)
+    return with_contrast(ev, getattr(a, "contrast", None), a.file)
+
+
+def with_contrast(ev, contrast, where: str):
+    """``ev`` with ``--contrast`` (when given) as its contrast thresholds; a stream that has none (a camera
+    recording) and no ``--contrast`` is refused in one line."""
+    if contrast:
+        c = number_list(contrast, "--contrast", lo=0, lo_open=True)
         if len(c) not in (1, 2):
-            raise EventFieldError(f"--contrast {a.contrast!r}: expected ON or ON,OFF")
+            raise EventFieldError(f"--contrast {contrast!r}: expected ON or ON,OFF")
         ev.meta["pixel_model"] = dict(ev.meta.get("pixel_model") or {}, threshold_on=c[0], threshold_off=c[-1])
     pm = ev.meta.get("pixel_model") or {}
     if pm.get("threshold_on") is None or pm.get("threshold_off") is None:
-        raise EventFieldError(f"{a.file}: the recording carries no contrast thresholds (pixel-model metadata): pass "
+        raise EventFieldError(f"{where}: the recording carries no contrast thresholds (pixel-model metadata): pass "
                               "--contrast ON[,OFF], log intensity per event (e.g. 0.2)")
     return ev
+
+
+def nominal_optics(path: str) -> dict:
+    """A galvo set-up's nominal optics from a JSON file (``--optics``), for a camera recording that carries
+    none: the fields a render records in ``meta["optics"]`` (design "galvo", fov_x_deg, mirror_distance,
+    mirror_separation, scan), each checked. Calibrating a recording needs them to start from; the calibration
+    then records them for the light-field commands."""
+    from ..optics.scan import curve_from_dict
+    from ..validate import json_file, positive
+    optics = json_file(path, "optics file")
+    if not isinstance(optics, dict) or optics.get("design") != "galvo":
+        raise EventFieldError(f"{path}: expected a JSON object with design \"galvo\" and "
+                              f"{', '.join(LIGHTFIELD_FIELDS['galvo'])}")
+    missing = [k for k in LIGHTFIELD_FIELDS["galvo"] if k not in optics]
+    if missing:
+        raise EventFieldError(f"{path}: galvo optics without {', '.join(missing)}")
+    try:
+        for key in ("fov_x_deg", "mirror_distance", "mirror_separation"):
+            optics[key] = positive(optics[key], f"{path}: {key}")
+        if not isinstance(optics["scan"], dict):
+            raise EventFieldError(f"{path}: scan = {optics['scan']!r}: expected a scan curve record")
+        curve_from_dict(optics["scan"], where=f"{path}: scan")
+    except ConfigError as e:
+        raise EventFieldError(str(e)) from None
+    return optics
 
 
 def luminance_channel(path):

@@ -82,3 +82,34 @@ def rendered_scales(events, depth):
     a = math.radians(events.meta["optics"]["scan"]["amplitude"])
     theta = np.linspace(0, 2 * np.pi, 721)
     return tuple(np.ptp(g.image_shift(a * np.cos(theta), a * np.sin(theta), depth), axis=0) / 2 / a)
+
+
+def test_depth_calibration_of_camera_recordings_from_nominal_optics(tmp_path, capsys):
+    """Camera recordings carry no optics and no thresholds: ``calibrate depth`` refused them, so the documented
+    workflow (calibrate the set-up, then refocus its recordings with that calibration) could not start. With
+    the set-up's nominal optics (``--optics``) and ``--contrast`` the LED captures written as Prophesee RAW give
+    the pivots of the same captures as rendered files."""
+    import json
+    pytest.importorskip("faery")
+    optics, h5, raw = None, [], []
+    for z in DEPTHS:
+        scene = ef.load_scene(LED, width=96, height=72, depth=z, amplitude=2.0, mirror_distance=PIVOT)
+        ev = ef.render_events(scene, 1 / FREQ, steps=32)
+        optics = ev.meta["optics"]
+        ef.write_events(str(tmp_path / f"led_{z}.h5"), ev)
+        ef.write_events(str(tmp_path / f"led_{z}.raw"), ev)
+        h5.append(f"{tmp_path / f'led_{z}.h5'}:{z}")
+        raw.append(f"{tmp_path / f'led_{z}.raw'}:{z}")
+    nominal = str(tmp_path / "optics.json")
+    json.dump({k: optics[k] for k in ("design", "fov_x_deg", "mirror_distance", "mirror_separation", "scan")},
+              open(nominal, "w"))
+    assert cli.main(["calibrate", "depth", *raw, "-o", str(tmp_path / "x.json")]) == 2
+    assert "the recording carries no optics: pass --optics FILE.json" in capsys.readouterr().err
+    assert cli.main(["calibrate", "depth", *h5, "-o", str(tmp_path / "from_h5.json")]) == 0
+    assert cli.main(["calibrate", "depth", *raw, "--optics", nominal, "--contrast", "0.2",
+                     "-o", str(tmp_path / "from_raw.json")]) == 0, capsys.readouterr().err
+    a, b = (load_calibration(str(tmp_path / n))["depth"] for n in ("from_h5.json", "from_raw.json"))
+    rendered = GalvoGeometry.from_optics(a.optics, 96, 72)
+    ga, gb = a.geometry(rendered), b.geometry(rendered)
+    assert (gb.pivot_x, gb.pivot_y) == pytest.approx((ga.pivot_x, ga.pivot_y), rel=0.02)
+    assert gb.pivot_x == pytest.approx(PIVOT, rel=PIVOT_TOL)
