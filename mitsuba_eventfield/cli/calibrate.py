@@ -41,8 +41,8 @@ def add_parsers(sub) -> None:
 
 
 def _capture(path: str, a):
-    """A capture's events, with the nominal optics of ``--optics`` where it carries none (a camera recording:
-    refused in one line without them) and, for the galvo fit, ``--contrast``."""
+    """A capture's events, with the nominal optics of ``--optics`` and the thresholds of ``--contrast`` where it
+    carries none (a camera recording: refused in one line without them)."""
     from ..events.io import read_events
     ev = read_events(path)
     if not ev.meta.get("optics"):
