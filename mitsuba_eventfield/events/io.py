@@ -34,7 +34,7 @@ from .aedat import read_aedat4, write_aedat4  # noqa: F401  (re-exported)
 from .disk import DISK_MARGIN, HEADER_BYTES, WRITE_CHUNK, BadFile, GuardedFile, check_space, disk_errors  # noqa: F401
 from .hdf5 import H5_BYTES_PER_EVENT, H5_GZIP_LEVEL, H5EventWriter, _json, read_h5  # noqa: F401
 from .recordings import EVT_VERSIONS, RECORDING_FORMATS, read_aedat4_faery, read_recording, write_recording
-from .stream import EventStream
+from .stream import EventStream, first_out_of_order
 from .streaming import AEDAT4_BYTES_PER_EVENT, BYTES_PER_EVENT, NPZ_BYTES_PER_EVENT, open_writer  # noqa: F401
 
 FORMATS = {".h5": "h5", ".hdf5": "h5", ".npz": "npz", ".txt": "txt", ".aedat4": "aedat4", **RECORDING_FORMATS}
@@ -169,9 +169,8 @@ def read_events(path: str, fmt: str | None = None) -> EventStream:
 def _check_time_order(stream) -> None:
     """Files are read as they are, and everything downstream (time windows, the index, light fields) takes the
     events in time order: an unsorted foreign file's window [1000, 2500) held its event at 3000."""
-    t = stream.t
-    if len(t) > 1 and np.less(t[1:], t[:-1]).any():
-        i = int(np.flatnonzero(t[1:] < t[:-1])[0]) + 1
+    t, i = stream.t, first_out_of_order(stream.t)
+    if i is not None:
         raise ConfigError(f"events are not in time order: event {i} at t = {int(t[i])} us follows "
                           f"{int(t[i - 1])} us (sort the file by t)")
 

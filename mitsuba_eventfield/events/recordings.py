@@ -20,7 +20,7 @@ import numpy as np
 from ..atomic import atomic_output
 from ..errors import EventFieldError
 from .disk import HEADER_BYTES, BadFile, check_space, disk_errors
-from .stream import EventStream
+from .stream import EventStream, first_out_of_order
 
 RECORDING_FORMATS = {".raw": "raw", ".evt": "raw", ".dat": "dat"}
 EVT_VERSIONS = ("evt2", "evt2.1", "evt3")
@@ -178,7 +178,7 @@ def write_recording(path: str, events: EventStream, fmt: str) -> None:
     if not (0 < events.width <= side and 0 < events.height <= side):
         raise EventFieldError(f"{path}: a {events.width}x{events.height} sensor: {VERSION_NAMES[version]} holds "
                               f"sensors of 1 to {side} pixels a side")
-    if len(events) > 1 and np.less(events.t[1:], events.t[:-1]).any():
+    if first_out_of_order(events.t) is not None:
         raise EventFieldError(f"{path}: events must be in time order to be written as {VERSION_NAMES[version]}")
     relative = len(events) > 0 and int(events.t.max()) >= 1 << TIME_BITS[version]
     a = np.zeros(len(events), faery.EVENTS_DTYPE)

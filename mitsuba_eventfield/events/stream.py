@@ -47,6 +47,16 @@ def _column(values, name: str, dtype, where: str = "event stream") -> np.ndarray
     return np.ascontiguousarray(a, dtype=dtype)
 
 
+def first_out_of_order(t) -> int | None:
+    """The index of the first timestamp earlier than the one before it, or None when ``t`` is in time order: the
+    one order check of streams, writers and readers (a comparison of neighbours, one byte an event: np.diff's
+    int64 array cost 3.5x as much)."""
+    if len(t) < 2:
+        return None
+    back = np.less(t[1:], t[:-1])
+    return int(np.argmax(back)) + 1 if back.any() else None
+
+
 def chunk_columns(where: str, width: int, height: int, x, y, t, p) -> tuple:
     """A chunk handed to an event writer, checked as an :class:`EventStream` checks its columns (and their
     one length, and the sensor's bounds), before any of it is written: an append of x = 100 to a 4x4 file, or
@@ -105,7 +115,7 @@ class EventStream:
 
     @property
     def is_sorted(self) -> bool:
-        return bool(np.all(np.diff(self.t) >= 0))
+        return first_out_of_order(self.t) is None
 
     def time_window(self, t0_us=None, t1_us=None) -> "EventStream":
         """Events with t0 <= t < t1 (microseconds; None = open end). Requires sorted timestamps."""

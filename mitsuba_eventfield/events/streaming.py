@@ -22,7 +22,7 @@ from ..atomic import check_writable, remove_stale_partials, temporary_name
 from ..errors import EventFieldError
 from .disk import HEADER_BYTES, check_space, disk_errors
 from .hdf5 import H5EventWriter, _json
-from .stream import chunk_columns
+from .stream import chunk_columns, first_out_of_order
 
 NPZ_BYTES_PER_EVENT = 22       # x, y, timestamp (float64), polarity, t, p
 AEDAT4_BYTES_PER_EVENT = 16    # dv::Event: int64 t, int16 x, y, uint8 p, padded
@@ -52,7 +52,7 @@ class _PartialFile:
                                   "appended")
         x, y, t, p = chunk_columns(f"{self.path}: append", self.width, self.height, x, y, t, p)
         if len(t):
-            if (self.last_t is not None and t[0] < self.last_t) or np.less(t[1:], t[:-1]).any():
+            if (self.last_t is not None and t[0] < self.last_t) or first_out_of_order(t) is not None:
                 raise ValueError(f"{self.path}: events must be appended in time order")
             self.last_t = int(t[-1])
         return x, y, t, p
