@@ -139,6 +139,13 @@ def available_memory() -> int:
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
+def usable_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the system has one: a pinned process or a
+    container's CPU set is fewer than the host's cores)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, cores or 1)
+
+
 def check_allocation(nbytes: float, what: str, fraction: float = 0.5) -> None:
     """Refuse an array of ``nbytes`` when it would take more than ``fraction`` of the available memory."""
     avail = available_memory()

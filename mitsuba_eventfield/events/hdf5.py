@@ -13,7 +13,7 @@ import numpy as np
 
 from ..atomic import check_writable, remove_stale_partials, temporary_name
 from ..errors import ConfigError, EventFieldError
-from ..validate import number
+from ..validate import number, usable_cores
 from .disk import DISK_MARGIN, HEADER_BYTES, GuardedFile, _disk_full, _free_bytes, _no_space, check_space
 from .stream import MAX_SENSOR, EventStream, chunk_columns, first_out_of_order
 
@@ -45,8 +45,7 @@ def default_compression_threads() -> int:
     if chosen:
         return int(number(chosen, f"environment variable {WRITER_THREADS_ENV}", 0, MAX_COMPRESSION_THREADS,
                           integer=True))
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()   # not the
-    return max(1, min(MAX_COMPRESSION_THREADS, cores or 1))     # host's cores where the process is pinned to fewer
+    return min(MAX_COMPRESSION_THREADS, usable_cores())
 
 
 def _shuffled(values: np.ndarray) -> np.ndarray:

@@ -54,3 +54,39 @@ def test_default_reservation_follows_available_memory(monkeypatch):
     assert buffer_mod.reserve_events() == 10**9          # half of it, 13 bytes an event
     monkeypatch.setattr(buffer_mod, "available_memory", lambda: 1000)
     assert buffer_mod.reserve_events() == buffer_mod.MIN_RESERVE
+
+
+@pytest.mark.parametrize("cores", [1, 2, 3, 16])
+def test_large_chunks_copied_in_parts_equal_their_join(monkeypatch, cores):
+    """A chunk at or above SPLIT_COPY_MIN is copied in parts by several threads (as many as the usable cores,
+    at most COPY_THREADS): every part lands where one copy would put it, whatever the part count, chunk length
+    (not a multiple of the parts) and offset; on one core there is no pool."""
+    monkeypatch.setattr(buffer_mod, "SPLIT_COPY_MIN", 64)
+    monkeypatch.setattr(buffer_mod, "usable_cores", lambda: cores)
+    monkeypatch.setattr(buffer_mod, "_pool", None)
+    chunks = list(_chunks(np.random.default_rng(5), [63, 64, 1001, 0, 97, 4099]))
+    buf = EventBuffer(3000)
+    for c in chunks:
+        buf.append(*c)
+    cols = buf.take()
+    for i in range(4):
+        np.testing.assert_array_equal(cols[i], np.concatenate([c[i] for c in chunks]))
+    if cores == 1:
+        assert buffer_mod._pool is None
+    else:
+        assert buffer_mod._pool[1] == min(cores, buffer_mod.COPY_THREADS) - 1
+
+
+def test_strided_chunk_columns_copied_in_parts(monkeypatch):
+    """x and y arrive as strided halves of one 32-bit word (DeviceEvents.numpy): split copies read them right."""
+    monkeypatch.setattr(buffer_mod, "SPLIT_COPY_MIN", 8)
+    monkeypatch.setattr(buffer_mod, "usable_cores", lambda: 4)
+    monkeypatch.setattr(buffer_mod, "_pool", None)
+    xy = np.arange(1000, dtype=np.uint32) | (np.arange(1000, dtype=np.uint32) % 7) << 16
+    halves = xy.view(np.uint16)
+    buf = EventBuffer(10)
+    buf.append(halves[0::2], halves[1::2], np.arange(1000, dtype=np.int64), np.ones(1000, np.int8))
+    x, y, t, p = buf.take()
+    np.testing.assert_array_equal(x, np.arange(1000) & 0xFFFF)
+    np.testing.assert_array_equal(y, np.arange(1000) % 7)
+    np.testing.assert_array_equal(t, np.arange(1000))
