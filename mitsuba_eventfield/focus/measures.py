@@ -47,6 +47,21 @@ def parabola_offset(before, peak, after):
     return float(off) if off.ndim == 0 else off
 
 
+def parabola_vertex(x, y):
+    """Position of the vertex of the parabola through three points ``(x[i], y[i])`` around a maximum at
+    ``x[1]`` (spacing need not be uniform: an end plane's neighbour beyond the range is not a plane step
+    away), kept within half the way to each neighbour; ``x[1]`` where the points do not curve downwards.
+    ``x``: three numbers; ``y``: three numbers or arrays that broadcast. With uniform spacing this is
+    :func:`parabola_offset` in ``x`` units."""
+    d0, d2 = float(x[0]) - float(x[1]), float(x[2]) - float(x[1])
+    e0, e2 = (np.asarray(y[0], np.float64) - y[1]), (np.asarray(y[2], np.float64) - y[1])
+    a = (e0 / d0 - e2 / d2) / (d0 - d2)           # y - y1 = a t^2 + b t, t = x - x1
+    b = e0 / d0 - a * d0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(a < 0, np.clip(-b / (2 * a), min(d0, d2) / 2, max(d0, d2) / 2), 0.0)
+    return float(x[1]) + (float(t) if t.ndim == 0 else t)
+
+
 def refine_peak(x, scores, k):
     """Sub-step position (in x units) of the maximum of ``scores`` at index ``k`` (the parabola through it and
     its neighbours; the end samples are not refined)."""
