@@ -199,6 +199,16 @@ def preset_and_overrides(preset: str | None, pixel: dict | None, where: str = "p
     return (preset if preset is not None else named), values
 
 
+def given_once(arguments: dict, pixel: dict, where: str = "pixel model") -> None:
+    """Refuse a parameter given both as its own argument (``arguments``: name -> value or None, e.g. a
+    render's ``threshold``) and in the ``pixel`` dict with another value: one would win silently while the
+    other is what the caller recorded (a sweep's ``render.threshold`` column beside ``pixel.threshold_on``)."""
+    for name, v in arguments.items():
+        if v is not None and pixel.get(name) is not None and pixel[name] != v:
+            raise ConfigError(f"{where}: {name} given twice, {v!r} as an argument and {pixel[name]!r} in the pixel "
+                              "parameters: give it once")
+
+
 def sample_thresholds(rng: np.random.Generator, n: int, nominal: float, sigma: float) -> np.ndarray:
     """Per-pixel thresholds ~ N(nominal, sigma), floored at nominal / 10 so none is ever <= 0."""
     if sigma == 0:

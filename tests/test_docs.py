@@ -109,7 +109,7 @@ DOCS = [os.path.join(ROOT, "README.md")] + sorted(glob.glob(os.path.join(ROOT, "
 @pytest.mark.parametrize("path", [p for p in DOCS if any(True for _ in _blocks(p))],
                          ids=lambda p: os.path.relpath(p, ROOT))
 def test_every_example_runs_as_written(path, scratch):
-    namespace = {"__name__": "__docs__"}
+    namespace = {"__name__": "__main__"}      # as a script runs them: a block's `if __name__ == "__main__":` too
     for lang, line_no, block in _blocks(path):
         if lang == "bash":
             _run_bash(path, line_no, block, scratch)

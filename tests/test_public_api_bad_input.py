@@ -40,6 +40,12 @@ CASES = {
     "render_events spp": (lambda s: ef.render_events(s, 0.01, steps=2, spp=float("nan")), "spp"),
     "render_events threshold": (lambda s: ef.render_events(s, 0.01, steps=2, threshold=-1), "threshold_on"),
     "render_events pixel": (lambda s: ef.render_events(s, 0.01, steps=2, pixel={"bogus": 1}), "bogus"),
+    "render_events threshold twice": (lambda s: ef.render_events(s, 0.01, steps=2, threshold=0.3,
+                                                                 pixel={"threshold_on": 0.15}), "given twice"),
+    "events_from_frames threshold twice": (lambda s: ef.events_from_frames(
+        np.ones((3, 4, 4)), [0.0, 0.001, 0.002], threshold=0.3, pixel={"threshold_off": 0.1}), "given twice"),
+    "sweep xml reserved": (lambda s: ef.sweep(DEMO, {"xml.motion": [None]}), "load_scene"),
+    "sweep render name": (lambda s: ef.sweep(DEMO, {"render.stepz": [8]}), "stepz"),
     "render_events pixel preset": (lambda s: ef.render_events(s, 0.01, steps=2, pixel="davis346"), "preset="),
     "render_events output": (lambda s: ef.render_events(s, 0.01, steps=2, output="/tmp/x.foo"), ".foo"),
     "render_events buffer": (lambda s: ef.render_events(s, 0.01, steps=2, event_buffer_mb=0), "event_buffer_mb"),

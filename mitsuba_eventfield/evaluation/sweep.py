@@ -8,9 +8,12 @@
 Parameter names say where a value goes: ``xml.<name>`` fills a ``<default name=...>`` of the scene XML,
 ``render.<name>`` is an argument of :func:`render_events` (duration, steps, spp, seed, threshold, preset, ...),
 ``pixel.<name>`` a pixel-model parameter. Each point runs in a fresh worker process (spawned, so Dr.Jit state
-never forks): locally in a process pool, or on a Dask cluster when ``client`` is given. With ``out_dir`` every
-finished point is kept (``point-<hash>.json``, plus its events when ``keep_events``), and a rerun skips them:
-an interrupted sweep resumes where it stopped.
+never forks; in a script, call ``sweep`` under ``if __name__ == "__main__":``, as each worker imports the
+script again): locally in a process pool, or on a Dask cluster when ``client`` is given. With ``out_dir``
+every finished point is kept (``point-<hash>.json``, plus its events when ``keep_events``), and a rerun skips
+them: an interrupted sweep resumes where it stopped. The hash covers the scene's path, the point's
+parameters and ``inputs_digest`` (the scene's files), so an edited scene is rendered again; a point whose
+events are asked for (``keep_events``) and were not kept runs again too.
 """
 from __future__ import annotations
 
@@ -18,9 +21,11 @@ import hashlib
 import itertools
 import json
 import os
+import re
 import time
 from dataclasses import dataclass, field
 
+from .._version import __version__
 from ..errors import EventFieldError
 from ..scene.timed import load_scene
 from ..simulate.render import render_events
@@ -78,19 +83,55 @@ def grid(over: dict) -> list:
     return [dict(zip(names, combo)) for combo in itertools.product(*(over[n] for n in names))]
 
 
-def point_key(scene: str, point: dict) -> str:
-    blob = json.dumps({"scene": os.path.abspath(scene), "point": point}, sort_keys=True, default=str)
+# load_scene's own keyword arguments: an ``xml.`` parameter of these names would not reach the XML
+RESERVED_XML = ("motion", "variant", "color", "sampler")
+# render_events' arguments a sweep sets itself (the scene, where a kept point's events go, the pixel.* dict)
+RESERVED_RENDER = ("scene", "output", "pixel")
+
+
+def plain(value):
+    """A NumPy scalar as the Python number it holds (other values as they are): a point's values are keyed,
+    saved as JSON and read back on resume, where ``np.int64(250)`` came back as the string '250'."""
+    item = getattr(value, "item", None)
+    return item() if callable(item) and getattr(value, "ndim", None) == 0 else value
+
+
+def inputs_digest(scene: str) -> str:
+    """SHA-256 of what a point's render reads besides its parameters: the scene XML, the motion file that
+    ``load_scene`` takes next to it (``<scene>.motion.toml``), every file the XML names (meshes, textures,
+    includes; relative to the XML's folder), and the package's version. A resumed point
+    whose inputs changed is rendered again instead of returning the old numbers."""
+    folder, h = os.path.dirname(scene), hashlib.sha256(__version__.encode())
+    with open(scene, "rb") as f:
+        xml = f.read()
+    # files: <string name="filename" value="mesh.ply"/>, <include filename="..."/>; a value naming no file is
+    # not one (a "$name" default is resolved by Mitsuba, and its value is in the point's parameters)
+    names = [m.decode(errors="replace") for m in re.findall(rb'(?:value|filename)\s*=\s*"([^"$]+)"', xml)]
+    for path in [scene, os.path.splitext(scene)[0] + ".motion.toml", *(os.path.join(folder, n) for n in names)]:
+        if os.path.isfile(path):
+            h.update(path.encode())
+            with open(path, "rb") as f:
+                h.update(hashlib.sha256(f.read()).digest())
+    return h.hexdigest()
+
+
+def point_key(scene: str, point: dict, inputs: str = "") -> str:
+    """The point's file name key: the scene's path, its parameters and its inputs' digest (``inputs_digest``)."""
+    blob = json.dumps({"scene": os.path.abspath(scene), "point": point, "inputs": inputs}, sort_keys=True,
+                      default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
-def run_point(scene: str, point: dict, out_dir: str | None = None, keep_events: bool = False) -> dict:
-    """Render one point (in whatever process this runs) and return its row: parameters, metrics, outputs."""
+def run_point(scene: str, point: dict, out_dir: str | None = None, keep_events: bool = False,
+              inputs: str = "") -> dict:
+    """Render one point (in whatever process this runs) and return its row: parameters, metrics, outputs.
+    ``inputs``: the scene's ``inputs_digest``, part of the point's key."""
     xml = {k[4:]: v for k, v in point.items() if k.startswith("xml.")}
     render = {k[7:]: v for k, v in point.items() if k.startswith("render.")}
     pixel = {k[6:]: v for k, v in point.items() if k.startswith("pixel.")}
     t0 = time.perf_counter()
     timed = load_scene(scene, **xml)
-    key = point_key(scene, point)
+    key = point_key(scene, point, inputs)
     out = os.path.join(out_dir, f"point-{key}.h5") if (out_dir and keep_events) else None
     duration = render.pop("duration", None)
     result = render_events(timed, duration, pixel=pixel or None, output=out, **render)
@@ -101,7 +142,7 @@ def run_point(scene: str, point: dict, out_dir: str | None = None, keep_events: 
     if out_dir:
         from ..atomic import atomic_output
         with atomic_output(os.path.join(out_dir, f"point-{key}.json"), "sweep point") as tmp, open(tmp, "w") as f:
-            json.dump(row, f, default=str)
+            json.dump(dict(row, inputs_sha256=inputs), f, default=str)
     return row
 
 
@@ -115,28 +156,30 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
         raise EventFieldError(f"sweep: base = {base!r}: give a dict whose keys start with {', '.join(_PREFIXES)}")
     if isinstance(processes, bool) or not isinstance(processes, int) or processes < 1:
         raise EventFieldError(f"sweep: processes = {processes!r}: allowed range is whole numbers >= 1")
-    points = [dict(base or {}, **p) for p in grid(over)]
-    done, todo = {}, []
+    points = [{k: plain(v) for k, v in dict(base or {}, **p).items()} for p in grid(over)]
+    check_names(points[0])
+    inputs = inputs_digest(scene)
+    keys = [point_key(scene, p, inputs) for p in points]
+    done = {}
     if out_dir:
         os.makedirs(out_dir, exist_ok=True)
-        for p in points:
-            path = os.path.join(out_dir, f"point-{point_key(scene, p)}.json")
-            if os.path.exists(path):
-                with open(path) as f:
-                    done[point_key(scene, p)] = dict(json.load(f), resumed=True)
-    todo = [p for p in points if point_key(scene, p) not in done]
+        for key in keys:
+            row = _done_row(out_dir, key, keep_events)
+            if row is not None:
+                done[key] = row
+    todo = [p for p, key in zip(points, keys) if key not in done]
     results = {}
     if todo:
         if client is not None:                                  # Dask distributed
             futures = client.map(run_point, [scene] * len(todo), todo, [out_dir] * len(todo),
-                                 [keep_events] * len(todo), pure=False)
+                                 [keep_events] * len(todo), [inputs] * len(todo), pure=False)
             rows = client.gather(futures)
         else:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
             with ProcessPoolExecutor(max_workers=max(1, processes),
                                      mp_context=multiprocessing.get_context("spawn")) as pool:
-                futs = [pool.submit(run_point, scene, p, out_dir, keep_events) for p in todo]
+                futs = [pool.submit(run_point, scene, p, out_dir, keep_events, inputs) for p in todo]
                 if progress:
                     from tqdm import tqdm
                     for _ in tqdm(futs, desc="sweep", unit="point"):
@@ -144,4 +187,34 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
                 rows = [f.result() for f in futs]
         results = {r["key"]: dict(r, resumed=False) for r in rows}
     results.update(done)
-    return SweepTable([results[point_key(scene, p)] for p in points])
+    return SweepTable([results[key] for key in keys])
+
+
+def _done_row(out_dir: str, key: str, keep_events: bool) -> dict | None:
+    """The kept row of a finished point, or None where it must run (again): none kept, or events wanted
+    (``keep_events``) that the earlier run did not keep."""
+    path = os.path.join(out_dir, f"point-{key}.json")
+    if not os.path.exists(path):
+        return None
+    with open(path) as f:
+        row = json.load(f)
+    row.pop("inputs_sha256", None)
+    if keep_events and not (row.get("events_path") and os.path.isfile(row["events_path"])):
+        return None
+    return dict(row, resumed=True)
+
+
+def check_names(point: dict) -> None:
+    """Refuse, before any worker starts, parameter names that cannot reach their target: an ``xml.`` name
+    that is one of load_scene's own arguments, a ``render.`` name render_events does not take or the sweep
+    sets itself."""
+    import inspect
+    takes = set(inspect.signature(render_events).parameters) - set(RESERVED_RENDER)
+    for name in point:
+        kind, _, arg = name.partition(".")
+        if kind == "xml" and arg in RESERVED_XML:
+            raise EventFieldError(f"sweep parameter {name!r}: {arg!r} is an argument of load_scene, not a scene "
+                                  f"default; xml.* names may not be {', '.join(RESERVED_XML)}")
+        if kind == "render" and arg not in takes:
+            raise EventFieldError(f"sweep parameter {name!r}: render_events takes no {arg!r} here; allowed: "
+                                  f"{', '.join(sorted(takes))}")

@@ -37,6 +37,7 @@ def pixel_integrator(preset: str | None = None, pixel: dict | None = None, thres
     preset, overrides = pixel_model.preset_and_overrides(preset, pixel)
     if threshold is not None:
         threshold = positive(threshold, "threshold")
+        pixel_model.given_once({"threshold_on": threshold, "threshold_off": threshold}, overrides)
         overrides.setdefault("threshold_on", threshold)
         overrides.setdefault("threshold_off", threshold)
     config = pixel_model.pixel_config(preset or "ideal", "pixel model", **overrides)   # ConfigError if bad

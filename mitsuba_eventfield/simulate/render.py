@@ -77,6 +77,7 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
     explicit = {"threshold_on": threshold_on if threshold_on is not None else threshold,
                 "threshold_off": threshold_off if threshold_off is not None else threshold,
                 "linlog_threshold": linlog_threshold}
+    pixel_model.given_once(explicit, pixel)
     explicit.update(pixel)
     for name, v in explicit.items():
         if v is not None:

@@ -1,7 +1,9 @@
 """Sweeps: local process pool and a local Dask cluster agree; an interrupted sweep resumes."""
 import csv
 import os
+import shutil
 
+import numpy as np
 import pytest
 from conftest import ROOT, needs
 
@@ -32,20 +34,52 @@ def test_local_and_dask_give_identical_tables(tmp_path):
 
 
 def test_interrupted_sweep_resumes_and_exports(tmp_path):
+    """A rerun skips the points done, but not one whose events are now wanted and were not kept; NumPy values
+    come back as the numbers they were (they came back as strings, and Parquet refused the mixed column)."""
     out = str(tmp_path / "sweep")
-    first = ef.sweep(GALVO, {"xml.frequency": [250], "render.threshold": [0.2, 0.3]}, BASE, out_dir=out)
+    first = ef.sweep(GALVO, {"xml.frequency": [np.int64(250)], "render.threshold": [0.2, 0.3]}, BASE, out_dir=out)
     assert [r["resumed"] for r in first.rows] == [False, False]
-    full = ef.sweep(GALVO, OVER, BASE, out_dir=out, keep_events=True)
-    resumed = {(r["xml.frequency"], r["render.threshold"]): r["resumed"] for r in full.rows}
-    assert resumed == {(250, 0.2): True, (250, 0.3): True, (500, 0.2): False, (500, 0.3): False}
-    assert os.path.exists(next(r["events_path"] for r in full.rows if not r["resumed"]))
-    full.to_csv(str(tmp_path / "t.csv"))
+    again = ef.sweep(GALVO, {"xml.frequency": [250], "render.threshold": list(np.array([0.2, 0.3]))}, BASE,
+                     out_dir=out)
+    assert [r["resumed"] for r in again.rows] == [True, True]
+    assert _strip(again) == _strip(first) and all(type(r["xml.frequency"]) is int for r in again.rows)
+    full = ef.sweep(GALVO, OVER, BASE, out_dir=out, keep_events=True)      # (250, *): events not kept before
+    assert [r["resumed"] for r in full.rows] == [False] * 4
+    assert all(os.path.exists(r["events_path"]) for r in full.rows)
+    assert {r["key"]: r["events"] for r in full.rows if r["xml.frequency"] == 250} == \
+        {r["key"]: r["events"] for r in first.rows}
+    kept = ef.sweep(GALVO, OVER, BASE, out_dir=out, keep_events=True)
+    assert [r["resumed"] for r in kept.rows] == [True] * 4 and _strip(kept) == _strip(full)
+    kept.to_csv(str(tmp_path / "t.csv"))
     with open(tmp_path / "t.csv") as f:
         rows = list(csv.DictReader(f))
-    assert [int(r["events"]) for r in rows] == full.column("events")
-    full.to_parquet(str(tmp_path / "t.parquet"))
+    assert [int(r["events"]) for r in rows] == kept.column("events")
+    kept.to_parquet(str(tmp_path / "t.parquet"))
     import pyarrow.parquet as pq
-    assert pq.read_table(str(tmp_path / "t.parquet")).column("events").to_pylist() == full.column("events")
+    table = pq.read_table(str(tmp_path / "t.parquet"))
+    assert table.column("events").to_pylist() == kept.column("events")
+    assert table.column("xml.frequency").to_pylist() == [250, 250, 500, 500]
+
+
+def test_resume_renders_again_when_the_scene_or_its_files_changed(tmp_path):
+    """A point's key holds a digest of the scene XML, its motion file and the files it names: editing the
+    scene's threshold or replacing its texture renders the point again (it returned the old count, marked
+    resumed)."""
+    scene_dir = tmp_path / "scene"
+    shutil.copytree(os.path.dirname(GALVO), scene_dir)
+    scene = str(scene_dir / os.path.basename(GALVO))
+    over, out = {"xml.frequency": [250]}, str(tmp_path / "sweep")
+    before = ef.sweep(scene, over, BASE, out_dir=out).rows[0]
+    text = open(scene).read()
+    assert 'name="threshold" value="0.2"' in text
+    with open(scene, "w") as f:
+        f.write(text.replace('name="threshold" value="0.2"', 'name="threshold" value="0.4"'))
+    after = ef.sweep(scene, over, BASE, out_dir=out).rows[0]
+    assert not after["resumed"] and after["key"] != before["key"]
+    assert 0 < after["events"] < 0.7 * before["events"]          # twice the threshold: far fewer events
+    assert '"letters.png"' in text and '"text.png"' in text
+    shutil.copy(scene_dir / "text.png", scene_dir / "letters.png")     # another texture under the same name
+    assert not ef.sweep(scene, over, BASE, out_dir=out).rows[0]["resumed"]
 
 
 def test_bad_sweep_parameters():
@@ -55,3 +89,10 @@ def test_bad_sweep_parameters():
         ef.sweep(GALVO, {"xml.frequency": []})
     with pytest.raises(ef.EventFieldError, match="not a scene file"):
         ef.sweep("nowhere.xml", {"xml.frequency": [1]})
+    # names that cannot reach their target are refused before any worker starts
+    with pytest.raises(ef.EventFieldError, match="'motion' is an argument of load_scene"):
+        ef.sweep(GALVO, {"xml.motion": [None, "auto"]})
+    with pytest.raises(ef.EventFieldError, match="render_events takes no 'stepz'.*allowed: .*steps"):
+        ef.sweep(GALVO, {"render.stepz": [8]})
+    with pytest.raises(ef.EventFieldError, match="takes no 'output'"):
+        ef.sweep(GALVO, {"render.output": ["x.h5"]})
