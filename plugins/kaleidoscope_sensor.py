@@ -104,11 +104,15 @@ class _KaleidoscopeSensorMethods:
     def view_layout(self) -> list:
         """Per view: index (i, j), film tile (x0, y0, w, h), flips, sub-aperture centre on the main lens."""
         n, tw, th = self.n, self.film_w // self.n, self.film_h // self.n
-        half = (n - 1) // 2
+        # centred indices: whole numbers for odd n (a kaleidoscope's always is), halves for an even microlens
+        # count, as the ray mapping (kaleido_optics.microlens_mapping) has them; a whole-number half put an
+        # even count's sub-apertures half a cell off (views = 2: 0 and -7.3 mm where the rays pass at +-4.2)
+        half = (n - 1) / 2
         views = []
         for row in range(n):
             for col in range(n):
-                i, j = col - half, row - half
+                i, j = (c - half for c in (col, row))
+                i, j = (int(c) if c == int(c) else c for c in (i, j))
                 if self.layout == "kaleidoscope":
                     scale = self.geo["lens_to_entrance"] / (self.relay_distance + self.tube_length)
                     ax, ay = kaleido_optics.subaperture(i, j, 0.0, 0.0, self.tube_width, self.tube_height, scale, np)

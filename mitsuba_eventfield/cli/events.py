@@ -251,11 +251,13 @@ def run_preview(a) -> int:
 def run_frame(a) -> int:
     from ..scene import load_scene
     from ..simulate.render import render_frames
+    from ..simulate.summary import sensor_optics
     scene = load_scene(a.scene, **defines(a))
     times = [t * 1e-3 for t in times_ms(a.times)]
     frames = render_frames(scene, times, spp=a.spp, log=False)
+    optics = sensor_optics(scene)     # what calibrate kaleidoscope records and compares (lens, tube)
     for k, (t, img) in enumerate(zip(times, frames)):
-        meta = {"scene": os.path.abspath(a.scene), "time_s": t, "spp": a.spp}
+        meta = {"scene": os.path.abspath(a.scene), "time_s": t, "spp": a.spp, "optics": optics}
         root = save_image(a.output.replace(".exr", ".png"), img, meta, f"_{k:04d}" if len(times) > 1 else "")
         print(f"wrote {root}.exr/.png (t = {t * 1e3:g} ms)")
     return 0

@@ -15,16 +15,20 @@ CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a r
                  "(default: the file's pixel-model metadata)")
 
 
+DEFAULT_PERIOD, DEFAULT_VIEWS = 0, 32     # refocus / depth on a galvo stream
+GALVO_ONLY, KALEIDOSCOPE_ONLY = ("period", "views"), ("time",)
+
+
 def add_parsers(sub) -> None:
     lf_args = argparse.ArgumentParser(add_help=False)
     lf_args.add_argument("file", help="event file")
     lf_args.add_argument("--method", help="reconstruction: direct, highpass, complementary, galvo (default: "
                                           "direct with --start-frame, else galvo / highpass)")
     lf_args.add_argument("--start-frame", help="EXR of the linear frame at the stream start (eventfield frame)")
-    lf_args.add_argument("--period", type=num(0, integer=True), default=0,
-                         help="galvo: scan period index (default 0)")
-    lf_args.add_argument("--views", type=num(2, MAX_VIEWS, integer=True), default=32,
-                         help="galvo: views per scan period (default 32)")
+    lf_args.add_argument("--period", type=num(0, integer=True),      # None: not given (refused on a kaleidoscope)
+                         help=f"galvo: scan period index (default {DEFAULT_PERIOD})")
+    lf_args.add_argument("--views", type=num(2, MAX_VIEWS, integer=True),
+                         help=f"galvo: views per scan period (default {DEFAULT_VIEWS})")
     lf_args.add_argument("--time", type=num(0), help="kaleidoscope: time in ms (default: stream end)")
     lf_args.add_argument("--calibration", help="calibration JSON (eventfield calibrate): view phase, depth model; "
                                                "a camera recording (.raw, .dat, .aedat4) takes its optics from it")
@@ -189,24 +193,37 @@ def _lightfield(a, ev):
         raise EventFieldError(f"{a.file}: the recording carries no optics (no light-field metadata): pass "
                               "--calibration, a calibration file made for its set-up")
     calibration = optics = None
-    if getattr(a, "time", None) is not None:
-        _check_times(a, ev, [a.time * 1e-3], "--time")
     if a.calibration:
         calibration = load_calibration(a.calibration)
-        if not ev.meta.get("optics"):
-            ev.meta["optics"] = recording_optics(calibration, ev, a.file)
-        optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
-        kinds = check_optics(calibration, optics)
-        if kinds == ("kaleidoscope",):
+        if set(calibration) == {"kaleidoscope"}:
             # its view registration and flat field are not applied to a light field yet: taken, it changed nothing
             raise EventFieldError(f"{a.calibration}: a kaleidoscope calibration (view registration, flat field) is "
                                   "not applied by refocus / depth / reconstruct: run without --calibration")
+        if not ev.meta.get("optics"):
+            ev.meta["optics"] = recording_optics(calibration, ev, a.file)
+        optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
+        check_optics(calibration, optics)
+    period, views = _design_options(a, ev)
     try:
-        lf = from_events(ev, period=a.period, views=a.views, time=None if a.time is None else a.time * 1e-3,
+        lf = from_events(ev, period=period, views=views, time=None if a.time is None else a.time * 1e-3,
                          method=a.method, log_start=start_log(a.start_frame, ev))
     except (ValueError, KeyError, StopIteration) as e:
         raise EventFieldError(f"{a.file}: {e}") from None
     return apply_to_lightfield(lf, calibration, optics) if calibration is not None else lf
+
+
+def _design_options(a, ev) -> tuple:
+    """(period, views) for the stream's design; an option of the other design is refused (it was ignored:
+    --period on a kaleidoscope stream, --time on a galvo one)."""
+    design = (ev.meta.get("optics") or {}).get("design")
+    wrong = GALVO_ONLY if design in ("kaleidoscope", "microlens") else KALEIDOSCOPE_ONLY if design == "galvo" else ()
+    given = [f"--{name}" for name in wrong if getattr(a, name, None) is not None]
+    if given:
+        raise EventFieldError(f"{a.file}: {' and '.join(given)} {'is' if len(given) == 1 else 'are'} for "
+                              f"{'a galvo' if design != 'galvo' else 'a kaleidoscope'} stream; this one is {design}")
+    if getattr(a, "time", None) is not None:
+        _check_times(a, ev, [a.time * 1e-3], "--time")
+    return (DEFAULT_PERIOD if a.period is None else a.period), (DEFAULT_VIEWS if a.views is None else a.views)
 
 
 def _check_times(a, ev, times, option: str) -> None:

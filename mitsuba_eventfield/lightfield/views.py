@@ -37,9 +37,15 @@ class ViewStack:
             raise ConfigError(f"ViewStack: ij {self.ij.shape} and positions {self.positions.shape} must both be "
                               f"({k}, 2), one row per image")
 
-    def view(self, i: int, j: int) -> np.ndarray:
-        k = int(np.nonzero((self.ij[:, 0] == i) & (self.ij[:, 1] == j))[0][0])
-        return self.images[k]
+    def view(self, i, j) -> np.ndarray:
+        """The image of view (i, j): centred indices, whole numbers for an odd view count, halves for an even
+        one (a microlens array of 2 or 4 views a side has no view (0, 0))."""
+        found = np.nonzero((self.ij[:, 0] == i) & (self.ij[:, 1] == j))[0]
+        if not len(found):
+            lo, hi = self.ij.min(axis=0), self.ij.max(axis=0)
+            raise ConfigError(f"ViewStack.view: no view ({i}, {j}); i runs {lo[0]:g}..{hi[0]:g} and j "
+                              f"{lo[1]:g}..{hi[1]:g} in steps of 1")
+        return self.images[int(found[0])]
 
 
 def _layout(optics: dict, where: str):
@@ -57,6 +63,7 @@ def extract_views(frame: np.ndarray, optics: dict, margin: int = 0) -> ViewStack
     if frame.ndim not in (2, 3) or not frame.size or not np.issubdtype(frame.dtype, np.number):
         raise ConfigError(f"extract_views: frame of shape {frame.shape} ({frame.dtype}): expected a film image "
                           "(H, W) or (H, W, C) of numbers")
+    _check_film(frame.shape[:2], optics, design, views, "extract_views: frame")
     most = (min(min(v["tile"][2:4]) for v in views) - 1) // 2 if design == "kaleidoscope" else None
     margin = int(number(margin, "extract_views: margin", 0, most, integer=True, strict=True))
     out = []
@@ -74,6 +81,23 @@ def extract_views(frame: np.ndarray, optics: dict, margin: int = 0) -> ViewStack
         out.append(np.ascontiguousarray(tile))
     return ViewStack(np.stack(out), np.array([[v["i"], v["j"]] for v in views]),
                      np.array([v["subaperture"] for v in views], dtype=np.float64))
+
+
+def _check_film(shape, optics: dict, design: str, views: list, what: str) -> None:
+    """The film (height, width) ``shape`` against the layout: n x n views, a kaleidoscope's tiles covering it
+    exactly, a microlens film a whole number of lenslets (n pixels) a side. A smaller frame failed inside
+    NumPy; a larger one was cut silently."""
+    n = optics.get("n")
+    if not isinstance(n, int) or n < 1 or len(views) != n * n:
+        raise ConfigError(f"{what}: the optics metadata lists {len(views)} views for n = {n!r}: expected n x n")
+    if design == "kaleidoscope":
+        need = (max(v["tile"][1] + v["tile"][3] for v in views), max(v["tile"][0] + v["tile"][2] for v in views))
+        if tuple(shape) != need:
+            raise ConfigError(f"{what} is {shape[1]}x{shape[0]} pixels: the kaleidoscope's {n}x{n} tiles cover "
+                              f"{need[1]}x{need[0]}")
+    elif shape[0] % n or shape[1] % n:
+        raise ConfigError(f"{what} is {shape[1]}x{shape[0]} pixels: a microlens film of {n} views a side is a "
+                          f"whole number of {n}-pixel lenslets in each direction")
 
 
 def view_of_pixel(x, y, optics: dict):
@@ -98,6 +122,7 @@ def split_events(events: EventStream) -> list:
     instance(events, EventStream, "split_events: events", "ef.read_events, ef.render_events")
     optics = events.meta.get("optics", {})
     design, views = _layout(optics, "split_events")
+    _check_film((events.height, events.width), optics, design, views, "split_events: the stream's film")
     k, vx, vy = view_of_pixel(events.x, events.y, optics)
     if design == "kaleidoscope":
         w, h = views[0]["tile"][2], views[0]["tile"][3]

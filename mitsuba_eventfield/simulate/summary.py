@@ -92,7 +92,10 @@ class RenderSummary:
         return "\n".join(lines)
 
 
-def run_metadata(timed: TimedScene, integ, **run) -> dict:
+def sensor_optics(timed: TimedScene) -> dict:
+    """The scene's optics as outputs record them (``meta["optics"]`` of an event file, an EXR frame's
+    metadata): a light-field sensor's own ``optics_metadata``, else a conventional camera with its first-level
+    parameters worth recording (e.g. ``x_fov``)."""
     sensor = timed.sensor
     optics = sensor.optics_metadata() if hasattr(sensor, "optics_metadata") else {"design": "conventional camera",
                                                                                    "sensor": type(sensor).__name__}
@@ -101,6 +104,11 @@ def run_metadata(timed: TimedScene, integ, **run) -> dict:
         if key.count(".") == 1 and name in ("x_fov", "focus_distance", "aperture_radius") \
                 and key.startswith(_sensor_id(timed)):
             optics[name] = float(timed.params[key][0])
+    return optics
+
+
+def run_metadata(timed: TimedScene, integ, **run) -> dict:
+    optics = sensor_optics(timed)
     return {"package": "mitsuba-eventfield", "package_version": __version__, "mitsuba_version": backend.mi.__version__,
             "drjit_version": backend.dr.__version__, "variant": backend.mi.variant(), "python": platform.python_version(),
             "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "width": timed.film_size[0],

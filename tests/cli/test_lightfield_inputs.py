@@ -103,7 +103,10 @@ def test_calibrations_that_change_nothing_or_were_edited(captures, capsys, tmp_p
     assert cli(["frame", KALEIDO, "-D", "views_px=60", "-o", str(tmp_path / "kf.exr")]) == 0
     path = str(tmp_path / "k.json")
     assert cli(["calibrate", "kaleidoscope", str(tmp_path / "kf.exr"), "-o", path]) == 0
-    assert "kaleidoscope" in json.load(open(path))
+    record = json.load(open(path))["kaleidoscope"]["optics"]
+    # eventfield frame records the sensor's optics in the EXR, so the calibration knows the lens and tube the
+    # light-field commands compare (docs/calibration.md)
+    assert record["n"] == 3 and record["focal_length"] > 0 and len(record["tube"]) == 3, record
     capsys.readouterr()
     code, err = _run(["refocus", d / "k.h5", "-o", tmp_path / "k.png", "--depth", "0.7", "--calibration", path],
                      capsys)
@@ -145,3 +148,22 @@ def test_depth_calibration_needs_galvo_captures(captures, capsys):
     code, err = _run(["calibrate", "depth", f"{d / 'g.h5'}:0", "-o", d / "cal.json"], capsys)
     assert code == 2 and "depth = 0: must be a finite number > 0" in err, err
     assert not (d / "cal.json").exists()
+
+
+def test_options_of_the_other_design_and_kaleidoscope_calibrations_refused(captures, capsys, tmp_path):
+    """--period / --views on a kaleidoscope stream and --time on a galvo one were ignored; a kaleidoscope
+    calibration of another film size was reported as "made for other optics: re-run eventfield calibrate",
+    which only led to the refusal of kaleidoscope calibrations: that refusal now comes first."""
+    d, _, _ = captures
+    for args, message in (([d / "k.h5", "--depth", "0.7", "--period", "7"], "--period is for a galvo stream"),
+                          ([d / "k.h5", "--depth", "0.7", "--views", "3"], "--views is for a galvo stream"),
+                          ([d / "g.h5", "--depth", "0.7", "--time", "3"], "--time is for a kaleidoscope stream")):
+        code, err = _run(["refocus", *args, "-o", tmp_path / "r.png"], capsys)
+        assert code == 2 and message in err and err.count("\n") == 0, err
+    assert cli(["frame", KALEIDO, "-D", "views_px=42", "-o", str(tmp_path / "small.exr")]) == 0
+    assert cli(["calibrate", "kaleidoscope", str(tmp_path / "small.exr"), "-o", str(tmp_path / "k42.json")]) == 0
+    capsys.readouterr()
+    code, err = _run(["depth", d / "k.h5", "-o", tmp_path / "k.png", "--near", "0.4", "--far", "3",
+                      "--calibration", tmp_path / "k42.json"], capsys)
+    assert code == 2 and "a kaleidoscope calibration (view registration, flat field) is not applied" in err, err
+    assert not (tmp_path / "r.png").exists() and not (tmp_path / "k.png").exists()
