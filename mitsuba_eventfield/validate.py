@@ -114,9 +114,13 @@ def describe_range(lo, hi, lo_open=False) -> str:
 def number_list(text: str, name: str, lo=None, hi=None, lo_open=False, allow_inf=False) -> list:
     """Comma-separated numbers (e.g. ``--times 0,1.5,3``), each checked as ``number``; "inf" where allowed."""
     out = []
-    for item in str(text).split(","):
-        item = item.strip()
+    items = [item.strip() for item in str(text).split(",")]
+    if items and not items[-1] and len(items) > 1:
+        items.pop()                      # one trailing comma: "0,1.5,"
+    for item in items:
         if not item:
+            if any(items):
+                raise ConfigError(f"{name} = {text!r}: an empty item between commas; give numbers only")
             continue
         if allow_inf and item.lower() == "inf":
             out.append(math.inf)

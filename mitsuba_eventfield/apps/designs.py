@@ -123,6 +123,9 @@ def _check(film, speeds, periods, views, spp, depth):
     speeds = tuple(number(s, "speeds", 0, 64, lo_open=True, strict=True) for s in speeds)
     if not speeds:
         raise ConfigError("speeds: give at least one speed factor (> 0)")
+    twice = sorted({f"{v:g}" for v in speeds if speeds.count(v) > 1})
+    if twice:        # each speed's images are named by it: a repeat overwrote them while counted twice
+        raise ConfigError(f"speeds: {', '.join(twice)} given more than once; give each speed factor once")
     periods = number(periods, "periods", 1, 100, integer=True, strict=True)
     views = number(views, "views", 4, MAX_VIEWS, integer=True, strict=True)
     spp = number(spp, "spp", 1, MAX_SPP, integer=True, strict=True)

@@ -63,7 +63,8 @@ def _add_render(sub) -> None:
     r.add_argument("--spp-changing", type=num(1, MAX_SPP, integer=True), metavar="N",
                    help="samples where they matter: pixels whose brightness changes during the render (found by "
                         "probe renders) get N samples per step, the others --spp")
-    r.add_argument("--seed", type=num(0, 2**31 - 1, integer=True), default=0, help="sampler seed (default 0)")
+    r.add_argument("--seed", type=num(0, 2**31 - 1, integer=True), default=0, help="sampler seed, and the pixel model's (mismatch, noise) unless --pixel seed=N names "
+                   "another (default 0)")
     r.add_argument("--no-reuse", action="store_true",
                    help="render every pixel at every step (default: a static scene renders one scan period; a "
                         "moving one, over enough scan periods to pay for its masks, renders the pixels moving objects "

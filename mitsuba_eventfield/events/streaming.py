@@ -67,10 +67,17 @@ class _PartialFile:
                 os.remove(p)
 
     def abort(self):
+        """Give the output up: nothing is left at the output path or beside it. Releasing may fail (closing a
+        file flushes its buffer, which fails again on a full disk): the partial files go all the same (a
+        disk-full render left its .txt / the .npz's column files behind, "nothing was kept" notwithstanding)."""
         if not self.closed:
             self.closed = True
-            self._release()
-            self._remove(self.tmp)
+            try:
+                self._release()
+            except OSError:
+                pass
+            finally:
+                self._remove(self.tmp)
 
     def _release(self):
         pass
@@ -174,7 +181,8 @@ class NpzEventWriter(_PartialFile):
 
     def _release(self):
         for f in self.columns.values():
-            f.close()
+            with contextlib.suppress(OSError):     # each closed (and its file removed) even when one fails
+                f.close()
         self._remove(*(f"{self.tmp}.{k}" for k in NPZ_COLUMNS))
 
 

@@ -97,6 +97,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
         tw = time.perf_counter()
         sink.drain()
         summary.write_s += time.perf_counter() - tw
+        summary.take_pixel_counters(integ)
         sink.report(summary)
         summary.wall_s = time.perf_counter() - wall0
         meta.update({"t_start_us": int(round(t_first * 1e6)), "duration_us": int(round(summary.duration_s * 1e6))})

@@ -18,7 +18,7 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import EventFieldError
-from ..validate import MAX_CONVERT_S, number
+from ..validate import MAX_CONVERT_S, available_memory, number
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr", ".pgm", ".ppm")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg")
@@ -182,6 +182,11 @@ def from_npz(path: str, fps=None, srgb=False) -> FrameSource:
     try:     # the members are read here, not by np.load: a damaged or pickled one fails now
         frames = data["frames"]
         times = None if times_key is None else data[times_key]
+    except MemoryError:              # a valid stack larger than the memory left: not a damaged file
+        size = data.zip.getinfo("frames.npy").file_size if "frames.npy" in data.zip.namelist() else 0
+        raise EventFieldError(f"{path}: its frames ({size / 2**20:.0f} MiB) do not fit in the memory available "
+                              f"({available_memory() / 2**20:.0f} MiB); convert a folder of images or a video, "
+                              "which are read frame by frame") from None
     except Exception as e:
         raise EventFieldError(f"{path}: not a readable .npz ({' '.join(str(e).split())[:100] or type(e).__name__})") \
             from None

@@ -59,6 +59,17 @@ class RenderSummary:
         self.on += n_on
         self.off += n - n_on
 
+    def take_pixel_counters(self, integ) -> None:
+        """The pixel model's drop and noise counters from the integrator, and the readout cap's note: a render
+        and a conversion both, after the sink's drain (its events are counted by then); the converter used to
+        record 0 for each."""
+        self.dropped_readout, self.dropped_refractory = integ.readout_dropped(), integ.refractory_dropped
+        self.noise_events = integ.noise_events
+        if self.dropped_readout:
+            total = self.events + self.dropped_readout
+            self.notes.append(f"readout cap dropped {self.dropped_readout} of {total} events "
+                              f"({100 * self.dropped_readout / total:.1f}%)")
+
     @property
     def rate(self) -> float:
         return self.events / self.duration_s if self.duration_s > 0 else 0.0

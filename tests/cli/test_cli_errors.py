@@ -41,6 +41,8 @@ def _cases(g, blocked):
         (["preview", g, "-o", f"{out}/p.png", "--scale", "100000"], "--scale"),
         (["preview", g, "-o", f"{out}/p.png", "--t0", "nan"], "--t0"),
         (["frame", GALVO, "-o", f"{out}/f.exr", "--times", "nan"], "--times"),
+        (["frame", GALVO, "-o", f"{out}/f.exr", "--times", "1,,2"], "an empty item between commas"),
+        (["compare-designs", "-o", f"{out}/cd", "--speeds", "1,1"], "1 given more than once"),
         (["reconstruct", g, "-o", f"{out}/rc", "--fps", "0"], "--fps"),
         (["reconstruct", g, "-o", f"{out}/rc", "--fps", "1e9"], "--fps"),
         (["reconstruct", g, "-o", f"{out}/rc", "--method", "highpass", "--cutoff", "-1"], "--cutoff"),

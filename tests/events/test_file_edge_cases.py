@@ -193,3 +193,35 @@ def test_whole_floats_at_the_top_of_a_column_are_taken():
     assert ev.x.tolist() == [65535] and ev.t.tolist() == [2 ** 62]
     with pytest.raises(ef.ConfigError, match=r"t = 9\.223372036854776e\+18: allowed range"):
         EventStream([1], [0], [2.0 ** 63], [1], 640, 480)
+
+
+class _FullDiskOnClose:
+    """A file whose close flushes into a full disk: it closes, then raises ENOSPC (as io does)."""
+
+    def __init__(self, f):
+        self.f = f
+
+    def __getattr__(self, name):
+        return getattr(self.f, name)
+
+    def close(self):
+        self.f.close()
+        raise OSError(28, "No space left on device")
+
+
+@pytest.mark.parametrize("suffix", [".txt", ".npz"])
+def test_abort_on_a_full_disk_leaves_nothing(tmp_path, suffix):
+    """A disk-full render said "nothing was kept" but left its .txt, or the .npz's four column files: closing
+    the partial file flushed into the full disk again and the error skipped their removal."""
+    from mitsuba_eventfield.events.streaming import NpzEventWriter, TxtEventWriter
+    path = str(tmp_path / f"out{suffix}")
+    w = (TxtEventWriter if suffix == ".txt" else NpzEventWriter)(path, 8, 6)
+    w.append(np.array([1, 2], np.uint16), np.array([3, 4], np.uint16), np.array([5, 6], np.int64),
+             np.array([1, -1], np.int8))
+    if suffix == ".txt":
+        w.f = _FullDiskOnClose(w.f)
+    else:
+        w.columns = {k: _FullDiskOnClose(f) for k, f in w.columns.items()}
+    assert len(os.listdir(tmp_path)) >= 1
+    w.abort()
+    assert os.listdir(tmp_path) == []

@@ -154,3 +154,27 @@ def test_a_pixel_dict_may_name_its_preset(demo_small):
                  lambda: ef.render_events(demo_small, 0.004, steps=4, preset="prophesee_gen4", pixel=described)):
         with pytest.raises(ef.ConfigError, match=r"^pixel model: pixel\['preset'\] = 'davis346' and preset = "):
             call()
+
+
+def test_the_pixel_models_drops_and_noise_are_counted(tmp_path):
+    """A conversion records what the pixel model dropped and added, as a render does (it recorded 0 for each):
+    on one random-walk stack the readout cap's and the refractory period's drops plus the events kept are the
+    ideal pixel's events exactly, and shot noise adds exactly the noise events it reports (also in a file)."""
+    rng = np.random.default_rng(0)
+    frames = np.exp(np.cumsum(rng.normal(0, 0.15, (80, 24, 32)), 0) + np.log(0.2)).astype(np.float32)
+    times = np.arange(80) / 1000
+
+    def counts(pixel):
+        r = ef.events_from_frames(frames, times, pixel=pixel).meta["render"]
+        return r["events"], r["dropped_readout"], r["dropped_refractory"], r["noise_events"], r["notes"]
+    ideal = counts(None)[0]
+    assert ideal > 10000
+    kept, dropped, _, _, notes = counts({"readout_cap": 3e6, "readout_cap_native_pixels": 89960})
+    assert dropped > 0.5 * ideal and kept + dropped == ideal
+    assert any(f"readout cap dropped {dropped} of {ideal} events" in n for n in notes)
+    kept, _, dropped, _, _ = counts({"refractory_s": 5e-4})
+    assert dropped > 0 and kept + dropped == ideal
+    kept, _, _, noise, _ = counts({"shot_noise_hz": 200.0})
+    assert noise > 0.2 * ideal and kept == ideal + noise
+    summary = ef.events_from_frames(frames, times, pixel={"refractory_s": 5e-4}, output=str(tmp_path / "r.h5"))
+    assert ef.read_events(str(tmp_path / "r.h5")).meta["render"]["dropped_refractory"] == summary.dropped_refractory > 0

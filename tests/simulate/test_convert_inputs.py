@@ -160,3 +160,15 @@ def test_a_virtual_file_system_is_not_called_a_full_disk():
         pytest.skip("no /proc on this system")
     with pytest.raises(ef.EventFieldError, match=r"^event file path /proc/e\.h5: directory /proc is not writable$"):
         check_writable("/proc/e.h5", "event file")
+
+
+def test_a_stack_larger_than_memory_is_not_called_damaged(tmp_path, monkeypatch):
+    """Reading a valid .npz's frames past the memory left said "not a readable .npz": it names the memory."""
+    path = str(tmp_path / "big.npz")
+    np.savez(path, frames=np.ones((4, 6, 8), np.float32), times=np.arange(4) * 1e-3)
+
+    def no_memory(self, key):
+        raise MemoryError("Unable to allocate 103. MiB")
+    monkeypatch.setattr(np.lib.npyio.NpzFile, "__getitem__", no_memory)
+    with pytest.raises(ef.EventFieldError, match=r"big.npz: its frames \(0 MiB\) do not fit in the memory"):
+        ef.events_from_frames(path)
