@@ -116,6 +116,7 @@ CASES = {
     "extract_views larger frame": (lambda s: ef.extract_views(np.ones((4, 6)), KALEIDOSCOPE), "cover 4x4"),
     "extract_views views cut": (lambda s: ef.extract_views(np.ones((4, 4)), dict(KALEIDOSCOPE, n=2)), "n x n"),
     "ViewStack.view missing": (lambda s: ef.extract_views(np.ones((4, 4)), KALEIDOSCOPE).view(1, 0), "no view"),
+    "view_of_pixel outside": (lambda s: ef.view_of_pixel([5, -1], [1, 1], KALEIDOSCOPE), "outside the film (4x4)"),
     "split_events no layout": (lambda s: ef.split_events(EVENTS), "kaleidoscope"),
     "view_of_pixel optics": (lambda s: ef.view_of_pixel(1, 1, None), "optics"),
     "LightField lengths": (lambda s: ef.LightField(np.ones((2, 3, 3)), np.ones((3, 2)), np.ones(2), LF.disparity),

@@ -334,8 +334,10 @@ def run_depth(a) -> int:
     write_exr(root + ".exr", {"depth": dm.depth, "confidence": dm.confidence}, meta)
     write_png(root + ".png", picture)
     confident = dm.confidence >= a.min_confidence
-    median = float(np.median(dm.depth[confident])) if confident.any() else float("nan")
-    print(f"wrote {root}.exr (depth, confidence) and {root}.png; median depth of confident pixels {median:.4g}")
+    found = (f"median depth of confident pixels {float(np.median(dm.depth[confident])):.4g} "
+             f"({confident.mean():.0%} of the pixels)") if confident.any() else \
+        f"no pixel is confident (>= {a.min_confidence:g}): no depth found (too little texture, parallax or events)"
+    print(f"wrote {root}.exr (depth, confidence) and {root}.png; {found}")
     return 0
 
 

@@ -303,7 +303,10 @@ def from_events(events, period: int = 0, views: int = 32, time: float | None = N
     if design == "galvo":
         return next(galvo_lightfields(events, views, method, periods=[period], **kw))
     if design in ("kaleidoscope", "microlens"):
-        t = t0 + events.duration_us * 1e-6 if time is None else time
+        t1 = t0 + events.duration_us * 1e-6
+        t = t1 if time is None else finite(time, "from_events: time")
+        if not t0 <= t <= t1 + 1e-9:     # past the end a reconstruction runs on no data (a high-pass decays)
+            raise ConfigError(f"from_events: time = {t:g} s: the stream covers {t0:g} to {t1:g} s")
         frame = reconstruct.reconstruct(events, [t], method, **kw)[0]
         return from_spatial(frame, optics, time=t, log=True)
     raise ConfigError("the stream's metadata describes no light-field optics (optics.design is "

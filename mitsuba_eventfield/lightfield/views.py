@@ -103,10 +103,18 @@ def _check_film(shape, optics: dict, design: str, views: list, what: str) -> Non
 def view_of_pixel(x, y, optics: dict):
     """Per pixel: (view index k, x and y in that view's unflipped coordinates)."""
     design, views = _layout(optics, "view_of_pixel")
-    x, y = np.asarray(x, np.int64), np.asarray(y, np.int64)
+    x, y = np.broadcast_arrays(np.asarray(x, np.int64), np.asarray(y, np.int64))
     n = optics["n"]
     if design == "kaleidoscope":
         tw, th = views[0]["tile"][2], views[0]["tile"][3]
+        outside = (x < 0) | (x >= n * tw) | (y < 0) | (y >= n * th)
+    else:
+        outside = (x < 0) | (y < 0)
+    if np.any(outside):        # a negative index picked the last view, one past the film a view that is not there
+        k = int(np.argmax(outside))
+        raise ConfigError(f"view_of_pixel: pixel ({int(x.flat[k])}, {int(y.flat[k])}) is outside the film"
+                          + (f" ({n * tw}x{n * th})" if design == "kaleidoscope" else ""))
+    if design == "kaleidoscope":
         col, row = x // tw, y // th
         k = row * n + col
         flip_x = np.array([v["flip_x"] for v in views])[k]

@@ -167,3 +167,15 @@ def test_options_of_the_other_design_and_kaleidoscope_calibrations_refused(captu
                       "--calibration", tmp_path / "k42.json"], capsys)
     assert code == 2 and "a kaleidoscope calibration (view registration, flat field) is not applied" in err, err
     assert not (tmp_path / "r.png").exists() and not (tmp_path / "k.png").exists()
+
+
+def test_a_kaleidoscope_light_field_only_at_times_the_stream_covers(captures):
+    """from_events(time=...) past the stream's end (or before its start) reconstructed on no data; the CLI
+    checked it, the API did not."""
+    from mitsuba_eventfield.lightfield.model import from_events
+    _, _, kal = captures
+    end = kal.meta.get("t_start_us", 0) * 1e-6 + kal.duration_us * 1e-6
+    assert from_events(kal, time=end).views.shape[0] == 9
+    for bad in (1.0, -1.0, math.nan):
+        with pytest.raises(ef.ConfigError, match="from_events: time"):
+            from_events(kal, time=bad)
