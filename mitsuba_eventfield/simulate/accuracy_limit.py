@@ -122,6 +122,8 @@ class AccuracyLimit:
 
     def note(self, summary) -> None:
         est = self.estimate() if self.active else None
+        if est is None and summary.timing_limit is not None:
+            est = summary.timing_limit             # a resumed render: the estimate its checkpoint saved
         summary.timing_limit = est
         if est is None:
             return

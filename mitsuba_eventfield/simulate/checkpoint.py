@@ -154,6 +154,8 @@ class Checkpoints:
             np.savez(f, **loop.integ.get_state())
         os.replace(tmp, os.path.join(self.folder, state_file))
         summary = {k_: v for k_, v in loop.summary.as_dict().items() if k_ not in ("output",)}
+        # the timing-accuracy estimate comes from the first steps, which a resumed process does not see again
+        summary["timing_limit"] = (loop.limit.estimate() if loop.limit.active else None) or summary.get("timing_limit")
         record = {"number": number, "fingerprint": self.fingerprint, "command": self.command, "t": t, "k": k, "dt": dt,
                   "state": state_file, "segments": writer.segments, "summary": summary,
                   "saved_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
@@ -176,7 +178,8 @@ class Checkpoints:
             elif hasattr(loop.summary, key) and key not in ("wall_s", "rate_ev_per_s"):
                 setattr(loop.summary, key, value)
         loop.summary.notes.append(f"resumed from checkpoint {s['number'] + 1} (step {s['k']}, "
-                                  f"t = {s['t'] * 1e3:.6g} ms, saved {s['saved_utc']})")
+                                  f"t = {s['t'] * 1e3:.6g} ms, saved {s['saved_utc']}): the stage times add both "
+                                  "processes' work, the wall time is this process's")
         return s["t"], s["k"], s["dt"]
 
 

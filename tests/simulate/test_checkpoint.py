@@ -68,6 +68,10 @@ def test_interrupted_render_resumes_to_the_uninterrupted_file(tmp_path, monkeypa
     summary = ef.render_events(timed, output=out, resume=True, **kw)
     assert any("resumed from checkpoint" in n for n in summary.notes)
     assert _same_file(ref, out) and not os.path.exists(folder)
+    # the timing-accuracy estimate of the first steps survives the resume (it was lost with them), note and all
+    ra, rb = (ef.read_events(p).meta["render"] for p in (ref, out))
+    assert ra["timing_limit"] == rb["timing_limit"]
+    assert [n for n in ra["notes"] if "timing accuracy" in n] == [n for n in rb["notes"] if "timing accuracy" in n]
 
 
 def test_sigkill_then_resume_from_the_command_line(tmp_path):
