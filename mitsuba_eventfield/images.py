@@ -118,6 +118,30 @@ def depth_png(depth: np.ndarray, confidence: np.ndarray | None = None, near: flo
     return canvas
 
 
+def depth_colours(near: float, far: float, bad: str = "0.6") -> tuple:
+    """(colormap, norm) for a depth panel of a matplotlib figure: ``depth_png``'s scale (turbo over inverse
+    depth from ``near`` to ``far``, near red), ``bad`` for masked pixels, so that one depth has one colour in
+    every figure and PNG (the demo's figure drew near blue on a linear scale, its depth.png near red)."""
+    import matplotlib
+    from matplotlib.colors import FuncNorm
+    cmap = matplotlib.colormaps["turbo_r"].copy()
+    cmap.set_bad(bad)
+    far = max(float(far), float(near) * 1.001)
+    return cmap, FuncNorm((lambda d: -1.0 / np.asarray(d, np.float64), lambda u: -1.0 / np.asarray(u, np.float64)),
+                          vmin=float(near), vmax=far, clip=True)
+
+
+def depth_colourbar(fig, mappable, ax, label: str = "m"):
+    """The colour bar of a ``depth_colours`` panel laid out like ``depth_png``'s: near at the top, ticks at
+    round depths spread over the inverse-depth scale (linear ticks crowded at its far end)."""
+    near, far = mappable.norm.vmin, mappable.norm.vmax
+    bar = fig.colorbar(mappable, ax=ax, fraction=0.046, label=label)
+    inv = np.linspace(1.0 / near, 1.0 / far, 5)
+    bar.set_ticks([float(f"{1.0 / v:.2g}") for v in inv])
+    bar.ax.invert_yaxis()
+    return bar
+
+
 def save_figure(fig, path: str, what: str = "figure", dpi: int = 110) -> str:
     """A matplotlib figure as a PNG, atomically (nothing half-written under ``path``), then closed."""
     import matplotlib.pyplot as plt

@@ -125,24 +125,23 @@ def figure(result: DemoResult, path: str) -> str:
     import matplotlib.pyplot as plt
 
     from ..events.preview import event_frame_rgb
-    from ..images import save_figure
+    from ..images import depth_colourbar, depth_colours, save_figure
     (z_near, near), (z_far, far) = sorted(result.refocused.items())
     dm = result.depth
     shown = np.where(dm.confidence >= 0.6, dm.depth, np.nan)
-    turbo = matplotlib.colormaps["turbo"].copy()
-    turbo.set_bad("0.6")
+    cmap, norm = depth_colours(NEAR, FAR)
     panels = [("events of 1/8 scan period (ON red, OFF blue)",
                event_frame_rgb(result.events, *_preview_window(result.events)), {}),
               (f"refocused at {z_near:g} m: near card sharp", _display(near), {"cmap": "gray"}),
               (f"refocused at {z_far:g} m: far card sharp", _display(far), {"cmap": "gray"}),
               ("depth from focus (m; grey: not confident)", np.ma.masked_invalid(shown),
-               {"cmap": turbo, "vmin": NEAR, "vmax": 1.6})]
+               {"cmap": cmap, "norm": norm})]
     fig, axes = plt.subplots(1, 4, figsize=(15, 3.4))
     for ax, (title, img, kw) in zip(axes, panels):
         shown_img = ax.imshow(img, **kw)
         ax.set_title(title, fontsize=9)
         ax.axis("off")
-    fig.colorbar(shown_img, ax=axes[-1], fraction=0.046)
+    depth_colourbar(fig, shown_img, axes[-1])
     fig.suptitle("An event field from a scanning galvo: refocus and depth from the events alone", fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path, dpi=100)

@@ -65,6 +65,8 @@ class HDRComparison(AppResult):
                  "mean |log error|       all    bright    dark   worst region"]
         for name, e in self.errors.items():
             lines.append(f"  {name:<14} {e['all']:9.3f} {e['bright']:9.3f} {e['dark']:7.3f} {e['worst_region']:9.3f}")
+        if "extra_information" in self.meta:
+            lines.append(f"extra information: {self.meta['extra_information']}")
         if "time_split_s" in self.meta:
             lines.append(time_split_line(self.meta["time_split_s"]))
         return "\n".join(lines)
@@ -124,6 +126,10 @@ def compare(scene_path: str, defines: dict | None = None, depth: float = math.in
                          {"scene": scene_path, "defines": dict(defines or {}), "events": len(events),
                           "exposures": exposures, "offset_from": "median over pixels with long-exposure codes "
                           f"{WELL_EXPOSED[0]}..{WELL_EXPOSED[1]}", "solver_depth": depth, "samples": samples,
+                          "inputs": "events of one scan period + one long-exposure 8-bit frame (the truth is "
+                          "rendered for scoring, and to make that frame)",
+                          "extra_information": "the events' unknown constant comes from a conventional frame (the "
+                          f"long exposure); the solver assumes the scene at {depth:g} (given, not measured)",
                           "steps": steps_per_period, "spp": spp,
                           "time_split_s": {"render": t1 - t0, "ground_truth": t2 - t1, "solve": t3 - t2},
                           "pixel_model": events.meta["pixel_model"], "optics": events.meta["optics"]})

@@ -68,8 +68,10 @@ class PlaneRefocus(AppResult):
                  "  plane        depth   PSNR dB (mean, min)   SSIM (mean, min)   focus selectivity"]
         for name, z in self.planes.items():
             p, s = np.array(self.scores[name]["psnr_db"]), np.array(self.scores[name]["ssim"])
+            sel = self.selectivity[name]
             lines.append(f"  {name:<10} {z:7.3g}   {p.mean():7.2f} {p.min():7.2f}       {s.mean():6.3f} {s.min():6.3f}"
-                         f"        {self.selectivity[name]:.2f}x")
+                         + (f"        {sel:.2f}x" if sel is not None else
+                            "        - (no textured pixel at this depth: its scores measure nothing)"))
         if self.conventional is not None:
             lines.append(f"  a conventional {self.meta['conventional_fps']:g} fps frame (pinhole, same view) differs "
                          "from the instant it is centred on by "
@@ -97,6 +99,16 @@ def _check_planes(planes: dict) -> dict:
         if not (z > 0 and math.isfinite(z)):
             raise ValueError(f"plane {name!r}: depth = {z!r} must be a finite number > 0 (scene units)")
         out[str(name)] = z
+    return out
+
+
+def _selectivity(planes: dict, focus: dict) -> dict:
+    """Per plane: focus of its own region refocused at it over the best of the other planes (None where no
+    textured pixel lies at its depth: nothing to compare; it printed "nanx")."""
+    out = {}
+    for n in planes:
+        others = [np.nanmean(focus[n][m]) for m in planes if m != n] if np.isfinite(focus[n][n]).any() else []
+        out[n] = float(np.nanmean(focus[n][n]) / max(others)) if others else None
     return out
 
 
@@ -139,11 +151,7 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
             for m in planes:
                 fm = focus_measure(refocused[m][k], "tenengrad")
                 focus[n][m].append(float(fm[region].mean()) if region.any() else float("nan"))
-    selectivity = {}
-    for n in planes:
-        own = np.nanmean(focus[n][n])
-        others = [np.nanmean(focus[n][m]) for m in planes if m != n]
-        selectivity[n] = float(own / max(others)) if others else float("nan")
+    selectivity = _selectivity(planes, focus)
     t2 = time.perf_counter()
     conventional, blur = None, {}
     if conventional_fps is not None:
@@ -285,7 +293,7 @@ def paper_rows(result) -> list:
     inputs = result.meta["inputs"]
     if isinstance(result, PlaneRefocus):
         psnr = ", ".join(f"{n} {np.mean(result.scores[n]['psnr_db']):.1f} dB" for n in result.planes)
-        sel = ", ".join(f"{n} {v:.2f}x" for n, v in result.selectivity.items())
+        sel = ", ".join(f"{n} {v:.2f}x" for n, v in result.selectivity.items() if v is not None)
         planes = "".join(f" --plane {n}={z:g}" for n, z in result.planes.items())
         return [{"figure": "Fig. 10", "claim": "A galvo at 250 Hz gives a light field every scan period of a scene "
                  "with a spinning fan, refocusable after capture on the fan or on the background.",

@@ -48,7 +48,7 @@ def planes_figure(result, path: str, period: int | None = None) -> str:
                                                                    result.conventional_blur.items()), fontsize=8)
         axes[0, -1].axis("off")
         axes[1, -1].axis("off")
-    fig.suptitle(f"High-speed refocus: scan period {k} of {len(result.refocused[names[0]])} "
+    fig.suptitle(f"High-speed refocus: scan period {k + 1} of {len(result.refocused[names[0]])} "
                  f"({1 / result.period_s:g} light fields per second)", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path)

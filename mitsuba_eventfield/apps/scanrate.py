@@ -46,8 +46,9 @@ class ScanRateDepth(AppResult):
         out = {}
         for key in ("near", "far", "coverage"):
             vals = np.array([e[key] for e in self.errors], dtype=np.float64)
-            out[key] = {"median": float(np.nanmedian(vals)),
-                        "worst": float(np.nanmax(vals) if key != "coverage" else np.nanmin(vals))}
+            vals = vals[np.isfinite(vals)]          # a period with no confident pixel there has no error
+            out[key] = {"median": float(np.median(vals)) if vals.size else None,
+                        "worst": (float(vals.max() if key != "coverage" else vals.min())) if vals.size else None}
         return out
 
     def report(self) -> str:
@@ -55,11 +56,14 @@ class ScanRateDepth(AppResult):
                  f"{len(self.depth_maps)} depth maps at {1 / self.period_s:g} per second; median |relative depth "
                  f"error| on confident (>= {self.meta['min_confidence']:g}) textured pixels:"]
         for k, e in enumerate(self.errors):
+            def err(name):
+                return (f"{e[name]:.3f} (p90 {e[name + '_p90']:.2f})" if e[name + "_pixels"] else
+                        "no confident pixel")
+            near_z = (f"; near object median z {e['near_truth_z']:.3f} m (estimated {e['near_estimate_z']:.3f} m)"
+                      if e["near_pixels"] else "")
             lines.append(f"  period {k} ({self.times[k] * 1e3:5.1f} ms): near (z < {self.meta['split_depth']:g} m) "
-                         f"{e['near']:.3f} (p90 {e['near_p90']:.2f}), far {e['far']:.3f} (p90 {e['far_p90']:.2f}); "
-                         f"{100 * e['coverage']:.0f}% of textured pixels "
-                         f"confident; near object median z {e['near_truth_z']:.3f} m (estimated "
-                         f"{e['near_estimate_z']:.3f} m)")
+                         f"{err('near')}, far {err('far')}; {100 * e['coverage']:.0f}% of textured pixels "
+                         f"confident{near_z}")
         lines.append(time_split_line(self.meta["time_split_s"]))
         return "\n".join(lines)
 
@@ -192,28 +196,30 @@ def figure(result: ScanRateDepth, path: str, columns: int = 4) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..images import save_figure
+    from ..images import depth_colourbar, depth_colours, save_figure
     n = len(result.depth_maps)
     pick = np.unique(np.linspace(0, n - 1, min(columns, n)).round().astype(int))
     lo, hi = result.meta["near"], float(np.nanmax([np.nanmax(np.where(np.isfinite(z), z, np.nan))
                                                    for z in result.truth]))
     fig, axes = plt.subplots(3, len(pick), figsize=(3.2 * len(pick), 7.2), squeeze=False)
-    cmap, err_cmap = plt.get_cmap("turbo").copy(), plt.get_cmap("viridis").copy()
-    cmap.set_bad("black")
+    cmap, norm = depth_colours(lo, hi, bad="black")          # depth_png's scale: near red, inverse depth
+    err_cmap = plt.get_cmap("viridis").copy()
     err_cmap.set_bad("black")
     for j, k in enumerate(pick):
         dm, z, e = result.depth_maps[k], result.truth[k], result.errors[k]
         shown = np.where(result.textured[k] & (dm.confidence >= result.meta["min_confidence"]), dm.depth, np.nan)
         rel = np.abs(shown - z) / z
-        panels = ((z, f"Mitsuba depth, {result.times[k] * 1e3:.0f} ms", cmap, lo, hi),
-                  (shown, f"events: near err {e['near']:.3f}, far {e['far']:.3f}", cmap, lo, hi),
-                  (rel, "|relative error| (0..0.2)", err_cmap, 0, 0.2))
-        for i, (img, title, cm, vmin, vmax) in enumerate(panels):
-            im = axes[i, j].imshow(np.ma.masked_invalid(img), cmap=cm, vmin=vmin, vmax=vmax)
+        panels = ((z, f"Mitsuba depth, {result.times[k] * 1e3:.0f} ms", {"cmap": cmap, "norm": norm}),
+                  (shown, f"events: near err {e['near']:.3f}, far {e['far']:.3f}", {"cmap": cmap, "norm": norm}),
+                  (rel, "|relative error| (0..0.2)", {"cmap": err_cmap, "vmin": 0, "vmax": 0.2}))
+        for i, (img, title, kw) in enumerate(panels):
+            im = axes[i, j].imshow(np.ma.masked_invalid(img), **kw)
             axes[i, j].set_title(title, fontsize=7)
             axes[i, j].axis("off")
-            if j == len(pick) - 1:
-                fig.colorbar(im, ax=axes[i, j], fraction=0.046, label="m" if i < 2 else "")
+            if j == len(pick) - 1 and i < 2:
+                depth_colourbar(fig, im, axes[i, j])
+            elif j == len(pick) - 1:
+                fig.colorbar(im, ax=axes[i, j], fraction=0.046)
     fig.suptitle(f"Depth at the scan rate: {result.meta['depth_maps_per_second']:g} metric depth maps per second "
                  "(confident textured pixels; black: no estimate)", fontsize=9)
     fig.tight_layout()

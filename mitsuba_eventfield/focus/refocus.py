@@ -257,15 +257,24 @@ def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None,
 
 
 def _refocus_warped(lf: LightField, depth: float, motion=None) -> np.ndarray:
-    """Refocus by exact per-view homographies (galvo light fields), reflected borders as the Fourier path."""
+    """Refocus by exact per-view homographies (galvo light fields): each pixel the mean of the views that
+    have data there (where a view's sample falls inside its image: ``aligned_views``' coverage); where none
+    has, the mean of all views with reflected borders. The mean over every view with reflected borders put
+    mirrored copies of the scene inside the image, a band as wide as the views' spread: on the demo, strips of
+    each card 6-10 px in from the edges over a uniform wall, 25-35 % of its brightness. Values are sampled
+    with reflected borders all the same: Lanczos near a view's edge would mix in the zeros of a constant one."""
     maps = lf.alignments(depth)
     if motion is not None:
         maps = _with_motion(maps, motion_shifts(lf, motion))
-    total = None
+    ones = np.ones(lf.shape, np.float32)
+    total = cover = every = None
     for view, m in zip(lf.views, maps):
-        w = _warp(view.astype(np.float32), m, border=cv2.BORDER_REFLECT_101)
-        total = w.astype(np.float64) if total is None else total + w
-    return np.maximum(total / len(lf.views), 0.0)
+        w = _warp(view.astype(np.float32), m, border=cv2.BORDER_REFLECT_101).astype(np.float64)
+        c = (_warp(ones, m, interpolation=cv2.INTER_LINEAR) > 0.999).astype(np.float64)
+        c = c[..., None] if w.ndim == 3 else c
+        total, cover, every = (w * c, c, w) if total is None else (total + w * c, cover + c, every + w)
+    mean = np.where(cover > 0, total / np.maximum(cover, 1.0), every / len(lf.views))
+    return np.maximum(mean, 0.0)
 
 
 def depth_planes(near: float, far: float, count: int) -> np.ndarray:

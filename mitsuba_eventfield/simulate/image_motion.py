@@ -266,7 +266,9 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
                              "the default steps are finer")
         return
     need = int(math.ceil(steps * worst / MAX_PX_PER_STEP))
-    fix = (f"--steps {need} keeps it under {MAX_PX_PER_STEP:g} px" if schedule is None else
+    # not "--steps N": the applications choose their own steps and take no such option
+    fix = (f"{need} steps (render --steps, render_events(steps=)) keep it under {MAX_PX_PER_STEP:g} px"
+           if schedule is None else
            "the steps are placed by the motion, and the fastest moments would need steps shorter than "
            "--min-step (default 1 us)")
     note = (f"warning: steps coarser than the image motion: per step {what} (more than {MAX_PX_PER_STEP:g} "

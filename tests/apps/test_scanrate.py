@@ -60,3 +60,26 @@ def test_scanrate_cli_outputs_and_errors(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "scanrate-depth", RUNNER, "-o",
                           str(tmp_path / "b"), "--near", "2", "--far", "1"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "near = 2.0, far = 1.0" in bad.stderr
+
+
+def test_periods_with_no_confident_pixel_report_none_not_nan():
+    """A period with no confident pixel in a region has no error there: the report said "nan (p90 nan)" with
+    NumPy's All-NaN warnings, and metrics held NaN medians."""
+    import warnings
+
+    import numpy as np
+
+    from mitsuba_eventfield.apps.scanrate import ScanRateDepth
+    empty = {"near": float("nan"), "near_p90": float("nan"), "near_pixels": 0, "far": float("nan"),
+             "far_p90": float("nan"), "far_pixels": 0, "coverage": 0.0, "near_truth_z": float("nan"),
+             "near_estimate_z": float("nan")}
+    some = dict(empty, far=0.02, far_p90=0.05, far_pixels=40, coverage=0.3)
+    r = ScanRateDepth([None, None], [None, None], [None, None], [empty, some], np.array([0.002, 0.006]), 0.004,
+                      {"min_confidence": 0.5, "split_depth": 1.0, "time_split_s": {"render": 1.0}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = r.summary()
+        text = r.report()
+    assert s["near"] == {"median": None, "worst": None} and s["far"] == {"median": 0.02, "worst": 0.02}
+    assert s["coverage"] == {"median": 0.15, "worst": 0.0}
+    assert "nan" not in text and text.count("no confident pixel") == 3

@@ -114,7 +114,7 @@ def test_coarse_scan_steps_are_flagged(tmp_path, capsys):
     assert cli.main(["render", GALVO, "-o", out, *SMALL, "--duration", "0.008", "--steps", "8", "--quiet"]) == 0
     assert "steps coarser than the image motion: per step the scan" in capsys.readouterr().err
     notes = [n for n in ef.read_events(out).meta["render"]["notes"] if "steps coarser" in n]
-    need = int(notes[0].split("--steps ")[1].split()[0])
+    need = int(re.search(r"; (\d+) steps \(render --steps", notes[0])[1])
     assert 8 < need <= 32
     assert cli.main(["render", GALVO, "-o", out, *SMALL, "--duration", "0.008", "--steps", str(need), "--quiet"]) == 0
     assert "steps coarser" not in capsys.readouterr().err

@@ -47,6 +47,8 @@ def test_reconstruct_refocus_depth_outputs(galvo_capture):
     near, _ = read_exr(str(d / "rf_0.5.exr"))
     far, meta = read_exr(str(d / "rf_2.5.exr"))
     assert meta["depth"] == 2.5 and meta["optics"]["design"] == "galvo"
+    # a start frame is information beyond the events: the output and the printed line say it was used
+    assert meta["inputs"].startswith("events + a start frame (extra information") and "start frame" in r.stdout
     assert not np.allclose(near["Y"], far["Y"])
     r = run("depth", str(d / "g.h5"), "-o", str(d / "depth.png"), "--near", "0.3", "--far", "4", "--planes", "16",
             "--start-frame", str(d / "start.exr"), "--views", "16", "--measure", "tenengrad")

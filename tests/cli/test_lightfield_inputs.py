@@ -179,3 +179,15 @@ def test_a_kaleidoscope_light_field_only_at_times_the_stream_covers(captures):
     for bad in (1.0, -1.0, math.nan):
         with pytest.raises(ef.ConfigError, match="from_events: time"):
             from_events(kal, time=bad)
+
+
+def test_a_stream_rendered_with_coarse_steps_is_flagged(tmp_path, capsys):
+    """depth / refocus on a stream whose render moved the image more than a pixel a step (its metadata records
+    it) gave confidently wrong depths without a word (offaxis_cards at 8 steps a period: 18-20 % off)."""
+    ev = ef.render_events(ef.load_scene(GALVO, width=48, height=36), 0.004, steps=4)   # 2 px a step
+    path = str(tmp_path / "coarse.h5")
+    ef.write_events(path, ev)
+    capsys.readouterr()
+    assert cli(["refocus", path, "-o", str(tmp_path / "r.png"), "--depth", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "px of image motion a step (more than 1)" in err and err.count("\n") == 1, err

@@ -286,3 +286,33 @@ def test_parabola_vertex_exact_on_parabolas_and_kept_between_neighbours():
     assert np.allclose(parabola_vertex((2.0, 3.0, 4.0), y), 3.0 + parabola_offset(*y))
     assert parabola_vertex((0.0, 1.0, 3.0), (0.0, 1.0, 1.2)) == pytest.approx(2.0)      # clamped: half of 1 -> 3
     assert parabola_vertex((0.0, 1.0, 3.0), (0.0, -1.0, 0.0)) == 1.0                     # curves upwards
+
+
+def test_galvo_refocus_averages_only_the_views_that_see_a_pixel():
+    """Each refocused pixel is the mean of the views whose sample falls inside their image; the mean over all
+    views with reflected borders put mirrored copies of the cards into a band along the edges (the demo). With
+    every view a different constant, the oracle is the mean of the constants of the views covering the pixel,
+    found here from the alignment homographies themselves."""
+    from mitsuba_eventfield.lightfield.model import from_galvo, galvo_view_times
+    timed = _galvo_two_planes(width=64)
+    optics = timed.sensor.optics_metadata()
+    times = galvo_view_times(optics, 0.0, 16)
+    h = w = 64
+    values = np.arange(1.0, 17.0)
+    lf = from_galvo(np.log(np.stack([np.full((h, w), v, np.float32) for v in values])), times, optics)   # log in
+    depth = 0.3                                             # a large spread: wide bands at the borders
+    img = ef.refocus(lf, depth, on_motion="ignore")
+    ys, xs = np.mgrid[0:h, 0:w]
+    pts = np.stack([xs.ravel(), ys.ravel(), np.ones(h * w)])
+    inside, margin = [], []
+    for m in lf.alignments(depth):
+        q = m @ pts
+        x, y = q[0] / q[2], q[1] / q[2]
+        inside.append(((x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)).reshape(h, w))
+        margin.append(np.minimum.reduce([np.abs(x), np.abs(x - (w - 1)), np.abs(y), np.abs(y - (h - 1))]).reshape(h, w))
+    inside, clear = np.array(inside), np.min(margin, axis=0) > 1e-2     # not on a view's very edge
+    covered = inside.any(axis=0)
+    expect = (inside * values[:, None, None]).sum(axis=0) / np.maximum(inside.sum(axis=0), 1)
+    sel = clear & covered
+    assert (~inside.all(axis=0) & sel).sum() > 0.1 * h * w          # the test reaches the border bands
+    np.testing.assert_allclose(img[sel], expect[sel], rtol=1e-4)

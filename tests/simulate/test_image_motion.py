@@ -1,5 +1,6 @@
 """Image motion per step (the coarse-step note) against closed-form projections."""
 import math
+import re
 
 import pytest
 
@@ -38,7 +39,7 @@ def test_coarse_steps_are_noted_with_the_steps_that_suffice():
     note_image_motion(timed, 0.0, 0.02, 64, fine)
     assert coarse.image_motion_px_per_step["objects"] == pytest.approx(4.07, rel=0.02)
     assert "steps coarser than the image motion" in coarse.notes[0]
-    need = int(coarse.notes[0].rsplit("--steps ", 1)[1].split()[0])
+    need = int(re.search(r"; (\d+) steps \(render --steps", coarse.notes[0])[1])
     assert need == 17 and fine.notes == [] and fine.image_motion_px_per_step["objects"] < 1
 
 
