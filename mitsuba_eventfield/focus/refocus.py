@@ -48,6 +48,17 @@ class MotionBlurWarning(UserWarning):
     """A refocused image whose content moved more than ``MOTION_LIMIT_PX`` while its views were taken."""
 
 
+# track_focus: a focus curve over the depths whose peak stands less than this share above its lowest value
+# cannot tell depth (a textureless region: every refocused image alike); a match below this normalised
+# correlation is no match (calibration.galvo's MIN_MATCH_SCORE)
+MIN_FOCUS_CONTRAST = 0.05
+MIN_FOLLOW_SCORE = 0.6
+
+
+class TrackingWarning(UserWarning):
+    """track_focus could not measure: the ROI has no texture to focus on or to follow."""
+
+
 def _warp(img, homography, border=cv2.BORDER_CONSTANT, interpolation=cv2.INTER_LANCZOS4):
     """img sampled at homography @ (x, y, 1) (array indices), Lanczos, zero (or reflected) outside."""
     return cv2.warpPerspective(img, homography, (img.shape[1], img.shape[0]),
@@ -305,8 +316,12 @@ def _follow(template: np.ndarray, image: np.ndarray, roi, search: float = 1.0):
     window = image[sy0:sy1, sx0:sx1]
     if window.ndim == 3:
         window, template = window.mean(-1), template.mean(-1)
+    if not np.std(template) > 1e-6 * (abs(float(np.mean(template))) + 1e-30):
+        return roi                       # a flat template matches anywhere: stay where it was
     score = cv2.matchTemplate(window.astype(np.float32), template.astype(np.float32), cv2.TM_CCOEFF_NORMED)
-    _, _, _, (bx, by) = cv2.minMaxLoc(score)
+    _, best, _, (bx, by) = cv2.minMaxLoc(score)
+    if not best >= MIN_FOLLOW_SCORE:     # no match worth the name: stay where it was
+        return roi
     return (sx0 + bx, sy0 + by, sx0 + bx + rw, sy0 + by + rh)
 
 
@@ -316,7 +331,10 @@ def _best_depth(lf, depths, roi, measure, motion):
     scores = np.array([focus_measure(s if s.ndim == 2 else s.mean(-1), measure)[y0:y1, x0:x1].mean()
                        for s in stack])
     k = int(np.argmax(scores))
-    return refine_peak(1.0 / depths, scores, k)
+    top, level = float(scores.max()), float(np.mean(stack[:, y0:y1, x0:x1]))
+    # flat: no focus at all (rounding noise against the image's own scale) or a peak hardly above the rest
+    flat = not top > 1e-9 * max(level * level, level, 1e-30) or (top - float(scores.min())) / top < MIN_FOCUS_CONTRAST
+    return refine_peak(1.0 / depths, scores, k), flat
 
 
 def _depth_list(depths, name: str) -> np.ndarray:
@@ -368,7 +386,11 @@ def track_focus(lightfields, depths, roi, measure: str = "tenengrad", smooth: fl
             x0, y0, x1, y1 = roi
             roi = _follow(images[-1][y0:y1, x0:x1], refocus(lf, 1.0 / inverse[-1], on_motion="ignore"), roi)
         rois.append(roi)
-        inverse.append(_best_depth(lf, depths, roi, measure, None))
+        inv, flat = _best_depth(lf, depths, roi, measure, None)
+        inverse.append(inv)
+        if flat:
+            warnings.warn(f"track_focus: light field {len(rois) - 1}: the ROI {tuple(roi)} looks the same at every "
+                          "depth (no texture to focus on): its depth is not measured", TrackingWarning, stacklevel=2)
         images.append(refocus(lf, 1.0 / inverse[-1], on_motion="ignore") if follow else None)
     velocities = np.zeros((len(lightfields), 2))
     if follow and compensate_motion and len(lightfields) > 1:
@@ -381,7 +403,7 @@ def track_focus(lightfields, depths, roi, measure: str = "tenengrad", smooth: fl
         for i in (0, 1):
             fit = np.polynomial.Polynomial.fit(times[first:], centres[first:, i], degree)
             velocities[:, i] = fit.deriv()(times) if degree > 0 else 0.0
-        inverse = [_best_depth(lf, depths, r, measure, v) for lf, r, v in zip(lightfields, rois, velocities)]
+        inverse = [_best_depth(lf, depths, r, measure, v)[0] for lf, r, v in zip(lightfields, rois, velocities)]
     chosen, out, prev = [], [], None
     for lf, inv, v in zip(lightfields, inverse, velocities):
         if prev is not None and smooth > 0:

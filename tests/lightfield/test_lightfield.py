@@ -316,3 +316,22 @@ def test_galvo_refocus_averages_only_the_views_that_see_a_pixel():
     sel = clear & covered
     assert (~inside.all(axis=0) & sel).sum() > 0.1 * h * w          # the test reaches the border bands
     np.testing.assert_allclose(img[sel], expect[sel], rtol=1e-4)
+
+
+def test_track_focus_flags_a_region_with_nothing_to_focus_on():
+    """A textureless ROI looks the same at every depth: track_focus returned a depth (0.83-1.46 m for a wall at
+    4 m) and, following it, an image velocity of hundreds of px/s in a still scene, flagging nothing. It now
+    warns for each such light field, and a flat template does not move the ROI (no velocity)."""
+    import warnings
+
+    from mitsuba_eventfield.focus.refocus import TrackingWarning
+    from mitsuba_eventfield.lightfield.model import from_galvo, galvo_view_times
+    timed = _galvo_two_planes(width=48)
+    optics = timed.sensor.optics_metadata()
+    flat = [from_galvo(np.full((16, 48, 48), math.log(0.3), np.float32), galvo_view_times(optics, t, 16), optics)
+            for t in (0.0, 0.004, 0.008)]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _, _, rois, velocities = ef.track_focus(flat, [0.5, 1.0, 2.0, 4.0], (16, 16, 32, 32), follow=True)
+    assert sum(issubclass(w.category, TrackingWarning) for w in caught) == 3
+    assert rois == [(16, 16, 32, 32)] * 3 and np.allclose(velocities, 0.0)
