@@ -55,12 +55,15 @@ def _charts(result, axes) -> None:
                 zip([first] + others[:1], ("o", "x"), ("-", "--"))]
     axes[1].legend(handles=handles, fontsize=6.5, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.2),
                    frameon=False)
-    for ax in axes:
+    crossing = result.crossing_hz
+    for i, ax in enumerate(axes):
         ax.set_xlabel("scan frequency (Hz)", fontsize=8)
         ax.tick_params(labelsize=7)
-        crossing = result.crossing_hz
         if crossing and f.min() <= crossing <= f.max():
-            ax.axvline(crossing, color="gray", ls=":", lw=1)
+            ax.axvline(crossing, color="gray", ls=":", lw=1,
+                       label=f"offered = cap ({crossing:.0f} Hz)" if i == 0 else None)
+    if crossing and f.min() <= crossing <= f.max():
+        axes[0].legend(fontsize=7, loc="upper left")     # again: with the dotted line's entry
 
 
 def figure(result, path: str) -> str:
