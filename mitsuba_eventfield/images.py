@@ -124,11 +124,12 @@ def depth_colours(near: float, far: float, bad: str = "0.6") -> tuple:
     every figure and PNG (the demo's figure drew near blue on a linear scale, its depth.png near red)."""
     import matplotlib
     from matplotlib.colors import FuncNorm
-    cmap = matplotlib.colormaps["turbo_r"].copy()
-    cmap.set_bad(bad)
+    cmap = matplotlib.colormaps["turbo_r"].with_extremes(bad=bad)
     far = max(float(far), float(near) * 1.001)
-    return cmap, FuncNorm((lambda d: -1.0 / np.asarray(d, np.float64), lambda u: -1.0 / np.asarray(u, np.float64)),
-                          vmin=float(near), vmax=far, clip=True)
+    def negative_inverse(v):     # increasing in depth; matplotlib also maps 0 (its colour bar's edges): -inf
+        with np.errstate(divide="ignore"):
+            return -1.0 / np.asarray(v, np.float64)
+    return cmap, FuncNorm((negative_inverse, negative_inverse), vmin=float(near), vmax=far, clip=True)
 
 
 def depth_colourbar(fig, mappable, ax, label: str = "m"):

@@ -30,3 +30,30 @@ def test_demo_command_writes_what_it_says(tmp_path):
         assert os.path.getsize(out / name) > 0, name
     channels, _ = read_exr(str(out / "depth.exr"))
     assert channels["depth"].shape == (48, 64) and set(channels) == {"depth", "confidence"}
+
+
+def test_depth_panels_share_depth_pngs_scale_without_warnings(tmp_path):
+    """Every depth panel takes images.depth_colours: depth_png's inverse-depth turbo scale with near red (the
+    demo's figure drew near blue on a linear scale); its colour bar runs near at the top, quietly (matplotlib
+    maps 0 at the bar's edges: a divide-by-zero warning reached the demo's output)."""
+    import warnings
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mitsuba_eventfield.images import depth_colourbar, depth_colours, depth_png
+    cmap, norm = depth_colours(0.35, 3.0)
+    assert norm(0.35) == 0.0 and norm(3.0) == 1.0
+    assert abs(norm(1.0) - (1 / 0.35 - 1) / (1 / 0.35 - 1 / 3.0)) < 1e-12       # uniform in inverse depth
+    assert np.allclose(cmap(norm(0.35))[:3], matplotlib.colormaps["turbo"](1.0)[:3])  # near: turbo's red end
+    png = depth_png(np.full((4, 4), 0.35), None, 0.35, 3.0)
+    assert png[0, 0, 0] > 100 and png[0, 0, 2] < 60                              # depth_png's near is red too
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fig, ax = plt.subplots()
+        shown = ax.imshow(np.ma.masked_invalid(np.array([[0.5, 1.2], [np.nan, 3.0]])), cmap=cmap, norm=norm)
+        bar = depth_colourbar(fig, shown, ax)
+        fig.savefig(str(tmp_path / "d.png"))
+        plt.close(fig)
+    assert bar.ax.yaxis_inverted()
