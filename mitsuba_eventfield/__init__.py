@@ -32,7 +32,8 @@ from .events.preview import event_frame_rgb, write_preview  # noqa: E402
 from .events.stream import EventStream  # noqa: E402
 from .focus import depth  # noqa: E402
 from .focus.depth import DepthMap, depth_from_focus, focus_measure  # noqa: E402
-from .focus.refocus import depth_planes, focal_stack, refocus, track_focus  # noqa: E402
+from .focus.refocus import depth_planes, focal_stack, refocus  # noqa: E402
+from .focus.tracking import track_focus  # noqa: E402
 from .lightfield import reconstruct  # noqa: E402
 from .lightfield.model import LightField, from_galvo, from_spatial, galvo_lightfields, galvo_view_times  # noqa: E402
 from .lightfield.views import ViewStack, extract_views, split_events, view_of_pixel  # noqa: E402

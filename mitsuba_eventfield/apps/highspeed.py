@@ -237,12 +237,13 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     """Follow an object moving in depth: per scan period, the depth in [near, far] at which the object's region
     is sharpest; the region starts at ``roi`` (fractions of the image) and follows the object by template
     matching; with ``compensate_motion`` the object's image velocity is taken out of the views
-    (``refocus.track_focus``); refocus maps every view exactly (``optics.galvo``), so the sharpest depth is
+    (``tracking.track_focus``); refocus maps every view exactly (``optics.galvo``), so the sharpest depth is
     metric across the field. ``captured``: a ``capture`` of the
     scene to reuse. Truth: the median Mitsuba depth of the region's pixels nearer than ``object_far`` (the
     object's pixels, the background being farther), with their 25th-75th percentiles (``truth_spread``)."""
     from ..evaluation.truth import truth_depth
-    from ..focus.refocus import depth_planes, refocus, track_focus
+    from ..focus.refocus import depth_planes, refocus
+    from ..focus.tracking import track_focus
     if not (0 < near < far and object_far > near):
         raise ValueError(f"near = {near}, far = {far}, object_far = {object_far}: need 0 < near < far and "
                          "object_far > near (scene units)")

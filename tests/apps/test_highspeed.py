@@ -12,7 +12,8 @@ from conftest import ROOT
 
 from mitsuba_eventfield.apps import highspeed
 from mitsuba_eventfield.evaluation.quality import psnr
-from mitsuba_eventfield.focus.refocus import depth_planes, refocus, track_focus
+from mitsuba_eventfield.focus.refocus import depth_planes, refocus
+from mitsuba_eventfield.focus.tracking import track_focus
 from mitsuba_eventfield.images import read_exr
 from mitsuba_eventfield.lightfield.model import Disparity, LightField
 

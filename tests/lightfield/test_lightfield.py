@@ -324,7 +324,7 @@ def test_track_focus_flags_a_region_with_nothing_to_focus_on():
     warns for each such light field, and a flat template does not move the ROI (no velocity)."""
     import warnings
 
-    from mitsuba_eventfield.focus.refocus import TrackingWarning
+    from mitsuba_eventfield.focus.tracking import TrackingWarning
     from mitsuba_eventfield.lightfield.model import from_galvo, galvo_view_times
     timed = _galvo_two_planes(width=48)
     optics = timed.sensor.optics_metadata()
@@ -335,3 +335,26 @@ def test_track_focus_flags_a_region_with_nothing_to_focus_on():
         _, _, rois, velocities = ef.track_focus(flat, [0.5, 1.0, 2.0, 4.0], (16, 16, 32, 32), follow=True)
     assert sum(issubclass(w.category, TrackingWarning) for w in caught) == 3
     assert rois == [(16, 16, 32, 32)] * 3 and np.allclose(velocities, 0.0)
+
+
+def test_kaleidoscope_refocus_averages_only_the_views_that_see_a_pixel(kaleido_lf):
+    """The Fourier shift-and-add counts every view everywhere (reflected padding); in the band along the
+    edges where some views do not see a pixel, it is the mean of those that do, as for the galvo. Views of
+    per-view constants: the oracle is the mean of the constants of the views whose shifted sample
+    (reference index + shift, ``LightField.alignments``) falls inside the view."""
+    lf0, _ = kaleido_lf
+    k, (h, w) = len(lf0.views), lf0.shape
+    values = np.arange(1.0, k + 1.0)
+    lf = type(lf0)(np.stack([np.full((h, w), v) for v in values]), lf0.positions, lf0.times, lf0.disparity,
+                   lf0.kind)
+    depth = 0.45
+    shifts = lf.shifts(depth)
+    assert np.abs(shifts).max() > 3                          # a band several pixels wide
+    img = ef.refocus(lf, depth)
+    xs, ys = np.arange(w)[None, :] + shifts[:, :1], np.arange(h)[None, :] + shifts[:, 1:]
+    inside = (((ys >= 0) & (ys <= h - 1))[:, :, None] & ((xs >= 0) & (xs <= w - 1))[:, None, :])
+    expect = (inside * values[:, None, None]).sum(axis=0) / np.maximum(inside.sum(axis=0), 1)
+    band = (inside.sum(axis=0) < k) & (inside.sum(axis=0) > 0)
+    assert band.mean() > 0.05
+    np.testing.assert_allclose(img[band], expect[band], rtol=1e-4)
+    np.testing.assert_allclose(img[~band], values.mean(), rtol=1e-4)   # the Fourier path inside
