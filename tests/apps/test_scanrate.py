@@ -83,3 +83,13 @@ def test_periods_with_no_confident_pixel_report_none_not_nan():
     assert s["near"] == {"median": None, "worst": None} and s["far"] == {"median": 0.02, "worst": 0.02}
     assert s["coverage"] == {"median": 0.15, "worst": 0.0}
     assert "nan" not in text and text.count("no confident pixel") == 3
+
+
+def test_capture_steps_cover_the_objects_motion_too(runner_capture):
+    """The capture's steps keep the scan's and the moving objects' image motion together under a pixel a step,
+    as the render's check adds them (sized from the scan alone, the runner at 80x60 went 1.05 px a step and
+    the render's warning told the application's user to pass --steps)."""
+    from mitsuba_eventfield.simulate.image_motion import largest_px_per_step
+    motion = runner_capture.events.meta["render"]["image_motion_px_per_step"]
+    assert motion["objects"] > 0 and largest_px_per_step(runner_capture.events.meta) <= 1.0 + 1e-9
+    assert not [n for n in runner_capture.events.meta["render"]["notes"] if "steps coarser" in n]
