@@ -115,22 +115,14 @@ def _check(depths, views, solver_depth, steps, samples, spp):
 
 
 def refocus_bilinear(lf, depth: float) -> np.ndarray:
-    """``focus.refocus`` of a galvo light field (exact homographies) with two changes for HDR content.
-    Interpolation is bilinear instead of Lanczos: Lanczos rings below zero next to an LED 1000 times brighter
-    than its surround, and the rings survive the average as holes and halos. Bilinear weights are never
-    negative. Each pixel averages only the views that cover it: reflected borders would mirror an LED near
-    the frame edge into the image."""
+    """``focus.refocus`` of a galvo light field (exact homographies; each pixel the mean of the views that
+    cover it, ``refocus.covered_mean``) with bilinear interpolation instead of Lanczos for HDR content:
+    Lanczos rings below zero next to an LED 1000 times brighter than its surround, and the rings survive the
+    average as holes and halos. Bilinear weights are never negative."""
     import cv2
-    total, count = np.zeros(lf.shape), np.zeros(lf.shape)
-    ones = np.ones(lf.shape, np.float32)
-    for view, m in zip(lf.views, lf.alignments(depth)):
-        def warp(img):
-            return cv2.warpPerspective(img, m, (lf.shape[1], lf.shape[0]),
-                                       flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderValue=0)
-        covered = warp(ones) > 0.999
-        total += np.where(covered, warp(view.astype(np.float32)), 0.0)
-        count += covered
-    return total / np.maximum(count, 1)
+
+    from ..focus.refocus import covered_mean
+    return covered_mean(lf, lf.alignments(depth), interpolation=cv2.INTER_LINEAR)[0]
 
 
 def _errors(estimates, truth, regions):

@@ -40,11 +40,7 @@ def focus_measure(img: np.ndarray, measure: str = "sml", window: int = 7) -> np.
 def parabola_offset(before, peak, after):
     """Offset in [-0.5, 0.5] steps of the vertex of the parabola through three samples around a maximum
     (0 where they do not curve downwards). Numbers or arrays that broadcast."""
-    before, peak, after = (np.asarray(v, np.float64) for v in (before, peak, after))
-    den = before - 2 * peak + after
-    with np.errstate(divide="ignore", invalid="ignore"):
-        off = np.where(den < 0, np.clip(0.5 * (before - after) / den, -0.5, 0.5), 0.0)
-    return float(off) if off.ndim == 0 else off
+    return parabola_vertex((-1.0, 0.0, 1.0), (before, peak, after))
 
 
 def parabola_vertex(x, y):

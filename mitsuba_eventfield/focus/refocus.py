@@ -6,13 +6,14 @@ and averages in linear intensity, which is what a lens with the synthetic apertu
 * Spatial multiplexing (one shift per view): the shifts are exact Fourier phase ramps on reflect-padded views,
   so no resampling blur biases focus measures.
 * Galvo: each view is warped by its exact homography (``optics.galvo``) with Lanczos interpolation.
-* Both: a pixel some views do not see (a band along the edges, as wide as the views' spread) is the mean
-  of the views that do (``_covered_mean``). Bicubic is 6x faster (0.10 against 0.61 ms a 120 x 90 warp) and found the
+  Bicubic is 6x faster (0.10 against 0.61 ms a 120 x 90 warp) and found the
   same depths on scenes/offaxis_cards, but its blur hides detail: the scan-frequency test's edge contrast kept
   under a readout cap read 0.71 with bicubic, 0.45 with Lanczos and 0.55 with exact Fourier shifts. A
   constant shift per view is right only on the optical axis: off axis the scan moves the image (1 + t^2) times
   more, and a shift-only refocus read a card 9.6 degrees off axis 54-68 % too far. ``alpha`` refocus (a
   disparity slope rather than a depth) keeps the on-axis shifts.
+* Both: a pixel some views do not see (a band along the edges, as wide as the views' spread) is the mean
+  of the views that do (``covered_mean``).
 
 Moving content. The views of a galvo light field are taken one after another over a scan period, so content
 that moves by d pixels during it is smeared over d pixels in the refocused image (the paper's motion blur of
@@ -62,16 +63,21 @@ def _with_motion(maps: np.ndarray, motion_px) -> np.ndarray:
     return out
 
 
+def covered(shape, homography) -> np.ndarray:
+    """(H, W) bool: the reference pixels whose sample under ``homography`` falls inside a view of ``shape``
+    (bilinear weights all inside it): where that view has data. The one coverage rule of every covering-views
+    mean and of the motion measure."""
+    return _warp(np.ones(shape, np.float32), homography, interpolation=cv2.INTER_LINEAR) > 0.999
+
+
 def aligned_views(lf: LightField, depth, motion=None):
     """Generator of (aligned view, coverage) for every view, aligned onto the reference view for a point at
     ``depth`` (``motion``: an image velocity, see ``motion_shifts``). Coverage is 1 where the view has data."""
     maps = lf.alignments(depth)
     if motion is not None:
         maps = _with_motion(maps, motion_shifts(lf, motion))
-    ones = np.ones(lf.shape, np.float32)
     for view, m in zip(lf.views, maps):
-        yield (_warp(view.astype(np.float32), m),
-               (_warp(ones, m, interpolation=cv2.INTER_LINEAR) > 0.999).astype(np.float32))
+        yield _warp(view.astype(np.float32), m), covered(lf.shape, m).astype(np.float32)
 
 
 class _Spectra:
@@ -156,12 +162,11 @@ def view_motion(lf: LightField, depth: float = math.inf, tile: int = 8) -> dict:
         lf.cache[key] = out
         return out
     maps = lf.alignments(depth)
-    ones = np.ones(lf.shape, np.float32)
     logs, cover = [], np.ones(lf.shape, bool)
     for i in (0, 1, len(t) - 1):
         v = lf.views[i] if lf.views.ndim == 3 else lf.views[i].mean(axis=-1)
         logs.append(np.log(np.maximum(_warp(v.astype(np.float32), maps[i]), 1e-6)))
-        cover &= _warp(ones, maps[i], interpolation=cv2.INTER_LINEAR) > 0.999
+        cover &= covered(lf.shape, maps[i])
     flow = np.concatenate(_flow_logs(logs, cover), axis=-1)                 # (H, W, 4): 0 -> 1, 0 -> K-1
     textured = cover & (np.hypot(*np.gradient(logs[0])) > TEXTURE_GRADIENT)
     h, w = textured.shape
@@ -257,16 +262,16 @@ def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None,
     return np.maximum(_covered_borders(lf, shifts, spectra.shifted_sum(shifts) / len(lf.views)), 0.0)
 
 
-def _covered_mean(lf: LightField, maps) -> tuple:
+def covered_mean(lf: LightField, maps, interpolation=cv2.INTER_LANCZOS4) -> tuple:
     """(each pixel's mean over the views whose sample (``maps``: reference-to-view index maps) falls inside
-    their image, how many such views, the mean over all views with reflected borders). Values are sampled
-    with reflected borders all the same: Lanczos next to a view's edge would mix in the zeros of a constant
-    border."""
-    ones = np.ones(lf.shape, np.float32)
+    their image (``covered``), how many such views, the mean over all views with reflected borders). Values
+    are sampled with reflected borders all the same: Lanczos next to a view's edge would mix in the zeros of
+    a constant border."""
     total = cover = every = None
     for view, m in zip(lf.views, maps):
-        w = _warp(view.astype(np.float32), m, border=cv2.BORDER_REFLECT_101).astype(np.float64)
-        c = (_warp(ones, m, interpolation=cv2.INTER_LINEAR) > 0.999).astype(np.float64)
+        w = _warp(view.astype(np.float32), m, border=cv2.BORDER_REFLECT_101, interpolation=interpolation)
+        w = w.astype(np.float64)
+        c = covered(lf.shape, m).astype(np.float64)
         c = c[..., None] if w.ndim == 3 else c
         total, cover, every = (w * c, c, w) if total is None else (total + w * c, cover + c, every + w)
     return total / np.maximum(cover, 1.0), cover, every / len(lf.views)
@@ -274,25 +279,25 @@ def _covered_mean(lf: LightField, maps) -> tuple:
 
 def _refocus_warped(lf: LightField, depth: float, motion=None) -> np.ndarray:
     """Refocus by exact per-view homographies (galvo light fields): each pixel the mean of the views that
-    have data there (``_covered_mean``); where none has, the mean of all views with reflected borders. The
+    have data there (``covered_mean``); where none has, the mean of all views with reflected borders. The
     mean over every view with reflected borders put mirrored copies of the scene inside the image, a band as
     wide as the views' spread: on the demo, strips of each card 6-10 px in from the edges over a uniform wall,
     25-35 % of its brightness."""
     maps = lf.alignments(depth)
     if motion is not None:
         maps = _with_motion(maps, motion_shifts(lf, motion))
-    mean, cover, every = _covered_mean(lf, maps)
+    mean, cover, every = covered_mean(lf, maps)
     return np.maximum(np.where(cover > 0, mean, every), 0.0)
 
 
 def _covered_borders(lf: LightField, shifts, fourier: np.ndarray) -> np.ndarray:
     """The Fourier shift-and-add (reflected padding: every view counted everywhere) where every view sees the
-    pixel, and the mean over the views that do (``_covered_mean``, translations by ``shifts``) in the band
+    pixel, and the mean over the views that do (``covered_mean``, translations by ``shifts``) in the band
     along the edges where some do not: the galvo's mirrored-border copies, at a kaleidoscope's smaller
     spread."""
     maps = np.tile(np.eye(3), (len(shifts), 1, 1))
     maps[:, :2, 2] = shifts
-    mean, cover, _ = _covered_mean(lf, maps)
+    mean, cover, _ = covered_mean(lf, maps)
     return np.where((cover > 0) & (cover < len(lf.views)), mean, fourier)
 
 
