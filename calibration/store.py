@@ -120,19 +120,44 @@ def load_calibration(path: str) -> CalibrationFile:
 
 def apply_to_lightfield(lf, calibration: dict, optics: dict):
     """A copy of ``lf`` placed and scaled by the calibration (galvo: view positions from the fitted phase;
-    depth: the disparity model from the inverse-depth fit). ``optics``: the ``optics_record`` of the data ``lf``
-    was made from; a calibration made for other optics is refused (``optics.check_optics``)."""
+    depth: the disparity model from the inverse-depth fit; kaleidoscope: each view's misalignment as part of
+    its shifts, and the flat field dividing views whose levels come from a frame). ``optics``: the
+    ``optics_record`` of the data ``lf`` was made from; a calibration made for other optics is refused
+    (``optics.check_optics``)."""
     from mitsuba_eventfield.lightfield.model import LightField, galvo_paraxial_disparity
     if not isinstance(optics, dict) or "design" not in optics:
         raise EventFieldError("apply_to_lightfield needs the optics record of the light field's data "
                               "(calibration.optics_record(events.meta['optics'], width, height))")
     kinds = check_optics(calibration, optics)
-    positions, disparity, geometry = lf.positions.copy(), lf.disparity, lf.galvo
+    views, positions, disparity, geometry = lf.views, lf.positions.copy(), lf.disparity, lf.galvo
+    offsets, applied = lf.view_offsets, set(kinds)
     if "galvo" in kinds and lf.kind == "galvo":
         ax, ay = calibration["galvo"].view_angles(lf.times)
         positions = np.stack([2 * np.asarray(ax), 2 * np.asarray(ay)], axis=-1)
     if "depth" in kinds and geometry is not None:
         geometry = calibration["depth"].geometry(geometry)
         disparity = galvo_paraxial_disparity(geometry)
-    return LightField(lf.views, positions, lf.times, disparity, lf.kind, dict(lf.meta, calibrated=sorted(kinds)),
-                      geometry)
+    if "kaleidoscope" in kinds:
+        views, offsets, flat = _kaleidoscope_applied(lf, calibration["kaleidoscope"])
+        applied |= {"flat_field"} if flat else set()
+    return LightField(views, positions, lf.times, disparity, lf.kind, dict(lf.meta, calibrated=sorted(applied)),
+                      geometry, offsets)
+
+
+def _kaleidoscope_applied(lf, calibration) -> tuple:
+    """(views, view_offsets, flat-fielded?) of a kaleidoscope light field under its calibration. The gains divide
+    only views whose levels a frame gave (``meta['levels'] == 'frame'``): views integrated from events alone,
+    or high-passed, hold log changes, the same under any gain, and dividing them would print the vignetting in
+    reverse."""
+    ij = lf.meta.get("ij")
+    if lf.kind != "kaleidoscope" or ij is None or len(ij) != len(lf.views):
+        raise EventFieldError(f"a kaleidoscope calibration applies to a kaleidoscope light field with its views' "
+                              f"indices (meta['ij']); this one is {lf.kind!r}")
+    offsets = calibration.misalignment(ij, lf.positions, lf.disparity)
+    gains = calibration.view_gains(ij) if lf.meta.get("levels") == "frame" else None
+    if gains is None:
+        return lf.views, offsets, False
+    if gains.shape != lf.views.shape[:3]:
+        raise EventFieldError(f"the kaleidoscope calibration's views are {gains.shape[2]}x{gains.shape[1]} px, the "
+                              f"light field's {lf.shape[1]}x{lf.shape[0]}")
+    return lf.views / (gains if lf.views.ndim == 3 else gains[..., None]), offsets, True

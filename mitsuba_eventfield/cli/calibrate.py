@@ -35,7 +35,11 @@ def add_parsers(sub) -> None:
     cd.add_argument("--contrast", help="contrast threshold ON[,OFF] of recordings that carry none (e.g. 0.2)")
     cd.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
     ck = csub.add_parser("kaleidoscope", help="tile seams, flips, view registration, flat-field from frames")
-    ck.add_argument("frame", help="EXR (linear) of a textured target at the focus distance")
+    ck.add_argument("frame", help="EXR (linear) of a flat textured target, at the focus distance unless "
+                    "--target-depth says where")
+    ck.add_argument("--target-depth", type=num(0, lo_open=True), default=None, metavar="Z",
+                    help="the target's depth (scene units), when it is not at the focus distance: its parallax is "
+                    "taken out of the registration")
     ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
     ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
 
@@ -106,9 +110,16 @@ def _kaleidoscope(a) -> None:
     from .. import calibration as cal
     from ..images import read_exr
     frame = luminance_channel(a.frame)
-    result = cal.register(np.log(np.maximum(frame, 1e-6)))
-    optics = cal.kaleidoscope_record(frame.shape[1], frame.shape[0], result.n, read_exr(a.frame)[1].get("optics"),
-                                     where=a.frame)
+    meta = read_exr(a.frame)[1].get("optics")
+    # the tiles of a frame whose metadata says n are known; a bare frame's are found by their seams
+    n = meta.get("n") if isinstance(meta, dict) and meta.get("design") == "kaleidoscope" else None
+    try:
+        tiles = cal.known_tiles(n, frame.shape[1], frame.shape[0]) if isinstance(n, int) and n > 0 else None
+        result = cal.register(np.log(np.maximum(frame, 1e-6)), tiles)
+    except cal.CalibrationError as e:
+        raise EventFieldError(f"{a.frame}: {e}") from None
+    result.target_depth = a.target_depth
+    optics = cal.kaleidoscope_record(frame.shape[1], frame.shape[0], result.n, meta, where=a.frame)
     if a.flat:
         flat = luminance_channel(a.flat)
         if flat.shape != frame.shape:
@@ -118,7 +129,8 @@ def _kaleidoscope(a) -> None:
     cal.save_calibration(a.output, optics, kaleidoscope=result)
     worst = max(abs(c) for v in result.views for c in v["offset"])
     print(f"kaleidoscope: {result.n}x{result.n} views of {result.tile[0]}x{result.tile[1]} px, largest "
-          f"offset {worst:.3f} px -> {a.output}")
+          f"offset {worst:.3f} px (target at {'the focus distance' if a.target_depth is None else a.target_depth})"
+          f"{', flat field' if a.flat else ''} -> {a.output}")
 
 
 def run_calibrate(a) -> int:

@@ -31,8 +31,9 @@ def add_parsers(sub) -> None:
     lf_args.add_argument("--views", type=num(2, MAX_VIEWS, integer=True),
                          help=f"galvo: views per scan period (default {DEFAULT_VIEWS})")
     lf_args.add_argument("--time", type=num(0), help="kaleidoscope: time in ms (default: stream end)")
-    lf_args.add_argument("--calibration", help="calibration JSON (eventfield calibrate): view phase, depth model; "
-                                               "a camera recording (.raw, .dat, .aedat4) takes its optics from it")
+    lf_args.add_argument("--calibration", help="calibration JSON (eventfield calibrate): galvo view phase, depth "
+                                               "model; kaleidoscope view registration, flat field; a camera "
+                                               "recording (.raw, .dat, .aedat4) takes its optics from it")
     lf_args.add_argument("--contrast", help=CONTRAST_HELP)
 
     rc = sub.add_parser("reconstruct", help="log-intensity frames from events: EXR + PNG per frame")
@@ -161,11 +162,15 @@ def _inputs(a) -> str:
     return ("events + a start frame (extra information: " + os.path.abspath(start) + ")") if start else "events only"
 
 
-def _out_meta(a, events, **extra):
+def _out_meta(a, events, lf=None, **extra):
+    """An output's metadata: what made it from what, and which calibration parts the light field ``lf`` took."""
     from .._version import __version__
+    calibration = None if lf is None or not getattr(a, "calibration", None) else \
+        {"file": os.path.abspath(a.calibration), "applied": lf.meta.get("calibrated", [])}
     return dict({"package_version": __version__, "command": a.command, "source": os.path.abspath(a.file),
                  "inputs": _inputs(a), "method": getattr(a, "method", None) or "default",
-                 "optics": events.meta.get("optics"), "pixel_model": events.meta.get("pixel_model")}, **extra)
+                 "optics": events.meta.get("optics"), "pixel_model": events.meta.get("pixel_model"),
+                 "calibration": calibration}, **extra)
 
 
 # what from_events needs of each design's optics, beyond what a calibration's optics record always holds
@@ -205,10 +210,6 @@ def _lightfield(a, ev):
     calibration = optics = None
     if a.calibration:
         calibration = load_calibration(a.calibration)
-        if set(calibration) == {"kaleidoscope"}:
-            # its view registration and flat field are not applied to a light field yet: taken, it changed nothing
-            raise EventFieldError(f"{a.calibration}: a kaleidoscope calibration (view registration, flat field) is "
-                                  "not applied by refocus / depth / reconstruct: run without --calibration")
         if not ev.meta.get("optics"):
             ev.meta["optics"] = recording_optics(calibration, ev, a.file)
         optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
@@ -331,7 +332,7 @@ def run_refocus(a) -> int:
     depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
     lf = _lightfield(a, ev)
     for z, root in _depths_and_paths(a, lf, depths):
-        save_image(root + ".png", refocus(lf, z), _out_meta(a, ev, depth=z, views=len(lf.views)))
+        save_image(root + ".png", refocus(lf, z), _out_meta(a, ev, lf, depth=z, views=len(lf.views)))
         print(f"wrote {root}.png/.exr (refocused at {z:g}; from {_inputs(a)})")
     return 0
 
@@ -353,7 +354,7 @@ def run_depth(a) -> int:
         raise EventFieldError(f"{a.file}: {e}") from None
     dm = depth_from_focus(lf, a.near, a.far, a.planes, a.measure)
     root = os.path.splitext(a.output)[0]
-    meta = _out_meta(a, ev, near=a.near, far=a.far, planes=a.planes, measure=a.measure, views=len(lf.views))
+    meta = _out_meta(a, ev, lf, near=a.near, far=a.far, planes=a.planes, measure=a.measure, views=len(lf.views))
     picture = depth_png(dm.depth, dm.confidence, a.near, a.far, a.min_confidence)   # before either file
     write_exr(root + ".exr", {"depth": dm.depth, "confidence": dm.confidence}, meta)
     write_png(root + ".png", picture)

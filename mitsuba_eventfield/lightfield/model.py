@@ -69,6 +69,10 @@ class LightField:
     kind: str = "generic"
     meta: dict = field(default_factory=dict)
     galvo: GalvoGeometry | None = None   # galvo light fields: the exact view-to-view mapping
+    # spatial multiplexing: (K, 2) pixels by which a point on the focus plane (alpha = 0) sits off the centre
+    # view's pixel in each view, from the optics' misalignment (a kaleidoscope calibration's registration,
+    # ``calibration.apply_to_lightfield``); None: a perfect instrument. Part of every shift (``shifts``)
+    view_offsets: np.ndarray | None = None
     cache: dict = field(default_factory=dict, repr=False, compare=False)   # derived data (refocus spectra)
 
     def __post_init__(self):
@@ -82,6 +86,14 @@ class LightField:
             raise ConfigError(f"LightField: views, positions and times must have one length (got {len(self.views)}, "
                               f"{len(self.positions)}, {len(self.times)})")
         instance(self.disparity, Disparity, "LightField: disparity")
+        if self.view_offsets is not None:
+            if self.galvo is not None:
+                raise ConfigError("LightField: view_offsets are for spatial multiplexing (one shift per view); a "
+                                  "galvo light field maps its views by its geometry")
+            self.view_offsets = array(self.view_offsets, "LightField: view_offsets", 2)
+            if self.view_offsets.shape != self.positions.shape:
+                raise ConfigError(f"LightField: view_offsets of shape {self.view_offsets.shape}: expected "
+                                  f"{self.positions.shape}, one (dx, dy) per view")
         if self.galvo is not None and (self.galvo.width, self.galvo.height) != tuple(self.shape[::-1]):
             raise ConfigError(f"galvo geometry is for {self.galvo.width}x{self.galvo.height} pixels, the views are "
                               f"{self.shape[1]}x{self.shape[0]}")
@@ -103,13 +115,15 @@ class LightField:
 
     def shifts(self, depth=None, alpha=None) -> np.ndarray:
         """(K, 2) pixel displacement in each view of a point at ``depth``, or for a disparity slope ``alpha``
-        (pixels per unit of view position; a number, or (alpha_x, alpha_y)). For a galvo light field this is
-        the on-axis displacement; ``alignments`` gives the exact one everywhere."""
+        (pixels per unit of view position; a number, or (alpha_x, alpha_y)), the instrument's ``view_offsets``
+        included. For a galvo light field this is the on-axis displacement; ``alignments`` gives the exact one
+        everywhere."""
         if alpha is None:
             ax, ay = self.alpha(depth)
         else:
             ax, ay = (alpha, alpha) if np.isscalar(alpha) else alpha
-        return np.stack([ax * self.positions[:, 0], ay * self.positions[:, 1]], axis=-1)
+        out = np.stack([ax * self.positions[:, 0], ay * self.positions[:, 1]], axis=-1)
+        return out if self.view_offsets is None else out + self.view_offsets
 
     def alignments(self, depth: float) -> np.ndarray:
         """(K, 3, 3) maps from reference-view array indices to each view's, for points at ``depth``: pure
@@ -127,6 +141,8 @@ class LightField:
         mirror pivot on (points before the mirrors are not seen through them; at 1e308 its homography
         overflowed into a constant image). From the disparity model alpha = A + K / z on each axis."""
         limit = MAX_SHIFT_VIEWS * max(self.shape)
+        if self.view_offsets is not None and self.view_offsets.size:
+            limit = max(limit - float(np.abs(self.view_offsets).max()), 1.0)
         near, far = 0.0, math.inf
         for axis in (0, 1):
             reach = float(np.abs(self.positions[:, axis]).max()) if len(self.positions) else 0.0
@@ -159,8 +175,9 @@ class LightField:
         return z
 
     def subset(self, index) -> "LightField":
+        offsets = None if self.view_offsets is None else self.view_offsets[index]
         return LightField(self.views[index], self.positions[index], self.times[index], self.disparity, self.kind,
-                          dict(self.meta), self.galvo)
+                          dict(self.meta), self.galvo, offsets)
 
 
 def _floats(values, name: str) -> np.ndarray:
@@ -273,14 +290,23 @@ def _galvo_lightfields(events, optics, starts, views, method, method_kw):
         yield from_galvo(frames[sl], all_times[sl], optics, {"period_index": p})
 
 
-def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool = True) -> LightField:
-    """A light field from one kaleidoscope/microlens film image (log or linear): its n x n extracted views."""
+LEVELS = ("frame", "events")
+
+
+def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool = True,
+                 levels: str = "frame") -> LightField:
+    """A light field from one kaleidoscope/microlens film image (log or linear): its n x n extracted views.
+    ``levels``: where the image's brightness levels come from, a ``frame`` taken through the optics (it holds
+    their vignetting, which a flat field divides out) or ``events`` alone (log changes: no gain survives)."""
     frame = _floats(log_or_linear_frame, "from_spatial: frame")
     time = finite(time, "from_spatial: time")
+    if levels not in LEVELS:
+        raise ConfigError(f"from_spatial: levels = {levels!r}; allowed: {', '.join(LEVELS)}")
     stack = extract_views(np.exp(frame) if log else frame, optics)
     h, w = stack.images.shape[1:3]
     return LightField(stack.images, stack.positions, np.full(len(stack.images), time),
-                      Disparity.for_spatial(optics, w, h), optics["design"], {"ij": stack.ij.tolist()})
+                      Disparity.for_spatial(optics, w, h), optics["design"],
+                      {"ij": stack.ij.tolist(), "levels": levels})
 
 
 def from_events(events, period: int = 0, views: int = 32, time: float | None = None, method: str | None = None,
@@ -308,6 +334,7 @@ def from_events(events, period: int = 0, views: int = 32, time: float | None = N
         if not t0 <= t <= t1 + 1e-9:     # past the end a reconstruction runs on no data (a high-pass decays)
             raise ConfigError(f"from_events: time = {t:g} s: the stream covers {t0:g} to {t1:g} s")
         frame = reconstruct.reconstruct(events, [t], method, **kw)[0]
-        return from_spatial(frame, optics, time=t, log=True)
+        from_frame = (method == "direct" and kw.get("log_start") is not None) or method == "complementary"
+        return from_spatial(frame, optics, time=t, log=True, levels="frame" if from_frame else "events")
     raise ConfigError("the stream's metadata describes no light-field optics (optics.design is "
                      f"{design!r}; expected galvo, kaleidoscope or microlens)")

@@ -1,0 +1,133 @@
+"""A kaleidoscope calibration applied to light fields (``calibration.apply_to_lightfield``): the registration of a
+misaligned tube, measured on a target, puts refocus and depth back where a perfect tube has them; a target off the
+focus plane gives the thin-lens parallax and nothing else; the flat field divides out the relay's vignetting in
+views whose levels a frame gave, and leaves views made from events alone as they are.
+
+Ground truth: the rendered scene's own geometry (two textured planes at NEAR and FAR, lf_scenes), the same
+scene through a tube with no misalignment (integer shifts of whole tiles are exact) and without the relay pupil
+(no vignetting), and the thin-lens disparity model (``Disparity.for_spatial``) the registration is not given."""
+import numpy as np
+import pytest
+from conftest import TEST_VARIANT
+from lf_scenes import FAR, NEAR, kaleido_sensor, two_planes
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.calibration import (apply_to_lightfield, flat_field, known_tiles, load_calibration,
+                                            optics_record, register, save_calibration)
+
+N, TILE = 3, 80
+NEAR_REGION, FAR_REGION = np.s_[10:70, 5:35], np.s_[10:70, 42:54]
+# whole-pixel misalignments of each view (dx, dy) in its own unflipped coordinates, centre view fixed
+MISALIGNED = {(-1, -1): (2, -2), (-1, 0): (-2, -1), (-1, 1): (-2, 2), (0, -1): (2, 0), (0, 0): (0, 0),
+              (0, 1): (-2, -2), (1, -1): (-1, 0), (1, 0): (1, 0), (1, 1): (-1, -2)}
+
+
+@pytest.fixture(scope="module")
+def renders():
+    ef.set_variant(TEST_VARIANT)
+    import mitsuba as mi
+
+    def render(scene):
+        return np.array(mi.render(mi.load_dict(scene)))[..., 0]
+    scene = mi.load_dict(two_planes(mi, kaleido_sensor(spp=128)))
+    optics = scene.sensors()[0].optics_metadata()
+    targets = {}
+    for depth in (1.0, FAR):           # the far card alone, at the focus distance and where it is
+        target = two_planes(mi, kaleido_sensor(spp=16), blank_strip=False)
+        target.pop("near")
+        target["far"]["to_world"] = mi.ScalarTransform4f().translate([0, 0, depth]).rotate([0, 1, 0], 180).scale(0.5)
+        targets[depth] = render(target)
+    vignetted = render(two_planes(mi, kaleido_sensor(spp=128, relay_aperture=0.002)))
+    flat = dict(two_planes(mi, kaleido_sensor(spp=128, relay_aperture=0.002)))
+    flat["far"]["emitter"]["radiance"] = 1.0                                  # a uniform white target
+    flat.pop("near")
+    return np.array(mi.render(scene))[..., 0], optics, targets, vignetted, render(flat)
+
+
+def _misalign(frame: np.ndarray) -> np.ndarray:
+    """The film of a tube whose views sit ``MISALIGNED`` pixels off (each tile's content moved in its own
+    unflipped coordinates; what leaves one edge enters the other, outside the regions scored)."""
+    out = frame.copy()
+    for row in range(N):
+        for col in range(N):
+            i, j = col - 1, row - 1
+            tile = out[row * TILE:(row + 1) * TILE, col * TILE:(col + 1) * TILE]
+            flip = (slice(None, None, -1 if j % 2 else 1), slice(None, None, -1 if i % 2 else 1))
+            dx, dy = MISALIGNED[(i, j)]
+            tile[:] = np.roll(tile[flip], (dy, dx), axis=(0, 1))[flip]
+    return out
+
+
+def _depths(lf) -> tuple:
+    dm = ef.depth_from_focus(lf, 0.4, 3.0, 32, "variance")
+    return float(np.median(dm.depth[NEAR_REGION])), float(np.median(dm.depth[FAR_REGION]))
+
+
+def test_registration_of_a_misaligned_tube_restores_refocus_and_depth(renders, tmp_path, capsys):
+    scene, optics, targets, _, _ = renders
+    cal = register(np.log(_misalign(targets[1.0])), known_tiles(N, N * TILE, N * TILE))
+    for v in cal.views:
+        assert np.allclose(v["offset"], MISALIGNED[(v["i"], v["j"])], atol=0.02), v
+    record = optics_record(optics, N * TILE, N * TILE)
+    path = save_calibration(str(tmp_path / "k.json"), record, kaleidoscope=cal)
+    calibration = load_calibration(path)                      # through the file, as the CLI takes it
+    perfect = ef.from_spatial(scene, optics, log=False)
+    misaligned = ef.from_spatial(_misalign(scene), optics, log=False)
+    fixed = apply_to_lightfield(misaligned, calibration, record)
+    assert fixed.meta["calibrated"] == ["kaleidoscope"]
+    depths = {name: _depths(lf) for name, lf in (("perfect", perfect), ("misaligned", misaligned),
+                                                 ("calibrated", fixed))}
+    sharp, sharp_fixed = ef.refocus(perfect, NEAR)[NEAR_REGION], ef.refocus(fixed, NEAR)[NEAR_REGION]
+    rms = float(np.sqrt(np.mean((sharp_fixed - sharp) ** 2)))
+    with capsys.disabled():
+        print(f"\n[kaleidoscope registration applied] near / far card (truth {NEAR} / {FAR} m): "
+              + ", ".join(f"{k} {a:.3f} / {b:.3f}" for k, (a, b) in depths.items())
+              + f"; refocus at the near card vs the perfect tube: rms {rms:.4f}")
+    for z, measured in zip((NEAR, FAR), depths["calibrated"]):
+        assert abs(measured - z) / z < 0.01
+    assert abs(depths["misaligned"][1] - FAR) / FAR > 0.05            # what the calibration is for
+    assert rms < 0.003
+
+
+def test_a_target_off_the_focus_plane_gives_only_its_parallax(renders):
+    """Registered on the card at 1.5 m, the views are displaced by its thin-lens parallax (up to 0.8 px here);
+    taken out with ``target_depth``, what is left for a perfect tube is nothing."""
+    scene, optics, targets, _, _ = renders
+    lf = ef.from_spatial(scene, optics, log=False)
+    cal = register(np.log(targets[FAR]), known_tiles(N, N * TILE, N * TILE))
+    measured = np.array([v["offset"] for v in cal.views])
+    assert 0.5 < np.abs(measured).max()
+    cal.target_depth = FAR
+    assert np.abs(cal.misalignment(lf.meta["ij"], lf.positions, lf.disparity)).max() < 0.01
+
+
+def test_flat_field_divides_frame_levels_and_leaves_event_levels(renders):
+    scene, optics, targets, vignetted, flat = renders
+    record = optics_record(optics, N * TILE, N * TILE)
+    cal = register(np.log(targets[1.0]), known_tiles(N, N * TILE, N * TILE))
+    flat_field(cal, flat)
+    cal.optics = record
+    truth = ef.from_spatial(scene, optics, log=False).views[:, 5:75, 5:75]     # no relay pupil: no vignetting
+    lf = ef.from_spatial(vignetted, optics, log=False)
+    fixed = apply_to_lightfield(lf, {"kaleidoscope": cal}, record)
+    assert fixed.meta["calibrated"] == ["flat_field", "kaleidoscope"]
+    before, after = lf.views[:, 5:75, 5:75] / truth, fixed.views[:, 5:75, 5:75] / truth
+    assert np.percentile(before, 5) < 0.8                              # the relay vignettes at the seams
+    assert 0.98 < np.percentile(after, 1) and np.percentile(after, 99) < 1.02
+    # the same film as levels integrated from events: log changes carry no gain, so nothing is divided
+    from_events = ef.from_spatial(vignetted, optics, log=False, levels="events")
+    kept = apply_to_lightfield(from_events, {"kaleidoscope": cal}, record)
+    assert kept.meta["calibrated"] == ["kaleidoscope"] and np.array_equal(kept.views, from_events.views)
+    assert kept.view_offsets is not None and np.abs(kept.view_offsets).max() < 0.05
+
+
+def test_view_offsets_belong_to_spatial_light_fields_and_follow_subsets(renders):
+    scene, optics, _, _, _ = renders
+    lf = ef.from_spatial(scene, optics, log=False)
+    offsets = np.arange(18, dtype=float).reshape(9, 2) / 10
+    moved = ef.LightField(lf.views, lf.positions, lf.times, lf.disparity, lf.kind, lf.meta, None, offsets)
+    assert np.allclose(moved.shifts(NEAR) - lf.shifts(NEAR), offsets)
+    assert np.allclose(moved.alignments(NEAR)[:, :2, 2], moved.shifts(NEAR))
+    assert np.allclose(moved.subset([2, 5]).view_offsets, offsets[[2, 5]])
+    with pytest.raises(ef.ConfigError, match="view_offsets of shape"):
+        ef.LightField(lf.views, lf.positions, lf.times, lf.disparity, lf.kind, lf.meta, None, offsets[:3])
