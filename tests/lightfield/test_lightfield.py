@@ -206,7 +206,8 @@ def test_galvo_motion_blur_degrades_gracefully(capsys):
         print("\n[galvo speed sweep] near-plane depth error at 0/1/2/4/8x: "
               + ", ".join(f"{e:.3f}" for e in errors))
     assert errors[0] < 0.05
-    assert errors[-1] >= errors[0]
+    # measured 0.018 still and 0.28 at 8x: the blur must show (a render that left the plane still passed ">=")
+    assert errors[-1] > errors[0] + 0.1
 
 
 def test_kaleidoscope_static_scene_reconstructs_without_events():

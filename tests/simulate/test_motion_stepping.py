@@ -7,11 +7,10 @@ import os
 import numpy as np
 import pytest
 from conftest import ROOT
+from traced_galvo import traced_scan_path_px
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.errors import EventFieldError
-from mitsuba_eventfield.optics.galvo import GalvoGeometry
-from mitsuba_eventfield.optics.scan import curve_from_dict
 from mitsuba_eventfield.simulate.image_motion import motion_schedule, scan_px_per_step
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
@@ -35,17 +34,10 @@ def _lissajous_scene(tmp_path, **size):
 
 
 def _true_scan_motion(timed, t0, t1, samples=64):
-    """Largest image displacement over [t0, t1] at the image centre and corners, straight from the two-mirror
-    geometry (an independent evaluation of what the schedule must bound)."""
-    optics = timed.sensor.optics_metadata()
+    """Largest image displacement over [t0, t1] at the image centre and corners, traced through the rotated
+    mirrors (``traced_galvo``): independent of the homographies the schedule is built from."""
     w, h = timed.film_size
-    geometry = GalvoGeometry.from_optics(optics, w, h)
-    ax, ay = curve_from_dict(optics["scan"]).angles(np.linspace(t0, t1, samples + 1))
-    worst = 0.0
-    for x, y in ((w / 2, h / 2), (0, 0), (w, 0), (0, h), (w, h)):
-        s = geometry.image_shift(ax, ay, math.inf, x, y)
-        worst = max(worst, float(np.hypot(*np.diff(s, axis=0).T).sum()))
-    return worst
+    return traced_scan_path_px(timed.sensor.optics_metadata(), w, h, t0, t1, samples)
 
 
 def test_lissajous_steps_are_short_where_the_scan_is_fast(tmp_path):
