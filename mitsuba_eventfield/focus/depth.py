@@ -139,12 +139,16 @@ def _outer_planes(lf: LightField, inv: np.ndarray) -> list:
     beyond it, then out to ``NEAR_BEYOND`` / ``FAR_BEYOND`` of the end's inverse depth. The nearer ones only
     while the disparity keeps its sign (a galvo has none in front of its pivot); the farther ones only where
     infinity is more than half a plane beyond the farthest plane (else that plane stands for all beyond), and
-    where a step beyond it would pass infinity, ``FAR_BEYOND``'s plane alone."""
+    where a step beyond it would pass infinity, ``FAR_BEYOND``'s plane alone. All within the depths the light
+    field refocuses at (``LightField.depth_range``): a calibrated galvo whose y pivot (0.211 m) lay beyond
+    its x pivot had its half-of-0.4 m plane pass the sign test on x and then refused by refocus, which stopped
+    ``scanrate-depth --calibration``."""
     step = abs(inv[0] - inv[1])
     near_sign = np.sign(lf.alpha(1.0 / inv[0])[0])
+    nearest, farthest = lf.depth_range()
     out = []
     for q in sorted({inv[0] + step, *(inv[0] * f for f in NEAR_BEYOND if inv[0] * f > inv[0] + step)}):
-        if np.sign(lf.alpha(1.0 / q)[0]) != near_sign:
+        if np.sign(lf.alpha(1.0 / q)[0]) != near_sign or 1.0 / q < nearest:
             break
         out.append(1.0 / q)
     if inv[-1] > 0.5 * step:
@@ -152,7 +156,7 @@ def _outer_planes(lf: LightField, inv: np.ndarray) -> list:
         # only ones beyond it, whether or not they are a step away
         one_step = inv[-1] - step
         far = {one_step, *(inv[-1] * f for f in FAR_BEYOND if inv[-1] * f < one_step or one_step <= 0)}
-        out += [1.0 / q for q in sorted(far, reverse=True) if q > 0]
+        out += [1.0 / q for q in sorted(far, reverse=True) if q > 0 and 1.0 / q <= farthest]
     return out
 
 
