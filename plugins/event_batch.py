@@ -216,7 +216,7 @@ def lanes_per_step(cfg, n_pix: int) -> int:
 
 
 # the pixel state a chunk carries from step to step, in this order (those the pixel model has)
-STATE = ("log_prev", "k_on", "k_off", "offset", "rng", "last_emit")
+STATE = ("log_prev", "k_on", "k_off", "offset", "held_on", "held_off", "rng", "last_emit")
 
 
 def _state(integ) -> dict:
@@ -312,14 +312,16 @@ class Chunk:
                     if pixel_step.needs_intensity(cfg) else None
             dt = dr.gather(mi.Float, dts, b) if dts is not None else None
             rng = view.generator(s["rng"]) if "rng" in s else None
+            held = (s["held_on"], s["held_off"]) if "held_on" in s else None
             st = pixel_step.step(view, s["log_prev"], s["k_on"], s["k_off"], s.get("offset"), rng, log_in,
-                                 intensity, dt)
+                                 intensity, dt, held)
             lv = st.levels
             t0, t1 = dr.gather(mi.Float64, t_d, b), dr.gather(mi.Float64, t_d, b + 1)
             sel = event_select.select_events(lv.n, s["log_prev"], lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1,
                                            s.get("last_emit"), period, st.noise)
             carried = each_step(b, pixel, s["log_prev"], st, sel, t0, t1, *carried)
             after = {"log_prev": lv.log_now, "k_on": lv.k_on, "k_off": lv.k_off, "offset": lv.offset,
+                     "held_on": st.held[0] if st.held else None, "held_off": st.held[1] if st.held else None,
                      "rng": rng.state if rng is not None else None, "last_emit": sel.last_emit}
             return (b + 1,) + tuple(after[k] for k in names) + tuple(carried)
 

@@ -10,7 +10,7 @@ threshold                      float      0.2        contrast threshold C (log u
 threshold_on                   float      0.2        ON threshold, when it differs from OFF
 threshold_off                  float      0.2        OFF threshold
 threshold_sigma                float      0          per-pixel threshold mismatch (log units)
-threshold_jitter               float      0          per-crossing threshold noise (log units)
+threshold_jitter               float      0          threshold noise of each reset (log units)
 refractory_s                   float      0          shortest time between two events of a pixel (s)
 leak_rate_hz                   float      0          spontaneous ON events per pixel per second
 leak_jitter                    float      0          relative per-pixel spread of the leak rate
@@ -116,6 +116,7 @@ class _EventIntegratorMethods:
         self.k_on = self.k_off = None  # ON / OFF events fired so far by each pixel (Int32)
         self.offset = None         # reference drift from leak and jitter (None when neither is on)
         self.c_on = self.c_off = None
+        self.held_on = self.held_off = None   # jittered thresholds each pixel holds until it fires (jitter only)
         self.staged = self.staged_intensity = None
         self.rng = self.leak_rate = self.last_emit = self.limiter = None
         self.refractory_dropped = 0
@@ -201,18 +202,22 @@ class _EventIntegratorMethods:
         if cfg.shot_noise_hz or cfg.threshold_jitter:
             self.rng = mi.PCG32(size=n_pix, initstate=mi.UInt64((cfg.seed * 2654435761 + 12345) % 2**64),
                                 initseq=dr.arange(mi.UInt64, n_pix))
+        if cfg.threshold_jitter:        # the thresholds of the pixels' last reset, before the first step
+            u = mi.Point2f(self.rng.next_float32(), self.rng.next_float32())
+            self.held_on, self.held_off = pixel_step.jittered(self.c_on, self.c_off, cfg.threshold_jitter, u)
         if cfg.refractory_s:
             self.last_emit = np.full(n_pix, -np.inf)
         if cfg.readout_cap:
             self.limiter = self._make_limiter(n_pix)
         state = [self.log_prev, self.anchor, self.k_on, self.k_off, self.c_on, self.c_off]
-        state += [v for v in (self.offset, self.leak_rate) if v is not None]
+        state += [v for v in (self.offset, self.leak_rate, self.held_on, self.held_off) if v is not None]
+        state += [self.rng.state] if cfg.threshold_jitter else []     # advanced by the first draw
         dr.make_opaque(*state)
 
     def _make_limiter(self, n_pix: int):
         cfg = self.config
-        cap = cfg.readout_cap * (n_pix / cfg.readout_cap_native_pixels if cfg.readout_cap_native_pixels else 1)
-        return readout.ReadoutLimiter(cap, cfg.seed)
+        cfg.check_film(n_pix)
+        return readout.ReadoutLimiter(cfg.readout_cap_for(n_pix), cfg.seed)
 
     def commit(self, t0: float, t1: float):
         """Accept the staged frame as the brightness at time t1 (seconds) and return the events of (t0, t1].
@@ -247,6 +252,8 @@ class _EventIntegratorMethods:
     def _advance(self, step: dict) -> None:
         self.log_prev, self.k_on, self.k_off, self.offset = step["log_now"], step["k_on"], step["k_off"], \
             step["offset"]
+        if step["held"] is not None:
+            self.held_on, self.held_off = step["held"]
 
     path_override = None       # "host" or "device" inside event_path(); None: chosen per backend
 
@@ -325,12 +332,13 @@ class _EventIntegratorMethods:
         if pixel_step.needs_dt(cfg):
             dt = mi.Float(duration)
             dr.make_opaque(dt)                  # a new literal per step would recompile the kernel
+        held = (self.held_on, self.held_off) if cfg.threshold_jitter else None
         st = pixel_step.step(self, self.log_prev, self.k_on, self.k_off, self.offset, self.rng, log_in, intensity,
-                             dt)
+                             dt, held)
         lv = st.levels
         todo = [lv.n, lv.k_on, lv.k_off, lv.log_now, lv.log_ref]
         if cfg.threshold_jitter:                # gathered below: evaluate here, in the one kernel
-            todo += [st.c_on, st.c_off]
+            todo += [st.c_on, st.c_off, *st.held]
         noise = None
         if st.noise is not None:
             hit, u_pol, u_t = st.noise
@@ -339,7 +347,7 @@ class _EventIntegratorMethods:
         todo += [v for v in (lv.offset, getattr(self.rng, "state", None)) if v is not None]
         dr.eval(*todo)
         return {"n": lv.n, "k_on": lv.k_on, "k_off": lv.k_off, "log_now": lv.log_now, "log_ref": lv.log_ref,
-                "c_on": st.c_on, "c_off": st.c_off, "offset": lv.offset, "noise": noise}
+                "c_on": st.c_on, "c_off": st.c_off, "offset": lv.offset, "noise": noise, "held": st.held}
 
     def readout(self, x, y, t_us, p):
         """The sensor's output stage on one step's time-sorted events: clock quantisation, readout cap."""

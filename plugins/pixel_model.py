@@ -104,7 +104,7 @@ class PixelConfig:
     threshold_on: float = 0.2
     threshold_off: float = 0.2
     threshold_sigma: float = 0.0          # per-pixel ON/OFF threshold mismatch (fixed per pixel), log units
-    threshold_jitter: float = 0.0         # per-crossing (per pixel and step) threshold noise, log units
+    threshold_jitter: float = 0.0         # the reset's threshold noise: drawn at each event, held to the next
     refractory_s: float = 0.0             # no two events of a pixel closer than this
     leak_rate_hz: float = 0.0             # spontaneous ON events per pixel per second (reference drift)
     leak_jitter: float = 0.0              # relative per-pixel spread of the leak rate
@@ -142,11 +142,14 @@ class PixelConfig:
             if getattr(self, name) < 0:
                 raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: must be >= 0 (rates, times and "
                                  "spreads cannot be negative)")
+        # thresholds are floored at C / 10 whatever the spread; beyond C / 2 that floor would hold more than 4 % of
+        # them and the spread would no longer be the one asked for (v2e's "noisy" sensor, sigma 0.05 at C = 0.2, is
+        # C / 4, which the bound of C / 4 exclusive refused)
         c = min(self.threshold_on, self.threshold_off)
         for name in ("threshold_sigma", "threshold_jitter"):
-            if getattr(self, name) * 4 >= c:
-                raise ConfigError(f"{where}: {name} = {getattr(self, name)}: with thresholds of {c} it would make "
-                                 f"thresholds <= 0 (C - 4 sigma <= 0); must be < {c / 4:g}")
+            if getattr(self, name) * 2 > c:
+                raise ConfigError(f"{where}: {name} = {getattr(self, name)}: with thresholds of {c} more than 4 % of "
+                                 f"the thresholds would sit on their floor of C / 10; must be <= {c / 2:g}")
         for name in ("shot_noise_bright_factor", "cutoff_min_fraction"):
             if not 0 < getattr(self, name) <= 1:
                 raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: must be in (0, 1]")
@@ -157,6 +160,23 @@ class PixelConfig:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+    def readout_cap_for(self, n_pix: int) -> float:
+        """The readout cap (events/s) of a film of ``n_pix`` pixels: scaled by film / native pixels when
+        ``readout_cap_native_pixels`` is given, so a small film saturates like the whole sensor."""
+        native = self.readout_cap_native_pixels
+        return self.readout_cap * (n_pix / native if native else 1)
+
+    def check_film(self, n_pix: int, where: str = "pixel model") -> None:
+        """Refuse a readout cap that, scaled to a film of ``n_pix`` pixels, falls below what the limiter can
+        enforce: its budget per bin rounded down to nothing, and every event was dropped (the davis346 cap on
+        an 8x8 film dropped all 46,080 of them, with a note)."""
+        cap = self.readout_cap_for(n_pix)
+        if self.readout_cap and cap < READOUT_BINS_PER_MS * 2000:
+            raise ConfigError(f"{where}: readout_cap = {self.readout_cap:g} events/s for "
+                              f"{self.readout_cap_native_pixels} pixels is {cap:g} events/s on this film of {n_pix} "
+                              f"pixels, below the smallest the limiter can enforce ({READOUT_BINS_PER_MS * 2000:g}): "
+                              "render a larger film, or set readout_cap_native_pixels = 0 to keep the cap unscaled")
 
 
 # Presets. Sources (docs/pixel_model.md): v2e (Hu et al., CVPRW 2021) defaults for a DVS: thresholds

@@ -12,7 +12,7 @@ import numpy as np
 from mitsuba_eventfield.errors import ConfigError
 
 STATE_ARRAYS = {"log_prev": "Float", "anchor": "Float", "k_on": "Int32", "k_off": "Int32", "c_on": "Float",
-                "c_off": "Float", "offset": "Float", "leak_rate": "Float"}
+                "c_off": "Float", "offset": "Float", "leak_rate": "Float", "held_on": "Float", "held_off": "Float"}
 
 
 class PixelVariables:
@@ -24,7 +24,8 @@ class PixelVariables:
     instead of 2 (about 3.5 ms each at 48x36: the demo's 12 steps took 40-45 ms, now 33-38)."""
 
 
-PIXEL_VARIABLES = ("size", "log_prev", "anchor", "k_on", "k_off", "offset", "c_on", "c_off", "staged",
+PIXEL_VARIABLES = ("size", "log_prev", "anchor", "k_on", "k_off", "offset", "c_on", "c_off", "held_on", "held_off",
+                   "staged",
                    "staged_intensity", "staged_size", "rng", "leak_rate", "last_emit", "limiter")
 
 
@@ -64,6 +65,9 @@ def get_state(integ) -> dict:
 def set_state(integ, d: dict) -> None:
     """Restore :func:`get_state`'s result into ``integ`` (same pixel model, same film)."""
     integ.reset()
+    if integ.config.threshold_jitter and "held_on" not in d:
+        raise ConfigError("checkpoint: made by a version whose threshold jitter was drawn every step, not held "
+                          "from one event to the next: render again from the start")
     integ.size = tuple(int(v) for v in d["size"])
     for name, kind in STATE_ARRAYS.items():
         if name in d:

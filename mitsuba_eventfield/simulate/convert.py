@@ -84,6 +84,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
         if isinstance(frames, (str, os.PathLike)) and os.path.abspath(output) == os.path.abspath(frames):
             raise EventFieldError(f"{output}: the output is the input: choose another event file")
     integ = pixel_integrator(preset, pixel, threshold)
+    integ.config.check_film(source.width * source.height, f"{source.name}: pixel model")
     summary = RenderSummary(width=source.width, height=source.height, output=os.path.abspath(output) if output else None)
     meta = {"package": "mitsuba-eventfield", "package_version": __version__, "variant": mi.variant(),
             "width": source.width, "height": source.height, "optics": {"design": "frames (converted)"},

@@ -88,6 +88,8 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
     if seed is not None and overrides.get("seed") is None:
         overrides["seed"] = int(seed)
     integ.configure(pixel_model.pixel_config(preset or integ.scene_preset, "pixel model", **overrides))
+    width, height = timed.film_size
+    integ.config.check_film(width * height, f"{timed.path or 'scene'}: pixel model")   # before any work
     return integ
 
 

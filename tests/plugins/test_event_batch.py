@@ -162,38 +162,6 @@ def test_a_chunk_whose_few_firing_pixels_are_filled_alone_equals_the_host_path(p
             assert np.array_equal(np.asarray(getattr(host, name)), np.asarray(getattr(integ, name))), name
 
 
-@pytest.mark.parametrize("pixel", [{"threshold_jitter": 0.049, "seed": 5}, BATCHABLE["everything"]],
-                         ids=["large_jitter", "everything"])
-def test_the_jitter_skipped_in_still_pixels_changes_no_event(pixel, monkeypatch):
-    """The jitter's normal pair is made only where a step's rise could reach the lowest jittered threshold
-    (``pixel_step._lowest``: 0.02 with the largest jitter allowed, C / 4, and about 0.08 with "everything"'s 0.02).
-    Against the model that makes it everywhere (no step quiet), on frames whose steps rise by less than either
-    bound, by about it and by several thresholds: the same events, batched and a step at a time, and the same
-    state."""
-    from mitsuba_eventfield.plugins import event_batch, pixel_step
-    from mitsuba_eventfield.plugins.frozen import FrozenCache
-    rng = np.random.default_rng(9)
-    steps, c = 40, 0.2
-    drift = rng.choice([0.0, 0.004, 0.015, 0.03, 0.13, 0.5], size=(steps, W * H),
-                       p=[0.3, 0.25, 0.15, 0.15, 0.1, 0.05])
-    frames = list(np.cumsum(np.vstack([rng.random(W * H) + 1, drift * rng.choice([-1, 1], drift.shape)]),
-                            axis=0).astype(np.float32))
-    times = np.arange(steps + 1) * 1e-3
-    pixel = dict(pixel, threshold_on=c, threshold_off=c)
-    runs = []
-    everywhere = lambda c, jitter: -c                   # noqa: E731 - rise < -c and -rise < -c: never quiet
-    for lowest in (pixel_step._lowest, everywhere):
-        monkeypatch.setattr(pixel_step, "_lowest", lowest)
-        monkeypatch.setattr(event_batch, "_PASSES", FrozenCache())      # recorded passes bake the bound in
-        batched, integ = _batched_events(pixel, frames, times, 4, 0)
-        runs.append((batched, _host_events(pixel, frames, times, 0), integ.offset.numpy(), integ.rng.state.numpy()))
-    (skipped, skipped_steps, offset, state), (full, full_steps, full_offset, full_state) = runs
-    assert len(full[0]) > 3000
-    for a, b, c_, d in zip(skipped, full, skipped_steps, full_steps):
-        assert np.array_equal(a, b) and np.array_equal(c_, d)
-    assert np.array_equal(offset, full_offset) and np.array_equal(state, full_state)
-
-
 def test_batching_is_refused_where_one_frame_a_step_or_the_host_path_is_asked_for():
     import mitsuba as mi
     from mitsuba_eventfield.plugins.event_batch import one_frame_a_step

@@ -67,6 +67,23 @@ def test_refractory_gaps(capsys):
               f"{gaps.min()} us; suppressed {ev.meta['render']['dropped_refractory']}")
     assert gaps.min() >= period * 1e6 - 1                           # 1 us: timestamp rounding
     assert ev.meta["render"]["dropped_refractory"] == len(ideal) - len(ev) > 0
+    # the reference moves by the dropped crossings too, so the kept events are those a greedy pass keeps of the
+    # ideal pixel's (each pixel's next event at least a period after the last one kept): not merely "no gap
+    # below the period", which a pixel that dropped too much also passes
+    kept = _greedy(ideal, 48, period * 1e6)
+    assert sorted(zip(ev.x, ev.y, ev.t, ev.p)) == sorted(kept)
+
+
+def _greedy(ev, width: int, period_us: float) -> list:
+    """(x, y, t, p) of the events a greedy refractory pass keeps: per pixel in time order, an event at least
+    ``period_us`` after the last one kept."""
+    pix = ev.y.astype(np.int64) * width + ev.x
+    last, kept = {}, []
+    for i in np.lexsort((ev.t, pix)):
+        if ev.t[i] - last.get(pix[i], -np.inf) >= period_us:
+            last[pix[i]] = ev.t[i]
+            kept.append((ev.x[i], ev.y[i], ev.t[i], ev.p[i]))
+    return kept
 
 
 @pytest.mark.parametrize("effect", ["leak", "shot"])
@@ -201,7 +218,7 @@ def test_lowpass_is_slower_for_dim_pixels():
 @pytest.mark.parametrize("pixel, message", [
     ({"leak_rate_hz": -1.0}, "leak_rate_hz = -1.0: must be >= 0"),
     ({"shot_noise_hz": -0.5}, "shot_noise_hz = -0.5: must be >= 0"),
-    ({"threshold_sigma": 0.08}, "would make thresholds <= 0"),
+    ({"threshold_sigma": 0.11}, "would sit on their floor of C / 10; must be <= 0.1"),
     ({"refractory_s": float("nan")}, "refractory_s = nan: must be a finite number"),
     ({"colour": 1.0}, "unknown pixel parameter 'colour'"),
 ])
@@ -212,7 +229,7 @@ def test_bad_pixel_parameters(pixel, message):
 
 
 def test_thresholds_are_floored_never_negative():
-    t = pm.sample_thresholds(np.random.default_rng(0), 1_000_000, 0.2, 0.049)   # the largest sigma allowed
+    t = pm.sample_thresholds(np.random.default_rng(0), 1_000_000, 0.2, 0.049)   # a quarter of C
     assert t.min() >= 0.02 and abs(t.std() - 0.049) < 0.001
 
 
@@ -280,3 +297,17 @@ def test_scan_frequency_sweep_loses_events_beyond_the_cap(capsys):
     assert slow["offered_ev_s"] < cap < fast["offered_ev_s"]
     assert slow["dropped_fraction"] < 0.02 < 0.3 < fast["dropped_fraction"]
     assert slow["edge_contrast"] > 0.9 > 0.7 > fast["edge_contrast"]
+
+
+def test_a_readout_cap_scaled_below_what_the_limiter_enforces_is_refused_up_front(tmp_path):
+    """The davis346 cap (12 Mev/s for 346x260) scaled to an 8x8 film is 8,537 events/s: a budget of no event a
+    bin, and every event was dropped, with a note. Refused before anything is rendered or written."""
+    out = tmp_path / "tiny.h5"
+    with pytest.raises(ef.EventFieldError, match=r"readout_cap = 1\.2e\+07 events/s for 89960 pixels is 8537\.\d+ "
+                                                 r"events/s on this film of 64 pixels"):
+        ef.render_events(ef.load_scene(DEMO, width=8, height=8), 0.001, steps=2, preset="davis346", output=str(out))
+    assert not out.exists()
+    with pytest.raises(ef.EventFieldError, match="on this film of 64 pixels"):
+        ef.events_from_frames(np.ones((3, 8, 8), np.float32), fps=1000.0, preset="davis346")
+    assert len(ef.events_from_frames(np.ones((3, 8, 8), np.float32), fps=1000.0,
+                                     pixel={"preset": "davis346", "readout_cap_native_pixels": 0})) == 0

@@ -1,0 +1,39 @@
+"""Threshold jitter is the reset's noise (``pixel_step``): drawn when a pixel fires, held until it fires again.
+So the event count of a brightness ramp is the ramp's height over the mean threshold whatever the step size
+(renewal: a rise of 4 log units at C = 0.2 gives 20 events a pixel), and a pixel that stops changing stops
+firing. Drawn afresh every step, a slow rise met the lowest of many draws (21, 25, 32 events a pixel at 20,
+200, 2000 steps) and a still pixel kept firing on its leftover rise."""
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+
+SIDE, C, JITTER = 16, 0.2, 0.04
+
+
+def _events(log_levels, times):
+    frames = np.exp(np.asarray(log_levels, np.float64))[:, None, None] * np.ones((1, SIDE, SIDE))
+    return ef.events_from_frames(frames.astype(np.float32), times,
+                                 pixel={"threshold_on": C, "threshold_off": C, "threshold_jitter": JITTER, "seed": 4})
+
+
+@pytest.mark.parametrize("steps", [20, 200, 2000])
+def test_a_ramp_fires_its_height_over_the_mean_threshold_at_any_step_size(steps):
+    times = np.linspace(0.0, 1.0, steps + 1)
+    ev = _events(np.log(0.5) + 4.0 * times, times)
+    per_pixel = np.bincount(ev.y.astype(np.int64) * SIDE + ev.x, minlength=SIDE * SIDE)
+    assert np.all(ev.p > 0)
+    # renewal: 4.0 / E[c] = 20, less the part-threshold left at the end (half a threshold on average), with a
+    # per-pixel spread of about sqrt(20) x 0.2 = 0.9 events: the mean of 256 pixels is good to about 0.06
+    assert 19.0 < per_pixel.mean() < 20.3, per_pixel.mean()
+
+
+def test_a_still_pixel_stops_firing():
+    """A rise of 1.75 thresholds, then a second of still frames: the pixel fires once for the threshold crossed,
+    at most once more at the next reset (when the new draw is below the 0.75 C left), then never."""
+    times = np.linspace(0.0, 1.0, 1001)
+    levels = np.full(len(times), np.log(0.5))
+    levels[1:] += 1.75 * C
+    ev = _events(levels, times)
+    assert np.all(ev.p > 0) and len(ev) >= SIDE * SIDE
+    assert ev.t.max() <= 3000                      # within the first steps after the rise (1 ms each)
