@@ -79,6 +79,27 @@ def find_tiles(frame: np.ndarray, candidates=(3, 5, 7, 9), half: int = 4) -> dic
     return out
 
 
+def _whole(value, lo: int) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= lo
+
+
+def _check_view(v, n: int, tile: tuple, where: str) -> None:
+    """One view record: indices within the n x n layout, flips, and an offset of finite pixels within its tile."""
+    half = (n - 1) // 2
+    if not isinstance(v, dict) or not all(k in v for k in ("i", "j", "offset")):
+        raise ConfigError(f"{where}: each view needs i, j and offset (got {v!r:.80})")
+    if not all(isinstance(v[k], int) and not isinstance(v[k], bool) and -half <= v[k] <= half for k in "ij"):
+        raise ConfigError(f"{where}: view ({v['i']!r}, {v['j']!r}): i and j must be whole numbers in "
+                          f"-{half}..{half}")
+    off = v["offset"]
+    if not (isinstance(off, (list, tuple)) and len(off) == 2 and all(
+            isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in off)):
+        raise ConfigError(f"{where}: view ({v['i']}, {v['j']}): offset = {off!r}: must be [dx, dy] in pixels")
+    if abs(off[0]) >= tile[0] / 2 or abs(off[1]) >= tile[1] / 2:
+        raise ConfigError(f"{where}: view ({v['i']}, {v['j']}): offset = {list(off)} px: must be within half a "
+                          f"tile ({tile[0] / 2:g} x {tile[1] / 2:g} px)")
+
+
 def known_tiles(n: int, width: int, height: int) -> dict:
     """The tiles of an n x n kaleidoscope on a ``width`` x ``height`` film, for a frame whose sensor metadata
     says n: equal tiles, no search. The seam search needs mirror symmetry at every seam, which a misaligned tube
@@ -99,14 +120,35 @@ class KaleidoscopeCalibration:
     optics: dict = field(default_factory=dict)        # what it was made for (optics.optics_record), set when saved
     target_depth: float | None = None      # scene units: depth of the registered target; None: the focus distance
     flat_map: dict | None = None           # the flat field's gain over the film (``_encode_map``): float16, base64
+    registration: str | None = None        # how the offsets were measured (``REGISTRATION``; None: before it)
 
     def __post_init__(self):
+        """Every field checked, as a hand-edited file is read (a bad offset was a raw ValueError deep in refocus,
+        an offset of 1e6 px asked for 262 TiB of padding, a negative gain map brightened every view 20x)."""
+        where = "kaleidoscope calibration"
+        n, tile = self.n, self.tile
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1 or n % 2 == 0:
+            raise ConfigError(f"{where}: n = {n!r}: must be an odd whole number of views a side")
+        if not (isinstance(tile, (list, tuple)) and len(tile) == 2 and all(_whole(v, 1) for v in tile)):
+            raise ConfigError(f"{where}: tile = {tile!r}: must be (width, height) in whole pixels")
+        self.tile = tuple(int(v) for v in tile)
+        if not isinstance(self.views, list) or len(self.views) != n * n:
+            raise ConfigError(f"{where}: views must list the {n * n} views of {n}x{n} tiles")
+        for v in self.views:
+            _check_view(v, n, self.tile, where)
         if self.target_depth is not None:
             z = self.target_depth
             if isinstance(z, bool) or not isinstance(z, (int, float)) or not math.isfinite(z) or z <= 0:
-                raise ConfigError(f"kaleidoscope calibration: target_depth = {z!r}: must be a number > 0 (scene "
-                                  "units), or absent for a target at the focus distance")
+                raise ConfigError(f"{where}: target_depth = {z!r}: must be a number > 0 (scene units), or absent "
+                                  "for a target at the focus distance")
             self.target_depth = float(z)
+        if self.flat_map is not None:
+            gain = _decode_map(self.flat_map)
+            tw, th = self.tile
+            if gain.shape != (n * th, n * tw) or not np.all(np.isfinite(gain)) or gain.min() < 0:
+                raise ConfigError(f"{where}: flat_map must be a finite, non-negative {n * tw}x{n * th} gain map (it "
+                                  f"is {'x'.join(map(str, gain.shape[::-1]))}): re-run eventfield calibrate "
+                                  "kaleidoscope --flat")
 
     @property
     def quality(self) -> dict:
@@ -122,7 +164,11 @@ class KaleidoscopeCalibration:
     def misalignment(self, ij, positions, disparity) -> np.ndarray:
         """(K, 2) pixels the instrument moves views (i, j) = ``ij`` by, whatever the depth: each view's measured
         offset less the parallax of the target's depth (``disparity.alpha(target_depth)`` times the view's
-        ``positions``; none at the focus distance)."""
+        ``positions``; none at the focus distance). A calibration from before the registration was refined
+        (biased towards zero by 7 %) is refused."""
+        if self.registration != REGISTRATION:
+            raise ConfigError("kaleidoscope calibration: made by an earlier version, whose registration read "
+                              "offsets 7 % short: re-run eventfield calibrate kaleidoscope")
         measured = {(v["i"], v["j"]): v["offset"] for v in self.views}
         missing = [tuple(k) for k in ij if tuple(k) not in measured]
         if missing:
@@ -136,8 +182,12 @@ class KaleidoscopeCalibration:
 
     def view_gains(self, ij) -> np.ndarray | None:
         """(K, h, w) flat-field gains of views (i, j) = ``ij``, unflipped like the views (None without a flat
-        field), at least ``GAIN_FLOOR``."""
+        field), at least ``GAIN_FLOOR``. A file with the mean gains of a flat field but not its map (written
+        before the maps were stored) is refused: applied, it would silently leave the vignetting in."""
         if self.flat_map is None:
+            if self.flat_gain is not None:
+                raise ConfigError("kaleidoscope calibration: holds a flat field's mean gains but not its map (made "
+                                  "by an earlier version): re-run eventfield calibrate kaleidoscope --flat")
             return None
         tw, th = self.tile
         gains = {(i, j): g for i, j, _, _, _, g in _unflipped(_decode_map(self.flat_map), self.n, tw, th)}
@@ -197,6 +247,7 @@ def _consistency(centre: np.ndarray, view: np.ndarray, offset) -> float:
 # (measured on 80 px tiles of a smooth texture: whole-pixel shifts of 1 and 2 px read 0.93 and 1.85). So the view
 # is moved back by the offset found and registered again, the residual added: two more passes left 0.00x px.
 REGISTRATION_PASSES = 3
+REGISTRATION = "upsampled cross-correlation, Hann window, 3 passes"     # recorded in each calibration
 
 
 def _offset(centre_prepared: np.ndarray, tile: np.ndarray, margin: int, prep) -> tuple:
@@ -246,7 +297,7 @@ def register(frame: np.ndarray, tiles: dict | None = None, margin: int = 2) -> K
                                f"the centre view to {worst['consistency']:.2f} (< {MIN_VIEW_CONSISTENCY}): its "
                                f"{n}x{n} tiles do not show one scene (a galvo, blank or noise frame?)")
     seams = {axis: tiles[axis]["score"] for axis in ("x", "y") if "score" in tiles[axis]}
-    return KaleidoscopeCalibration(n=n, tile=(tw, th), views=views, seam_scores=seams)
+    return KaleidoscopeCalibration(n=n, tile=(tw, th), views=views, seam_scores=seams, registration=REGISTRATION)
 
 
 def _encode_map(gain: np.ndarray) -> dict:

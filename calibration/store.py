@@ -128,6 +128,9 @@ def apply_to_lightfield(lf, calibration: dict, optics: dict):
     if not isinstance(optics, dict) or "design" not in optics:
         raise EventFieldError("apply_to_lightfield needs the optics record of the light field's data "
                               "(calibration.optics_record(events.meta['optics'], width, height))")
+    if lf.meta.get("calibrated"):        # a flat field applied twice divided twice
+        raise EventFieldError(f"the light field is already calibrated ({', '.join(lf.meta['calibrated'])}): apply "
+                              "a calibration once, to the light field made from the data")
     kinds = check_optics(calibration, optics)
     views, positions, disparity, geometry = lf.views, lf.positions.copy(), lf.disparity, lf.galvo
     offsets, applied = lf.view_offsets, set(kinds)

@@ -326,6 +326,13 @@ def from_events(events, period: int = 0, views: int = 32, time: float | None = N
     kw = dict(method_kw)
     if method == "direct":
         kw.update(log_start=log_start, t_start=t0)
+    elif method == "complementary":          # anchored to the start frame (it needs one)
+        if log_start is None:
+            raise ConfigError("from_events: method 'complementary' needs log_start, a frame to anchor to")
+        kw.update(frames=np.asarray(log_start)[None], frame_times=[t0])
+    elif log_start is not None:              # taken and ignored, it was recorded as an input
+        raise ConfigError(f"from_events: method {method!r} reconstructs from the events alone: a start frame "
+                          "(log_start, --start-frame) is used by the direct and complementary methods")
     if design == "galvo":
         return next(galvo_lightfields(events, views, method, periods=[period], **kw))
     if design in ("kaleidoscope", "microlens"):

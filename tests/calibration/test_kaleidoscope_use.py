@@ -131,3 +131,68 @@ def test_view_offsets_belong_to_spatial_light_fields_and_follow_subsets(renders)
     assert np.allclose(moved.subset([2, 5]).view_offsets, offsets[[2, 5]])
     with pytest.raises(ef.ConfigError, match="view_offsets of shape"):
         ef.LightField(lf.views, lf.positions, lf.times, lf.disparity, lf.kind, lf.meta, None, offsets[:3])
+
+
+def test_a_light_field_knows_where_its_levels_come_from(renders):
+    """The flat field divides only frame levels (``meta['levels']``): from_events labels each method."""
+    from mitsuba_eventfield.lightfield.model import from_events
+    scene, optics, _, _, _ = renders
+    t = np.arange(0, 2000, 20)
+    ev = ef.EventStream(t % (N * TILE), (t // 7) % (N * TILE), t, np.where(t % 40, 1, -1), N * TILE, N * TILE,
+                        {"optics": optics, "t_start_us": 0, "duration_us": 2000,
+                         "pixel_model": {"threshold_on": 0.2, "threshold_off": 0.2}})
+    start = np.log(scene)
+    assert from_events(ev).meta["levels"] == "events"                                   # high-pass
+    assert from_events(ev, method="direct").meta["levels"] == "events"                  # from a zero start
+    assert from_events(ev, log_start=start).meta["levels"] == "frame"
+    assert from_events(ev, method="complementary", log_start=start).meta["levels"] == "frame"
+    with pytest.raises(ef.ConfigError, match="method 'highpass' reconstructs from the events alone"):
+        from_events(ev, method="highpass", log_start=start)
+    with pytest.raises(ef.ConfigError, match="'complementary' needs log_start"):
+        from_events(ev, method="complementary")
+
+
+def _negative_map() -> str:
+    import base64
+    return base64.b64encode(np.full((N * TILE, N * TILE), -1.0, "<f2").tobytes()).decode("ascii")
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda k: k["views"][1].update(offset=["a", 0]), r"offset = \['a', 0\]: must be \[dx, dy\] in pixels"),
+    (lambda k: k["views"][1].update(offset=[1e6, 0]), "must be within half a tile"),
+    (lambda k: k["views"].pop(), "views must list the 9 views"),
+    (lambda k: k.update(tile="x"), "tile = 'x': must be"),
+    (lambda k: k.update(target_depth=-1), "target_depth = -1: must be a number > 0"),
+    (lambda k: k["flat_map"].update(shape=[57600]), "flat_map must be a finite, non-negative 240x240 gain map"),
+    (lambda k: k["flat_map"].update(base64=_negative_map()), "flat_map must be a finite, non-negative"),
+])
+def test_a_hand_edited_calibration_is_refused_in_one_line(renders, tmp_path, edit, message):
+    import json
+    scene, optics, targets, _, flat = renders
+    cal = register(np.log(targets[1.0]), known_tiles(N, N * TILE, N * TILE))
+    flat_field(cal, flat)
+    path = save_calibration(str(tmp_path / "k.json"), optics_record(optics, N * TILE, N * TILE), kaleidoscope=cal)
+    data = json.load(open(path))
+    edit(data["kaleidoscope"])
+    json.dump(data, open(path, "w"))
+    with pytest.raises(ef.EventFieldError, match=message) as e:
+        load_calibration(path)
+    assert str(e.value).startswith(path) and "\n" not in str(e.value)
+
+
+def test_old_or_twice_applied_calibrations_are_refused(renders, tmp_path):
+    scene, optics, targets, _, flat = renders
+    record = optics_record(optics, N * TILE, N * TILE)
+    cal = register(np.log(targets[1.0]), known_tiles(N, N * TILE, N * TILE))
+    cal.optics = record
+    lf = ef.from_spatial(scene, optics, log=False)
+    once = apply_to_lightfield(lf, {"kaleidoscope": cal}, record)
+    with pytest.raises(ef.EventFieldError, match="already calibrated"):
+        apply_to_lightfield(once, {"kaleidoscope": cal}, record)
+    cal.registration = None              # a file from before the registration was refined
+    with pytest.raises(ef.ConfigError, match="made by an earlier version"):
+        apply_to_lightfield(lf, {"kaleidoscope": cal}, record)
+    cal = register(np.log(targets[1.0]), known_tiles(N, N * TILE, N * TILE))
+    cal.optics, cal.flat_gain = record, [1.0] * 9        # mean gains without the map: an older --flat file
+    with pytest.raises(ef.ConfigError, match="mean gains but not its map"):
+        apply_to_lightfield(lf, {"kaleidoscope": cal}, record)

@@ -131,6 +131,31 @@ def test_calibrations_that_change_nothing_or_were_edited(captures, capsys, tmp_p
             GalvoCalibration(**{**fields, **edit})
 
 
+def test_kaleidoscope_calibration_through_the_cli(captures, capsys, tmp_path):
+    """calibrate kaleidoscope takes the frame's tiles from its metadata and records --target-depth; refocus
+    applies the offsets (an edited file's 1 px moves the output) and refuses a start frame its method ignores."""
+    d, _, _ = captures
+    assert cli(["frame", KALEIDO, "-D", "views_px=60", "-o", str(tmp_path / "kf.exr")]) == 0
+    path = str(tmp_path / "k.json")
+    assert cli(["calibrate", "kaleidoscope", str(tmp_path / "kf.exr"), "-o", path, "--target-depth", "1.0"]) == 0
+    part = json.load(open(path))["kaleidoscope"]
+    assert part["target_depth"] == 1.0 and part["seam_scores"] == {}          # known tiles: no seam search
+    plain = tmp_path / "plain.png"
+    assert cli(["refocus", str(d / "k.h5"), "-o", str(plain), "--depth", "0.7"]) == 0
+    data = json.load(open(path))
+    for v in data["kaleidoscope"]["views"]:
+        v["offset"] = [float(v["i"]), 0.0]                                 # 1 px a view step along x
+    json.dump(data, open(path, "w"))
+    assert cli(["refocus", str(d / "k.h5"), "-o", str(tmp_path / "moved.png"), "--depth", "0.7",
+                "--calibration", path]) == 0
+    a, b = read_exr(str(tmp_path / "moved.exr"))[0], read_exr(str(tmp_path / "plain.exr"))[0]
+    assert max(np.abs(a[c] - b[c]).max() / np.abs(b[c]).max() for c in b) > 0.1
+    capsys.readouterr()
+    code, err = _run(["refocus", d / "k.h5", "-o", tmp_path / "hp.png", "--depth", "0.7", "--method", "highpass",
+                      "--start-frame", tmp_path / "kf.exr"], capsys)
+    assert code == 2 and "method 'highpass' reconstructs from the events alone" in err and "\n" not in err, err
+
+
 def test_a_one_period_recording_counts_one_period():
     """A camera recording's span runs from its first event to its last: one 4 ms period captured read as
     3.996 ms and counted no whole period ("allowed 0..-1")."""
