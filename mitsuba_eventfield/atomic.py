@@ -25,8 +25,9 @@ def check_writable(path: str, what: str = "output") -> str:
         existing = _nearest_existing(parent)
         if os.path.isfile(existing):
             raise EventFieldError(f"{what} path {path}: {existing} is a file, not a directory")
+        below = parent.startswith(os.path.join(os.getcwd(), ""))     # short where it lies below here
         raise EventFieldError(f"{what} path {path}: directory {parent} does not exist (create it first, e.g. "
-                              f"mkdir -p {os.path.relpath(parent)})")
+                              f"mkdir -p {os.path.relpath(parent) if below else parent})")
     if not os.access(parent, os.W_OK | os.X_OK) or _stores_nothing(parent):
         raise EventFieldError(f"{what} path {path}: directory {parent} is not writable")
     return path

@@ -72,12 +72,21 @@ class _FilteringAppender(mi.Appender):
         pass
 
 
+VARIANT_ENV = "EVENTFIELD_VARIANT"      # the variant for any command or script that names none
+
+
 def available_backends() -> dict:
     return {"cuda": bool(dr.has_backend(dr.JitBackend.CUDA)), "llvm": bool(dr.has_backend(dr.JitBackend.LLVM))}
 
 
 def choose_variant(variant: str | None = None, color: bool = False) -> str:
-    """Return the variant to use. ``variant`` is an explicit override ('llvm_ad_rgb', 'cuda', 'llvm', ...)."""
+    """Return the variant to use. ``variant`` is an explicit override ('llvm_ad_rgb', 'cuda', 'llvm', ...); without
+    one, the environment's ``EVENTFIELD_VARIANT`` (every command and script, not only those with ``--variant``)."""
+    if variant is None and os.environ.get(VARIANT_ENV):
+        try:
+            return choose_variant(os.environ[VARIANT_ENV], color)
+        except EventFieldError as e:
+            raise EventFieldError(f"{VARIANT_ENV}={os.environ[VARIANT_ENV]}: {e}") from None
     if variant is not None and not isinstance(variant, str):
         raise EventFieldError(f"variant = {variant!r}: expected a variant name ('llvm_ad_mono', 'cuda', 'llvm', ...) "
                               "or None")

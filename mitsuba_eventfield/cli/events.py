@@ -244,6 +244,14 @@ def run_preview(a) -> int:
     ev = read_events(a.file)
     t0 = None if a.t0 is None else int(round(a.t0 * 1e3))
     t1 = None if a.t1 is None else int(round(a.t1 * 1e3))
+    if t0 is not None and t1 is not None and t1 < t0:
+        raise EventFieldError(f"--t0 {a.t0:g} --t1 {a.t1:g}: the window ends before it starts (ms)")
+    start = int(ev.meta.get("t_start_us", ev.t[0] if len(ev) else 0))
+    end = start + int(ev.duration_us)
+    if (t0 is not None and t0 > end) or (t1 is not None and t1 < start):     # an empty picture, written as a result
+        raise EventFieldError(f"{a.file}: the window {'' if a.t0 is None else f'--t0 {a.t0:g} '}"
+                              f"{'' if a.t1 is None else f'--t1 {a.t1:g} '}is outside the stream, which covers "
+                              f"{start / 1e3:g} to {end / 1e3:g} ms")
     write_preview(a.output, ev, t0, t1, scale=a.scale)
     print(f"wrote {a.output}: {len(ev.time_window(t0, t1))} events in the window")
     return 0

@@ -110,6 +110,9 @@ def main(argv=None) -> int:
         if not was_quiet:
             quiet_mitsuba_log(False)
     signum = received[0] if received else signal.SIGINT
-    print(f"eventfield: {'terminated' if signum == signal.SIGTERM else 'interrupted'} (no partial output kept)",
-          file=sys.stderr)
+    from ..simulate.checkpoint import KEPT
+    kept = (f"; its last checkpoint is kept in {KEPT[-1]}: run the same command with --resume to go on"
+            if KEPT else "")
+    print(f"eventfield: {'terminated' if signum == signal.SIGTERM else 'interrupted'} (no partial output kept)"
+          f"{kept}", file=sys.stderr)
     return 128 + int(signum)

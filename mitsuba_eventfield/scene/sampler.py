@@ -73,7 +73,10 @@ def load_text(mi, text: str, path: str, params: dict):
             copy = os.path.join(folder, os.path.basename(path))
             with open(copy, "w") as f:
                 f.write(text)
-            return mi.load_file(copy, **params)
+            try:
+                return mi.load_file(copy, **params)
+            except RuntimeError as e:       # its messages name the copy: name the user's file
+                raise RuntimeError(str(e).replace(copy, path)) from None
     finally:
         resolver.clear()
         for p in saved:

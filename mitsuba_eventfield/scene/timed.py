@@ -236,7 +236,8 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
         except (OSError, UnicodeDecodeError) as e:
             raise EventFieldError(f"{path}: cannot read the scene ({e.strerror or type(e).__name__})") from None
         except Exception as e:  # Mitsuba reports XML/plugin errors as RuntimeError with a long trace
-            raise EventFieldError(f"{path}: {_mitsuba_message(e)}") from None
+            raise EventFieldError(f"{path}: {_unused_defines(e, original, xml_params) or _mitsuba_message(e)}") \
+                from None
     timed = TimedScene(scene, motion, path, instanced)
     timed.sampler_choice = sampler_choice
     timed.defines = dict(xml_params) if path is not None else {}
@@ -280,6 +281,18 @@ def _film_override(path: str, xml_params: dict) -> dict:
     if "views_px" in declared:
         out["views_px"] = max(30, height - height % 6)     # n x n views of whole, even tiles
     return out
+
+
+def _unused_defines(e: Exception, text: str, xml_params: dict) -> str | None:
+    """Mitsuba's "Found unused parameters: - $widht=96" as the -D names the scene does not declare and the ones
+    it does (its ``<default name=...>`` values); None for any other error."""
+    import re
+    if "Found unused parameters" not in str(e):
+        return None
+    declared = re.findall(r"<default\s+name=\"([^\"]+)\"", text)
+    unknown = [k for k in xml_params if k not in declared]
+    return (f"-D {', '.join(unknown) or ', '.join(xml_params)}: not a value the scene declares; its <default> values "
+            f"are {', '.join(declared) or 'none'}")
 
 
 def _mitsuba_message(e: Exception) -> str:

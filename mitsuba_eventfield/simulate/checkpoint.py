@@ -28,6 +28,7 @@ from ..validate import positive
 
 SUFFIX = ".resume"
 MERGE_CHUNK = 1 << 20
+KEPT = []                        # checkpoint folders of renders stopped in this process, kept to resume from
 DEFAULT_EVERY_S = 60.0           # wall seconds between checkpoints when only resume is asked for
 # metadata that differs between an interrupted render and its resumption without changing any event
 VOLATILE = ("created_utc", "command", "render", "python")
@@ -135,9 +136,12 @@ class Checkpoints:
         return self.saved["segments"] if self.saved else []
 
     def abandon(self) -> None:
-        """The render stopped: keep the folder if it holds a checkpoint to resume from, else leave nothing."""
+        """The render stopped: keep the folder if it holds a checkpoint to resume from (listed in ``KEPT``, which
+        the command line's interrupt line names), else leave nothing."""
         if self.saved is None:
             shutil.rmtree(self.folder, ignore_errors=True)
+        else:
+            KEPT.append(self.folder)
 
     def due(self) -> bool:
         return time.perf_counter() - self.last_save >= self.every_s

@@ -59,7 +59,7 @@ def reuse_plan(timed: TimedScene, duration: float, steps: int, width: int, heigh
     if k * width * height * 4 > 0.25 * available_memory():
         notes.append(f"static scene, but caching {k} frames would need too much memory: every step rendered")
         return None
-    what = "one frame" if period == 0.0 else f"one scan period ({k} steps, {period * 1e3:.4g} ms)"
-    notes.append(f"static scene: rendered {what} and reused it for the other {steps + 1 - k} steps "
-                 "(events identical to rendering every step)")
+    what = "one frame" if period == 0.0 else f"one scan period ({k} frames, {period * 1e3:.4g} ms)"
+    notes.append(f"static scene: rendered {what} and reused it for the other {steps + 1 - k} of the render's "
+                 f"{steps + 1} frames ({steps} steps; events identical to rendering every frame)")
     return k

@@ -217,3 +217,43 @@ def test_reused_output_folder_warns_and_keeps_no_stale_files(capture, tmp_path, 
     assert len(first) > len(frames) > 0 and frames == [f"frame_{k:04d}.{e}" for k in range(len(frames) // 2)
                                                        for e in ("exr", "png")]
     assert (out / "mine.txt").exists()
+
+
+def test_a_preview_window_outside_the_stream_is_refused(tmp_path, capsys):
+    """A window past the stream's end wrote an empty PNG and exited 0; a reversed one named the library's
+    t0_us / t1_us instead of the options given."""
+    events = str(tmp_path / "d.h5")
+    assert cli.main(["render", os.path.join(ROOT, "scenes", "demo", "demo.xml"), "-D", "width=16", "-D", "height=12",
+                     "--duration", "0.01", "--steps", "4", "--quiet", "-o", events]) == 0
+    capsys.readouterr()
+    for window, message in ((["--t0", "400", "--t1", "450"], "the window --t0 400 --t1 450 is outside the stream, "
+                                                             "which covers 0 to 10 ms"),
+                            (["--t0", "5", "--t1", "3"], "--t0 5 --t1 3: the window ends before it starts")):
+        assert cli.main(["preview", events, "-o", str(tmp_path / "p.png"), *window]) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and "\n" not in err, err
+    assert not (tmp_path / "p.png").exists()
+    assert cli.main(["preview", events, "-o", str(tmp_path / "p.png"), "--t0", "2", "--t1", "6"]) == 0
+
+
+def test_scene_value_errors_name_the_users_file_and_the_declared_values(tmp_path, capsys):
+    """-D width=abc named a temporary copy of the scene; -D widht=96 gave Mitsuba's "Found unused parameters"."""
+    demo = os.path.join(ROOT, "scenes", "demo", "demo.xml")
+    for define, message in (("width=abc", f"Error while loading {demo} (line 24, col 14): could not parse integer "
+                                          'value "abc"'),
+                            ("widht=96", "-D widht: not a value the scene declares; its <default> values are width, "
+                                         "height, max_depth")):
+        code = cli.main(["render", demo, "-o", str(tmp_path / "x.h5"), "-D", define,
+                         "--duration", "0.001", "--steps", "2"])
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and message in err and "/tmp" not in err.replace(str(tmp_path), ""), err
+
+
+def test_a_missing_output_folder_is_named_as_the_user_can_create_it(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    os.makedirs("here")
+    for target, shown in (("here/out/x.h5", "mkdir -p here/out)"), ("/nonexistent_dir/x.h5", "mkdir -p /nonexistent_dir)")):
+        code = cli.main(["render", os.path.join(ROOT, "scenes", "demo", "demo.xml"), "-o", target, "--duration",
+                         "0.001", "--steps", "2"])
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and err.endswith(shown), err

@@ -15,6 +15,24 @@ def test_bad_variants_are_refused(variant, message):
         ef.choose_variant(variant)
 
 
+def test_the_environment_names_the_variant_of_any_command(monkeypatch, tmp_path, capsys):
+    """EVENTFIELD_VARIANT reaches commands without --variant (the demo, the applications): a name this Mitsuba
+    lacks is refused by the demo, in one line naming the variable, before anything is rendered."""
+    from mitsuba_eventfield.cli.main import main as cli
+    monkeypatch.setenv("EVENTFIELD_VARIANT", "llvm_ad_rgb")
+    assert ef.choose_variant() == "llvm_ad_rgb"
+    assert ef.choose_variant("llvm") == "llvm_ad_mono"          # an explicit choice wins
+    monkeypatch.setenv("EVENTFIELD_VARIANT", "llvm_ad_foo")
+    with pytest.raises(ef.EventFieldError, match="EVENTFIELD_VARIANT=llvm_ad_foo: variant 'llvm_ad_foo' is not "
+                                                 "compiled"):
+        ef.choose_variant()
+    monkeypatch.setattr("mitsuba_eventfield.backend._active", None)      # as in a fresh process
+    assert cli(["demo", "-o", str(tmp_path / "demo")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("eventfield: error: EVENTFIELD_VARIANT=llvm_ad_foo") and "\n" not in err
+    assert not (tmp_path / "demo").exists()
+
+
 def test_llvm_library_is_at_least_16():
     import os
     import re

@@ -74,6 +74,20 @@ def test_interrupted_render_resumes_to_the_uninterrupted_file(tmp_path, monkeypa
     assert [n for n in ra["notes"] if "timing accuracy" in n] == [n for n in rb["notes"] if "timing accuracy" in n]
 
 
+def test_an_interrupted_command_says_its_checkpoint_is_kept(tmp_path, monkeypatch, capsys):
+    """Ctrl-C on a checkpointed render printed only "interrupted (no partial output kept)": the user could not
+    tell that the work up to the last checkpoint was kept and --resume goes on from it."""
+    from mitsuba_eventfield.simulate import checkpoint
+    monkeypatch.setattr(checkpoint, "KEPT", [])
+    out = str(tmp_path / "c.h5")
+    _interrupt_at(monkeypatch, 5)
+    code = cli(["render", DEMO, "-D", "width=16", "-D", "height=12", "--duration", "0.004", "--steps", "8",
+                "--quiet", "-o", out, "--checkpoint-every", "1e-9"])
+    err = capsys.readouterr().err.strip()
+    assert code == 130 and err == (f"eventfield: interrupted (no partial output kept); its last checkpoint is kept "
+                                   f"in {out}.resume: run the same command with --resume to go on"), err
+
+
 def test_sigkill_then_resume_from_the_command_line(tmp_path):
     """A render killed with SIGKILL (no ``finally`` runs) leaves the last checkpoint; --resume finishes it."""
     out, ref = str(tmp_path / "k.h5"), str(tmp_path / "ref.h5")
