@@ -12,10 +12,8 @@ accuracy, against the analytic scene's exact events in tests/simulate/test_auto_
 * samples per pixel: the per-pixel spread of log brightness over 4 seeds at a probe spp, scaled as
   1/sqrt(spp) (Monte-Carlo), gives the smallest power of two whose noise is below ``noise_fraction`` x C
   (default C / 2; with a fixed seed the noise fires nothing on static pixels, it moves event times);
-* steps: a probe of two instants ``probe_dt`` apart measures the per-pixel log change per unit time; the 99th
-  percentile (not the maximum: hard edges crossing a pixel would demand ~100x more steps for a few pixels) sets
-  steps so that change stays below ``change_fraction`` x C per step (default one threshold: several
-  crossings in a step are interpolated exactly, the linearisation error is second order);
+* steps: the rule of an unasked render (``stepping.uniform_default_steps``): the known image motion, scan and
+  objects, at most 0.5 px a step, and the pixel model's floors (low-pass, shot noise), uniform;
 * reuse: a static scene under a periodic view renders one period (already automatic in render_events).
 
 With ``timing_accuracy`` (seconds: the median timestamp error wanted; ``eventfield render --auto
@@ -26,7 +24,7 @@ at 1, 4 and 16 x ``probe_spp`` give each candidate sampler's noise and how fast 
 (independent: 1/sqrt(spp); stratified and multi-jittered samplers faster on smooth pixels). The cheapest
 (sampler, spp) whose predicted noise error is at most ``NOISE_SHARE`` of the request (and whose noise stays
 under ``noise_fraction`` x C) is chosen, then the fewest steps whose step error, added in quadrature, keeps the
-total within the request; never fewer steps than the change rule above (count accuracy). A request the limits
+total within the request; never fewer steps than the motion rule above (count accuracy). A request the limits
 (``max_spp``, ``max_steps``) cannot meet is refused before anything is rendered.
 """
 from __future__ import annotations
@@ -198,9 +196,21 @@ def _timing_choice(scene_path, defines, timed, frames, dt, target_s, sigma_cap, 
             "steps_us_at_probe": models[own]["steps_us"], "models": models}
 
 
-def _change_steps(f0, f1, dt, duration, threshold, change_fraction, max_steps):
-    rate = float(np.percentile(np.abs(f1 - f0), 99)) / dt
-    return int(min(max_steps, max(1, math.ceil(duration * rate / (change_fraction * threshold))))), rate
+def _default_steps(timed, duration, spp, threshold, max_steps) -> tuple:
+    """(steps, why): the known image motion under 0.5 px a step and the pixel model's floors
+    (``stepping.uniform_default_steps``, the rule an unasked render takes). It replaced a rule of its own, the
+    99th percentile of a probe's per-pixel log change under C a step, which Monte-Carlo noise drove (a moving
+    mesh's edges flip whole samples between dark and bright at any step size): the fan at 346x260 asked for
+    2405 steps over 20 ms (481 a scan period, 3 minutes) and then noted that more steps do not help."""
+    from .render import _event_integrator
+    from .stepping import uniform_default_steps
+    steps, chosen = uniform_default_steps(timed, duration, spp, _event_integrator(timed, threshold, None, None, None))
+    if steps > max_steps:
+        raise ConfigError(f"the scene's image motion needs {steps} steps over {duration:g} s, more than "
+                          f"max_steps = {max_steps}")
+    speed = chosen.get("largest_image_speed_px_per_s")
+    return steps, (f"{chosen['by']}" + (f": the image moves up to {speed:.4g} px/s (scan and objects), at most "
+                                         f"{chosen['px_per_step']:g} px a step" if speed is not None else ""))
 
 
 def _reuse(timed, duration, steps, reasons) -> int:
@@ -261,7 +271,7 @@ def scene_threshold(timed) -> float:
 
 
 def plan(scene_path: str, duration: float, threshold: float | None = None, noise_fraction: float = 0.5,
-         change_fraction: float = 1.0, probe_spp: int = 4, probe_dt: float | None = None, defines=None,
+         probe_spp: int = 4, probe_dt: float | None = None, defines=None,
          max_spp: int = 256, max_steps: int = 100_000, timing_accuracy: float | None = None) -> Plan:
     """Colour, spp and steps for rendering ``scene_path`` over ``duration`` seconds (module docstring); with
     ``timing_accuracy`` (seconds, median timestamp error) also the sampler, by the accuracy-limit model.
@@ -277,23 +287,21 @@ def plan(scene_path: str, duration: float, threshold: float | None = None, noise
     dt = probe_dt or duration / 200
     if timing_accuracy is None:
         spp = _noise_spp(timed, threshold, noise_fraction, probe_spp, max_spp, reasons)
-        steps, rate = _change_steps(*render_frames(timed, [0.0, dt], spp=spp), dt, duration, threshold,
-                                    change_fraction, max_steps)
-        reasons["steps"] = (f"{steps}: the 99th-percentile log change is {rate:.3g} per second; {steps} steps keep "
-                            f"it under {change_fraction} x C per step")
+        steps, why = _default_steps(timed, duration, spp, threshold, max_steps)
+        reasons["steps"] = f"{steps}: {why}"
         return Plan(color=not grey, spp=spp, steps=_reuse(timed, duration, steps, reasons), static=timed.is_static,
                     reasons=reasons, defines=defines)
     frames = render_frames(timed, [0.0, dt, 2 * dt], spp=probe_spp)
     choice = _timing_choice(scene_path, defines, timed, frames, dt, timing_accuracy, noise_fraction * threshold,
                             probe_spp, max_spp)
-    floor, rate = _change_steps(frames[0], frames[1], dt, duration, threshold, change_fraction, max_steps)
+    floor, why = _default_steps(timed, duration, probe_spp, threshold, max_steps)
     steps, need, steps_us = _timing_steps(choice, duration, dt, timing_accuracy, floor, max_steps)
-    return _timing_plan(grey, timed, choice, steps, need, floor, rate, steps_us, timing_accuracy, duration,
-                        reasons, defines, change_fraction)
+    return _timing_plan(grey, timed, choice, steps, need, floor, why, steps_us, timing_accuracy, duration,
+                        reasons, defines)
 
 
-def _timing_plan(grey, timed, choice, steps, need, floor, rate, steps_us, target_s, duration, reasons, defines,
-                 change_fraction) -> Plan:
+def _timing_plan(grey, timed, choice, steps, need, floor, why, steps_us, target_s, duration, reasons,
+                 defines) -> Plan:
     """The plan of a timing request, with the reason of each choice in words and numbers."""
     target_us = target_s * 1e6
     models = choice["models"]
@@ -308,13 +316,12 @@ def _timing_plan(grey, timed, choice, steps, need, floor, rate, steps_us, target
     reasons["spp"] = f"{choice['spp']}: predicted noise timing error {choice['noise_us']:.3g} us"
     total = math.hypot(choice["noise_us"], steps_us)
     reasons["steps"] = (f"{steps}: the time step's error falls as dt^2; {need} steps keep it, in quadrature with the "
-                        f"noise, under {target_us:g} us; the 99th-percentile log change ({rate:.3g} per second) "
-                        f"needs {floor} to stay under {change_fraction} x C per step (count accuracy)")
+                        f"noise, under {target_us:g} us; the image motion needs {floor} (count accuracy: {why})")
     steps = _reuse(timed, duration, steps, reasons)
     reasons["timing"] = (f"requested median timestamp error {target_us:g} us; predicted {total:.3g} us "
                          f"(noise {choice['noise_us']:.3g} us, steps {steps_us:.3g} us)")
     timing = {"requested_s": target_s, "predicted_us": total, "noise_us": choice["noise_us"], "steps_us": steps_us,
-              "steps_for_timing": need, "steps_for_change": floor, "noise_share": NOISE_SHARE,
+              "steps_for_timing": need, "steps_for_motion": floor, "noise_share": NOISE_SHARE,
               "samplers": {name: {"probe_spp": [p[0] for p in m["points"]], "noise_us": [p[1] for p in m["points"]],
                                   "slopes": m["slopes"]} for name, m in models.items()}}
     return Plan(color=not grey, spp=choice["spp"], steps=steps, static=timed.is_static, reasons=reasons,

@@ -198,8 +198,7 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     decided_by = "image motion" if for_motion >= floor else max(floors, key=lambda k: -1 if k in waived else floors[k])
     chosen = {"by": decided_by, "px_per_step": bound if for_motion >= floor else None,
               "largest_image_speed_px_per_s": speed, "noise_over_threshold": noise,
-              "steps_for_motion": for_motion, **{f"steps_for_{k.replace(' ', '_').replace('-', '')}": v
-                                                 for k, v in floors.items()},
+              "steps_for_motion": for_motion, **{_steps_key(k): v for k, v in floors.items()},
               **({"waived_for_noise": waived} if waived else {})}
     probe = (sigma, first) if sigma is not None else None
     placed = _placed_by_motion(st, timed, bound, floor, for_motion, sampled) if for_motion > floor else None
@@ -216,6 +215,22 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
         steps = min(int(math.ceil(steps / periods)), max(1, MAX_STEPS // periods)) * periods
     steps = min(steps, MAX_STEPS)          # the coarse-step note says so if this binds
     return replace(st, steps=steps, chosen=dict(chosen, steps=steps)), probe
+
+
+def uniform_default_steps(timed, duration: float, spp: int, integ) -> tuple:
+    """(steps, why) for ``eventfield render --auto``, which states one uniform count: the default rule's image
+    motion under its fine bound (``FINE_PX_PER_STEP``, 0.5 px a step everywhere: auto favours accuracy and does
+    not take the 2 px a noise-limited default allows) and the pixel model's floors. The same motion and floors
+    as an unasked render (:func:`default_steps`), not a rule of its own."""
+    st = stepping(timed, duration, None, False, 0.5, None, None, spp, 0, "fixed", 0.0)
+    speed, _ = _fastest_motion(st, timed)
+    if speed is None:
+        return UNKNOWN_MOTION_STEPS, {"by": "default for motion not known before rendering"}
+    floors = _floors(st, integ.config)
+    for_motion = int(math.ceil(speed * st.duration / FINE_PX_PER_STEP * (1 - 1e-9)))
+    steps = max(for_motion, *floors.values())
+    by = "image motion" if for_motion >= max(floors.values()) else max(floors, key=floors.get)
+    return min(steps, MAX_STEPS), {"by": by, "px_per_step": FINE_PX_PER_STEP, "largest_image_speed_px_per_s": speed}
 
 
 def _fastest_motion(st: Stepping, timed) -> tuple:
