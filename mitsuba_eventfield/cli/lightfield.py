@@ -229,11 +229,12 @@ def _warn_coarse_steps(path: str, ev) -> None:
     ``image_motion.largest_px_per_step``): its views are interpolated between rendered instants, and a light
     field built from them is wrong by as much, confidently (offaxis_cards at 8 steps a period, 5.3 px a step:
     depth 18-20 % off, against 6-7 % at the default steps)."""
-    from ..simulate.image_motion import MAX_PX_PER_STEP, largest_px_per_step
+    from ..simulate.image_motion import allowed_px_per_step, largest_px_per_step
     worst = largest_px_per_step(ev.meta)
-    if worst is not None and worst > MAX_PX_PER_STEP * (1 + 1e-6):
+    allowed = allowed_px_per_step((ev.meta.get("stepping") or {}).get("chosen"))
+    if worst is not None and worst > allowed * (1 + 1e-6):
         print(f"eventfield: warning: {path} was rendered with {worst:.3g} px of image motion a step (more than "
-              f"{MAX_PX_PER_STEP:g}): its views are interpolated, not resolved; render it with more steps",
+              f"{allowed:g}): its views are interpolated, not resolved; render it with more steps",
               file=sys.stderr)
 
 

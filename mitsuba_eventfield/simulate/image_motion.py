@@ -258,8 +258,7 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
         return
     parts = [f"the {k} {v:.3g} px" for k, v in (("scan", scan), ("objects", objects)) if v]
     what = " and ".join(parts) + (f", together {worst:.3g} px" if len(parts) > 1 else "")   # the check is on the sum
-    allowed = (chosen or {}).get("px_per_step") or MAX_PX_PER_STEP
-    if worst <= allowed * (1 + 1e-6):
+    if worst <= allowed_px_per_step(chosen) * (1 + 1e-6):
         summary.notes.append(f"steps of about {worst:.3g} px of image motion (per step {what}), chosen because "
                              f"Monte-Carlo noise ({chosen['noise_over_threshold']:.2g} C) limits this render: "
                              "finer steps would add noise events, not accuracy; with more samples (e.g. --spp 16) "
@@ -275,6 +274,14 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
             f"px: events between rendered instants are interpolated, not resolved, and missed); {fix}")
     summary.notes.append(note)
     print(f"eventfield: {note}", file=sys.stderr)
+
+
+def allowed_px_per_step(chosen: dict | None) -> float:
+    """The image motion a step may have without a warning: ``MAX_PX_PER_STEP``, or more where the default steps
+    chose it (``chosen``: ``stepping.default_steps``' reasons, in the metadata as ``stepping.chosen``) because
+    Monte-Carlo noise limits the render. The render's own note and the light-field commands' warning read this
+    one bound: the commands warned "render it with more steps" on the default render of galvo_static."""
+    return max(MAX_PX_PER_STEP, (chosen or {}).get("px_per_step") or 0.0)
 
 
 def largest_px_per_step(meta: dict) -> float | None:

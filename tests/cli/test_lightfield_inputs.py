@@ -224,3 +224,20 @@ def test_a_stream_rendered_with_coarse_steps_is_flagged(tmp_path, capsys):
     assert cli(["refocus", path, "-o", str(tmp_path / "r.png"), "--depth", "1"]) == 0
     err = capsys.readouterr().err
     assert "px of image motion a step (more than 1)" in err and err.count("\n") == 1, err
+
+
+def test_the_coarse_step_warning_reads_the_bound_the_render_chose(capsys):
+    """A default render limited by Monte-Carlo noise takes up to 2 px a step by design (noted, not warned about,
+    by the render); refocus and depth then warned "render it with more steps" on the very file the default made.
+    One bound for both (``image_motion.allowed_px_per_step``)."""
+    from mitsuba_eventfield.cli.lightfield import _warn_coarse_steps
+
+    def stream(px, chosen):
+        meta = {"render": {"image_motion_px_per_step": {"scan": px, "objects": None}},
+                "stepping": {"mode": "uniform", "steps": 160, **({"chosen": chosen} if chosen else {})}}
+        return ef.EventStream.empty(8, 8, meta)
+    for px, chosen, warned in ((1.8, {"px_per_step": 2.0}, None), (1.8, None, "more than 1)"),
+                               (2.5, {"px_per_step": 2.0}, "more than 2)"), (0.9, {"px_per_step": 0.5}, None)):
+        _warn_coarse_steps("f.h5", stream(px, chosen))
+        err = capsys.readouterr().err
+        assert (warned in err) if warned else err == "", (px, chosen, err)
