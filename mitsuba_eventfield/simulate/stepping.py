@@ -233,6 +233,11 @@ def uniform_default_steps(timed, duration: float, spp: int, integ) -> tuple:
     return min(steps, MAX_STEPS), {"by": by, "px_per_step": FINE_PX_PER_STEP, "largest_image_speed_px_per_s": speed}
 
 
+def _steps_key(floor: str) -> str:
+    """The metadata key of a floor's step count ("low-pass pixel" -> "steps_for_lowpass_pixel")."""
+    return f"steps_for_{floor.replace(' ', '_').replace('-', '')}"
+
+
 def _fastest_motion(st: Stepping, timed) -> tuple:
     """(the fastest image motion in px/s or None where unknown, ``image_motion.sampled_motion``'s samples or
     None): without a scan the samples the steps may be placed by give the speed too; under a scan
