@@ -224,9 +224,13 @@ def lightfield(scene_path: str | None = None, defines: dict | None = None, depth
 def paper_rows(result: HDRLightField) -> list:
     """The metrics' "paper" row: what Fig. 7 claims and what this run measured."""
     e, d = result.errors, result.depths
+    # each region against the exposure that fails there (the claim), and over all pixels against both: there the
+    # long exposure, right on the dark majority to its 8-bit steps, can be the closer one
     at = "; ".join(f"at {z:g} m: events {e['events'][i]['bright']:.2f} vs long {e['ldr_long'][i]['bright']:.2f} on "
                    f"the bright pixels (LEDs), events {e['events'][i]['dark']:.2f} vs short "
-                   f"{e['ldr_short'][i]['dark']:.2f} on the dark ones (card, wall, text)" for i, z in enumerate(d))
+                   f"{e['ldr_short'][i]['dark']:.2f} on the dark ones (card, wall, text), and over all pixels events "
+                   f"{e['events'][i]['all']:.2f} vs long {e['ldr_long'][i]['all']:.2f} and short "
+                   f"{e['ldr_short'][i]['all']:.2f}" for i, z in enumerate(d))
     cmd = "eventfield hdr --lightfield"
     if result.meta["scene"] != os.path.abspath(DEFAULT_SCENE):
         cmd += f" {scene_argument(result.meta['scene'])}"
@@ -245,7 +249,8 @@ def paper_rows(result: HDRLightField) -> list:
              "differs": "The paper shows a real capture through the kaleidoscope, judged by eye. Here a galvo scans "
              "a simulated scene once, slowly, and refocuses at two depths. The frame camera is an ideal 8-bit sensor "
              "with exposures set from the truth. Every error is measured against the renderer. The events' one "
-             "unknown constant comes from the long exposure."}]
+             "unknown constant comes from the long exposure. The claim is per region: no single exposure records "
+             "both; over all pixels one exposure may still be closer than the events."}]
 
 
 def figure(result: HDRLightField, path: str) -> str:

@@ -8,9 +8,10 @@ seed; no other cost):
 - **steps**: linear interpolation between rendered instants misplaces a crossing by about
   dt^2 |L''| / (8 |L'|) (the error bound of linear interpolation), from the second difference of three frames.
 
-Medians over the events: each changing pixel's estimate weighted by its slope, which its event count follows. On the analytic scene (benchmarks/results/accuracy.md) the estimates are
-within about 2x of the measured errors and name the right limit at 20, 80 and 320 steps, for a noise-free sampler
-and for 4 and 16 spp. More steps do not lower a noise limit; four times the samples halve it.
+Medians over the events: each changing pixel's estimate weighted by its slope, which its event count follows.
+On the analytic scene (benchmarks/results/accuracy.md) the estimates are within about 2x of the measured errors
+and name the right limit at 20, 80 and 320 steps, for a noise-free sampler and for 4 and 16 spp. More steps do
+not lower a noise limit; four times the samples halve it.
 """
 from __future__ import annotations
 

@@ -134,6 +134,10 @@ def test_hdr_lightfield_cli_outputs_and_paper_row(tmp_path):
     row = m["paper"][0]
     assert set(row) == {"figure", "claim", "measured", "command", "differs"} and row["figure"] == "Fig. 7"
     assert f"events {m['errors']['events'][1]['bright']:.2f} vs long" in row["measured"]
+    # and over all pixels against both exposures, where one of them may be the closer (per region it is not)
+    assert (f"over all pixels events {m['errors']['events'][1]['all']:.2f} vs long "
+            f"{m['errors']['ldr_long'][1]['all']:.2f} and short {m['errors']['ldr_short'][1]['all']:.2f}"
+            in row["measured"])
     assert row["command"] == ("eventfield hdr --lightfield -D width=64 -D height=48 --depths 0.6,1.5 --views 12 "
                               f"--steps {m['steps']}")
     assert "long exposure" in m["extra_information"] and m["pixel_model"]["preset"] == "prophesee_gen4"

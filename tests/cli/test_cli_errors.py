@@ -252,7 +252,8 @@ def test_scene_value_errors_name_the_users_file_and_the_declared_values(tmp_path
 def test_a_missing_output_folder_is_named_as_the_user_can_create_it(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     os.makedirs("here")
-    for target, shown in (("here/out/x.h5", "mkdir -p here/out)"), ("/nonexistent_dir/x.h5", "mkdir -p /nonexistent_dir)")):
+    for target, shown in (("here/out/x.h5", "mkdir -p here/out)"),
+                          ("/nonexistent_dir/x.h5", "mkdir -p /nonexistent_dir)")):
         code = cli.main(["render", os.path.join(ROOT, "scenes", "demo", "demo.xml"), "-o", target, "--duration",
                          "0.001", "--steps", "2"])
         err = capsys.readouterr().err.strip()
