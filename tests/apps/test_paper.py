@@ -29,6 +29,16 @@ def test_every_paper_figure_has_a_row_and_numbers_come_from_the_named_command(tm
     assert "reduced sizes" in text
 
 
+def test_a_partial_run_leaves_the_full_document_alone(tmp_path, monkeypatch):
+    """`eventfield paper --only KEY` wrote docs/paper.md with that result's row and none of the others'."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "paper.md").write_text("the full document\n")
+    assert cli(["paper", "--only", "demo", "--quick", "-o", "out"]) == 0
+    assert (tmp_path / "docs" / "paper.md").read_text() == "the full document\n"
+    assert "| Fig. 14" in (tmp_path / "out" / "paper.md").read_text()
+
+
 def test_unknown_result_is_one_line(tmp_path):
     import pytest
 
