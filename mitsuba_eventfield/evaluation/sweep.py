@@ -181,8 +181,8 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
                                      mp_context=multiprocessing.get_context("spawn")) as pool:
                 futs = [pool.submit(run_point, scene, p, out_dir, keep_events, inputs) for p in todo]
                 if progress:
-                    from tqdm import tqdm
-                    for _ in tqdm(futs, desc="sweep", unit="point"):
+                    from ..simulate.summary import progress_bar
+                    for _ in progress_bar(futs, desc="sweep", unit="point"):
                         _.result()
                 rows = [f.result() for f in futs]
         results = {r["key"]: dict(r, resumed=False) for r in rows}

@@ -116,8 +116,8 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
     that allow it take ``frames_per_kernel`` frames per kernel (``event_batch``; same events)."""
     bar = None
     if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=source.count, unit="frame", desc="converting")
+        from .summary import progress_bar
+        bar = progress_bar(total=source.count, unit="frame", desc="converting")
     group, batched = frames_per_kernel, integ.batchable
     pending, times = None, []      # the group's frames (_Group) and their times
     t_first = t_prev = t_last_committed = None

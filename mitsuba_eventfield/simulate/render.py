@@ -215,7 +215,7 @@ class _Loop:
             self._step_events(t, t_next, k)
             if self.bar is not None:
                 _advance(self.bar, t_next - st.t_start)
-                self.bar.set_postfix_str(f"{self.summary.events + self.sink.device_events} events")
+                self.bar.set_postfix_str(f"{self.summary.events + self.sink.device_events} events", refresh=False)
             t, k = t_next, k + 1
         if self.batch is not None:
             self.batch.flush()
@@ -331,9 +331,9 @@ def _new_summary(timed, st: Stepping, output) -> RenderSummary:
 
 
 def _progress_bar(duration):
-    from tqdm import tqdm
-    return tqdm(total=round(duration * 1e3, 6), unit="ms", unit_scale=False, desc="rendering", file=sys.stderr,
-                bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} ms sim [{elapsed}<{remaining}]{postfix}")
+    from .summary import progress_bar
+    return progress_bar(total=round(duration * 1e3, 6), unit="ms", unit_scale=False, desc="rendering",
+                        bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} ms sim [{elapsed}<{remaining}]{postfix}")
 
 
 def _steps_and_samples(timed, st: Stepping, integ, spp_changing):
