@@ -405,6 +405,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     try:
         loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation, noise, frozen)
         stream = loop.finish(loop.run(), meta, wall0)
+        if bar is not None:              # the last chunks reach the count only when the render finishes
+            bar.set_postfix_str(f"{summary.events} events", refresh=False)
     except BaseException:
         sink.abort()
         if checkpoints is not None:

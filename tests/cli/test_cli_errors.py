@@ -270,3 +270,5 @@ def test_the_progress_bar_into_a_log_is_a_few_lines(tmp_path):
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     assert 1 <= r.stderr.count("rendering:") <= 4, r.stderr.count("rendering:")
+    total = re.match(r"(\d+) events", r.stdout).group(1)        # the bar's last count is the render's total
+    assert r.stderr.rstrip().endswith(f", {total} events"), r.stderr[-300:]
