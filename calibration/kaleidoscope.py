@@ -321,9 +321,10 @@ def flat_field(calibration: KaleidoscopeCalibration, flat_frame: np.ndarray) -> 
     divide extracted views by them. Records each view's mean gain and the film's gain map in the calibration."""
     n, (tw, th) = calibration.n, calibration.tile
     flat = np.asarray(flat_frame, dtype=np.float64)
-    if flat.shape != (n * th, n * tw) or not np.all(np.isfinite(flat)):
-        raise CalibrationError(f"the flat-field frame ({flat.shape[1]}x{flat.shape[0]}) must be a finite "
-                               f"{n * tw}x{n * th} image like the registered frame")
+    if flat.ndim != 2 or flat.shape[0] < n * th or flat.shape[1] < n * tw or not np.all(np.isfinite(flat)):
+        raise CalibrationError(f"the flat-field frame ({flat.shape[-1]}x{flat.shape[0]}) must be a finite image "
+                               f"covering the {n}x{n} tiles of {tw}x{th} px, like the registered frame")
+    flat = flat[:n * th, :n * tw]            # a bare frame's tiles are its size over n, rounded down
     parts = _unflipped(flat, n, tw, th)
     maps = np.stack([p[5] for p in parts])
     ref = maps[len(maps) // 2].mean()

@@ -72,7 +72,7 @@ class _FilteringAppender(mi.Appender):
         pass
 
 
-VARIANT_ENV = "EVENTFIELD_VARIANT"      # the variant for any command or script that names none
+VARIANT_ENV = "EVENTFIELD_VARIANT"      # the backend (cuda, llvm) for any command or script that names none
 
 
 def available_backends() -> dict:
@@ -83,8 +83,12 @@ def choose_variant(variant: str | None = None, color: bool = False) -> str:
     """Return the variant to use. ``variant`` is an explicit override ('llvm_ad_rgb', 'cuda', 'llvm', ...); without
     one, the environment's ``EVENTFIELD_VARIANT`` (every command and script, not only those with ``--variant``)."""
     if variant is None and os.environ.get(VARIANT_ENV):
+        named = os.environ[VARIANT_ENV]
+        # the backend it names; mono or rgb stays the caller's (a colour probe, a mono bench): "llvm_ad_mono"
+        # there made --auto plan a coloured scene as grey
+        backend, _, mode = named.partition("_ad_")
         try:
-            return choose_variant(os.environ[VARIANT_ENV], color)
+            return choose_variant(backend if mode in ("mono", "rgb") else named, color)
         except EventFieldError as e:
             raise EventFieldError(f"{VARIANT_ENV}={os.environ[VARIANT_ENV]}: {e}") from None
     if variant is not None and not isinstance(variant, str):

@@ -159,7 +159,7 @@ def _auto_plan(a, motion, scene_defines):
         if duration is None:
             raise EventFieldError("--auto needs --duration (or `duration` in the motion file)")
     plan = auto.plan(a.scene, duration, threshold=a.threshold, defines=scene_defines,
-                     timing_accuracy=a.timing_accuracy)
+                     timing_accuracy=a.timing_accuracy, preset=a.preset, pixel=pixel_overrides(a.pixel))
     print("automatic choices:\n  " + plan.report().replace("\n", "\n  "))
     set_variant(a.variant, plan.color)
     a.spp, a.steps, a.duration, a.auto_plan = plan.spp, plan.steps, duration, plan
@@ -244,11 +244,12 @@ def run_preview(a) -> int:
     ev = read_events(a.file)
     t0 = None if a.t0 is None else int(round(a.t0 * 1e3))
     t1 = None if a.t1 is None else int(round(a.t1 * 1e3))
-    if t0 is not None and t1 is not None and t1 < t0:
-        raise EventFieldError(f"--t0 {a.t0:g} --t1 {a.t1:g}: the window ends before it starts (ms)")
+    if t0 is not None and t1 is not None and t1 <= t0:       # [t0, t1): empty when t1 = t0
+        raise EventFieldError(f"--t0 {a.t0:g} --t1 {a.t1:g}: the window [t0, t1) holds no time (ms): t1 must be "
+                              "after t0")
     start = int(ev.meta.get("t_start_us", ev.t[0] if len(ev) else 0))
     end = start + int(ev.duration_us)
-    if (t0 is not None and t0 > end) or (t1 is not None and t1 < start):     # an empty picture, written as a result
+    if (t0 is not None and t0 > end) or (t1 is not None and t1 <= start):    # an empty picture, written as a result
         raise EventFieldError(f"{a.file}: the window {'' if a.t0 is None else f'--t0 {a.t0:g} '}"
                               f"{'' if a.t1 is None else f'--t1 {a.t1:g} '}is outside the stream, which covers "
                               f"{start / 1e3:g} to {end / 1e3:g} ms")

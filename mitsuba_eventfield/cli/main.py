@@ -78,6 +78,8 @@ def main(argv=None) -> int:
     from ..backend import quiet_mitsuba_log
     from ..errors import EventFieldError
     args = build_parser().parse_args(argv)
+    from ..simulate.checkpoint import KEPT
+    KEPT.clear()                     # this command's kept checkpoints only (main may run many in one process)
     # our lines only: no Mitsuba notes (monochrome film, "winding down" on Ctrl-C); restored when main returns
     was_quiet = quiet_mitsuba_log()
     previous = _signals_as_interrupts()

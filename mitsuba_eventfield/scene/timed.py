@@ -289,7 +289,7 @@ def _unused_defines(e: Exception, text: str, xml_params: dict) -> str | None:
     import re
     if "Found unused parameters" not in str(e):
         return None
-    declared = re.findall(r"<default\s+name=\"([^\"]+)\"", text)
+    declared = re.findall(r"<default\s[^>]*?name=[\"']([^\"']+)[\"']", text)
     unknown = [k for k in xml_params if k not in declared]
     return (f"-D {', '.join(unknown) or ', '.join(xml_params)}: not a value the scene declares; its <default> values "
             f"are {', '.join(declared) or 'none'}")

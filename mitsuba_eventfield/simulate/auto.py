@@ -196,7 +196,7 @@ def _timing_choice(scene_path, defines, timed, frames, dt, target_s, sigma_cap, 
             "steps_us_at_probe": models[own]["steps_us"], "models": models}
 
 
-def _default_steps(timed, duration, spp, threshold, max_steps) -> tuple:
+def _default_steps(timed, duration, spp, threshold, max_steps, preset=None, pixel=None) -> tuple:
     """(steps, why): the known image motion under 0.5 px a step and the pixel model's floors
     (``stepping.uniform_default_steps``, the rule an unasked render takes). It replaced a rule of its own, the
     99th percentile of a probe's per-pixel log change under C a step, which Monte-Carlo noise drove (a moving
@@ -204,7 +204,8 @@ def _default_steps(timed, duration, spp, threshold, max_steps) -> tuple:
     2405 steps over 20 ms (481 a scan period, 3 minutes) and then noted that more steps do not help."""
     from .render import _event_integrator
     from .stepping import uniform_default_steps
-    steps, chosen = uniform_default_steps(timed, duration, spp, _event_integrator(timed, threshold, None, None, None))
+    integ = _event_integrator(timed, threshold, None, None, None, preset, pixel)
+    steps, chosen = uniform_default_steps(timed, duration, spp, integ)
     if steps > max_steps:
         raise ConfigError(f"the scene's image motion needs {steps} steps over {duration:g} s, more than "
                           f"max_steps = {max_steps}")
@@ -272,10 +273,12 @@ def scene_threshold(timed) -> float:
 
 def plan(scene_path: str, duration: float, threshold: float | None = None, noise_fraction: float = 0.5,
          probe_spp: int = 4, probe_dt: float | None = None, defines=None,
-         max_spp: int = 256, max_steps: int = 100_000, timing_accuracy: float | None = None) -> Plan:
+         max_spp: int = 256, max_steps: int = 100_000, timing_accuracy: float | None = None,
+         preset: str | None = None, pixel: dict | None = None) -> Plan:
     """Colour, spp and steps for rendering ``scene_path`` over ``duration`` seconds (module docstring); with
     ``timing_accuracy`` (seconds, median timestamp error) also the sampler, by the accuracy-limit model.
-    ``threshold``: the contrast threshold C of the render (default: the scene's own)."""
+    ``threshold``: the contrast threshold C of the render (default: the scene's own); ``preset`` / ``pixel``:
+    the render's pixel model, as for ``render_events`` (its floors: a low-pass pixel's, shot noise's)."""
     defines = dict(defines or {})
     reasons = {}
     grey = _grey(scene_path, defines)
@@ -287,14 +290,14 @@ def plan(scene_path: str, duration: float, threshold: float | None = None, noise
     dt = probe_dt or duration / 200
     if timing_accuracy is None:
         spp = _noise_spp(timed, threshold, noise_fraction, probe_spp, max_spp, reasons)
-        steps, why = _default_steps(timed, duration, spp, threshold, max_steps)
+        steps, why = _default_steps(timed, duration, spp, threshold, max_steps, preset, pixel)
         reasons["steps"] = f"{steps}: {why}"
         return Plan(color=not grey, spp=spp, steps=_reuse(timed, duration, steps, reasons), static=timed.is_static,
                     reasons=reasons, defines=defines)
     frames = render_frames(timed, [0.0, dt, 2 * dt], spp=probe_spp)
     choice = _timing_choice(scene_path, defines, timed, frames, dt, timing_accuracy, noise_fraction * threshold,
                             probe_spp, max_spp)
-    floor, why = _default_steps(timed, duration, probe_spp, threshold, max_steps)
+    floor, why = _default_steps(timed, duration, probe_spp, threshold, max_steps, preset, pixel)
     steps, need, steps_us = _timing_steps(choice, duration, dt, timing_accuracy, floor, max_steps)
     return _timing_plan(grey, timed, choice, steps, need, floor, why, steps_us, timing_accuracy, duration,
                         reasons, defines)

@@ -317,6 +317,8 @@ class _Loop:
         stream = self.sink.finish(int(round((self.st.t_start + self.st.duration) * 1e6)), {"render": meta["render"]})
         summary.write_s += time.perf_counter() - tw
         summary.wall_s = time.perf_counter() - wall0    # the file's copy lacks only this final write
+        if self.bar is not None:         # the last chunks reach the count only as the render finishes
+            self.bar.set_postfix_str(f"{summary.events} events", refresh=False)
         return stream
 
 
@@ -405,8 +407,6 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     try:
         loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation, noise, frozen)
         stream = loop.finish(loop.run(), meta, wall0)
-        if bar is not None:              # the last chunks reach the count only when the render finishes
-            bar.set_postfix_str(f"{summary.events} events", refresh=False)
     except BaseException:
         sink.abort()
         if checkpoints is not None:

@@ -224,9 +224,11 @@ def uniform_default_steps(timed, duration: float, spp: int, integ) -> tuple:
     as an unasked render (:func:`default_steps`), not a rule of its own."""
     st = stepping(timed, duration, None, False, 0.5, None, None, spp, 0, "fixed", 0.0)
     speed, _ = _fastest_motion(st, timed)
-    if speed is None:
-        return UNKNOWN_MOTION_STEPS, {"by": "default for motion not known before rendering"}
     floors = _floors(st, integ.config)
+    if speed is None:
+        steps = max(UNKNOWN_MOTION_STEPS, *floors.values())
+        return min(steps, MAX_STEPS), {"by": "default for motion not known before rendering"
+                                       if steps == UNKNOWN_MOTION_STEPS else max(floors, key=floors.get)}
     for_motion = int(math.ceil(speed * st.duration / FINE_PX_PER_STEP * (1 - 1e-9)))
     steps = max(for_motion, *floors.values())
     by = "image motion" if for_motion >= max(floors.values()) else max(floors, key=floors.get)

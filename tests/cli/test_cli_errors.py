@@ -228,7 +228,9 @@ def test_a_preview_window_outside_the_stream_is_refused(tmp_path, capsys):
     capsys.readouterr()
     for window, message in ((["--t0", "400", "--t1", "450"], "the window --t0 400 --t1 450 is outside the stream, "
                                                              "which covers 0 to 10 ms"),
-                            (["--t0", "5", "--t1", "3"], "--t0 5 --t1 3: the window ends before it starts")):
+                            (["--t0", "5", "--t1", "3"], "--t0 5 --t1 3: the window [t0, t1) holds no time"),
+                            (["--t0", "1", "--t1", "1"], "--t0 1 --t1 1: the window [t0, t1) holds no time"),
+                            (["--t1", "0"], "the window --t1 0 is outside the stream")):
         assert cli.main(["preview", events, "-o", str(tmp_path / "p.png"), *window]) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and "\n" not in err, err

@@ -37,3 +37,20 @@ def test_a_still_pixel_stops_firing():
     ev = _events(levels, times)
     assert np.all(ev.p > 0) and len(ev) >= SIDE * SIDE
     assert ev.t.max() <= 3000                      # within the first steps after the rise (1 ms each)
+
+
+def test_each_event_draws_new_thresholds():
+    """On a linear ramp every crossing of a pixel is its threshold after the one before, so the log rise between
+    consecutive events of a pixel is the threshold it held: spread by the jitter within each pixel (a pixel that
+    kept one draw forever, or no jitter, would show none), about C on average."""
+    rate = 4.0                                               # log units a second
+    times = np.linspace(0.0, 1.0, 2001)
+    ev = _events(np.log(0.5) + rate * times, times)
+    pixel = ev.y.astype(np.int64) * SIDE + ev.x
+    spreads, means = [], []
+    for k in range(SIDE * SIDE):
+        held = np.diff(np.sort(ev.t[pixel == k])) * 1e-6 * rate
+        spreads.append(held.std())
+        means.append(held.mean())
+    assert 0.8 * JITTER < np.mean(spreads) < 1.2 * JITTER, np.mean(spreads)     # ~0.04 within each pixel
+    assert abs(np.mean(means) - C) < 0.01

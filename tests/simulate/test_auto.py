@@ -44,3 +44,12 @@ def test_static_scene_plan_rounds_steps_so_periods_are_reused():
     assert r["reused_steps"] + r["copied_steps"] >= 2 * plan.steps // 3
     odd = ef.auto.plan(GALVO_STATIC, 0.005, defines=SMALL)             # 1.25 periods: nothing to reuse
     assert odd.static and "every step is rendered" in odd.reasons["reuse"]
+
+
+def test_the_plan_takes_the_render_pixel_models_floors():
+    """--auto --preset davis346 --pixel cutoff_hz=3000: the low-pass pixel needs steps no longer than two of its
+    time constants (1885 over 0.2 s), whatever the image motion; the plan used the scene's own (ideal) pixel and
+    chose 81."""
+    plan = ef.auto.plan(os.path.join(ROOT, "scenes", "demo", "demo.xml"), 0.2, defines={"width": 36, "height": 24},
+                        preset="davis346", pixel={"cutoff_hz": 3000.0})
+    assert plan.steps >= 0.2 * 3.14159 * 3000 and "low-pass pixel" in plan.reasons["steps"], plan.reasons["steps"]

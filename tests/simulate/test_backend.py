@@ -20,8 +20,11 @@ def test_the_environment_names_the_variant_of_any_command(monkeypatch, tmp_path,
     lacks is refused by the demo, in one line naming the variable, before anything is rendered."""
     from mitsuba_eventfield.cli.main import main as cli
     monkeypatch.setenv("EVENTFIELD_VARIANT", "llvm_ad_rgb")
-    assert ef.choose_variant() == "llvm_ad_rgb"
-    assert ef.choose_variant("llvm") == "llvm_ad_mono"          # an explicit choice wins
+    assert ef.choose_variant() == "llvm_ad_mono"                 # the backend it names; mono / rgb as asked
+    assert ef.choose_variant(color=True) == "llvm_ad_rgb"       # (a full name made colour probes mono)
+    monkeypatch.setenv("EVENTFIELD_VARIANT", "llvm")
+    assert ef.choose_variant(color=True) == "llvm_ad_rgb"
+    assert ef.choose_variant("llvm_ad_mono", color=True) == "llvm_ad_mono"      # an explicit choice wins
     monkeypatch.setenv("EVENTFIELD_VARIANT", "llvm_ad_foo")
     with pytest.raises(ef.EventFieldError, match="EVENTFIELD_VARIANT=llvm_ad_foo: variant 'llvm_ad_foo' is not "
                                                  "compiled"):

@@ -86,6 +86,10 @@ def test_an_interrupted_command_says_its_checkpoint_is_kept(tmp_path, monkeypatc
     err = capsys.readouterr().err.strip()
     assert code == 130 and err == (f"eventfield: interrupted (no partial output kept); its last checkpoint is kept "
                                    f"in {out}.resume: run the same command with --resume to go on"), err
+    _interrupt_at(monkeypatch, 5)
+    code = cli(["render", DEMO, "-D", "width=16", "-D", "height=12", "--duration", "0.004", "--steps", "8",
+                "--quiet", "-o", str(tmp_path / "plain.h5")])           # the next command, in the same process
+    assert code == 130 and capsys.readouterr().err.strip() == "eventfield: interrupted (no partial output kept)"
 
 
 def test_sigkill_then_resume_from_the_command_line(tmp_path):
