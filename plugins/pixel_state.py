@@ -25,8 +25,7 @@ class PixelVariables:
 
 
 PIXEL_VARIABLES = ("size", "log_prev", "anchor", "k_on", "k_off", "offset", "c_on", "c_off", "held_on", "held_off",
-                   "staged",
-                   "staged_intensity", "staged_size", "rng", "leak_rate", "last_emit", "limiter")
+                   "staged", "staged_intensity", "staged_size", "rng", "leak_rate", "last_emit", "limiter")
 
 
 def _pixel_variable(name: str) -> property:
