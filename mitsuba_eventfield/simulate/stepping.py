@@ -182,7 +182,7 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
         chosen = {"by": "default for motion not known before rendering", "steps": UNKNOWN_MOTION_STEPS}
         return replace(st, steps=UNKNOWN_MOTION_STEPS, chosen=chosen), None
     floors = _floors(st, integ.config)
-    fine = int(math.ceil(speed * st.duration / FINE_PX_PER_STEP * (1 - 1e-9)))
+    fine = _steps_for(speed, st.duration, FINE_PX_PER_STEP)
     sigma, first, noise, bound = None, None, None, FINE_PX_PER_STEP
     others = max(v for k, v in floors.items() if k != "low-pass pixel")
     if fine > others:                      # the bound decides: is the noise large against the threshold?
@@ -193,7 +193,7 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     noisy = noise is not None and noise >= NOISE_LIMITED
     waived = ["low-pass pixel"] if noisy and floors["low-pass pixel"] > others else []
     floor = max(1, max(v for k, v in floors.items() if k not in waived))
-    for_motion = int(math.ceil(speed * st.duration / bound * (1 - 1e-9)))
+    for_motion = _steps_for(speed, st.duration, bound)
     steps = max(floor, for_motion)
     decided_by = "image motion" if for_motion >= floor else max(floors, key=lambda k: -1 if k in waived else floors[k])
     chosen = {"by": decided_by, "px_per_step": bound if for_motion >= floor else None,
@@ -229,10 +229,16 @@ def uniform_default_steps(timed, duration: float, spp: int, integ) -> tuple:
         steps = max(UNKNOWN_MOTION_STEPS, *floors.values())
         return min(steps, MAX_STEPS), {"by": "default for motion not known before rendering"
                                        if steps == UNKNOWN_MOTION_STEPS else max(floors, key=floors.get)}
-    for_motion = int(math.ceil(speed * st.duration / FINE_PX_PER_STEP * (1 - 1e-9)))
+    for_motion = _steps_for(speed, st.duration, FINE_PX_PER_STEP)
     steps = max(for_motion, *floors.values())
     by = "image motion" if for_motion >= max(floors.values()) else max(floors, key=floors.get)
     return min(steps, MAX_STEPS), {"by": by, "px_per_step": FINE_PX_PER_STEP, "largest_image_speed_px_per_s": speed}
+
+
+def _steps_for(speed: float, duration: float, px_per_step: float) -> int:
+    """Uniform steps that keep an image moving at ``speed`` px/s under ``px_per_step`` over ``duration`` (an exact
+    multiple is not rounded up by float round-off)."""
+    return int(math.ceil(speed * duration / px_per_step * (1 - 1e-9)))
 
 
 def _steps_key(floor: str) -> str:
