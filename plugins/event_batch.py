@@ -19,11 +19,11 @@ frames at once:
 The count pass (1-2) and the crossing writer (3) are frozen functions (:func:`_frozen`): recorded for a pixel
 model and chunk shape, then replayed chunk after chunk instead of traced again.
 
-Every pixel model batches. Its random parts draw from the per-pixel PCG32 generator, which the loop carries
-(five draws a step at most, in the per-step kernel's order: the same numbers); the refractory period carries
-each pixel's last emission; shot-noise events take a second lane per pixel after each step's crossings, as
-the per-step path puts a step's noise after its crossings; the drop and noise counts are summed per pixel in
-the loop.
+Every pixel model batches. Its random draws are counter-based (``counter_rng``: keyed by the pixel and its
+event counters, which the loop carries with the shot noise's hazard left: the per-step kernel's numbers);
+the refractory period carries each pixel's last emission; shot-noise events take a second lane per pixel
+after each step's crossings, as the per-step path puts a step's noise after its crossings; the drop and noise
+counts are summed per pixel in the loop.
 
 The events equal, bit for bit, those of ``B`` calls of ``EventIntegrator.commit_device`` joined in order: the
 same float operations in the same order, and a stable sort keyed by time over slots in (step, pixel,
@@ -105,7 +105,7 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
     seconds; with ``intensity`` they are linear radiances (a render's, which the low-pass and shot noise read
     as the per-step kernel does) and their log is taken in the kernel; else the low-pass and shot noise
     recover the radiance from the log, as the per-step kernel does for a staged log frame. Advances the
-    integrator's state (pixels, generator, last emissions, readout cap, counters); returns the chunk's events
+    integrator's state (pixels, noise counters, last emissions, readout cap, tallies); returns the chunk's events
     time-sorted and read out on the device, as per-step commits would."""
     if not batchable(integ):
         raise ValueError("commit_frames: frames are committed one at a time here (event_batch.batchable)")
@@ -216,24 +216,17 @@ def lanes_per_step(cfg, n_pix: int) -> int:
 
 
 # the pixel state a chunk carries from step to step, in this order (those the pixel model has)
-STATE = ("log_prev", "k_on", "k_off", "offset", "held_on", "held_off", "rng", "last_emit")
+STATE = ("log_prev", "k_on", "k_off", "offset", "held_on", "held_off", "noise_left", "noise_k", "last_emit")
 
 
 def _state(integ) -> dict:
-    """The integrator's pixel state by name (the generator by its state array)."""
-    state = {name: getattr(integ, name) for name in STATE if getattr(integ, name) is not None}
-    if "rng" in state:
-        state["rng"] = state["rng"].state
-    return state
+    """The integrator's pixel state by name."""
+    return {name: getattr(integ, name) for name in STATE if getattr(integ, name) is not None}
 
 
 def _set_state(integ, state: dict) -> None:
     for name, value in state.items():
-        if name == "rng":
-            integ.rng = mi.PCG32(integ.rng)
-            integ.rng.state = value
-        else:
-            setattr(integ, name, value)
+        setattr(integ, name, value)
 
 
 @dataclass
@@ -241,11 +234,11 @@ class Chunk:
     """``B`` frames of every pixel from a state, as ``event_fill.fill`` takes crossings: stepping the pixels is
     cheap next to storing each (step, pixel) lane's brightness before and after, reference level and count
     (16 bytes a lane written, then read back by the fill), so the count pass keeps only the kept counts and the
-    fill steps the pixels again from the same state (generator included: the same draws; the same operations:
+    fill steps the pixels again from the same state (the same counters: the same draws; the same operations:
     the same values, bit for bit). Lanes: per step every pixel's crossings, then (with shot noise) every
     pixel's noise event, so that slot order is the per-step path's: a step's crossings, then its noise."""
     view: PixelView              # the pixel model and its per-pixel constants
-    state: dict                  # STATE at times[0] (the names the pixel model has; the generator's state array)
+    state: dict                  # STATE at times[0] (the names the pixel model has)
     frames: object
     times: np.ndarray | None     # the step boundaries in seconds, on the host (None inside the count pass)
     t_d: object                  # the same as Float64
@@ -311,10 +304,10 @@ class Chunk:
                 intensity = pixel_model.linlog_inverse(dr, value, view.linlog_threshold) \
                     if pixel_step.needs_intensity(cfg) else None
             dt = dr.gather(mi.Float, dts, b) if dts is not None else None
-            rng = view.generator(s["rng"]) if "rng" in s else None
             held = (s["held_on"], s["held_off"]) if "held_on" in s else None
-            st = pixel_step.step(view, s["log_prev"], s["k_on"], s["k_off"], s.get("offset"), rng, log_in,
-                                 intensity, dt, held)
+            noise_state = (s["noise_left"], s["noise_k"]) if "noise_left" in s else None
+            st = pixel_step.step(view, pixel, s["log_prev"], s["k_on"], s["k_off"], s.get("offset"), noise_state,
+                                 log_in, intensity, dt, held)
             lv = st.levels
             t0, t1 = dr.gather(mi.Float64, t_d, b), dr.gather(mi.Float64, t_d, b + 1)
             sel = event_select.select_events(lv.n, s["log_prev"], lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1,
@@ -322,7 +315,8 @@ class Chunk:
             carried = each_step(b, pixel, s["log_prev"], st, sel, t0, t1, *carried)
             after = {"log_prev": lv.log_now, "k_on": lv.k_on, "k_off": lv.k_off, "offset": lv.offset,
                      "held_on": st.held[0] if st.held else None, "held_off": st.held[1] if st.held else None,
-                     "rng": rng.state if rng is not None else None, "last_emit": sel.last_emit}
+                     "noise_left": st.noise_state[0] if st.noise_state else None,
+                     "noise_k": st.noise_state[1] if st.noise_state else None, "last_emit": sel.last_emit}
             return (b + 1,) + tuple(after[k] for k in names) + tuple(carried)
 
         bound = event_fill._opaque(self.steps, mi.UInt32)

@@ -42,11 +42,11 @@ discards it (adaptive stepping re-renders a shorter step). State lives in Dr.Jit
 previous instant, reference level and per-pixel ON/OFF thresholds.
 
 Pixel realism (``pixel_model.PixelConfig``; all off in the default ``ideal`` preset): threshold mismatch and
-per-crossing jitter, leak, shot noise and the photoreceptor low-pass evolve in the step's single Dr.Jit kernel
-(random numbers from a per-pixel PCG32, seeded). :meth:`commit_events` makes the step's events either on the
-device (``event_fill``: count, prefix sum, fill, refractory selection, shot noise, sort, clock; the readout
-cap in ``readout``) or on the host (``host_events``, then :meth:`readout`), whichever is faster on the backend
-(:attr:`device_resident`); both give the same events.
+the reset's jitter, leak, shot noise and the photoreceptor low-pass evolve in the step's single Dr.Jit kernel
+(counter-based random draws, ``counter_rng``, keyed by the seed). :meth:`commit_events` makes the step's events
+either on the device (``event_fill``: count, prefix sum, fill, refractory selection, shot noise, sort, clock;
+the readout cap in ``readout``) or on the host (``host_events``, then :meth:`readout`), whichever is faster on
+the backend (:attr:`device_resident`); both give the same events.
 """
 from __future__ import annotations
 
@@ -58,8 +58,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import (event_batch, event_fill, event_select, host_events, pixel_model, pixel_state,
-                                        pixel_step, readout)
+from mitsuba_eventfield.plugins import (counter_rng, event_batch, event_fill, event_select, host_events, pixel_model,
+                                        pixel_state, pixel_step, readout)
 
 from ._per_variant import per_variant, subclass
 
@@ -118,9 +118,9 @@ class _EventIntegratorMethods:
         self.c_on = self.c_off = None
         self.held_on = self.held_off = None   # jittered thresholds each pixel holds until it fires (jitter only)
         self.staged = self.staged_intensity = None
-        self.rng = self.leak_rate = self.last_emit = self.limiter = None
-        self.refractory_dropped = 0
-        self.noise_events = 0
+        self.noise_left = self.noise_k = None  # shot noise: hazard left before each pixel's next event, events so far
+        self.seed_word = self.leak_rate = self.last_emit = self.limiter = None  # seed_word: keys the draws
+        self.refractory_dropped = self.noise_events = 0
 
     # ---------------------------------------------------------------- checkpoints
     def get_state(self) -> dict:
@@ -199,19 +199,15 @@ class _EventIntegratorMethods:
             self.leak_rate = event_fill.device_copy(sensor["leak_rate"], mi.Float)
             # a sensor in steady state has its pixels at random phases of their leak cycle
             self.offset = -mi.Float(sensor["leak_phase"]) * self.c_on
-        if cfg.shot_noise_hz or cfg.threshold_jitter:
-            self.rng = mi.PCG32(size=n_pix, initstate=mi.UInt64((cfg.seed * 2654435761 + 12345) % 2**64),
-                                initseq=dr.arange(mi.UInt64, n_pix))
-        if cfg.threshold_jitter:        # the thresholds of the pixels' last reset, before the first step
-            u = mi.Point2f(self.rng.next_float32(), self.rng.next_float32())
-            self.held_on, self.held_off = pixel_step.jittered(self.c_on, self.c_off, cfg.threshold_jitter, u)
+        self.seed_word = counter_rng.seed_array(mi, cfg.seed)
+        pixel_step.start_draws(self, n_pix)
         if cfg.refractory_s:
             self.last_emit = np.full(n_pix, -np.inf)
         if cfg.readout_cap:
             self.limiter = self._make_limiter(n_pix)
         state = [self.log_prev, self.anchor, self.k_on, self.k_off, self.c_on, self.c_off]
-        state += [v for v in (self.offset, self.leak_rate, self.held_on, self.held_off) if v is not None]
-        state += [self.rng.state] if cfg.threshold_jitter else []     # advanced by the first draw
+        state += [v for v in (self.offset, self.leak_rate, self.held_on, self.held_off, self.noise_left, self.noise_k)
+                  if v is not None]
         dr.make_opaque(*state)
 
     def _make_limiter(self, n_pix: int):
@@ -254,6 +250,8 @@ class _EventIntegratorMethods:
             step["offset"]
         if step["held"] is not None:
             self.held_on, self.held_off = step["held"]
+        if step["noise_state"] is not None:
+            self.noise_left, self.noise_k = step["noise_state"]
 
     path_override = None       # "host" or "device" inside event_path(); None: chosen per backend
 
@@ -333,8 +331,9 @@ class _EventIntegratorMethods:
             dt = mi.Float(duration)
             dr.make_opaque(dt)                  # a new literal per step would recompile the kernel
         held = (self.held_on, self.held_off) if cfg.threshold_jitter else None
-        st = pixel_step.step(self, self.log_prev, self.k_on, self.k_off, self.offset, self.rng, log_in, intensity,
-                             dt, held)
+        noise_state = (self.noise_left, self.noise_k) if cfg.shot_noise_hz else None
+        st = pixel_step.step(self, dr.arange(mi.UInt32, dr.width(log_in)), self.log_prev, self.k_on, self.k_off,
+                             self.offset, noise_state, log_in, intensity, dt, held)
         lv = st.levels
         todo = [lv.n, lv.k_on, lv.k_off, lv.log_now, lv.log_ref]
         if cfg.threshold_jitter:                # gathered below: evaluate here, in the one kernel
@@ -343,11 +342,12 @@ class _EventIntegratorMethods:
         if st.noise is not None:
             hit, u_pol, u_t = st.noise
             noise = (hit, u_pol, u_t, mi.Int32(dr.select(hit, 1, 0)))
-            todo += list(noise)
-        todo += [v for v in (lv.offset, getattr(self.rng, "state", None)) if v is not None]
+            todo += list(noise) + list(st.noise_state)
+        todo += [lv.offset] if lv.offset is not None else []
         dr.eval(*todo)
         return {"n": lv.n, "k_on": lv.k_on, "k_off": lv.k_off, "log_now": lv.log_now, "log_ref": lv.log_ref,
-                "c_on": st.c_on, "c_off": st.c_off, "offset": lv.offset, "noise": noise, "held": st.held}
+                "c_on": st.c_on, "c_off": st.c_off, "offset": lv.offset, "noise": noise, "held": st.held,
+                "noise_state": st.noise_state}
 
     def readout(self, x, y, t_us, p):
         """The sensor's output stage on one step's time-sorted events: clock quantisation, readout cap."""

@@ -271,11 +271,12 @@ def lowpass_alpha(dr, intensity, dt, cutoff_hz, bright_intensity, min_fraction):
     return 1.0 - dr.exp(-2.0 * math.pi * f * dt)
 
 
-def shot_noise_probability(dr, intensity, dt, rate_hz, bright_intensity, bright_factor):
-    """Probability of a noise event in dt: rate falls linearly from rate_hz (dark) to bright_factor * rate_hz."""
+def shot_noise_hazard(dr, intensity, dt, rate_hz, bright_intensity, bright_factor):
+    """The expected number of noise events in dt (rate x dt): the rate falls linearly from rate_hz (dark) to
+    bright_factor * rate_hz at ``bright_intensity``."""
     frac = dr.clip(intensity / bright_intensity, 0.0, 1.0)
     rate = rate_hz * (1.0 - (1.0 - bright_factor) * frac)
-    return dr.minimum(rate * dt, 1.0)
+    return rate * dt
 
 
 def refractory_crossings(pixel, t, last_emit, period):

@@ -10,9 +10,11 @@ import mitsuba as mi
 import numpy as np
 
 from mitsuba_eventfield.errors import ConfigError
+from mitsuba_eventfield.plugins import counter_rng
 
 STATE_ARRAYS = {"log_prev": "Float", "anchor": "Float", "k_on": "Int32", "k_off": "Int32", "c_on": "Float",
-                "c_off": "Float", "offset": "Float", "leak_rate": "Float", "held_on": "Float", "held_off": "Float"}
+                "c_off": "Float", "offset": "Float", "leak_rate": "Float", "held_on": "Float", "held_off": "Float",
+                "noise_left": "Float64", "noise_k": "UInt32"}
 
 
 class PixelVariables:
@@ -25,7 +27,8 @@ class PixelVariables:
 
 
 PIXEL_VARIABLES = ("size", "log_prev", "anchor", "k_on", "k_off", "offset", "c_on", "c_off", "held_on", "held_off",
-                   "staged", "staged_intensity", "staged_size", "rng", "leak_rate", "last_emit", "limiter")
+                   "staged", "staged_intensity", "staged_size", "noise_left", "noise_k", "seed_word", "leak_rate",
+                   "last_emit", "limiter")
 
 
 def _pixel_variable(name: str) -> property:
@@ -42,8 +45,9 @@ def add_pixel_variables(methods) -> None:
 
 def get_state(integ) -> dict:
     """Everything that fixes the pixels' future events, as NumPy arrays and plain numbers (a checkpoint):
-    levels, event counts, thresholds, drift, the noise generator's state, last emissions, the readout
-    limiter's counters."""
+    levels, event counts, thresholds, drift, the shot noise's hazard left and event counts, last emissions, the
+    readout limiter's counters. (The random draws are keyed by these counters and the seed: no generator
+    state.)"""
     if integ.staged is not None:
         raise RuntimeError("get_state() with a staged frame: commit it first")
     d = {"size": np.array(integ.size or (0, 0)), "refractory_dropped": integ.refractory_dropped,
@@ -51,8 +55,6 @@ def get_state(integ) -> dict:
     for name in STATE_ARRAYS:
         if getattr(integ, name) is not None:
             d[name] = getattr(integ, name).numpy()
-    if integ.rng is not None:
-        d["rng_state"], d["rng_inc"] = integ.rng.state.numpy(), integ.rng.inc.numpy()
     if integ.last_emit is not None:
         d["last_emit"] = integ.last_emit if isinstance(integ.last_emit, np.ndarray) else integ.last_emit.numpy()
     if integ.limiter is not None:
@@ -67,13 +69,14 @@ def set_state(integ, d: dict) -> None:
     if integ.config.threshold_jitter and "held_on" not in d:
         raise ConfigError("checkpoint: made by a version whose threshold jitter was drawn every step, not held "
                           "from one event to the next: render again from the start")
+    if "rng_state" in d:
+        raise ConfigError("checkpoint: made by a version that drew its noise from per-pixel PCG32 streams, which "
+                          "this version replaced with counter-based draws: render again from the start")
     integ.size = tuple(int(v) for v in d["size"])
     for name, kind in STATE_ARRAYS.items():
         if name in d:
             setattr(integ, name, getattr(mi, kind)(d[name]))
-    if "rng_state" in d:
-        integ.rng = mi.PCG32(size=len(d["rng_state"]))
-        integ.rng.state, integ.rng.inc = mi.UInt64(d["rng_state"]), mi.UInt64(d["rng_inc"])
+    integ.seed_word = counter_rng.seed_array(mi, integ.config.seed)
     if "last_emit" in d:
         integ.last_emit = np.array(d["last_emit"], dtype=np.float64)
     cfg = integ.config

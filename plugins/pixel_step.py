@@ -1,15 +1,23 @@
 """One step of every event pixel: the single definition that the per-step kernel (``EventIntegrator._pixel_step``)
 and the many-frames kernel (``event_batch``) both trace, so the two cannot drift apart. :func:`advance` is the
-deterministic core; :func:`step` wraps it with the random parts (threshold jitter, shot noise), which draw from
-the per-pixel PCG32 generator in a fixed order: two jitter draws, then three noise draws a step, made whether
-or not they are used. A generator carried through a many-frames loop therefore draws what the per-step kernel
-draws, step after step.
+deterministic core; :func:`step` wraps it with the random parts (threshold jitter, shot noise), whose draws are
+counter-based (``counter_rng``): keyed by the pixel and its own event counters, made only where used, and the
+same whatever the step size.
 
 Threshold jitter is the reset's noise: a pixel draws its next thresholds when it fires and holds them until it
-fires again (the pixel state ``held_on`` / ``held_off``). Drawn afresh every step instead, a slow rise met the
-lowest of many draws, so the count depended on the step size, not the sensor (a 4-threshold ramp, C = 0.2,
-jitter 0.04: 21, 25, 32 and 40 events a pixel at 20, 200, 2000 and 10,000 steps), and a still pixel kept
-firing on its leftover rise (0.14-0.53 events a pixel in a second)."""
+fires again (the pixel state ``held_on`` / ``held_off``); the thresholds after its m-th crossing are draw m.
+Drawn afresh every step instead, a slow rise met the lowest of many draws, so the count depended on the step
+size, not the sensor (a 4-threshold ramp, C = 0.2, jitter 0.04: 21, 25, 32 and 40 events a pixel at 20, 200,
+2000 and 10,000 steps), and a still pixel kept firing on its leftover rise (0.14-0.53 events a pixel in a
+second).
+
+Shot noise is a Poisson process whose rate follows the brightness: each pixel holds the hazard left before
+its next noise event (``noise_left``, an exponential draw) and spends ``rate x dt`` of it a step; the event
+falls where the hazard runs out, at that fraction of the step (exact for a rate constant over the step). The
+j-th noise event's polarity and the wait after it are draws j of their streams (``noise_k`` counts them). Until
+2026-11-26 it was a Bernoulli draw a step (p = rate x dt, three uniforms a pixel every step) with a uniform time
+in the step: the same process in the limit of short steps, but a different realisation at every step size.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -17,7 +25,7 @@ from dataclasses import dataclass
 import drjit as dr
 import mitsuba as mi
 
-from mitsuba_eventfield.plugins import pixel_model
+from mitsuba_eventfield.plugins import counter_rng, pixel_model
 
 
 @dataclass
@@ -59,58 +67,107 @@ def advance(integ, log_prev, k_on, k_off, offset, log_in, intensity, dt, thresho
 class PixelStep:
     """A whole step of the pixel model: the levels, the thresholds the step compared against (the pixel's own,
     or the jittered ones it held), the jittered thresholds it holds for the next step (None without jitter),
-    and the shot-noise draws (hit Bool, u_pol, u_t; None without shot noise)."""
+    the shot-noise event (hit Bool, u_pol, u_t: its polarity draw and its time as a fraction of the step; None
+    without shot noise) and the noise state after the step ((noise_left, noise_k); None without shot noise)."""
     levels: PixelLevels
     c_on: object
     c_off: object
     noise: tuple | None
     held: tuple | None = None
+    noise_state: tuple | None = None
 
 
-def step(integ, log_prev, k_on, k_off, offset, rng, log_in, intensity, dt, held=None) -> PixelStep:
+def step(integ, pixel, log_prev, k_on, k_off, offset, noise_state, log_in, intensity, dt, held=None) -> PixelStep:
     """Every pixel through one step with the whole pixel model: :func:`advance` against the thresholds the
     pixel holds (``held``: (on, off), jittered at its last event; None without jitter), the reference moved by
-    them, new thresholds drawn where the pixel fired (two draws from ``rng``), shot noise (three draws).
-    ``rng``: the per-pixel ``mi.PCG32`` (advanced in place; None when nothing draws). ``intensity``: the linear
-    radiance (needed by the low-pass and shot noise). Lazy: the caller evaluates.
+    them, new thresholds drawn where the pixel fired, and shot noise from ``noise_state`` = (noise_left,
+    noise_k) (None without shot noise). ``pixel``: the pixels' indices (UInt32), which key their draws with
+    ``integ.seed_word``. ``intensity``: the linear radiance (needed by the low-pass and shot noise). Lazy: the
+    caller evaluates.
 
     All crossings of one step share the thresholds held at its start (a step is meant to be short next to the
-    time between a pixel's events); the normal pair (Box-Muller: a log, a square root, a sine and a cosine) is
-    made only where the pixel fired (a symbolic branch: the CPU skips it in every packet of quiet pixels), the
-    uniforms drawn either way, so the generator's stream does not depend on the events."""
+    time between a pixel's events). The draws (and the jitter's Box-Muller normal: a log, a square root, a
+    sine and a cosine) are made only where the pixel fired: symbolic branches, which the CPU skips in every
+    packet of quiet pixels."""
     cfg = integ.config
     thresholds = held if cfg.threshold_jitter else (integ.c_on, integ.c_off)
     lv, c_on, c_off = advance(integ, log_prev, k_on, k_off, offset, log_in, intensity, dt, thresholds)
     if cfg.threshold_jitter:                # the reference moved by the thresholds the pixel held
         lv.offset = lv.offset + mi.Float(dr.maximum(lv.n, 0)) * (c_on - integ.c_on) \
             - mi.Float(dr.maximum(-lv.n, 0)) * (c_off - integ.c_off)
-        u = mi.Point2f(rng.next_float32(), rng.next_float32())
-        held = _redrawn(integ, cfg.threshold_jitter, lv.n != 0, u, c_on, c_off)
+        resets = mi.UInt32(lv.k_on + lv.k_off)
+        held = _redrawn(integ, pixel, resets, lv.n != 0, c_on, c_off)
     noise = None
     if cfg.shot_noise_hz:
-        prob = pixel_model.shot_noise_probability(dr, intensity, dt, cfg.shot_noise_hz, cfg.bright_intensity,
-                                                  cfg.shot_noise_bright_factor)
-        u_hit, u_pol, u_t = rng.next_float32(), rng.next_float32(), rng.next_float32()
-        noise = (u_hit < prob, u_pol, u_t)
-    return PixelStep(lv, c_on, c_off, noise, held if cfg.threshold_jitter else None)
+        rate_dt = mi.Float64(pixel_model.shot_noise_hazard(dr, intensity, dt, cfg.shot_noise_hz,
+                                                           cfg.bright_intensity, cfg.shot_noise_bright_factor))
+        noise, noise_state = _shot_noise(integ, pixel, noise_state, rate_dt)
+    return PixelStep(lv, c_on, c_off, noise, held if cfg.threshold_jitter else None,
+                     noise_state if cfg.shot_noise_hz else None)
 
 
-def jittered(c_on, c_off, jitter: float, u) -> tuple:
-    """Thresholds ``c_on``, ``c_off`` with the reset's noise: each plus ``jitter`` times one of the normal pair
-    of the uniforms ``u`` (Mitsuba's Box-Muller), floored at a tenth of it."""
-    g = mi.warp.square_to_std_normal(u)
-    return dr.maximum(c_on + jitter * g.x, c_on * 0.1), dr.maximum(c_off + jitter * g.y, c_off * 0.1)
+def _jittered(base_on, base_off, jitter: float, pixel, resets, seed_word) -> tuple:
+    """The thresholds a pixel holds after its ``resets``-th crossing (UInt32; 0: before its first): each of
+    ``base_on``, ``base_off`` plus ``jitter`` times one of a normal pair (Mitsuba's Box-Muller of two
+    counter-based uniforms), floored at a tenth of it."""
+    def draw(stream):
+        return counter_rng.uniform(mi, pixel, resets, counter_rng.stream_word(seed_word, stream))
+    g = mi.warp.square_to_std_normal(mi.Point2f(draw(counter_rng.JITTER_ON), draw(counter_rng.JITTER_OFF)))
+    return dr.maximum(base_on + jitter * g.x, base_on * 0.1), dr.maximum(base_off + jitter * g.y, base_off * 0.1)
 
 
-def _redrawn(integ, jitter: float, fired, u, c_on, c_off) -> tuple:
+def _redrawn(integ, pixel, resets, fired, c_on, c_off) -> tuple:
     """The thresholds each pixel holds after the step: new ones (:func:`jittered`) where it fired, else those it
     held."""
-    def draw(base_on, base_off, u, c_on, c_off):
-        return jittered(base_on, base_off, jitter, u)
+    jitter = integ.config.threshold_jitter
 
-    def keep(base_on, base_off, u, c_on, c_off):
+    def draw(base_on, base_off, pixel, resets, seed, c_on, c_off):
+        return _jittered(base_on, base_off, jitter, pixel, resets, seed)
+
+    def keep(base_on, base_off, pixel, resets, seed, c_on, c_off):
         return c_on, c_off
-    return dr.if_stmt((integ.c_on, integ.c_off, u, c_on, c_off), fired, draw, keep)
+    return dr.if_stmt((integ.c_on, integ.c_off, pixel, resets, integ.seed_word, c_on, c_off), fired, draw, keep)
+
+
+def start_draws(integ, n_pix: int) -> None:
+    """The random part of a new sensor's state (keyed by ``integ.seed_word``): with jitter, the thresholds of
+    the pixels' last reset before the first step (draw 0); with shot noise, the hazard each pixel spends before
+    its first noise event, an exponential draw (the process is memoryless, so this is also the steady state at
+    any start). Float64: the hazard left is a sum over every step, and in float32 its rounding moved a 3 Hz
+    pixel's events by up to tens of microseconds over a second of 1 ms steps."""
+    cfg, pixel = integ.config, dr.arange(mi.UInt32, n_pix)
+    if cfg.threshold_jitter:
+        integ.held_on, integ.held_off = _jittered(integ.c_on, integ.c_off, cfg.threshold_jitter, pixel,
+                                                  mi.UInt32(0), integ.seed_word)
+    if cfg.shot_noise_hz:
+        integ.noise_left = mi.Float64(_exponential(pixel, mi.UInt32(0), integ.seed_word))
+        integ.noise_k = dr.zeros(mi.UInt32, n_pix)
+
+
+def _exponential(pixel, counter, seed_word):
+    u = counter_rng.uniform(mi, pixel, counter, counter_rng.stream_word(seed_word, counter_rng.NOISE_WAIT))
+    return -dr.log(1.0 - u)                 # u < 1: finite (at most 16.6)
+
+
+def _shot_noise(integ, pixel, noise_state, rate_dt) -> tuple:
+    """One step of shot noise: ((hit, u_pol, u_t Float64), (noise_left Float64, noise_k) after the step). The
+    hazard is one clock: the waits add up, and ``noise_left`` is where the next event sits on it relative to the
+    step's start. At most one event a pixel a step: a second one the clock places in the same step is overdue
+    (``noise_left`` below zero) and fires at the next step's start, the wait after it still counted from where
+    the clock put it, so no event is lost and none shifts the ones after it; at the presets' rates (a few Hz,
+    steps of a millisecond or less) about one event in a million is delayed."""
+    left, k = noise_state
+    hit = left <= rate_dt
+
+    def fire(pixel, left, k, rate_dt, seed):
+        u_pol = counter_rng.uniform(mi, pixel, k, counter_rng.stream_word(seed, counter_rng.NOISE_POLARITY))
+        u_t = dr.select(left > 0, dr.minimum(left / rate_dt, 1.0), 0.0)     # left > 0: rate_dt >= left > 0
+        return u_pol, u_t, left + mi.Float64(_exponential(pixel, k + 1, seed)) - rate_dt, k + 1
+
+    def wait(pixel, left, k, rate_dt, seed):
+        return mi.Float(0.5), mi.Float64(0.0), left - rate_dt, k
+    u_pol, u_t, left, k = dr.if_stmt((pixel, left, k, rate_dt, integ.seed_word), hit, fire, wait)
+    return (hit, u_pol, u_t), (left, k)
 
 
 def needs_intensity(cfg) -> bool:

@@ -11,7 +11,7 @@ import mitsuba as mi
 @dataclass
 class PixelView:
     """What a chunk's kernels read of an integrator besides its state: the pixel model (``config``, a key) and
-    the per-pixel constants (thresholds, reference anchor, leak rates, the generators' streams), as arrays a
+    the per-pixel constants (thresholds, reference anchor, leak rates) and the draws' seed word, as arrays a
     frozen function takes as arguments (:meth:`arrays`, :meth:`bind`); the same names as the integrator's, so
     ``pixel_step.step`` reads either."""
     config: object
@@ -20,17 +20,19 @@ class PixelView:
     c_off: object = None
     anchor: object = None
     leak_rate: object = None
-    rng_inc: object = None
+    seed_word: object = None
 
-    CONSTANTS = ("c_on", "c_off", "anchor", "leak_rate", "rng_inc")
+    CONSTANTS = ("c_on", "c_off", "anchor", "leak_rate", "seed_word")
+    PER_PIXEL = ("c_on", "c_off", "anchor", "leak_rate")      # the seed word is one number for every pixel
 
     @staticmethod
     def of(integ) -> "PixelView":
         return PixelView(integ.config, integ.linlog_threshold, integ.c_on, integ.c_off, integ.anchor,
-                         integ.leak_rate, integ.rng.inc if integ.rng is not None else None)
+                         integ.leak_rate, integ.seed_word)
 
-    # configuration fields no chunk pass reads (the seed draws the per-pixel constants and the generators'
-    # streams, which are arguments): left out of the key, so a sweep over seeds replays one recording
+    # configuration fields no chunk pass reads (the seed draws the per-pixel constants and keys the draws
+    # through the seed word, which are arguments): left out of the key, so a sweep over seeds replays one
+    # recording
     UNTRACED = ("seed",)
 
     def key(self) -> tuple:
@@ -51,14 +53,6 @@ class PixelView:
 
     def gather(self, idx) -> "PixelView":
         """The view at pixels ``idx``."""
-        return PixelView(self.config, self.linlog_threshold,
+        return PixelView(self.config, self.linlog_threshold, seed_word=self.seed_word,
                          **{k: (dr.gather(type(v), v, idx) if v is not None else None)
-                            for k, v in ((k, getattr(self, k)) for k in self.CONSTANTS)})
-
-    def generator(self, state):
-        """A PCG32 with this view's streams at ``state`` (None without a generator)."""
-        if self.rng_inc is None:
-            return None
-        rng = mi.PCG32()
-        rng.state, rng.inc = state, self.rng_inc
-        return rng
+                            for k, v in ((k, getattr(self, k)) for k in self.PER_PIXEL)})

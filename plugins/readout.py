@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from mitsuba_eventfield.plugins import counter_rng
+
 READOUT_BINS_PER_MS = 9
 
-_GOLDEN, _M1, _M2 = 0x9E3779B1, 0x85EBCA6B, 0xC2B2AE35      # Weyl step and MurmurHash3's finaliser
-_MASK = 0xFFFFFFFF
 # bits of the random key that order an overfull bin's events: equal keys keep time order, and among 100,000
 # events of one bin a few hundred pairs tie at 24 bits (a tie matters only where it straddles the bin's cut);
 # with the bin above them, steps of up to 256 bins (28 ms) sort one 32-bit word on the device
@@ -30,30 +30,18 @@ KEY_BITS = 24
 
 def step_word(seed: int, step: int) -> int:
     """The 32-bit word that, with an event's index, keys the draws of one step."""
-    return (seed * 0x27D4EB2F + step * 0x165667B1 + 7919) & _MASK
+    return (seed * 0x27D4EB2F + step * 0x165667B1 + 7919) & counter_rng.MASK
 
 
 def keys_np(n: int, word: int) -> np.ndarray:
-    """The ``n`` events' keys (uint32) of a step with ``step_word`` ``word``."""
-    with np.errstate(over="ignore"):
-        h = np.arange(n, dtype=np.uint32) * np.uint32(_GOLDEN) + np.uint32(word)
-        h ^= h >> np.uint32(16)
-        h *= np.uint32(_M1)
-        h ^= h >> np.uint32(13)
-        h *= np.uint32(_M2)
-        h ^= h >> np.uint32(16)
-    return h
+    """The ``n`` events' keys (uint32) of a step with ``step_word`` ``word`` (``counter_rng.mixed``)."""
+    return counter_rng.mixed_np(np.arange(n, dtype=np.uint32), word)
 
 
 def keys_dr(mi, index, word):
     """:func:`keys_np` on the device for the events numbered ``index`` (UInt32) within their step, whose
     ``step_word`` is ``word`` (one, or one an event); UInt32 arithmetic wraps as NumPy's uint32 does."""
-    h = index * _GOLDEN + word
-    h ^= h >> 16
-    h *= _M1
-    h ^= h >> 13
-    h *= _M2
-    return h ^ (h >> 16)
+    return counter_rng.mixed(index, word)
 
 
 class ReadoutLimiter:

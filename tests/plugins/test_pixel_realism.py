@@ -116,9 +116,9 @@ def _dark_noise(rate_hz, duration, steps, size=32, seed=3):
 
 
 def test_shot_noise_keeps_its_mean_rate_at_coarse_steps():
-    """Shot noise fires at most one event a pixel a step, with probability rate x dt: at 0.25 a pixel a step its
-    mean rate is still the configured one (a Poisson count capped at one a step would lose
-    1 - (1 - e^-0.25) / 0.25 = 11.5 %)."""
+    """Shot noise fires at most one event a pixel a step, but a second one due in the same step is delayed to the
+    next step's start, not lost: at 0.25 a pixel a step its mean rate is still the configured one (a Poisson
+    count capped at one a step would lose 1 - (1 - e^-0.25) / 0.25 = 11.5 %)."""
     rate, duration, size = 10.0, 2.0, 64
     ev = _dark_noise(rate, duration, steps=80, size=size)
     expected = rate * duration * size * size                    # 81,920; Poisson sd 286, 0.35 %

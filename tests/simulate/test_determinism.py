@@ -98,16 +98,27 @@ def test_overlapped_steps_give_the_same_events(monkeypatch, per_step):
 
 def test_the_render_seed_seeds_the_pixel_model_unless_it_names_its_own():
     """A sweep over seeds draws new sensor noise: with pixel seed 0 always, 98 % of a davis346 render's shot
-    noise events were the same under two render seeds. The pixel's own seed still wins where given."""
+    noise events were the same under two render seeds. The pixel's own seed still wins where given: the same
+    draws, so the same noise events but for the sampler's noise in the brightness, which moves the hazard a
+    noise event waits for (measured: 60 % of the events within 1 ms of one of the same pixel, against 7 % under
+    another seed)."""
     import numpy as np
     scene = ef.load_scene(DEMO, motion=None, width=32, height=24)
 
     def run(seed, pixel=None):
-        ev = ef.render_events(scene, 0.05, steps=10, seed=seed, preset="davis346",
-                              pixel=dict({"shot_noise_hz": 50.0}, **(pixel or {})))
-        return ev, set(zip(ev.x.tolist(), ev.y.tolist(), ev.t.tolist()))
-    (a, ea), (b, eb), (c, ec) = run(0), run(1), run(1, {"seed": 0})
+        return ef.render_events(scene, 0.05, steps=10, seed=seed, preset="davis346",
+                                pixel=dict({"shot_noise_hz": 50.0}, **(pixel or {})))
+
+    def near(u, v, tol_us=1000):
+        """The fraction of ``u``'s events with an event of ``v`` at the same pixel within ``tol_us``."""
+        ku, kv = u.y.astype(np.int64) * 32 + u.x, v.y.astype(np.int64) * 32 + v.x
+        order = np.lexsort((v.t, kv))
+        keys = kv[order] * 10**8 + v.t[order].astype(np.int64)
+        want = ku * 10**8 + u.t.astype(np.int64)
+        i = np.clip(np.searchsorted(keys, want), 1, len(keys) - 1)
+        return float(np.mean(np.minimum(np.abs(keys[i] - want), np.abs(keys[i - 1] - want)) <= tol_us))
+    a, b, c = run(0), run(1), run(1, {"seed": 0})
     assert [e.meta["pixel_model"]["seed"] for e in (a, b, c)] == [0, 1, 0]
-    assert min(len(ea), len(eb)) > 500 and len(ea & eb) < 0.2 * len(ea)
-    assert len(ea & ec) > 0.5 * len(ea)          # same sensor noise; only the sampler's draws differ
-    assert np.array_equal(run(1)[0].t, b.t)      # and a seed is still deterministic
+    assert min(len(a), len(b)) > 500 and near(a, b) < 0.15
+    assert near(a, c) > 0.45          # same sensor noise; only the sampler's draws differ
+    assert np.array_equal(run(1).t, b.t)      # and a seed is still deterministic

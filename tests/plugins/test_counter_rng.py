@@ -1,0 +1,112 @@
+"""Counter-based draws (``plugins/counter_rng.py``): the pixel model's random numbers are a hash of (seed, pixel,
+the pixel's own event counter, stream), so host and device draw the same bits, and a realisation of the
+threshold jitter or the shot noise is the same whatever the step size (the draws follow the events, not the
+steps)."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.errors import ConfigError
+from mitsuba_eventfield.plugins import counter_rng, pixel_state
+
+SIDE = 32
+
+
+def _grid(n_pix=256, n_counter=256):
+    pixel, counter = np.meshgrid(np.arange(n_pix, dtype=np.uint32), np.arange(n_counter, dtype=np.uint32))
+    return pixel.ravel(), counter.ravel()
+
+
+def _bits_np(pixel, counter, seed, stream):
+    with np.errstate(over="ignore"):
+        word = np.uint32(counter_rng.stream_word(counter_rng.seed_word(seed), stream) & counter_rng.MASK)
+        return counter_rng.bits(pixel, counter, word)
+
+
+def test_host_and_device_draw_the_same_bits():
+    ef.set_variant()
+    pixel, counter = _grid()
+    word = counter_rng.stream_word(counter_rng.seed_array(mi, 9), counter_rng.NOISE_WAIT)
+    device = counter_rng.bits(mi.UInt32(pixel), mi.UInt32(counter), word).numpy()
+    assert np.array_equal(device, _bits_np(pixel, counter, 9, counter_rng.NOISE_WAIT))
+
+
+def test_draws_are_uniform_and_unrelated_across_pixels_counters_streams_and_seeds():
+    """65,536 draws: 64-bin chi-square within its 0.1 % bound (df 63: 103), and no correlation above 0.02 (sd of
+    a correlation of 65,536 independent pairs: 0.004) between neighbouring pixels, consecutive counters, two
+    streams or two seeds."""
+    pixel, counter = _grid()
+    u = _bits_np(pixel, counter, 0, counter_rng.JITTER_ON) / 2.0**32
+    hist = np.bincount((u * 64).astype(np.int64), minlength=64)
+    expected = len(u) / 64
+    assert np.sum((hist - expected) ** 2 / expected) < 103
+    grid = u.reshape(256, 256)                          # [counter, pixel]
+    others = {"next pixel": (grid[:, :-1], grid[:, 1:]), "next counter": (grid[:-1], grid[1:]),
+              "other stream": (u, _bits_np(pixel, counter, 0, counter_rng.JITTER_OFF) / 2.0**32),
+              "other seed": (u, _bits_np(pixel, counter, 1, counter_rng.JITTER_ON) / 2.0**32)}
+    for name, (a, b) in others.items():
+        assert abs(np.corrcoef(a.ravel(), b.ravel())[0, 1]) < 0.02, name
+
+
+def _ramp(steps, pixel):
+    times = np.linspace(0.0, 1.0, steps + 1)
+    frames = np.exp(np.log(0.5) + 4.0 * times)[:, None, None] * np.ones((1, SIDE, SIDE))
+    return ef.events_from_frames(frames.astype(np.float32), times, pixel=pixel)
+
+
+def _sorted(ev):
+    key = ev.y.astype(np.int64) * SIDE + ev.x
+    order = np.lexsort((ev.t, key))
+    return key[order], ev.t[order].astype(np.int64), ev.p[order]
+
+
+def test_the_jitter_realisation_does_not_depend_on_the_step_size():
+    """A ramp of 20 thresholds with jitter 0.04 at 200 and at 2000 steps: every pixel fires the same events
+    (the thresholds after its m-th event are draw m), each within 1 us (its crossing's interpolation)."""
+    pixel = {"threshold_on": 0.2, "threshold_off": 0.2, "threshold_jitter": 0.04, "seed": 4}
+    (ka, ta, pa), (kb, tb, pb) = _sorted(_ramp(200, pixel)), _sorted(_ramp(2000, pixel))
+    assert len(ka) > 19 * SIDE * SIDE and np.array_equal(ka, kb) and np.array_equal(pa, pb)
+    assert np.abs(ta - tb).max() <= 1
+    counts = np.bincount(ka, minlength=SIDE * SIDE)
+    assert counts.std() > 0.3                          # the jitter is there: pixels differ
+
+
+def _dark(steps, rate_hz, seed=3):
+    times = np.linspace(0.0, 1.0, steps + 1)
+    frames = np.zeros((steps + 1, SIDE, SIDE), np.float32)
+    return ef.events_from_frames(frames, times, pixel={"shot_noise_hz": rate_hz, "seed": seed})
+
+
+def test_the_shot_noise_realisation_does_not_depend_on_the_step_size():
+    """Shot noise at 3 Hz for a second, in 100 and in 1000 steps: the same events (pixel, polarity) within 1 us,
+    but for the few that the coarse steps delay (a second event of a pixel within one 10 ms step fires at the
+    next step's start: P = 1 - e^-0.03 (1 + 0.03), 4.4e-4 a pixel-step, about 45 of ~3,100), and another seed
+    gives other events."""
+    fine, coarse = _sorted(_dark(1000, 3.0)), _sorted(_dark(100, 3.0))
+    n = len(fine[0])
+    assert 2800 < n < 3400
+    keys = {(k, t, p) for k, t, p in zip(*coarse)}
+    near = {(k, t + d, p) for k, t, p in zip(*coarse) for d in (-1, 1)}
+    matched = sum((k, t, p) in keys or (k, t, p) in near for k, t, p in zip(*fine))
+    assert matched > 0.97 * n and abs(len(coarse[0]) - n) < 0.01 * n, (matched, n, len(coarse[0]))
+    other = _sorted(_dark(1000, 3.0, seed=4))
+    assert sum((k, t, p) in keys for k, t, p in zip(*other)) < 0.01 * n
+
+
+def test_a_checkpoint_of_generator_drawn_noise_is_refused():
+    integ = mi.load_dict({"type": "eventfield", "shot_noise_hz": 5.0})
+    integ.stage_log(mi.Float(np.zeros(16, np.float32)), (4, 4))
+    integ.commit(0.0, 1e-3)
+    integ.stage_log(mi.Float(np.zeros(16, np.float32)), (4, 4))
+    integ.commit(1e-3, 2e-3)
+    state = integ.get_state()
+    assert {"noise_left", "noise_k"} <= set(state) and "rng_state" not in state
+    other = mi.load_dict({"type": "eventfield", "shot_noise_hz": 5.0})
+    other.set_state(state)
+    assert np.array_equal(other.noise_left.numpy(), integ.noise_left.numpy())
+    old = dict(state, rng_state=np.zeros(16, np.uint64), rng_inc=np.ones(16, np.uint64))
+    with pytest.raises(ConfigError, match="PCG32"):
+        pixel_state.set_state(other, old)
+    assert dr.width(integ.noise_k) == 16
