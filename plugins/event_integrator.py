@@ -163,12 +163,13 @@ class _EventIntegratorMethods:
         self.stage_log(pixel_model.linlog(dr, intensity, self.linlog_threshold), (width, height))
         self.staged_intensity = intensity
 
-    def stage_log(self, log_brightness, size):
-        """Stage a log-brightness frame directly (period reuse feeds cached frames through here)."""
+    def stage_log(self, log_brightness, size, intensity=None):
+        """Stage a log-brightness frame directly (period reuse feeds cached frames through here), with its linear
+        radiance where the caller has it (else the pixel model recovers it from the log where it needs it)."""
         if self.size is not None and self.size != tuple(size):
             raise ValueError(f"film size changed from {self.size} to {tuple(size)} between steps")
         self.staged, self.staged_size = log_brightness, tuple(size)
-        self.staged_intensity = None
+        self.staged_intensity = intensity
 
     def staged_max_change(self) -> float:
         """Largest |Delta L| of the staged frame against the last committed one (0 before the first commit)."""

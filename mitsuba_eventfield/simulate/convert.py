@@ -20,7 +20,7 @@ from .._version import __version__
 from ..atomic import check_writable
 from ..errors import EventFieldError
 from ..events.io import format_of
-from ..plugins import event_batch, event_fill, pixel_model
+from ..plugins import event_batch, event_fill, pixel_model, pixel_step
 from ..validate import positive
 from .device_stream import check_on_device
 from .frame_sources import FrameSource, check_span, from_array, from_device, is_device_array, open_frames
@@ -169,7 +169,8 @@ def _frames(source: FrameSource):
 def _commit_one(integ, sink: Sink, summary: RenderSummary, frame, t_prev, t, source: FrameSource) -> None:
     t0 = time.perf_counter()
     values = frame if source.device else mi.Float(frame.ravel())
-    integ.stage_log(pixel_model.linlog(dr, values, integ.config.linlog_threshold), (source.width, source.height))
+    integ.stage_log(pixel_model.linlog(dr, values, integ.config.linlog_threshold), (source.width, source.height),
+                    intensity=values if pixel_step.needs_intensity(integ.config) else None)
     events = integ.commit_events(t_prev if t_prev is not None else t, t)
     summary.events_s += time.perf_counter() - t0
     if t_prev is not None:
@@ -210,8 +211,10 @@ class _Group:
 
 def _commit_group(integ, sink: Sink, summary: RenderSummary, values, times: list) -> None:
     t0 = time.perf_counter()
-    log = pixel_model.linlog(dr, values, integ.config.linlog_threshold)
-    events = integ.commit_frames(log, times)
+    if pixel_step.needs_intensity(integ.config):    # the kernels take the log: no exp back to the radiance
+        events = event_batch.commit_frames(integ, values, times, intensity=True)
+    else:
+        events = integ.commit_frames(pixel_model.linlog(dr, values, integ.config.linlog_threshold), times)
     summary.events_s += time.perf_counter() - t0
     tw = time.perf_counter()
     sink.add_step(events, complete_until_us=int(math.floor(times[-1] * 1e6)))

@@ -37,14 +37,23 @@ def test_log_ramps_fire_at_the_closed_form_instants():
     assert ev.meta["optics"]["design"] == "frames (converted)" and ev.meta["width"] == 24
 
 
-def test_same_events_as_a_render_fed_the_same_frames(demo_small):
+@pytest.mark.parametrize("pixel", [None, {"shot_noise_hz": 200.0, "cutoff_hz": 300.0, "threshold_jitter": 0.02}],
+                         ids=["ideal", "reading-the-radiance"])
+def test_same_events_as_a_render_fed_the_same_frames(demo_small, pixel):
     """The converter is the renderer's pixel: frames rendered from the demo scene, converted, give the
-    render's own events (same integrator, same interpolation, same rounding)."""
+    render's own events (same integrator, same interpolation, same rounding), batched or a frame at a time;
+    also for a pixel model that reads the radiance (shot noise, low-pass), which both take as given, not as
+    exp(log) of it."""
+    from mitsuba_eventfield.plugins.event_batch import one_frame_a_step
     times = np.linspace(0.0, 0.01, 11)
     radiance = ef.render_frames(demo_small, times, log=False)
-    rendered = ef.render_events(demo_small, 0.01, steps=10, reuse=False)
-    converted = ef.events_from_frames(radiance, times)
+    rendered = ef.render_events(demo_small, 0.01, steps=10, reuse=False, pixel=pixel)
+    converted = ef.events_from_frames(radiance, times, pixel=pixel)
     assert len(rendered) > 300 and converted.equals(rendered)
+    with one_frame_a_step():
+        assert ef.events_from_frames(radiance, times, pixel=pixel).equals(rendered)
+    if pixel:
+        assert rendered.meta["render"]["noise_events"] > 10
 
 
 def test_every_input_kind_gives_the_same_events(tmp_path):
