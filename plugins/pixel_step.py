@@ -14,7 +14,8 @@ second).
 Shot noise is a Poisson process whose rate follows the brightness: each pixel holds the hazard left before
 its next noise event (``noise_left``, an exponential draw) and spends ``rate x dt`` of it a step; the event
 falls where the hazard runs out, at that fraction of the step (exact for a rate constant over the step). The
-j-th noise event's polarity and the wait after it are draws j of their streams (``noise_k`` counts them). Until
+j-th noise event's polarity and the wait before it are draws j of their streams (j from 0; ``noise_k`` counts
+the events). Until
 2026-11-26 it was a Bernoulli draw a step (p = rate x dt, three uniforms a pixel every step) with a uniform time
 in the step: the same process in the limit of short steps, but a different realisation at every step size.
 """
@@ -117,7 +118,7 @@ def _jittered(base_on, base_off, jitter: float, pixel, resets, seed_word) -> tup
 
 
 def _redrawn(integ, pixel, resets, fired, c_on, c_off) -> tuple:
-    """The thresholds each pixel holds after the step: new ones (:func:`jittered`) where it fired, else those it
+    """The thresholds each pixel holds after the step: new ones (:func:`_jittered`) where it fired, else those it
     held."""
     jitter = integ.config.threshold_jitter
 
@@ -149,20 +150,26 @@ def _exponential(pixel, counter, seed_word):
     return -dr.log(1.0 - u)                 # u < 1: finite (at most 16.6)
 
 
+MAX_OWED = 1.0     # hazard (mean waits) the shot noise's clock may be overdue by: at most about one owed event
+
+
 def _shot_noise(integ, pixel, noise_state, rate_dt) -> tuple:
     """One step of shot noise: ((hit, u_pol, u_t Float64), (noise_left Float64, noise_k) after the step). The
     hazard is one clock: the waits add up, and ``noise_left`` is where the next event sits on it relative to the
     step's start. At most one event a pixel a step: a second one the clock places in the same step is overdue
     (``noise_left`` below zero) and fires at the next step's start, the wait after it still counted from where
-    the clock put it, so no event is lost and none shifts the ones after it; at the presets' rates (a few Hz,
-    steps of a millisecond or less) about one event in a million is delayed."""
+    the clock put it, so no event is lost and none shifts the ones after it. About rate x dt / 2 of the events
+    are delayed (1 in 2,000 at 1 Hz and 1 ms steps). The clock owes at most one mean wait (``MAX_OWED``): at
+    rate x dt near 1 or above, where a step would hold more than one event, the rest are lost, not owed (owed
+    without limit, a 500 Hz dark pixel kept firing one event a step long after it turned bright and its rate
+    fell to 5 Hz: 23 events a pixel in 0.5 s, against 2.5)."""
     left, k = noise_state
     hit = left <= rate_dt
 
     def fire(pixel, left, k, rate_dt, seed):
         u_pol = counter_rng.uniform(mi, pixel, k, counter_rng.stream_word(seed, counter_rng.NOISE_POLARITY))
         u_t = dr.select(left > 0, dr.minimum(left / rate_dt, 1.0), 0.0)     # left > 0: rate_dt >= left > 0
-        return u_pol, u_t, left + mi.Float64(_exponential(pixel, k + 1, seed)) - rate_dt, k + 1
+        return u_pol, u_t, dr.maximum(left + mi.Float64(_exponential(pixel, k + 1, seed)) - rate_dt, -MAX_OWED), k + 1
 
     def wait(pixel, left, k, rate_dt, seed):
         return mi.Float(0.5), mi.Float64(0.0), left - rate_dt, k

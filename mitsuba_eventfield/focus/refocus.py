@@ -142,7 +142,7 @@ def _flow_logs(logs, cover):
     Why the check: on repetitive texture (lines of text) Farneback's window can lock onto the next line in one
     view pair and not the other; the scenes/galvo_static wall at a 2-degree scan (173 x 130, 32 views) had
     blocks whose flow spread over 8 px within the block, reading 8 px of motion on a static scene and a
-    MotionBlurWarning at 2.1-2.3 px. Those pixels fail the round trip; without them the scene reads 1.0-1.7."""
+    MotionBlurWarning at 2.1-2.3 px. Those pixels fail the round trip; without them the scene reads 1.1-1.8."""
     lo, hi = np.percentile(np.concatenate([g[cover] for g in logs]), [1, 99]) if cover.any() else (0.0, 1.0)
     codes = [np.clip((g - lo) / max(hi - lo, 1e-6) * 255, 0, 255).astype(np.uint8) for g in logs]
     h, w = codes[0].shape

@@ -110,3 +110,18 @@ def test_a_checkpoint_of_generator_drawn_noise_is_refused():
     with pytest.raises(ConfigError, match="PCG32"):
         pixel_state.set_state(other, old)
     assert dr.width(integ.noise_k) == 16
+
+
+def test_a_noise_backlog_is_bounded_when_the_rate_falls():
+    """At rate x dt far above 1 a step holds more events than the one it may fire; they are lost, not owed: a
+    500 Hz dark pixel (10 events a 20 ms step) that turns bright (5 Hz) fires about 5 Hz after the switch
+    (owed without limit, it kept firing one event a step: 23 a pixel in 0.48 s, against 2.4)."""
+    steps, side = 50, 16
+    times = np.linspace(0.0, 1.0, steps + 1)
+    frames = np.where(times[:, None, None] > 0.5, 1.0, 0.0) * np.ones((1, side, side))
+    ev = ef.events_from_frames(frames.astype(np.float32), times,
+                               pixel={"shot_noise_hz": 500.0, "shot_noise_bright_factor": 0.01, "seed": 2})
+    before = np.count_nonzero(ev.t < 500_000) / side ** 2
+    after = np.count_nonzero(ev.t > 520_000) / side ** 2
+    assert 24 <= before <= 25                      # one a step, the most a step fires (25 steps)
+    assert 1.5 < after < 4.0, after                # 5 Hz x 0.48 s = 2.4, plus at most about one owed

@@ -30,7 +30,10 @@ def test_xml_thresholds_and_nested_integrator(tmp_path):
     ev2 = ef.render_events(timed, 0.01, steps=10, threshold=0.1)
     assert ev2.meta["pixel_model"]["threshold_on"] == 0.1 and len(ev2) > len(ev)
     ev3 = ef.render_events(timed, 0.01, steps=10)
-    assert ev3.meta["pixel_model"]["threshold_on"] == 0.35 and ev3.equals(ev)
+    assert ev3.meta["pixel_model"]["threshold_on"] == 0.35
+    # the same events but for the renderer's own run-to-run difference on a moving scene (docs/design.md,
+    # "Render determinism": once seen here, 2026-11-26): the 0.1 threshold's render differs by hundreds
+    assert np.abs(ev3.signed_counts() - ev.signed_counts()).sum() <= 2 < len(ev2) - len(ev)
 
 
 def test_net_events_follow_log_change(tmp_path):
