@@ -7,9 +7,11 @@ generator steps a pixel a step (0.14 ms at 346x260 on the CPU, 0.7x all of the i
 for draws that are used at a few percent of the pixel-steps. Keyed by the pixel's event counter, a draw is
 made only where it is used, costs a few 32-bit integer operations, and is the same draw whatever the step
 size: the thresholds held after a pixel's 17th event, or the wait before its 5th noise event, do not change
-when a render takes twice the steps. The pixel model draws in its step kernel, which both event paths share;
-the readout cap's keys are hashed on the host or on the device (NumPy and Dr.Jit wrap uint32 the same way), so
-both paths draw the same keys without exchanging any.
+when a render takes twice the steps. (It did not make the model faster: inside the chunk kernels the draws
+were not what the realistic pixel costs, docs/pixel_model.md; the invariance is what it buys.) The pixel
+model draws in its step kernel, which both event paths share; the readout cap's keys are hashed on the host or
+on the device (NumPy and Dr.Jit wrap uint32 the same way), so both paths draw the same keys without
+exchanging any.
 
 The mixing function is MurmurHash3's 32-bit finaliser (a bijection with full avalanche) applied twice: once to
 (counter, seed, stream), once more with the pixel added through a Weyl step.

@@ -15,9 +15,9 @@ Shot noise is a Poisson process whose rate follows the brightness: each pixel ho
 its next noise event (``noise_left``, an exponential draw) and spends ``rate x dt`` of it a step; the event
 falls where the hazard runs out, at that fraction of the step (exact for a rate constant over the step). The
 j-th noise event's polarity and the wait before it are draws j of their streams (j from 0; ``noise_k`` counts
-the events). Until
-2026-11-26 it was a Bernoulli draw a step (p = rate x dt, three uniforms a pixel every step) with a uniform time
-in the step: the same process in the limit of short steps, but a different realisation at every step size.
+the events). Until 2026-11-26 it was a Bernoulli draw a step (p = rate x dt, three uniforms a pixel every
+step) with a uniform time in the step: the same process in the limit of short steps, but a different
+realisation at every step size.
 """
 from __future__ import annotations
 
