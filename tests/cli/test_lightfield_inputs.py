@@ -241,3 +241,29 @@ def test_the_coarse_step_warning_reads_the_bound_the_render_chose(capsys):
         _warn_coarse_steps("f.h5", stream(px, chosen))
         err = capsys.readouterr().err
         assert (warned in err) if warned else err == "", (px, chosen, err)
+
+
+def test_the_demos_galvo_solver_through_the_cli(captures, capsys, tmp_path):
+    """``--method periods`` is the demo's events-only solver (``focus.galvo_periods``: per-pixel depth), which the
+    CLI's default one-depth solver is not: its depth map is the one depth from focus gives on that solver's light
+    field, recorded as such; refused, in one line, on a kaleidoscope stream or with a start frame."""
+    from mitsuba_eventfield.focus.depth import depth_from_focus
+    from mitsuba_eventfield.focus.galvo_periods import reconstruct_periods
+    d, ev, _ = captures
+    args = ["--near", "0.4", "--far", "3", "--planes", "8", "--views", "8"]
+    assert cli(["depth", str(d / "g.h5"), "-o", str(tmp_path / "p.png"), "--method", "periods", *args]) == 0
+    assert cli(["depth", str(d / "g.h5"), "-o", str(tmp_path / "g.png"), *args]) == 0
+    got, meta = read_exr(str(tmp_path / "p.exr"))
+    expected = depth_from_focus(next(reconstruct_periods(ev, 8, periods=[0]))[0], 0.4, 3.0, 8, "variance")
+    assert meta["method"] == "periods" and np.array_equal(got["depth"], expected.depth.astype(got["depth"].dtype))
+    assert not np.array_equal(got["depth"], read_exr(str(tmp_path / "g.exr"))[0]["depth"])   # not the default
+    capsys.readouterr()
+    frame = tmp_path / "start.exr"
+    assert cli(["frame", GALVO, "-D", "width=48", "-D", "height=36", "-o", str(frame)]) == 0
+    capsys.readouterr()
+    for extra, message in (([d / "k.h5"], "--method periods is for a galvo stream; this one is kaleidoscope"),
+                           ([d / "g.h5", "--start-frame", frame], "--method periods reconstructs from the events "
+                                                                  "alone")):
+        code, err = _run(["depth", *extra, "-o", tmp_path / "x.png", "--method", "periods", *args[:6]], capsys)
+        assert code == 2 and message in err and err.count("\n") == 0, err
+    assert not (tmp_path / "x.png").exists()
