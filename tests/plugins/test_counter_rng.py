@@ -125,3 +125,28 @@ def test_a_noise_backlog_is_bounded_when_the_rate_falls():
     after = np.count_nonzero(ev.t > 520_000) / side ** 2
     assert 24 <= before <= 25                      # one a step, the most a step fires (25 steps)
     assert 1.5 < after < 4.0, after                # 5 Hz x 0.48 s = 2.4, plus at most about one owed
+
+
+def test_no_two_counters_draw_one_row_of_pixels_shifted():
+    """The rows of draws (every pixel) of two counters are unrelated. Hashing the counter and then adding the
+    pixel's Weyl step made two counters' rows one row shifted wherever their counter hashes differed by a
+    multiple of the step smaller than the film (about one pair in 500,000 at 4096 pixels): such a pair is found
+    here among the first 4 M counters, and its rows share no more than chance under that shift."""
+    n_pix = 4096
+    with np.errstate(over="ignore"):
+        word = np.uint32(counter_rng.stream_word(counter_rng.seed_word(5), counter_rng.NOISE_WAIT) & counter_rng.MASK)
+        inner = counter_rng.finalise(np.arange(1 << 22, dtype=np.uint32) * np.uint32(0x61C88647) + word)
+        g_inverse = np.uint32(pow(counter_rng.GOLDEN, -1, 1 << 32))
+        d = ((inner - inner[0]) * g_inverse).astype(np.int64)
+    d = np.where(d >= 1 << 31, d - (1 << 32), d)
+    c2 = int(np.nonzero((np.abs(d) < n_pix // 2) & (np.arange(len(d)) > 0))[0][0])
+    shift = int(d[c2])
+    pixel = np.arange(n_pix // 2, dtype=np.uint32) + np.uint32(n_pix // 4)
+    with np.errstate(over="ignore"):      # the old design: the same row, shifted
+        old1 = counter_rng.finalise(pixel * np.uint32(counter_rng.GOLDEN) + inner[0])
+        old2 = counter_rng.finalise((pixel - np.uint32(shift & counter_rng.MASK)) * np.uint32(counter_rng.GOLDEN)
+                                    + inner[c2])
+    assert np.array_equal(old1, old2)
+    new1 = _bits_np(pixel, np.zeros_like(pixel), 5, counter_rng.NOISE_WAIT)
+    new2 = _bits_np(pixel - np.uint32(shift & counter_rng.MASK), np.full_like(pixel, c2), 5, counter_rng.NOISE_WAIT)
+    assert np.count_nonzero(new1 == new2) <= 2
