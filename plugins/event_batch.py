@@ -129,17 +129,18 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
     step_last = mi.UInt32((np.arange(1, steps + 1) * lanes - 1).tolist())
     count = _count_pass(view, (integ.size[0], n_pix, steps, intensity, dr.width(frames)))
     final, ends, fired, head = count(view.arrays(), state, frames, t_d, dts, step_last)
-    # one read: every step's last slot (the chunk's total is the last), then the tallies
-    read = head.numpy()
+    # one read: every step's last slot (the chunk's total is the last), then what the tallies need
+    read = head.numpy().astype(np.int64)
     step_ends = read[:steps]
     _set_state(integ, final)
     stats = {}
+    total = int(step_ends[-1])
     if cfg.refractory_s or cfg.shot_noise_hz:
-        raw, kept, noise_raw, noise_kept = (int(v) for v in read[steps:])
-        stats = dict(refractory_dropped=(raw - kept) + (noise_raw - noise_kept), noise_events=noise_kept)
+        noise_kept = int(np.sum(step_ends - read[steps:2 * steps])) if cfg.shot_noise_hz else 0
+        crossings, noise_hits = (int(v) for v in read[-2:])
+        stats = dict(refractory_dropped=crossings + noise_hits - total, noise_events=noise_kept)
         integ.refractory_dropped += stats["refractory_dropped"]
         integ.noise_events += noise_kept
-    total = int(step_ends[-1])
     chunk = Chunk(view, state, frames, times, t_d, dts, integ.size[0], n_pix, intensity)
     if 0 < total < 2 * n_pix:     # more events than that: most pixels fire, and the compress would be wasted
         chunk.only_firing(fired)
@@ -154,7 +155,11 @@ def _count_pass(view: "PixelView", shape: tuple):
     """The count pass of a chunk: ``fn(arrays, state, frames, t, dt, step_last) -> (state after, ends, fired,
     head)`` for a pixel model and chunk shape (film width, pixels, steps, radiance or log frames, frame buffer
     length), frozen (:func:`_frozen`). ``ends``: each (step, lane) slot end; ``head``: every step's last slot
-    end, then the four tallies (refractory and noise) when the model has them."""
+    end, then with shot noise every step's last crossing slot end (a step's kept noise events are the
+    difference), then with a refractory period or shot noise the chunk's crossings and noise hits before any
+    was dropped: differences of the pixels' own counters (k_on + k_off, noise_k) over the chunk, which the
+    loop carries anyway, instead of four per-pixel tallies carried beside them (as fast, measured on the
+    demo's every-effect pixel; less for the loop to carry)."""
     width, n_pix, steps, intensity, _ = shape
     model = view.model()          # the cached pass keeps the model, not this integrator's arrays
     cfg = model.config
@@ -165,30 +170,33 @@ def _count_pass(view: "PixelView", shape: tuple):
             lanes = chunk.lanes_per_step
             counts = dr.empty(mi.UInt32, steps * lanes)
             lanes_d, n_d = event_fill._opaque(lanes, mi.UInt32), event_fill._opaque(n_pix, mi.UInt32)
-            tally = bool(cfg.refractory_s or cfg.shot_noise_hz)       # the drops and noise events to count
-            sums = [dr.zeros(mi.UInt32, n_pix) for _ in range(4)] if tally else []
 
-            def count(b, pixel, log_prev, st, sel, t0, t1, fired, *tallies):
+            def count(b, pixel, log_prev, st, sel, t0, t1, fired):
                 lane = b * lanes_d + pixel
                 dr.scatter(counts, sel.kept, lane)
                 fired = fired + sel.kept          # the pixel's events in the chunk: the fill steps only these
                 if sel.hit is not None:
                     dr.scatter(counts, mi.UInt32(sel.hit), lane + n_d)
                     fired = fired + mi.UInt32(sel.hit)
-                if not tally:
-                    return (fired,)
-                # per pixel, carried through the loop: crossings, kept crossings, noise draws that hit, kept noise
-                values = [mi.UInt32(dr.abs(st.levels.n)), sel.kept]
-                if sel.hit is not None:
-                    values += [mi.UInt32(st.noise[0]), mi.UInt32(sel.hit)]
-                return (fired,) + tuple(acc + v for acc, v in zip(tallies, values)) + tallies[len(values):]
-            final, (fired, *sums) = chunk.run(count, [dr.zeros(mi.UInt32, n_pix)] + sums)
-            dr.eval(counts, fired, *final.values(), *sums)
+                return (fired,)
+            final, (fired,) = chunk.run(count, [dr.zeros(mi.UInt32, n_pix)])
+            dr.eval(counts, fired, *final.values())
             ends = dr.prefix_reduce(dr.ReduceOp.Add, counts, exclusive=False)
-            head = [dr.gather(mi.UInt32, ends, step_last)] + [dr.sum(v) for v in sums]
+            head = [dr.gather(mi.UInt32, ends, step_last)]
+            if cfg.shot_noise_hz:
+                head.append(dr.gather(mi.UInt32, ends, step_last - n_d))
+            if cfg.refractory_s or cfg.shot_noise_hz:       # UInt32 sums wrap: their difference is exact
+                head.append(_counted(final["k_on"] + final["k_off"]) - _counted(state["k_on"] + state["k_off"]))
+                head.append(_counted(final["noise_k"]) - _counted(state["noise_k"]) if cfg.shot_noise_hz
+                            else mi.UInt32(0))
             return final, ends, fired, event_fill.concat_arrays(head, mi.UInt32)
         return count_pass
     return _frozen("count", view, shape, make)
+
+
+def _counted(per_pixel):
+    """The sum of per-pixel event counters as one UInt32 (wrapping)."""
+    return dr.sum(mi.UInt32(per_pixel))
 
 
 def _frozen(kind: str, view: "PixelView", shape: tuple, make):
