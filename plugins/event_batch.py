@@ -21,9 +21,9 @@ model and chunk shape, then replayed chunk after chunk instead of traced again.
 
 Every pixel model batches. Its random draws are counter-based (``counter_rng``: keyed by the pixel and its
 event counters, which the loop carries with the shot noise's hazard left: the per-step kernel's numbers);
-the refractory period carries each pixel's last emission; shot-noise events take a second lane per pixel
-after each step's crossings, as the per-step path puts a step's noise after its crossings; the drop and noise
-counts are summed per pixel in the loop.
+the refractory period carries each pixel's last emission; a pixel's shot-noise event takes the last slot of
+its lane, after its crossings, as on the per-step paths; the drop and noise counts come from the pixels' own
+counters.
 
 The events equal, bit for bit, those of ``B`` calls of ``EventIntegrator.commit_device`` joined in order: the
 same float operations in the same order, and a stable sort keyed by time over slots in (step, pixel,
@@ -136,8 +136,7 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
     stats = {}
     total = int(step_ends[-1])
     if cfg.refractory_s or cfg.shot_noise_hz:
-        noise_kept = int(np.sum(step_ends - read[steps:2 * steps])) if cfg.shot_noise_hz else 0
-        crossings, noise_hits = (int(v) for v in read[-2:])
+        crossings, noise_hits, noise_kept = (int(v) for v in read[steps:])
         stats = dict(refractory_dropped=crossings + noise_hits - total, noise_events=noise_kept)
         integ.refractory_dropped += stats["refractory_dropped"]
         integ.noise_events += noise_kept
@@ -154,12 +153,12 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
 def _count_pass(view: "PixelView", shape: tuple):
     """The count pass of a chunk: ``fn(arrays, state, frames, t, dt, step_last) -> (state after, ends, fired,
     head)`` for a pixel model and chunk shape (film width, pixels, steps, radiance or log frames, frame buffer
-    length), frozen (:func:`_frozen`). ``ends``: each (step, lane) slot end; ``head``: every step's last slot
-    end, then with shot noise every step's last crossing slot end (a step's kept noise events are the
-    difference), then with a refractory period or shot noise the chunk's crossings and noise hits before any
-    was dropped: differences of the pixels' own counters (k_on + k_off, noise_k) over the chunk, which the
-    loop carries anyway, instead of four per-pixel tallies carried beside them (as fast, measured on the
-    demo's every-effect pixel; less for the loop to carry)."""
+    length), frozen (:func:`_frozen`). ``ends``: each (step, pixel) lane's slot end (its kept crossings, then
+    its noise event); ``head``: every step's last slot end, then with a refractory period or shot noise the
+    chunk's crossings and noise hits before any was dropped, and its kept noise events. The first two are
+    differences of the pixels' own counters (k_on + k_off, noise_k) over the chunk, which the loop carries
+    anyway; the kept noise events are the hits where nothing drops them, else one tally carried through the
+    loop (four per-pixel tallies before, as fast)."""
     width, n_pix, steps, intensity, _ = shape
     model = view.model()          # the cached pass keeps the model, not this integrator's arrays
     cfg = model.config
@@ -171,24 +170,22 @@ def _count_pass(view: "PixelView", shape: tuple):
             counts = dr.empty(mi.UInt32, steps * lanes)
             lanes_d, n_d = event_fill._opaque(lanes, mi.UInt32), event_fill._opaque(n_pix, mi.UInt32)
 
-            def count(b, pixel, log_prev, st, sel, t0, t1, fired):
-                lane = b * lanes_d + pixel
-                dr.scatter(counts, sel.kept, lane)
-                fired = fired + sel.kept          # the pixel's events in the chunk: the fill steps only these
-                if sel.hit is not None:
-                    dr.scatter(counts, mi.UInt32(sel.hit), lane + n_d)
-                    fired = fired + mi.UInt32(sel.hit)
-                return (fired,)
-            final, (fired,) = chunk.run(count, [dr.zeros(mi.UInt32, n_pix)])
-            dr.eval(counts, fired, *final.values())
+            lanes_d = event_fill._opaque(lanes, mi.UInt32)
+            tally = bool(cfg.refractory_s and cfg.shot_noise_hz)    # noise events kept: only a tally tells
+
+            def count(b, pixel, log_prev, st, sel, t0, t1, fired, *kept_noise):
+                events = sel.kept + mi.UInt32(sel.hit) if sel.hit is not None else sel.kept
+                dr.scatter(counts, events, b * lanes_d + pixel)
+                # the pixel's events in the chunk: the fill steps only the pixels that have some
+                return (fired + events,) + ((kept_noise[0] + mi.UInt32(sel.hit),) if tally else ())
+            final, (fired, *kept_noise) = chunk.run(count, [dr.zeros(mi.UInt32, n_pix)] * (2 if tally else 1))
+            dr.eval(counts, fired, *final.values(), *kept_noise)
             ends = dr.prefix_reduce(dr.ReduceOp.Add, counts, exclusive=False)
             head = [dr.gather(mi.UInt32, ends, step_last)]
-            if cfg.shot_noise_hz:
-                head.append(dr.gather(mi.UInt32, ends, step_last - n_d))
             if cfg.refractory_s or cfg.shot_noise_hz:       # UInt32 sums wrap: their difference is exact
-                head.append(_counted(final["k_on"] + final["k_off"]) - _counted(state["k_on"] + state["k_off"]))
-                head.append(_counted(final["noise_k"]) - _counted(state["noise_k"]) if cfg.shot_noise_hz
-                            else mi.UInt32(0))
+                hits = _counted(final["noise_k"]) - _counted(state["noise_k"]) if cfg.shot_noise_hz else mi.UInt32(0)
+                head += [_counted(final["k_on"] + final["k_off"]) - _counted(state["k_on"] + state["k_off"]), hits,
+                         dr.sum(kept_noise[0]) if tally else hits]
             return final, ends, fired, event_fill.concat_arrays(head, mi.UInt32)
         return count_pass
     return _frozen("count", view, shape, make)
@@ -219,8 +216,10 @@ _PASSES = FrozenCache()
 
 
 def lanes_per_step(cfg, n_pix: int) -> int:
-    """Count lanes a step: every pixel's crossings, then with shot noise every pixel's noise event."""
-    return n_pix * (2 if cfg.shot_noise_hz else 1)
+    """Count lanes a step: one a pixel, its crossings and then its noise event (until 2026-11-26 a second lane
+    a pixel for noise: twice the scan and a scatter more a step, 0.1 ms a step of the demo's every-effect
+    pixel)."""
+    return n_pix
 
 
 # the pixel state a chunk carries from step to step, in this order (those the pixel model has)
@@ -355,18 +354,17 @@ class Chunk:
                                    self.pixels, slots.base, slots.start)
 
     def _write(self, ends, slots) -> None:
-        lanes_d, n_d = event_fill._opaque(self.lanes_per_step, mi.UInt32), event_fill._opaque(self.n_pix, mi.UInt32)
+        lanes_d = event_fill._opaque(self.lanes_per_step, mi.UInt32)
         pixels = self.pixels if self.pixels is not None else dr.arange(mi.UInt32, self.n_pix)
         xy = event_fill.pixel_xy(pixels, self.width)       # once, not per step: a vector integer division
 
         def write_step(b, pixel, log_prev, st, sel, t0, t1):         # carries nothing
-            lane = b * lanes_d + pixel
             lv = st.levels
-            event_fill.write_crossings(lv.n, sel.kept, dr.gather(mi.UInt32, ends, lane) - sel.kept, log_prev,
-                                       lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1, xy, slots.put, sel.first,
-                                       sel.stride)
+            end = dr.gather(mi.UInt32, ends, b * lanes_d + pixel)    # the lane: crossings, then the noise event
+            noise = mi.UInt32(sel.hit) if sel.hit is not None else 0
+            event_fill.write_crossings(lv.n, sel.kept, end - sel.kept - noise, log_prev, lv.log_now, lv.log_ref,
+                                       st.c_on, st.c_off, t0, t1, xy, slots.put, sel.first, sel.stride)
             if sel.hit is not None:
-                slot = dr.gather(mi.UInt32, ends, lane + n_d) - 1
-                slots.put(slot, sel.noise_t, event_fill.event_word(xy, sel.noise_on), sel.hit)
+                slots.put(end - 1, sel.noise_t, event_fill.event_word(xy, sel.noise_on), sel.hit)
             return ()
         self.run(write_step)

@@ -14,7 +14,8 @@ the same events, bit for bit, without leaving the backend (LLVM or CUDA):
 4. timestamps: crossing ``k`` sits at level ``ref + sign k C``; its time is where the step's linear segment
    meets that level, computed in float64 in the same operation order as the host twin, then rounded to integer
    microseconds (``dr.round``: ties to even, as ``np.rint``): float32 would lose microseconds after ~16 s;
-5. order: a stable radix sort by microsecond keeps equal times in slot order: (step, pixel, k), then noise.
+5. order: a stable radix sort by microsecond keeps equal times in slot order: (step, pixel, k, then the
+   pixel's noise event).
 
 Events stay as Dr.Jit arrays (:class:`DeviceEvents`); the caller decides when they cross to the host, so a
 render can keep many steps on the device and move them in one chunk.
@@ -235,20 +236,20 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
     kept, hit = sel.kept, sel.hit
     if refractory is not None or hit is not None:   # one kernel for the plan; lazy, every use would redo it
         dr.eval(*[v for v in (kept, sel.first, sel.stride, hit, sel.noise_t, sel.last_emit) if v is not None])
-    ends = dr.prefix_reduce(dr.ReduceOp.Add, kept, exclusive=False)        # inclusive scan: slot ends
-    totals = [dr.gather(mi.UInt32, ends, n_pix - 1), dr.sum(mi.UInt32(dr.abs(n)))]
-    if hit is not None:
-        totals += [dr.sum(mi.UInt32(hit)), dr.sum(mi.UInt32(noise[0]))]
+    # one lane a pixel: its kept crossings, then its noise event (inclusive scan: slot ends)
+    ends = dr.prefix_reduce(dr.ReduceOp.Add, kept + mi.UInt32(hit) if hit is not None else kept, exclusive=False)
+    totals = [dr.gather(mi.UInt32, ends, n_pix - 1), dr.sum(mi.UInt32(dr.abs(n)))] + \
+        ([dr.sum(mi.UInt32(hit)), dr.sum(mi.UInt32(noise[0]))] if hit is not None else [])
     if refractory is not None:
         refractory.last_emit = sel.last_emit
     total, raw, noise_kept, noise_hits = _read(totals)
-    stats = dict(refractory_dropped=(raw - total) + (noise_hits - noise_kept), noise_events=noise_kept)
-    if total + noise_kept == 0:
+    stats = dict(refractory_dropped=raw + noise_hits - total, noise_events=noise_kept)
+    if total == 0:
         return DeviceEvents(*empty_columns(), count=0, **stats)
     crossings = Crossings(n, kept, log_prev, log_now, log_ref, c_on, c_off, np.array([t0, t1]), width, n_pix,
                           sel.first, sel.stride)
-    shot = ShotNoise(hit, sel.noise_t, sel.noise_on, noise_kept) if noise_kept else None
-    return fill(crossings, ends, total, base_us, resolution_us, shot, stats)
+    shot = ShotNoise(hit, sel.noise_t, sel.noise_on, ends - 1) if noise_kept else None
+    return fill(crossings, ends - mi.UInt32(hit) if shot else ends, total, base_us, resolution_us, shot, stats)
 
 
 @dataclass
@@ -309,11 +310,11 @@ def write_crossings(n, kept, start, before, after, ref, c_on, c_off, t0, t1, xy,
 @dataclass
 class ShotNoise:
     """One step's kept shot-noise events for :func:`fill`: per pixel ``hit`` (Bool), time ``t`` (Float64 s),
-    polarity ``on`` (Bool), and how many hit."""
+    polarity ``on`` (Bool), and ``slot`` (UInt32): the last of the pixel's lane, after its crossings."""
     hit: object
     t: object
     on: object
-    count: int
+    slot: object
 
 
 @dataclass
@@ -357,17 +358,18 @@ def pixel_xy(pixel, width: int):
 
 def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float = 0.0,
          noise: ShotNoise | None = None, stats: dict | None = None) -> DeviceEvents:
-    """The events of ``cr`` (``ends``: inclusive prefix sum of ``kept``; ``total``: its last entry), then the
-    noise events, time-sorted, with timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor
-    clock ``resolution_us`` when > 0. ``cr.write`` has one lane a pixel write its own crossings into its slot
+    """The events of ``cr`` (``ends``: each lane's crossings' slot end; ``total``: every event, noise
+    included) and the noise events (each in its pixel's lane after its crossings), time-sorted, with
+    timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor clock ``resolution_us`` when > 0. ``cr.write`` has one lane a pixel write its own crossings into its slot
     range (the fill of esim_torch's count / prefix-sum / fill) through :class:`Slots`, two words an event: the
     sort key (microseconds from the chunk's first one) and x | y << 16 | ON << 31, so no event searches for its
     pixel or divides by the width, and the sort moves 8 bytes an event. The two words share one 64-bit slot
     (key above): one scatter an event in the fill and one gather after the sort, where two 32-bit arrays took
     two of each (dense 2 kHz converter stack, 346x260: the fill kernel 0.39 -> 0.34 ms a frame, the gather
-    0.10 -> 0.09); a 64-bit key (time-lapse spans) keeps two arrays. Noise events take the slots after every
-    crossing, in pixel order, so equal times keep crossings first."""
-    count = total + (noise.count if noise else 0)
+    0.10 -> 0.09); a 64-bit key (time-lapse spans) keeps two arrays. A pixel's noise event takes the slot
+    after its own crossings (one lane a pixel: one scan for both, the batch path's layout), so equal times keep
+    (pixel, crossing rank, then noise) order."""
+    count = total
     if count == 0:
         return DeviceEvents(*empty_columns(), count=0, **(stats or {}))
     start_us = int(math.floor(cr.times[0] * 1e6)) + int(base_us) - 1
@@ -379,12 +381,10 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
     # the arrays are made where they are first written (a writer may replace them with longer ones of its own:
     # event_batch's frozen pass; only the first ``count`` slots are read)
     slots = Slots.allocate(count, packed, _opaque(base_us, mi.Int64), _opaque(start_us, mi.Int64))
-    if total:
-        cr.write(ends, slots)
+    cr.write(ends, slots)
     if noise is not None:
         xy = pixel_xy(dr.arange(mi.UInt32, cr.n_pix), cr.width)
-        slot = dr.prefix_reduce(dr.ReduceOp.Add, mi.UInt32(noise.hit), exclusive=True) + _opaque(total, mi.UInt32)
-        slots.put(slot, noise.t, event_word(xy, noise.on), noise.hit)
+        slots.put(noise.slot, noise.t, event_word(xy, noise.on), noise.hit)
     if packed:
         keys = mi.UInt32(_first(slots.key, count, mi.UInt64) >> 32)
         dr.eval(keys)

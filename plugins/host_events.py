@@ -37,7 +37,10 @@ def step_events(integ, step: dict, t0: float, t1: float):
     if noise is None:
         return pix, t, p
     npix, nt, pol = _noise_events(integ, fpix[hit], arr[7][hit], arr[8][hit], before, crossings, t0, t1)
-    return np.concatenate([pix, npix]), np.concatenate([t, nt]), np.concatenate([p, pol])
+    # each pixel's noise event after its own crossings (both in pixel order): the device's slot order, which
+    # the stable time sort keeps for equal times
+    at = np.searchsorted(pix, npix, side="right")
+    return np.insert(pix, at, npix), np.insert(t, at, nt), np.insert(p, at, pol)
 
 def _noise_events(integ, npix, u_pol, u_t, before, crossings, t0: float, t1: float):
     """Shot-noise events of the pixels ``npix`` (uniform polarity and time within the step), subject to the
