@@ -27,11 +27,11 @@ counters.
 
 The events equal, bit for bit, those of ``B`` calls of ``EventIntegrator.commit_device`` joined in order: the
 same float operations in the same order, and a stable sort keyed by time over slots in (step, pixel,
-crossing) order is the per-step order concatenated (a step's times never pass the next step's start: the
-interpolation fraction is clipped to [0, 1] and rounding to microseconds keeps order; the one exception is a
-float64 ``t0 + 1.0 (t1 - t0)`` one ulp above ``t1`` where ``t1`` is exactly half a microsecond, which the
-per-step concatenation would leave out of order and the chunk sorts). Tested against the host path for
-every pixel model and chunking (tests/plugins/test_event_batch.py).
+crossing, then the pixel's noise event) order is the per-step order concatenated (a step's times never pass
+the next step's start: the interpolation fraction is clipped to [0, 1] and rounding to microseconds keeps
+order; the one exception is a float64 ``t0 + 1.0 (t1 - t0)`` one ulp above ``t1`` where ``t1`` is exactly
+half a microsecond, which the per-step concatenation would leave out of order and the chunk sorts). Tested
+against the host path for every pixel model and chunking (tests/plugins/test_event_batch.py).
 """
 from __future__ import annotations
 
@@ -168,8 +168,6 @@ def _count_pass(view: "PixelView", shape: tuple):
             chunk = Chunk(model.bind(arrays), state, frames, None, t_d, dts, width, n_pix, intensity, steps=steps)
             lanes = chunk.lanes_per_step
             counts = dr.empty(mi.UInt32, steps * lanes)
-            lanes_d, n_d = event_fill._opaque(lanes, mi.UInt32), event_fill._opaque(n_pix, mi.UInt32)
-
             lanes_d = event_fill._opaque(lanes, mi.UInt32)
             tally = bool(cfg.refractory_s and cfg.shot_noise_hz)    # noise events kept: only a tally tells
 
@@ -242,8 +240,8 @@ class Chunk:
     cheap next to storing each (step, pixel) lane's brightness before and after, reference level and count
     (16 bytes a lane written, then read back by the fill), so the count pass keeps only the kept counts and the
     fill steps the pixels again from the same state (the same counters: the same draws; the same operations:
-    the same values, bit for bit). Lanes: per step every pixel's crossings, then (with shot noise) every
-    pixel's noise event, so that slot order is the per-step path's: a step's crossings, then its noise."""
+    the same values, bit for bit). Lanes: per step one a pixel, its crossings and then (with shot noise) its
+    noise event, the per-step paths' slot order."""
     view: PixelView              # the pixel model and its per-pixel constants
     state: dict                  # STATE at times[0] (the names the pixel model has)
     frames: object

@@ -309,8 +309,7 @@ def write_crossings(n, kept, start, before, after, ref, c_on, c_off, t0, t1, xy,
 
 @dataclass
 class ShotNoise:
-    """One step's kept shot-noise events for :func:`fill`: per pixel ``hit`` (Bool), time ``t`` (Float64 s),
-    polarity ``on`` (Bool), and ``slot`` (UInt32): the last of the pixel's lane, after its crossings."""
+    """A step's kept noise events for :func:`fill`, per pixel: ``hit``, time ``t`` (s), ``on``, lane's last ``slot``."""
     hit: object
     t: object
     on: object
@@ -360,10 +359,11 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
          noise: ShotNoise | None = None, stats: dict | None = None) -> DeviceEvents:
     """The events of ``cr`` (``ends``: each lane's crossings' slot end; ``total``: every event, noise
     included) and the noise events (each in its pixel's lane after its crossings), time-sorted, with
-    timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor clock ``resolution_us`` when > 0. ``cr.write`` has one lane a pixel write its own crossings into its slot
-    range (the fill of esim_torch's count / prefix-sum / fill) through :class:`Slots`, two words an event: the
-    sort key (microseconds from the chunk's first one) and x | y << 16 | ON << 31, so no event searches for its
-    pixel or divides by the width, and the sort moves 8 bytes an event. The two words share one 64-bit slot
+    timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor clock ``resolution_us`` when > 0.
+    ``cr.write`` has one lane a pixel write its own crossings into its slot range (the fill of esim_torch's
+    count / prefix-sum / fill) through :class:`Slots`, two words an event: the sort key (microseconds from the
+    chunk's first one) and x | y << 16 | ON << 31, so no event searches for its pixel or divides by the width,
+    and the sort moves 8 bytes an event. The two words share one 64-bit slot
     (key above): one scatter an event in the fill and one gather after the sort, where two 32-bit arrays took
     two of each (dense 2 kHz converter stack, 346x260: the fill kernel 0.39 -> 0.34 ms a frame, the gather
     0.10 -> 0.09); a 64-bit key (time-lapse spans) keeps two arrays. A pixel's noise event takes the slot
