@@ -166,8 +166,8 @@ def view_motion(lf: LightField, depth: float = math.inf, tile: int = 8) -> dict:
     between them by a multiple a of the change in view position (its leftover parallax), moving content by
     v times the time between them; the flows 0 -> 1 and 0 -> K-1 (4 numbers) fit a and v (3) by least
     squares per ``tile`` x ``tile`` block with texture (log gradient > ``TEXTURE_GRADIENT`` on half of it) and
-    reliable flow on half of its textured pixels (``_flow_logs``; the flow's median over those pixels). ``motion_px`` = |v| (t_{K-1} + t_1 - 2 t_0) (one period for evenly spread
-    views), the 97th percentile over the blocks (content covering 3 % of the textured image counts);
+    reliable flow on half of its textured pixels (``_flow_logs``; the flow's median over those pixels).
+    ``motion_px`` = |v| (t_{K-1} + t_1 - 2 t_0) (one period for evenly spread views), the 97th percentile over the blocks (content covering 3 % of the textured image counts);
     ``velocity_px_s`` the median v of the blocks moving more than ``MOTION_LIMIT_PX``. Views taken at one
     instant, fewer than ``MOTION_MIN_VIEWS`` views, or a first and last view not adjacent on the scan (an
     open curve): motion_px is NaN (unknown). With 8 views the steps along the scan are too coarse: the static,
