@@ -109,10 +109,19 @@ def select_events(n, log_prev, log_now, log_ref, c_on, c_off, t0_d, t1_d, last_e
         sel.kept, sel.last_emit = mi.UInt32(kept_f), new_last
     if noise is not None:
         hit, u_pol, u_t = noise[:3]
-        nt = t0_d + rounded(mi.Float64(u_t) * (t1_d - t0_d))
-        if last_emit is not None:
-            hit = hit & (nt >= last_emit + period) & (~dr.isfinite(first_kept) | (nt <= first_kept - period)
+        if last_emit is None:
+            nt = t0_d + rounded(mi.Float64(u_t) * (t1_d - t0_d))
+        else:
+            def placed(hit, u_t, last, new_last, first_kept, t0, t1):
+                nt = t0 + rounded(mi.Float64(u_t) * (t1 - t0))
+                keep = hit & (nt >= last + period) & (~dr.isfinite(first_kept) | (nt <= first_kept - period)
                                                       | (nt >= new_last + period))
-            sel.last_emit = dr.select(hit, dr.maximum(new_last, nt), new_last)
+                return keep, nt, dr.select(keep, dr.maximum(new_last, nt), new_last)
+
+            def quiet(hit, u_t, last, new_last, first_kept, t0, t1):    # no noise event: nothing to place
+                return hit, mi.Float64(0.0), new_last
+            # a symbolic branch: noise is rare, and its placement's float64 tests ran for every pixel-step
+            hit, nt, sel.last_emit = dr.if_stmt((hit, u_t, last_emit, new_last, first_kept, t0_d, t1_d), hit,
+                                                placed, quiet)
         sel.hit, sel.noise_t, sel.noise_on = hit, nt, u_pol < 0.5
     return sel
