@@ -125,8 +125,7 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
     # difference, rounded to float32
     t_d = mi.Float64(times.tolist())
     dts = mi.Float(np.diff(times).astype(np.float32).tolist()) if pixel_step.needs_dt(cfg) else None
-    lanes = lanes_per_step(cfg, n_pix)
-    step_last = mi.UInt32((np.arange(1, steps + 1) * lanes - 1).tolist())
+    step_last = mi.UInt32((np.arange(1, steps + 1) * n_pix - 1).tolist())      # one count lane a pixel a step
     count = _count_pass(view, (integ.size[0], n_pix, steps, intensity, dr.width(frames)))
     final, ends, fired, head = count(view.arrays(), state, frames, t_d, dts, step_last)
     # one read: every step's last slot (the chunk's total is the last), then what the tallies need
@@ -154,7 +153,8 @@ def _count_pass(view: "PixelView", shape: tuple):
     """The count pass of a chunk: ``fn(arrays, state, frames, t, dt, step_last) -> (state after, ends, fired,
     head)`` for a pixel model and chunk shape (film width, pixels, steps, radiance or log frames, frame buffer
     length), frozen (:func:`_frozen`). ``ends``: each (step, pixel) lane's slot end (its kept crossings, then
-    its noise event); ``head``: every step's last slot end, then with a refractory period or shot noise the
+    its noise event: one lane a pixel; until 2026-11-26 noise had a second lane a pixel, twice the scan and a
+    scatter more a step, 0.1 ms a step of the demo's every-effect pixel); ``head``: every step's last slot end, then with a refractory period or shot noise the
     chunk's crossings and noise hits before any was dropped, and its kept noise events. The first two are
     differences of the pixels' own counters (k_on + k_off, noise_k) over the chunk, which the loop carries
     anyway; the kept noise events are the hits where nothing drops them, else one tally carried through the
@@ -166,9 +166,8 @@ def _count_pass(view: "PixelView", shape: tuple):
     def make():
         def count_pass(arrays, state, frames, t_d, dts, step_last):
             chunk = Chunk(model.bind(arrays), state, frames, None, t_d, dts, width, n_pix, intensity, steps=steps)
-            lanes = chunk.lanes_per_step
-            counts = dr.empty(mi.UInt32, steps * lanes)
-            lanes_d = event_fill._opaque(lanes, mi.UInt32)
+            counts = dr.empty(mi.UInt32, steps * n_pix)
+            lanes_d = event_fill._opaque(n_pix, mi.UInt32)
             tally = bool(cfg.refractory_s and cfg.shot_noise_hz)    # noise events kept: only a tally tells
 
             def count(b, pixel, log_prev, st, sel, t0, t1, fired, *kept_noise):
@@ -211,13 +210,6 @@ def _frozen(kind: str, view: "PixelView", shape: tuple, make):
 
 
 _PASSES = FrozenCache()
-
-
-def lanes_per_step(cfg, n_pix: int) -> int:
-    """Count lanes a step: one a pixel, its crossings and then its noise event (until 2026-11-26 a second lane
-    a pixel for noise: twice the scan and a scatter more a step, 0.1 ms a step of the demo's every-effect
-    pixel)."""
-    return n_pix
 
 
 # the pixel state a chunk carries from step to step, in this order (those the pixel model has)
@@ -279,10 +271,6 @@ class Chunk:
         idx = self.pixels
         sub = {k: dr.gather(type(v), v, idx) for k, v in self.state.items()}
         return idx, dr.width(idx), self.view.gather(idx), sub
-
-    @property
-    def lanes_per_step(self) -> int:
-        return lanes_per_step(self.view.config, self.n_pix)
 
     def run(self, each_step, carry=()) -> tuple:
         """One kernel: every pixel through the ``B`` steps (``pixel_step.step``, the per-step kernel's own
@@ -352,7 +340,7 @@ class Chunk:
                                    self.pixels, slots.base, slots.start)
 
     def _write(self, ends, slots) -> None:
-        lanes_d = event_fill._opaque(self.lanes_per_step, mi.UInt32)
+        lanes_d = event_fill._opaque(self.n_pix, mi.UInt32)
         pixels = self.pixels if self.pixels is not None else dr.arange(mi.UInt32, self.n_pix)
         xy = event_fill.pixel_xy(pixels, self.width)       # once, not per step: a vector integer division
 

@@ -30,7 +30,7 @@ KEY_BITS = 24
 
 def step_word(seed: int, step: int) -> int:
     """The 32-bit word that, with an event's index, keys the draws of one step."""
-    return (seed * 0x27D4EB2F + step * 0x165667B1 + 7919) & counter_rng.MASK
+    return counter_rng.stream_word(counter_rng.seed_word(seed), step) & counter_rng.MASK
 
 
 def keys_np(n: int, word: int) -> np.ndarray:
