@@ -11,6 +11,8 @@
 #   run(command="bash benchmarks/gpu_session.sh engine", carry=[".gpu"])  known tests, chunk shape, engine, fan to
 #                                                                         HDF5, memory, pixel, writer, the demo's
 #                                                                         and the fan's render profiles
+#   run(command="bash benchmarks/gpu_session.sh pixel", carry=[".gpu"])   the pixel model's tests under CUDA, its cost,
+#                                                                         fan to HDF5, the main job, engine, known tests
 #   run(command="bash benchmarks/gpu_session.sh write", carry=[".gpu"])   known tests, fan to HDF5 (and one writer
 #                                                                         setting changed at a time), writer,
 #                                                                         memory, render profiles, pixel
@@ -29,6 +31,8 @@
 # Eleventh session (H200): verify + bench in one command 379 s; engine 210 s, each on a fresh machine.
 # Twelfth session (H200): engine 194 s, write 82 s (before fan_writer and the profiles joined it), then 141 s;
 # bench_fan_writer alone 41 s; each on a fresh machine (start about 30 s more).
+# Seventeenth session (H200): pixel 229 s on a fresh machine; then the whole suite on 14 workers to its end in
+# 437 s on the warm machine (KNOWN_LIMIT=1 TEST_LIMIT=430 TEST_WORKERS=14, timeout_s 480).
 # A dry run on the CPU checks the script itself: PY=.venv/bin/python OUT=/tmp/gpu_dry bash benchmarks/gpu_session.sh bench --quick
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -115,7 +119,7 @@ case "$stage" in
         known_failures
         # (-v: each test's outcome as it ends; a run cut short still names what failed; TESTS picks a subset)
         step tests_cuda "${TEST_LIMIT:-300}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -v \
-            --tb=short -rfEs -p no:cacheprovider -n "$n" --timeout 240 ${TESTS:-tests}
+            --tb=short -rfEs -p no:cacheprovider -n "$n" --timeout 420 ${TESTS:-tests}
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_cuda.txt" | tail -n 60 ;;
     bench)
         # engine + converter (device, per step, host) and issue 15's render rows (demo 0.1 s; fan 1280x720,
@@ -176,6 +180,26 @@ case "$stage" in
         for f in "$W"/fan_render*.txt; do echo "== $f"; grep -E "^[0-9]+ steps|^file writer" "$f"; done
         grep -E "^\| " "$W/fan_writer.md"; grep -E "^\| [0-9]|floor" "$W/writer.txt"; tail -n 8 "$W/memory.txt"
         tail -n 12 "$W/pixel.txt" ;;
+    pixel)
+        # after a change to the realistic pixel's kernels (counter-based draws, the hazard clock, one count lane
+        # a pixel): the known tests, the pixel model's own tests under cuda_ad_mono, its cost against the ideal,
+        # the fan to HDF5, the main job timed, the event engine and converter rows, and last the known tests
+        # (a fresh machine compiles their kernels for 150 s; what ran before them comes back if time runs out)
+        step tests_pixel "${PIXEL_LIMIT:-150}" env EVENTFIELD_TEST_VARIANT=cuda_ad_mono $PY -m pytest -v \
+            --tb=short -rfEs -p no:cacheprovider -n "${TEST_WORKERS:-8}" --timeout 120 \
+            tests/plugins/test_counter_rng.py tests/plugins/test_pixel_model.py \
+            tests/plugins/test_pixel_realism.py tests/plugins/test_pixel_jitter.py tests/plugins/test_readout.py \
+            tests/plugins/test_event_fill.py tests/simulate/test_determinism.py tests/simulate/test_convert.py \
+            tests/simulate/test_checkpoint.py
+        step pixel 90 $PY benchmarks/bench_pixel.py
+        fan_to_hdf5
+        main_demo
+        step event_engine 150 $PY benchmarks/bench_event_engine.py $quick
+        known_failures
+        grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" "$W/tests_pixel.txt" | tail -n 40
+        cat "$W/steps.txt"; grep -E "^real" "$W"/main_demo_*.txt
+        grep -E "^[0-9]+ steps|^file writer" "$W/fan_render.txt"; tail -n 14 "$W/pixel.txt"
+        tail -n 20 "$W/event_engine.txt" ;;
     verify)
         # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
         # memory against the duration, the overlap's A/B, the converter's profile; 100 s on an H200
@@ -190,5 +214,5 @@ case "$stage" in
         step chunk_shape 150 $PY benchmarks/bench_chunk_shape.py $quick
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" | tail -n 20
         cat "$W/steps.txt"; grep -E "^real" "$W"/main_demo_*.txt; grep -v "rendering:" "$W/fan_render.txt" | tail -n 12; tail -n 8 "$W/memory.txt" "$W/overlap.txt"; head -n 30 "$W/profile.txt"; head -n 40 "$W/chunk_shape.txt" ;;
-    *) echo "usage: gpu_session.sh tests|known|bench|verify|engine|write [--quick]" >&2; exit 2 ;;
+    *) echo "usage: gpu_session.sh tests|known|bench|verify|engine|write|pixel [--quick]" >&2; exit 2 ;;
 esac

@@ -220,7 +220,7 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
     if path is None and not isinstance(scene, mi.Scene):
         raise EventFieldError(f"load_scene: expected a path or mi.Scene, got {type(scene).__name__}")
     motion = _resolve_motion(motion, path)     # before the scene: which shapes move decides how it is loaded
-    sampler_choice, instanced = "the scene's own", []
+    sampler_choice, instanced, text = "the scene's own", [], None
     if path is not None:
         xml_params = {k: str(v) for k, v in _film_override(path, xml_params).items()}
         try:
@@ -236,8 +236,7 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
         except (OSError, UnicodeDecodeError) as e:
             raise EventFieldError(f"{path}: cannot read the scene ({e.strerror or type(e).__name__})") from None
         except Exception as e:  # Mitsuba reports XML/plugin errors as RuntimeError with a long trace
-            raise EventFieldError(f"{path}: {_unused_defines(e, original, xml_params) or _mitsuba_message(e)}") \
-                from None
+            raise EventFieldError(f"{path}: {_load_error(e, path, original, text, xml_params)}") from None
     timed = TimedScene(scene, motion, path, instanced)
     timed.sampler_choice = sampler_choice
     timed.defines = dict(xml_params) if path is not None else {}
@@ -281,6 +280,18 @@ def _film_override(path: str, xml_params: dict) -> dict:
     if "views_px" in declared:
         out["views_px"] = max(30, height - height % 6)     # n x n views of whole, even tiles
     return out
+
+
+def _load_error(e: Exception, path: str, original: str, loaded: str | None, xml_params: dict) -> str:
+    """The one-line message of a failed load, with the user's own line numbers: a rewritten text (a sampler
+    chosen, moving shapes as instances) loses the file's comments and line breaks, so its error is looked up
+    again by loading the file as it is (where that loads, the rewritten text's message stays)."""
+    if loaded is not None and "Found unused parameters" not in str(e):
+        try:
+            mi.load_file(path, **xml_params)
+        except Exception as own:  # noqa: BLE001 (Mitsuba's loader errors are RuntimeErrors with long traces)
+            e = own
+    return _unused_defines(e, original, xml_params) or _mitsuba_message(e)
 
 
 def _unused_defines(e: Exception, text: str, xml_params: dict) -> str | None:

@@ -165,14 +165,15 @@ def test_highspeed_and_track_focus_cli(tmp_path):
 
 def test_views_from_events_alone_on_a_static_scene():
     # start="events": the galvo solver gives the start image from the first period's events (up to a constant,
-    # so compare by correlation); measured 0.970 against 0.996 with a rendered start frame
+    # so compare by correlation). By the second period it has caught up with a rendered start frame: 0.9936
+    # against 0.9937 (LLVM), 0.9934 against 0.9934 (CUDA, H200), so which is higher is not asserted
     static = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
     corr = {}
     for start in ("frame", "events"):
         cap = highspeed.capture(static, {"width": 96, "height": 72, "amplitude": 2}, periods=2, views=24, start=start)
         a, b = refocus(cap.lightfields[1], 2.5), refocus(cap.truth_lightfields[1], 2.5)
         corr[start] = np.corrcoef(a.ravel(), b.ravel())[0, 1]
-    assert corr["frame"] > 0.99 and 0.95 < corr["events"] < corr["frame"]
+    assert corr["frame"] > 0.99 and corr["events"] > 0.985
 
 
 def test_bad_arguments_name_the_field():

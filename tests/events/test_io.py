@@ -142,8 +142,8 @@ def test_render_streams_every_chunked_format(tmp_path, demo_small, ext, monkeypa
     kept = []
     real_add = sink_mod.Sink._add_host
 
-    def add_host(self, *a):
-        real_add(self, *a)
+    def add_host(self, *a, **k):       # the device path passes borrowed= and counted= (CUDA's default)
+        real_add(self, *a, **k)
         kept.append(0 if self.memory is None else len(self.memory))
     monkeypatch.setattr(sink_mod.Sink, "_add_host", add_host)
     mem = ef.render_events(demo_small, 0.004, steps=200)

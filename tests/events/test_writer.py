@@ -26,6 +26,11 @@ print(held, resident_mb() - before)
 """
 
 
+# the chunk is 8 MB: kept on the heap it stays resident whole (> 6 MB below); given back, what stays is other
+# allocations' noise, under 1 MB here and 2.15 MB once on the H200 machine's Python, with 14 test workers running
+GIVEN_BACK_MB = 4.0
+
+
 def _run(mode, code=CHILD, **env):
     """The child under this environment, less any malloc tuning it inherited (a Dask LocalCluster started by an
     earlier test leaves MALLOC_TRIM_THRESHOLD_ in this process's os.environ), plus ``env``."""
@@ -41,7 +46,7 @@ def _run(mode, code=CHILD, **env):
 def test_a_freed_chunk_is_given_back_once_the_threshold_is_held():
     held, kept_mb = _run("hold")
     assert held == "True"
-    assert kept_mb < 1.0                  # its own mapping, unmapped when freed
+    assert kept_mb < GIVEN_BACK_MB                  # its own mapping, unmapped when freed
     # the adaptive threshold keeps the same chunk resident on the heap: what the hold is for
     assert _run("adaptive")[1] > 6.0
 
@@ -56,7 +61,7 @@ def test_malloc_tuning_set_after_start_up_is_not_the_environments():
     MALLOC_TRIM_THRESHOLD_ in their parent for the workers they spawn) did not tune this process's malloc."""
     later = "import os, sys\nos.environ['MALLOC_TRIM_THRESHOLD_'] = '65536'\n" + CHILD
     held, kept_mb = _run("hold", code=later)
-    assert held == "True" and kept_mb < 1.0
+    assert held == "True" and kept_mb < GIVEN_BACK_MB
 
 
 class _SlowTarget:

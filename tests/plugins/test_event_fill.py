@@ -106,7 +106,7 @@ def test_render_same_events_on_device_and_host_and_in_any_chunking(tmp_path, dem
     batch_chunks = str(tmp_path / "small.h5")
     chunks, real_add = [], sink_mod.Sink._add_host
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(sink_mod.Sink, "_add_host", lambda self, *a: (chunks.append(len(a[2])), real_add(self, *a)))
+        mp.setattr(sink_mod.Sink, "_add_host", lambda self, *a, **k: (chunks.append(len(a[2])), real_add(self, *a, **k)))
         summary = ef.render_events(demo_small, **kw, output=batch_chunks, event_buffer_mb=1e-6)
     with host_path():
         host = ef.render_events(demo_small, **kw)
