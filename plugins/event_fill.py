@@ -12,8 +12,9 @@ the same events, bit for bit, without leaving the backend (LLVM or CUDA):
 3. fill: one lane a pixel writes its own crossings of each step into its slot range (no event
    searches for its pixel: a binary search per event was 2x slower on the CPU);
 4. timestamps: crossing ``k`` sits at level ``ref + sign k C``; its time is where the step's linear segment
-   meets that level, computed in float64 in the same operation order as the host twin, then rounded to integer
-   microseconds (``dr.round``: ties to even, as ``np.rint``): float32 would lose microseconds after ~16 s;
+   meets that level (times the pixel's 1 / rise, made before its crossings' loop), computed in float64 in the
+   host twin's operation order, then rounded to integer microseconds (``dr.round``: ties to even, as
+   ``np.rint``): float32 would lose microseconds after ~16 s;
 5. order: a stable radix sort by microsecond keeps equal times in slot order: (step, pixel, k, then the
    pixel's noise event).
 
@@ -30,7 +31,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins.event_select import Refractory, crossing_time, select_events
+from mitsuba_eventfield.plugins.event_select import Refractory, crossing_time, inverse_rise, select_events
 
 
 @dataclass
@@ -294,7 +295,7 @@ def write_crossings(n, kept, start, before, after, ref, c_on, c_off, t0, t1, xy,
     sign = dr.select(on, mi.Int32(1), mi.Int32(-1))
     word = event_word(xy, on)
     step = dr.select(on, mi.Float64(c_on), mi.Float64(c_off))
-    segment = (mi.Float64(before), mi.Float64(after), mi.Float64(ref), step, t0, t1)
+    segment = (lp := mi.Float64(before), inverse_rise(lp, mi.Float64(after)), mi.Float64(ref), step, t0, t1)
     ranked = first is not None
 
     def crossing_body(j):
@@ -330,8 +331,7 @@ class Slots:
 
     @staticmethod
     def allocate(count: int, packed: bool, base, start) -> "Slots":
-        """Slots for ``count`` events (unallocated until first written), the key and word in one array where
-        ``packed``."""
+        """Slots for ``count`` events (allocated when first written), key and word in one array if ``packed``."""
         return Slots(dr.empty(mi.UInt64, count), None if packed else dr.empty(mi.UInt32, count), base, start)
 
     @property

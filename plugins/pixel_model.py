@@ -78,14 +78,16 @@ def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: floa
     lp, ln, ref = (np.asarray(a, dtype=np.float64) for a in (log_prev, log_now, log_ref))
     step = np.where(n > 0, np.asarray(c_on, dtype=np.float64), np.asarray(c_off, dtype=np.float64))
     sign = np.sign(n)
+    with np.errstate(divide="ignore"):
+        inv_rise = 1.0 / (ln - lp)        # once a pixel, multiplied per crossing: event_select.crossing_time
     if counts.max() > 1:  # repeat each firing pixel once per crossing; k = 1..n within the pixel
         idx = np.repeat(np.arange(len(n)), counts)
         k = np.arange(len(idx), dtype=np.int64) - (np.cumsum(counts) - counts)[idx] + 1
-        pixel, lp, ln, ref, step, sign = pixel[idx], lp[idx], ln[idx], ref[idx], step[idx], sign[idx]
+        pixel, lp, inv_rise, ref, step, sign = pixel[idx], lp[idx], inv_rise[idx], ref[idx], step[idx], sign[idx]
     else:                 # the common case with short steps: one crossing per pixel
         k = 1
-    with np.errstate(divide="ignore", invalid="ignore"):
-        frac = (ref + sign * k * step - lp) / (ln - lp)
+    with np.errstate(invalid="ignore"):
+        frac = (ref + sign * k * step - lp) * inv_rise
     frac = np.clip(np.nan_to_num(frac, nan=1.0), 0.0, 1.0)
     return pixel, t0 + frac * (t1 - t0), sign.astype(np.int8)
 
