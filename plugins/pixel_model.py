@@ -78,7 +78,7 @@ def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: floa
     lp, ln, ref = (np.asarray(a, dtype=np.float64) for a in (log_prev, log_now, log_ref))
     step = np.where(n > 0, np.asarray(c_on, dtype=np.float64), np.asarray(c_off, dtype=np.float64))
     sign = np.sign(n)
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):
         inv_rise = 1.0 / (ln - lp)        # once a pixel, multiplied per crossing: event_select.crossing_time
     if counts.max() > 1:  # repeat each firing pixel once per crossing; k = 1..n within the pixel
         idx = np.repeat(np.arange(len(n)), counts)
