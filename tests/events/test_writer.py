@@ -46,7 +46,7 @@ def _run(mode, code=CHILD, **env):
 def test_a_freed_chunk_is_given_back_once_the_threshold_is_held():
     held, kept_mb = _run("hold")
     assert held == "True"
-    assert kept_mb < GIVEN_BACK_MB                  # its own mapping, unmapped when freed
+    assert kept_mb < GIVEN_BACK_MB        # its own mapping, unmapped when freed
     # the adaptive threshold keeps the same chunk resident on the heap: what the hold is for
     assert _run("adaptive")[1] > 6.0
 
