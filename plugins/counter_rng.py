@@ -62,9 +62,7 @@ def seed_array(mi, seed: int):
     """:func:`seed_word` as an opaque ``mi.UInt32`` of one entry: a kernel reads it as an input, so renders of
     different seeds share their kernels (and a frozen function's recordings)."""
     import drjit as dr
-    word = mi.UInt32(seed_word(seed))
-    dr.make_opaque(word)
-    return word
+    return dr.opaque(mi.UInt32, seed_word(seed))
 
 
 def stream_word(seed_word_, stream: int):

@@ -54,18 +54,17 @@ class Refractory:
 
 
 def _refractory_plan(size, tk, last, period):
-    """Per pixel, the closed-form refractory selection of ``pixel_model.refractory_crossings`` on the device:
-    crossings are evenly spaced within a step, so the kept ones are ranks first, first + stride, ... Returns
-    (first, stride, kept count, updated last emission, first kept time), all Float64 per pixel."""
+    """Per pixel with more than one crossing (:func:`_single_crossing_plan` takes the others), the closed-form
+    refractory selection of ``pixel_model.refractory_crossings`` on the device: crossings are evenly spaced
+    within a step, so the kept ones are ranks first, first + stride, ... Returns (first, stride, kept count,
+    updated last emission, first kept time), all Float64 per pixel."""
     size_f = mi.Float64(size)
     t_a, t_b = tk(1), tk(2)
-    multi = size > 1
-    spacing = dr.select(multi, t_b - t_a, 1.0)
+    spacing = t_b - t_a
     wait = last + period - t_a                                  # > 0: the first crossing is too early
-    first_multi = dr.ceil(wait / spacing - 1e-9)
-    first_multi = dr.maximum(dr.select(dr.isnan(first_multi), 0.0, first_multi), 0.0)
-    first = dr.select(multi, first_multi, dr.select(wait <= 0, 0.0, 1.0))
-    stride = dr.select(multi, dr.maximum(1.0, dr.ceil(period / spacing - 1e-9)), 1.0)
+    first = dr.ceil(wait / spacing - 1e-9)
+    first = dr.maximum(dr.select(dr.isnan(first), 0.0, first), 0.0)
+    stride = dr.maximum(1.0, dr.ceil(period / spacing - 1e-9))
     any_kept = first < size_f
     runs = dr.floor((size_f - 1 - first) / stride)
     kept = dr.select(any_kept, runs + 1, 0.0)

@@ -287,15 +287,18 @@ def _load_error(e: Exception, path: str, original: str, loaded: str | None, xml_
     chosen, moving shapes as instances) loses the file's comments and line breaks, so its error is looked up
     again by loading the file as it is, and taken where it is the same error at another place (a sampler the
     rewrite replaced may fail on its own; where the file loads, the rewritten text's message stays)."""
+    unused = _unused_defines(e, original, xml_params)
+    if unused:
+        return unused
     message = _mitsuba_message(e)
-    if loaded is not None and "Found unused parameters" not in str(e):
+    if loaded is not None:
         try:
             mi.load_file(path, **xml_params)
         except Exception as own:  # noqa: BLE001 (Mitsuba's loader errors are RuntimeErrors with long traces)
             place = re.compile(r"\(line \d+, col \d+\)")
             if place.sub("", _mitsuba_message(own)) == place.sub("", message):
                 message = _mitsuba_message(own)
-    return _unused_defines(e, original, xml_params) or message
+    return message
 
 
 def _unused_defines(e: Exception, text: str, xml_params: dict) -> str | None:
