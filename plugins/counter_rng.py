@@ -80,3 +80,8 @@ def bits(pixel, counter, word):
 def uniform(mi, pixel, counter, word):
     """A ``mi.Float`` uniform in [0, 1) (24 bits) for each pixel's draw ``counter`` of the stream ``word``."""
     return mi.Float(bits(pixel, counter, word) >> 8) * (1.0 / (1 << 24))
+
+
+def draw(mi, pixel, counter, seed_word_, stream: int):
+    """:func:`uniform` of the pixel model's ``stream`` (``JITTER_ON``, ...) under a render's ``seed_word_``."""
+    return uniform(mi, pixel, counter, stream_word(seed_word_, stream))

@@ -167,12 +167,11 @@ def _count_pass(view: "PixelView", shape: tuple):
         def count_pass(arrays, state, frames, t_d, dts, step_last):
             chunk = Chunk(model.bind(arrays), state, frames, None, t_d, dts, width, n_pix, intensity, steps=steps)
             counts = dr.empty(mi.UInt32, steps * n_pix)
-            lanes_d = event_fill._opaque(n_pix, mi.UInt32)
             tally = bool(cfg.refractory_s and cfg.shot_noise_hz)    # noise events kept: only a tally tells
 
-            def count(b, pixel, log_prev, st, sel, t0, t1, fired, *kept_noise):
+            def count(lane, pixel, log_prev, st, sel, t0, t1, fired, *kept_noise):
                 events = sel.kept + mi.UInt32(sel.hit) if sel.hit is not None else sel.kept
-                dr.scatter(counts, events, b * lanes_d + pixel)
+                dr.scatter(counts, events, lane)
                 # the pixel's events in the chunk: the fill steps only the pixels that have some
                 return (fired + events,) + ((kept_noise[0] + mi.UInt32(sel.hit),) if tally else ())
             final, (fired, *kept_noise) = chunk.run(count, [dr.zeros(mi.UInt32, n_pix)] * (2 if tally else 1))
@@ -275,8 +274,8 @@ class Chunk:
     def run(self, each_step, carry=()) -> tuple:
         """One kernel: every pixel through the ``B`` steps (``pixel_step.step``, the per-step kernel's own
         definition, and ``event_select.select_events``, the per-step path's selection);
-        ``each_step(b, pixel, log_prev, step, selection, t0, t1, *carry)`` is traced into the loop body and
-        returns the new ``carry`` (per-pixel values it keeps across steps). Returns the state after the last
+        ``each_step(lane, pixel, log_prev, step, selection, t0, t1, *carry)`` is traced into the loop body
+        (``lane``: the (step, pixel) lane's frame-major index, ``b n_pix + pixel``) and returns the new ``carry`` (per-pixel values it keeps across steps). Returns the state after the last
         step and the last carry (lazy)."""
         cfg = self.view.config
         pixel, lanes, view, state = self._at_pixels()
@@ -289,7 +288,8 @@ class Chunk:
 
         def body(b, *values):
             s, carried = dict(zip(names, values[:n_state])), values[n_state:]
-            value = dr.gather(mi.Float, self.frames, b * n_d + pixel)
+            lane = b * n_d + pixel                      # frame-major: the frame's value and the step's lane
+            value = dr.gather(mi.Float, self.frames, lane)
             if self.intensity:
                 intensity, log_in = value, pixel_model.linlog(dr, value, view.linlog_threshold)
             else:
@@ -305,7 +305,7 @@ class Chunk:
             t0, t1 = dr.gather(mi.Float64, t_d, b), dr.gather(mi.Float64, t_d, b + 1)
             sel = event_select.select_events(lv.n, s["log_prev"], lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1,
                                            s.get("last_emit"), period, st.noise)
-            carried = each_step(b, pixel, s["log_prev"], st, sel, t0, t1, *carried)
+            carried = each_step(lane, pixel, s["log_prev"], st, sel, t0, t1, *carried)
             after = {"log_prev": lv.log_now, "k_on": lv.k_on, "k_off": lv.k_off, "offset": lv.offset,
                      "held_on": st.held[0] if st.held else None, "held_off": st.held[1] if st.held else None,
                      "noise_left": st.noise_state[0] if st.noise_state else None,
@@ -340,17 +340,13 @@ class Chunk:
                                    self.pixels, slots.base, slots.start)
 
     def _write(self, ends, slots) -> None:
-        lanes_d = event_fill._opaque(self.n_pix, mi.UInt32)
         pixels = self.pixels if self.pixels is not None else dr.arange(mi.UInt32, self.n_pix)
         xy = event_fill.pixel_xy(pixels, self.width)       # once, not per step: a vector integer division
 
-        def write_step(b, pixel, log_prev, st, sel, t0, t1):         # carries nothing
+        def write_step(lane, pixel, log_prev, st, sel, t0, t1):      # carries nothing
             lv = st.levels
-            end = dr.gather(mi.UInt32, ends, b * lanes_d + pixel)    # the lane: crossings, then the noise event
-            noise = mi.UInt32(sel.hit) if sel.hit is not None else 0
-            event_fill.write_crossings(lv.n, sel.kept, end - sel.kept - noise, log_prev, lv.log_now, lv.log_ref,
-                                       st.c_on, st.c_off, t0, t1, xy, slots.put, sel.first, sel.stride)
-            if sel.hit is not None:
-                slots.put(end - 1, sel.noise_t, event_fill.event_word(xy, sel.noise_on), sel.hit)
+            end = dr.gather(mi.UInt32, ends, lane)                   # the lane: crossings, then the noise event
+            event_fill.write_lane(lv.n, sel, end, log_prev, lv.log_now, lv.log_ref, st.c_on, st.c_off, t0, t1, xy,
+                                  slots.put)
             return ()
         self.run(write_step)

@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins.event_select import Refractory, crossing_time, inverse_rise, select_events
+from mitsuba_eventfield.plugins.event_select import Refractory, Selection, crossing_time, inverse_rise, select_events
 
 
 @dataclass
@@ -247,23 +247,22 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
     stats = dict(refractory_dropped=raw + noise_hits - total, noise_events=noise_kept)
     if total == 0:
         return DeviceEvents(*empty_columns(), count=0, **stats)
-    crossings = Crossings(n, kept, log_prev, log_now, log_ref, c_on, c_off, np.array([t0, t1]), width, n_pix,
-                          sel.first, sel.stride)
-    shot = ShotNoise(hit, sel.noise_t, sel.noise_on, ends - 1) if noise_kept else None
-    return fill(crossings, ends - mi.UInt32(hit) if shot else ends, total, base_us, resolution_us, shot, stats)
+    if not noise_kept:        # no noise event this step: the lanes hold crossings only (no masked noise write)
+        sel = replace(sel, hit=None)
+    crossings = Crossings(n, sel, log_prev, log_now, log_ref, c_on, c_off, np.array([t0, t1]), width, n_pix)
+    return fill(crossings, ends, total, base_us, resolution_us, stats)
 
 
 @dataclass
 class Crossings:
-    """One step's crossings for :func:`fill`, one lane a pixel: the signed count ``n`` (Int32) and how many
-    become events ``kept`` (UInt32: ``|n|`` unless a refractory period drops some), the log brightness
-    ``before`` and ``after`` the step and the reference level ``ref`` it compared against (Float), per pixel
-    the thresholds it used, the step's boundaries (t0, t1 seconds), the film width and pixel count, and for a
-    refractory pixel the kept crossings' ranks ``first + j stride`` (Float64 per lane; None: every crossing,
-    rank j). Any object with ``times``, ``width``, ``n_pix`` and this ``write`` can be filled (``event_batch``
-    recomputes a chunk's crossings instead of storing them)."""
+    """One step's events for :func:`fill`, one lane a pixel: the signed crossing count ``n`` (Int32) and the
+    step's ``sel`` (``event_select.Selection``: the kept crossings, their ranks under a refractory period, the
+    noise event), the log brightness ``before`` and ``after`` the step and the reference level ``ref`` it
+    compared against (Float), per pixel the thresholds it used, the step's boundaries (t0, t1 seconds), the
+    film width and pixel count. Any object with ``times``, ``width``, ``n_pix`` and this ``write`` can be
+    filled (``event_batch`` recomputes a chunk's crossings instead of storing them)."""
     n: object
-    kept: object
+    sel: Selection
     before: object
     after: object
     ref: object
@@ -272,17 +271,25 @@ class Crossings:
     times: np.ndarray
     width: int
     n_pix: int
-    first: object = None
-    stride: object = None
 
     def write(self, ends, slots: "Slots") -> None:
-        """The crossings into their slots (``ends``: inclusive prefix sum of ``kept``; ``slots``: :func:`fill`'s
-        slots)."""
+        """The lanes into their slots (``ends``: inclusive prefix sum of each lane's events; ``slots``:
+        :func:`fill`'s slots)."""
         t0, t1 = (_opaque(float(t), mi.Float64) for t in self.times)
-        kept = self.kept
         xy = pixel_xy(dr.arange(mi.UInt32, self.n_pix), self.width)
-        write_crossings(self.n, kept, ends - kept, self.before, self.after, self.ref, self.c_on, self.c_off, t0,
-                        t1, xy, slots.put, self.first, self.stride)
+        write_lane(self.n, self.sel, ends, self.before, self.after, self.ref, self.c_on, self.c_off, t0, t1, xy,
+                   slots.put)
+
+
+def write_lane(n, sel: Selection, end, before, after, ref, c_on, c_off, t0, t1, xy, put) -> None:
+    """One step of every lane into the slots that end at ``end`` (its inclusive prefix sum): the ``sel.kept``
+    crossings first (:func:`write_crossings`), then the noise event where ``sel.hit``, the slot order of every
+    device path (the per-step fill's and ``event_batch``'s chunk writer: this is their one lane writer)."""
+    noise = mi.UInt32(sel.hit) if sel.hit is not None else 0
+    write_crossings(n, sel.kept, end - sel.kept - noise, before, after, ref, c_on, c_off, t0, t1, xy, put,
+                    sel.first, sel.stride)
+    if sel.hit is not None:
+        put(end - 1, sel.noise_t, event_word(xy, sel.noise_on), sel.hit)
 
 
 def write_crossings(n, kept, start, before, after, ref, c_on, c_off, t0, t1, xy, put, first=None,
@@ -306,15 +313,6 @@ def write_crossings(n, kept, start, before, after, ref, c_on, c_off, t0, t1, xy,
         return (j + 1,)
 
     dr.while_loop((dr.zeros(mi.UInt32, dr.width(xy)),), lambda j: j < kept, crossing_body)
-
-
-@dataclass
-class ShotNoise:
-    """A step's kept noise events for :func:`fill`, per pixel: ``hit``, time ``t`` (s), ``on``, lane's last ``slot``."""
-    hit: object
-    t: object
-    on: object
-    slot: object
 
 
 @dataclass
@@ -356,18 +354,17 @@ def pixel_xy(pixel, width: int):
 
 
 def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float = 0.0,
-         noise: ShotNoise | None = None, stats: dict | None = None) -> DeviceEvents:
-    """The events of ``cr`` (``ends``: each lane's crossings' slot end; ``total``: every event, noise
-    included) and the noise events (each in its pixel's lane after its crossings), time-sorted, with
-    timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor clock ``resolution_us`` when > 0.
-    ``cr.write`` has one lane a pixel write its own crossings into its slot range (the fill of esim_torch's
+         stats: dict | None = None) -> DeviceEvents:
+    """The events of ``cr`` (``ends``: each lane's slot end, its crossings then its noise event; ``total``:
+    every event), time-sorted, with timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor clock ``resolution_us`` when > 0.
+    ``cr.write`` has one lane a pixel write its own events into its slot range (the fill of esim_torch's
     count / prefix-sum / fill) through :class:`Slots`, two words an event: the sort key (microseconds from the
     chunk's first one) and x | y << 16 | ON << 31, so no event searches for its pixel or divides by the width,
     and the sort moves 8 bytes an event. The two words share one 64-bit slot
     (key above): one scatter an event in the fill and one gather after the sort, where two 32-bit arrays took
     two of each (dense 2 kHz converter stack, 346x260: the fill kernel 0.39 -> 0.34 ms a frame, the gather
     0.10 -> 0.09); a 64-bit key (time-lapse spans) keeps two arrays. A pixel's noise event takes the slot
-    after its own crossings (one lane a pixel: one scan for both, the batch path's layout), so equal times keep
+    after its own crossings (:func:`write_lane`: one lane a pixel, one scan for both), so equal times keep
     (pixel, crossing rank, then noise) order."""
     count = total
     if count == 0:
@@ -382,9 +379,6 @@ def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float
     # event_batch's frozen pass; only the first ``count`` slots are read)
     slots = Slots.allocate(count, packed, _opaque(base_us, mi.Int64), _opaque(start_us, mi.Int64))
     cr.write(ends, slots)
-    if noise is not None:
-        xy = pixel_xy(dr.arange(mi.UInt32, cr.n_pix), cr.width)
-        slots.put(noise.slot, noise.t, event_word(xy, noise.on), noise.hit)
     if packed:
         keys = mi.UInt32(_first(slots.key, count, mi.UInt64) >> 32)
         dr.eval(keys)

@@ -111,9 +111,8 @@ def _jittered(base_on, base_off, jitter: float, pixel, resets, seed_word) -> tup
     """The thresholds a pixel holds after its ``resets``-th crossing (UInt32; 0: before its first): each of
     ``base_on``, ``base_off`` plus ``jitter`` times one of a normal pair (Mitsuba's Box-Muller of two
     counter-based uniforms), floored at a tenth of it."""
-    def draw(stream):
-        return counter_rng.uniform(mi, pixel, resets, counter_rng.stream_word(seed_word, stream))
-    g = mi.warp.square_to_std_normal(mi.Point2f(draw(counter_rng.JITTER_ON), draw(counter_rng.JITTER_OFF)))
+    g = mi.warp.square_to_std_normal(mi.Point2f(counter_rng.draw(mi, pixel, resets, seed_word, counter_rng.JITTER_ON),
+                                                counter_rng.draw(mi, pixel, resets, seed_word, counter_rng.JITTER_OFF)))
     return dr.maximum(base_on + jitter * g.x, base_on * 0.1), dr.maximum(base_off + jitter * g.y, base_off * 0.1)
 
 
@@ -146,7 +145,7 @@ def start_draws(integ, n_pix: int) -> None:
 
 
 def _exponential(pixel, counter, seed_word):
-    u = counter_rng.uniform(mi, pixel, counter, counter_rng.stream_word(seed_word, counter_rng.NOISE_WAIT))
+    u = counter_rng.draw(mi, pixel, counter, seed_word, counter_rng.NOISE_WAIT)
     return -dr.log(1.0 - u)                 # u < 1: finite (at most 16.6)
 
 
@@ -167,7 +166,7 @@ def _shot_noise(integ, pixel, noise_state, rate_dt) -> tuple:
     hit = left <= rate_dt
 
     def fire(pixel, left, k, rate_dt, seed):
-        u_pol = counter_rng.uniform(mi, pixel, k, counter_rng.stream_word(seed, counter_rng.NOISE_POLARITY))
+        u_pol = counter_rng.draw(mi, pixel, k, seed, counter_rng.NOISE_POLARITY)
         u_t = dr.select(left > 0, dr.minimum(left / rate_dt, 1.0), 0.0)     # left > 0: rate_dt >= left > 0
         return u_pol, u_t, dr.maximum(left + mi.Float64(_exponential(pixel, k + 1, seed)) - rate_dt, -MAX_OWED), k + 1
 
