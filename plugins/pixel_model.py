@@ -211,8 +211,14 @@ def pixel_config(preset: str = "ideal", where: str = "pixel model", **overrides)
 
 def preset_and_overrides(preset: str | None, pixel: dict | None, where: str = "pixel model") -> tuple:
     """(preset, the other parameters) of a ``pixel`` dict that may name its preset itself, as
-    ``PixelConfig.as_dict()`` and a render's metadata do: its name is taken where ``preset`` is None or the
-    same; two different names are refused (one line). ``preset`` None stays None (the caller's default)."""
+    ``PixelConfig.as_dict()`` and a render's metadata do (or of a preset's name alone): its name is taken where
+    ``preset`` is None or the same; two different names are refused (one line). ``preset`` None stays None
+    (the caller's default)."""
+    if isinstance(pixel, str):        # pixel="davis346": the preset by its name
+        pixel = {"preset": pixel}
+    elif pixel is not None and not isinstance(pixel, dict):
+        raise ConfigError(f"{where}: pixel = {pixel!r}: expected a preset's name or a dict of parameters "
+                          f"(allowed presets: {', '.join(PRESETS)})")
     values = dict(pixel or {})
     named = values.pop("preset", None)
     if named is not None and preset is not None and named != preset:

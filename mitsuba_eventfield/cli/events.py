@@ -9,6 +9,15 @@ from ..validate import MAX_DURATION_S, MAX_SPP, MAX_STEPS
 from .args import add_defines, defines, num, pairs, save_image, times_ms
 
 PIXEL_INTEGERS = ("seed", "readout_cap_native_pixels")
+# the suffixes events.io.FORMATS writes (not imported here: it loads h5py, and --help should be quick)
+EVENT_FILE_HELP = ("event file: .h5 / .hdf5 (DSEC layout, streamed), .npz, .txt, .aedat4 (streamed); .raw / .evt "
+                   "(Prophesee EVT 3.0), .dat (written at the end)")
+CONVERT_DETAILS = (". Frames are linear intensity: floats as they are, 8- and 16-bit integers divided by 255 "
+                   "and 65535 (--srgb decodes gamma-encoded ones first); colour frames become luminance. Times: "
+                   "a video's own frame rate, or --fps, or --times FILE (seconds, one a frame); an image folder "
+                   "(natural name order) needs --fps or --times; an .npz carries 'frames' and its times in "
+                   "seconds ('times') or microseconds ('timestamps_us'). Between frames the log brightness is "
+                   "taken as linear in time.")
 
 
 def add_parsers(sub) -> None:
@@ -34,8 +43,7 @@ def add_parsers(sub) -> None:
 def _add_render(sub) -> None:
     r = sub.add_parser("render", help="render the event stream of a Mitsuba scene")
     r.add_argument("scene", help="Mitsuba scene XML (motion from <scene>.motion.toml if present)")
-    r.add_argument("-o", "--output", required=True,
-                   help="event file: .h5 (DSEC layout, streamed), .npz, .txt, .aedat4; .raw / .dat (Prophesee)")
+    r.add_argument("-o", "--output", required=True, help=EVENT_FILE_HELP)
     r.add_argument("--motion", help="motion TOML (default: <scene>.motion.toml if it exists)")
     r.add_argument("--no-motion", action="store_true", help="ignore any motion file (static scene)")
     r.add_argument("--duration", type=num(0, MAX_DURATION_S, lo_open=True),
@@ -108,14 +116,20 @@ def _add_pixel_options(r) -> None:
 
 
 def _add_convert(sub) -> None:
-    c = sub.add_parser("convert", help="events from frames you already have: a video, a folder of images or an "
-                                       ".npz stack (frames, times), through the same pixel model as render")
+    summary = ("events from frames you already have: a video, a folder of images or an .npz stack (frames, "
+               "times), through the same pixel model as render")
+    c = sub.add_parser("convert", help=summary, description=summary[0].upper() + summary[1:] + CONVERT_DETAILS)
     c.add_argument("input", help="video file (OpenCV), folder of images (natural name order) or .npz")
-    c.add_argument("-o", "--output", required=True, help="event file: .h5 (DSEC layout, streamed), .npz, .txt, "
-                                                         ".aedat4; .raw / .dat (Prophesee)")
-    c.add_argument("--fps", type=num(0, 1e9, lo_open=True),
-                   help="frame rate (image folders; overrides a video's own; .npz stacks carry times)")
-    c.add_argument("--threshold", type=num(0, 10, lo_open=True), help="contrast threshold C (default: preset's)")
+    c.add_argument("-o", "--output", required=True, help=EVENT_FILE_HELP)
+    clock = c.add_mutually_exclusive_group()
+    clock.add_argument("--fps", type=num(0, 1e9, lo_open=True),
+                       help="frame rate (image folders need it or --times; overrides a video's own; .npz stacks "
+                            "carry times in seconds, 'times', or microseconds, 'timestamps_us')")
+    clock.add_argument("--times", metavar="FILE",
+                       help="the frames' times in seconds, one a line (text; '#' comments) or a .npy array: "
+                            "frames at uneven times, e.g. ESIM's or rpg_vid2e's timestamps.txt")
+    c.add_argument("--threshold", type=num(0, 10, lo_open=True),
+                   help="contrast threshold C for ON and OFF (default: the preset's; 0.2 for the ideal pixel)")
     c.add_argument("--srgb", action="store_true", help="decode gamma-encoded (sRGB) frames to linear light first")
     _add_pixel_options(c)
     c.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -125,7 +139,7 @@ def run_convert(a) -> int:
     from ..backend import set_variant
     from ..simulate.convert import events_from_frames
     set_variant(a.variant)
-    summary = events_from_frames(a.input, fps=a.fps, preset=a.preset, pixel=pixel_overrides(a.pixel),
+    summary = events_from_frames(a.input, a.times, fps=a.fps, preset=a.preset, pixel=pixel_overrides(a.pixel),
                                  threshold=a.threshold, srgb=a.srgb, output=a.output, progress=not a.quiet,
                                  event_buffer_mb=a.event_buffer_mb)
     print(summary.format())
@@ -143,7 +157,8 @@ def pixel_overrides(items) -> dict:
         try:
             out[name] = int(value) if name in PIXEL_INTEGERS else float(value)
         except ValueError:
-            raise EventFieldError(f"--pixel {name}={value!r}: expected NAME=NUMBER") from None
+            kind = "an integer" if name in PIXEL_INTEGERS else "a number"
+            raise EventFieldError(f"--pixel {name}={value!r}: {name} takes {kind}") from None
     return out
 
 

@@ -57,7 +57,8 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     (folder of images, ``.npz`` with ``frames`` and ``times``, or a video), or a ``FrameSource``; a (T, H, W)
     float stack already on the device (a Dr.Jit tensor, or PyTorch / CuPy through DLPack) stays there
     (``frame_sources.from_device``; with ``on_device`` nothing crosses to the host at all). ``times``:
-    seconds per frame (arrays), or ``fps``. ``preset`` / ``pixel`` / ``threshold``: the pixel model, as for
+    seconds per frame (an array, or for a path a timestamps file: ``.npy`` or text, one time a line), or
+    ``fps`` (not both; an ``.npz`` with its own times takes neither). ``preset`` / ``pixel`` / ``threshold``: the pixel model, as for
     :func:`render_events`. ``srgb=True`` decodes gamma-encoded frames to linear light first.
     ``frames_per_kernel``: frames the pixel model takes per kernel where it can (``event_batch``; the events
     are the same, only the speed changes); None picks by film size and backend.
@@ -72,7 +73,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     check_on_device(on_device, output)
     group = None if frames_per_kernel is None else positive(frames_per_kernel, "frames_per_kernel", integer=True)
     source = frames if isinstance(frames, FrameSource) else \
-        open_frames(frames, fps, srgb) if isinstance(frames, (str, os.PathLike)) else \
+        open_frames(frames, fps, srgb, times) if isinstance(frames, (str, os.PathLike)) else \
         from_device(frames, times, fps, srgb) if is_device_array(frames) else from_array(frames, times, fps, srgb)
     too_large = event_fill.film_limit_error(source.width, source.height)
     if too_large:

@@ -84,21 +84,67 @@ def _uniform_rate(fps: float | None, where: str) -> float:
     return number(fps, f"{where}: fps", 0, lo_open=True, error=EventFieldError)
 
 
-def _uniform_times(fps: float | None, where: str):
-    rate = _uniform_rate(fps, where)
-    return lambda i: i / rate
-
-
 def check_times(times, count: int, where: str) -> np.ndarray:
+    """``times`` as float64 seconds, one a frame, finite and strictly increasing; else one line naming the
+    first value that is not."""
     try:
-        t = np.asarray(times, dtype=np.float64).ravel()
+        t = np.asarray(times, dtype=np.float64)
     except (TypeError, ValueError):
         raise EventFieldError(f"{where}: times: expected numbers (seconds), got {np.asarray(times).dtype}") from None
+    if t.ndim != 1:
+        raise EventFieldError(f"{where}: times: shape {t.shape}: expected one value a frame (a 1-D array)")
     if len(t) != count:
         raise EventFieldError(f"{where}: times: {len(t)} values for {count} frames")
-    if not np.isfinite(t).all() or (len(t) > 1 and (np.diff(t) <= 0).any()):
-        raise EventFieldError(f"{where}: times must be finite and strictly increasing (seconds)")
+    bad = np.flatnonzero(~np.isfinite(t))
+    if len(bad):
+        raise EventFieldError(f"{where}: times[{bad[0]}] = {float(t[bad[0]])!r}: times must be finite (seconds)")
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if len(back):
+        i = back[0] + 1
+        raise EventFieldError(f"{where}: times[{i}] = {float(t[i])!r} is not after times[{i - 1}] = "
+                              f"{float(t[i - 1])!r}: times "
+                              "must be strictly increasing (seconds)")
     return t
+
+
+def read_times(times):
+    """Frame times in seconds from an array, or from a file: ``.npy``, or text with one time a line (blank lines
+    and ``#`` comments skipped; a timestamps file as ESIM's and rpg_vid2e's tools write). None stays None."""
+    if times is None or not isinstance(times, (str, os.PathLike)):
+        return times
+    path = os.fspath(times)
+    try:
+        if path.lower().endswith(".npy"):
+            return np.load(path, allow_pickle=False)
+        return np.loadtxt(path, dtype=np.float64, comments="#", ndmin=1)
+    except OSError as e:
+        raise EventFieldError(f"{path}: cannot read the frame times ({e.strerror or type(e).__name__})") from None
+    except ValueError as e:
+        raise EventFieldError(f"{path}: frame times: expected one number (seconds) a line "
+                              f"({' '.join(str(e).split())[:100]})") from None
+
+
+def _one_clock(times, fps, where: str) -> None:
+    """Refuse times given together with a frame rate: one of them would be ignored."""
+    if times is not None and fps is not None:
+        raise EventFieldError(f"{where}: fps = {fps!r} and times given: give the frames' times or their rate, "
+                              "not both")
+
+
+def _times_of(times, count: int | None, fps, where: str):
+    """(time of frame i, span in seconds or None): from ``times`` (seconds, checked against ``count`` frames
+    where known) or else the frame rate."""
+    if times is None:
+        rate = _uniform_rate(fps, where)
+        return (lambda i: i / rate), ((count - 1) / rate if count else None)
+    t = check_times(times, count if count is not None else len(np.ravel(times)), where)
+
+    def time_of(i):
+        if i >= len(t):
+            raise EventFieldError(f"{where}: times: {len(t)} values, and the frames go on past them: give one "
+                                  "time a frame")
+        return float(t[i])
+    return time_of, float(t[-1] - t[0])
 
 
 def from_array(frames, times=None, fps=None, srgb=False, where="frames") -> FrameSource:
@@ -109,6 +155,7 @@ def from_array(frames, times=None, fps=None, srgb=False, where="frames") -> Fram
         raise EventFieldError(f"{where}: the frames differ in size (a stack needs one size)") from None
     if a.ndim not in (3, 4) or a.shape[0] < 2 or 0 in a.shape[1:3]:
         raise EventFieldError(f"{where}: shape {a.shape}: expected (T, H, W) or (T, H, W, C) with T >= 2, H, W >= 1")
+    _one_clock(times, fps, where)
     t = check_times(times, a.shape[0], where) if times is not None else \
         np.arange(a.shape[0]) / _uniform_rate(fps, where)
 
@@ -148,6 +195,7 @@ def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> Fra
     shape = tuple(tensor.shape)
     if len(shape) != 3 or shape[0] < 2 or 0 in shape[1:]:
         raise EventFieldError(f"{where}: shape {shape}: device frames must be (T, H, W) with T >= 2, H, W >= 1")
+    _one_clock(times, fps, where)
     t = check_times(times, shape[0], where) if times is not None else np.arange(shape[0]) / _uniform_rate(fps, where)
     flat = tensor.array
     if bool(dr.any(~dr.isfinite(flat) | (flat < 0))[0]):
@@ -166,8 +214,9 @@ def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> Fra
                        block=block, times=t, span_s=float(t[-1] - t[0]))
 
 
-def from_npz(path: str, fps=None, srgb=False) -> FrameSource:
-    """An ``.npz`` with ``frames`` (T, H, W[, C]) and ``times`` (seconds) or ``timestamps_us``."""
+def from_npz(path: str, fps=None, srgb=False, times=None) -> FrameSource:
+    """An ``.npz`` with ``frames`` (T, H, W[, C]) and ``times`` (seconds) or ``timestamps_us``; a stack without
+    either takes ``times`` (seconds) or ``fps``."""
     try:
         data = np.load(path, allow_pickle=False)
     except Exception as e:            # empty (EOFError), not a zip, damaged: one line whatever NumPy raises
@@ -176,12 +225,14 @@ def from_npz(path: str, fps=None, srgb=False) -> FrameSource:
     if "frames" not in data:
         raise EventFieldError(f"{path}: no 'frames' array (found: {', '.join(data.files) or 'nothing'})")
     times_key = next((k for k in ("times", "timestamps_us") if k in data), None)
-    if times_key and fps is not None:
-        raise EventFieldError(f"{path}: fps = {fps!r}: this stack carries its own times ('{times_key}'); the frame "
-                              "rate is for image folders and videos")
+    if times_key and (fps is not None or times is not None):
+        given = f"fps = {fps!r}" if fps is not None else "times given"
+        raise EventFieldError(f"{path}: {given}: this stack carries its own times ('{times_key}'); give times or "
+                              "a frame rate only for stacks without them, image folders and videos")
+    given_times = times
     try:     # the members are read here, not by np.load: a damaged or pickled one fails now
         frames = data["frames"]
-        times = None if times_key is None else data[times_key]
+        times = given_times if times_key is None else data[times_key]
     except MemoryError:              # a valid stack larger than the memory left: not a damaged file
         size = data.zip.getinfo("frames.npy").file_size if "frames.npy" in data.zip.namelist() else 0
         raise EventFieldError(f"{path}: its frames ({size / 2**20:.0f} MiB) do not fit in the memory available "
@@ -217,12 +268,14 @@ def _read_image(path: str) -> np.ndarray:
     return img
 
 
-def from_folder(path: str, fps=None, srgb=False) -> FrameSource:
-    """Every image of a folder in natural name order (frame_2 before frame_10), at ``fps``."""
+def from_folder(path: str, fps=None, srgb=False, times=None) -> FrameSource:
+    """Every image of a folder in natural name order (frame_2 before frame_10), at ``times`` (seconds, one an
+    image in that order) or ``fps``."""
     names = sorted((n for n in os.listdir(path) if n.lower().endswith(IMAGE_SUFFIXES)), key=_natural_key)
     if len(names) < 2:
         raise EventFieldError(f"{path}: {len(names)} images ({', '.join(IMAGE_SUFFIXES)}); need at least 2")
-    time_of = _uniform_times(fps, path)
+    _one_clock(times, fps, path)
+    time_of, span = _times_of(times, len(names), fps, path)
     first = intensity(_read_image(os.path.join(path, names[0])), srgb, bgr=True, where=names[0])
     h, w = first.shape
 
@@ -234,8 +287,8 @@ def from_folder(path: str, fps=None, srgb=False) -> FrameSource:
                 raise EventFieldError(f"{f}: size {img.shape[1]}x{img.shape[0]}, the first image is {w}x{h}")
             yield time_of(i), img
     return FrameSource(path, w, h, len(names), frames_iter,
-                       {"kind": "image folder", "path": os.path.abspath(path), "fps": fps},
-                       span_s=time_of(len(names) - 1))
+                       {"kind": "image folder", "path": os.path.abspath(path), "fps": fps,
+                        "times": "given" if times is not None else "from the frame rate"}, span_s=span)
 
 
 # containers whose frame count OpenCV reads from the file (FFmpeg's nb_frames): a video that ends before it is
@@ -283,10 +336,10 @@ def _open_video(path: str):
     return None
 
 
-def from_video(path: str, fps=None, srgb=False) -> FrameSource:
-    """A video through OpenCV; frame times from ``fps`` when given, else from the container's frame rate. A
-    video that ends before the frame count its container states is refused as cut or damaged (one line, and
-    the conversion's output file is not written), not converted in part."""
+def from_video(path: str, fps=None, srgb=False, times=None) -> FrameSource:
+    """A video through OpenCV; frame times from ``times`` (seconds, one a frame) or ``fps`` when given, else from
+    the container's frame rate. A video that ends before the frame count its container states is refused as cut
+    or damaged (one line, and the conversion's output file is not written), not converted in part."""
     import cv2
     cap = _open_video(path)
     if cap is None:
@@ -295,8 +348,11 @@ def from_video(path: str, fps=None, srgb=False) -> FrameSource:
     count = max(0, int(cap.get(cv2.CAP_PROP_FRAME_COUNT))) or None
     w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
     cap.release()
-    time_of = _uniform_times(rate if rate and rate > 0 else None, path)
+    _one_clock(times, fps, path)
     slack = VIDEO_COUNT_SLACK.get(os.path.splitext(path)[1].lower())
+    # given times are checked against the container's count where it is exact, else frame by frame
+    time_of, span = _times_of(times, count if slack == 0 else None, None, path) if times is not None else \
+        _times_of(None, count, rate if rate and rate > 0 else None, path)
 
     def frames_iter() -> Iterator[tuple[float, np.ndarray]]:
         video = _open_video(path)
@@ -311,14 +367,18 @@ def from_video(path: str, fps=None, srgb=False) -> FrameSource:
                     if count and slack is not None and i < count - slack:
                         raise EventFieldError(f"{path}: frame {i + 1} of {count} unreadable (the video is cut or "
                                               "damaged): nothing written")
+                    if times is not None and i != len(times):
+                        raise EventFieldError(f"{path}: times: {len(times)} values for {i} frames: give one time "
+                                              "a frame")
                     return
                 yield time_of(i), intensity(img, srgb, bgr=True, where=f"{path} frame {i}")
                 i += 1
         finally:
             video.release()
     return FrameSource(path, w, h, count, frames_iter, {"kind": "video", "path": os.path.abspath(path),
-                                                         "fps": float(rate)},
-                       span_s=time_of(count - 1) if count else None)
+                                                         "fps": float(rate) if times is None else None,
+                                                         "times": "given" if times is not None else "from the frame rate"},
+                       span_s=span)
 
 
 def check_span(where: str, span_s: float | None) -> None:
@@ -330,16 +390,18 @@ def check_span(where: str, span_s: float | None) -> None:
                               "conversion (check the times' unit or the frame rate; split longer inputs)")
 
 
-def open_frames(path: str, fps=None, srgb=False) -> FrameSource:
-    """The right reader for ``path``: a folder of images, an ``.npz`` stack or a video file."""
+def open_frames(path: str, fps=None, srgb=False, times=None) -> FrameSource:
+    """The right reader for ``path``: a folder of images, an ``.npz`` stack or a video file; ``times``: the
+    frames' times in seconds (an array, or a file :func:`read_times` reads) instead of a frame rate."""
+    times = read_times(times)
     if os.path.isdir(path):
-        return from_folder(path, fps, srgb)
+        return from_folder(path, fps, srgb, times)
     if not os.path.exists(path):
         raise EventFieldError(f"{path}: no such file or folder")
     suffix = os.path.splitext(path)[1].lower()
     if suffix == ".npz":
-        return from_npz(path, fps, srgb)
+        return from_npz(path, fps, srgb, times)
     if suffix in VIDEO_SUFFIXES:
-        return from_video(path, fps, srgb)
+        return from_video(path, fps, srgb, times)
     raise EventFieldError(f"{path}: unknown input type {suffix or '(none)'}: expected a folder of images, "
                           f"an .npz stack or a video ({', '.join(VIDEO_SUFFIXES)})")

@@ -94,9 +94,11 @@ class RenderSummary:
             pace = "the disk writer set the pace" if self.writer_wait_s > 0.05 * self.wall_s else "it kept up"
             copier = f" (and {self.writer_copy_s:.2f} s copying chunks from the GPU on another)" \
                 if self.writer_copy_s else ""
-            lines.append(f"file writer: {self.writer_busy_s:.2f} s on its own thread{copier}, the render waited "
+            work = "render" if self.render_s else "conversion"
+            drains = "checkpoints, the last chunks" if self.render_s else "the last chunks"
+            lines.append(f"file writer: {self.writer_busy_s:.2f} s on its own thread{copier}, the {work} waited "
                          f"{self.writer_wait_s:.2f} s for it ({pace}), and {self.writer_tail_s:.2f} s for its queue "
-                         "to drain (checkpoints, the last chunks)")
+                         f"to drain ({drains})")
         if self.output:
             lines.append(f"wrote {self.output}")
         lines += self.notes

@@ -1,0 +1,119 @@
+"""Frames at given times (a reviewer's findings, 2026-11-27): ``times`` was ignored for a path (a folder's or a
+video's frames then sat at --fps or the container's rate), an array's ``fps`` beside its ``times`` was dropped
+silently, and a bad time was not named. Timestamps here are checked against the log-linear crossings worked by
+hand."""
+import math
+
+import numpy as np
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.cli.main import main as cli
+
+UNEVEN = [0.0, 0.010, 0.013]          # seconds: the second interval is 3 ms, not 10
+
+
+def _ramp(dtype=np.float32):
+    """One pixel stepping up by 0.5 in ln I over the first interval, then still: with C = 0.2, ON crossings
+    at 0.2 / 0.5 and 0.4 / 0.5 of the interval (4 and 8 ms at UNEVEN), none after."""
+    return np.array([1.0, math.exp(0.5), math.exp(0.5)], dtype).reshape(3, 1, 1)
+
+
+def _cli(args, capfd):
+    try:
+        code = cli(["convert"] + [str(a) for a in args] + ["--quiet"])
+    except SystemExit as e:
+        code = e.code
+    return code, capfd.readouterr().err.strip()
+
+
+def test_times_place_an_npz_stack_without_its_own(tmp_path):
+    np.savez(tmp_path / "s.npz", frames=_ramp())
+    ev = ef.events_from_frames(str(tmp_path / "s.npz"), UNEVEN, threshold=0.2)
+    assert ev.t.tolist() == [4000, 8000] and ev.p.tolist() == [1, 1]
+    assert ev.meta["duration_us"] == 13000
+
+
+def test_a_folder_at_given_times_equals_the_same_frames_as_an_array(tmp_path, capfd):
+    """A timestamps file (seconds, one a line, comments allowed) places a folder's images; the events equal
+    those of the same 16-bit frames given as an array with the same times, and differ from the frames at a
+    uniform rate."""
+    cv2 = pytest.importorskip("cv2")
+    rng = np.random.default_rng(3)
+    frames = (rng.random((6, 12, 16)) * 60000 + 2000).astype(np.uint16)
+    (tmp_path / "f").mkdir()
+    for i, f in enumerate(frames):
+        cv2.imwrite(str(tmp_path / "f" / f"frame_{i}.png"), f)
+    times = np.array([0.0, 0.001, 0.0015, 0.004, 0.0041, 0.009])
+    (tmp_path / "t.txt").write_text("# seconds\n" + "\n".join(repr(float(t)) for t in times) + "\n")
+    code, err = _cli([tmp_path / "f", "-o", tmp_path / "f.h5", "--times", tmp_path / "t.txt"], capfd)
+    assert code == 0, err
+    from_folder = ef.read_events(str(tmp_path / "f.h5"))
+    from_array = ef.events_from_frames(frames, times)
+    assert len(from_array) > 100 and from_folder.equals(from_array)
+    assert from_folder.t.max() <= 9000
+    assert not from_folder.equals(ef.events_from_frames(frames, fps=1000))
+    np.save(tmp_path / "t.npy", times)                      # a .npy array works as the text does
+    assert ef.events_from_frames(str(tmp_path / "f"), str(tmp_path / "t.npy")).equals(from_array)
+
+
+def test_a_video_at_given_times(tmp_path, capfd):
+    cv2 = pytest.importorskip("cv2")
+    path = str(tmp_path / "v.avi")
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), 100, (32, 24))
+    for k in range(30):
+        img = np.full((24, 32, 3), 40, np.uint8)
+        img[:, k] = 220                                     # a bright column sweeping right
+        writer.write(img)
+    writer.release()
+    times = np.cumsum(np.r_[0, np.full(29, 0.002)])        # 500 Hz, where the container says 100
+    ev = ef.events_from_frames(path, times)
+    assert ev.meta["duration_us"] == 58000 and 0 <= ev.t.min() and ev.t.max() <= 58000
+    at_rate = ef.events_from_frames(path)
+    assert at_rate.meta["duration_us"] == 290000 and len(at_rate) == len(ev)
+    np.savetxt(tmp_path / "short.txt", times[:-1])
+    code, err = _cli([path, "-o", tmp_path / "o.h5", "--times", tmp_path / "short.txt"], capfd)
+    assert code == 2 and err == f"eventfield: error: {path}: times: 29 values for 30 frames", err
+    assert not (tmp_path / "o.h5").exists()
+
+
+@pytest.mark.parametrize("times, message", [
+    ([0.0, 0.01, 0.01], r"^frames: times\[2\] = 0\.01 is not after times\[1\] = 0\.01: times must be strictly "
+                        r"increasing \(seconds\)$"),
+    ([0.0, float("nan"), 0.02], r"^frames: times\[1\] = nan: times must be finite \(seconds\)$"),
+    ([[0.0], [0.01], [0.02]], r"^frames: times: shape \(3, 1\): expected one value a frame \(a 1-D array\)$"),
+    ([0.0, 0.01], r"^frames: times: 2 values for 3 frames$"),
+])
+def test_bad_times_are_named(times, message):
+    with pytest.raises(ef.EventFieldError, match=message):
+        ef.events_from_frames(_ramp(), times)
+
+
+def test_one_clock_only(tmp_path, capfd):
+    """Times and a frame rate together are refused (one of them was ignored), from Python and the command
+    line; so are times for a stack that carries its own."""
+    with pytest.raises(ef.EventFieldError, match=r"^frames: fps = 100 and times given: give the frames' times or "
+                                                 r"their rate, not both$"):
+        ef.events_from_frames(_ramp(), UNEVEN, fps=100)
+    np.savez(tmp_path / "own.npz", frames=_ramp(), times=UNEVEN)
+    with pytest.raises(ef.EventFieldError, match=r"own\.npz: times given: this stack carries its own times"):
+        ef.events_from_frames(str(tmp_path / "own.npz"), UNEVEN)
+    np.savetxt(tmp_path / "t.txt", UNEVEN)
+    code, err = _cli([tmp_path / "own.npz", "-o", tmp_path / "o.h5", "--fps", "10", "--times", tmp_path / "t.txt"],
+                     capfd)
+    assert code == 2 and "not allowed with argument" in err and len(err.splitlines()) == 1
+    (tmp_path / "bad.txt").write_text("0.0\nzero point one\n")
+    with pytest.raises(ef.EventFieldError, match=r"bad\.txt: frame times: expected one number \(seconds\) a line"):
+        ef.events_from_frames(str(tmp_path / "own.npz"), str(tmp_path / "bad.txt"))
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_a_preset_by_name_in_pixel_and_pixel_values_checked(capfd):
+    frames = np.random.default_rng(4).random((8, 40, 60)) + 0.05       # large enough for davis346's readout cap
+    by_name = ef.events_from_frames(frames, fps=1000, pixel="davis346")
+    assert len(by_name) > 10 and by_name.equals(ef.events_from_frames(frames, fps=1000, preset="davis346"))
+    with pytest.raises(ef.EventFieldError, match=r"^pixel model: pixel = 3: expected a preset's name or a dict "
+                                                 r"of parameters \(allowed presets: ideal, "):
+        ef.events_from_frames(frames, fps=1000, pixel=3)
+    code, err = _cli(["x.npz", "-o", "o.h5", "--pixel", "seed=1.5"], capfd)
+    assert code == 2 and err == "eventfield: error: --pixel seed='1.5': seed takes an integer", err
