@@ -28,6 +28,9 @@ REL_TOL = 1e-3                  # 0.1 %: galvo depth is ~z / pivot = 10x as sens
 PHASE_TOL_DEG = 0.1             # Lissajous shape (relative phase after the best common time shift)
 GALVO_KEYS = ("fov_x_deg", "mirror_distance", "mirror_separation")
 SPATIAL_KEYS = ("focal_length", "focus_distance", "tube", "relay_distance")
+# carried, not compared (they follow from n and the keys above): the views a camera recording of the set-up,
+# which carries no optics, takes its light field from (cli/lightfield.recording_optics)
+SPATIAL_CARRIED = ("views", "lens_to_image_plane", "image_plane_size", "aperture_radius", "relay_aperture")
 SCAN_NOT_COMPARED = ("phase", "phase_x", "phase_y", "max_angle_deg")
 # the calibration kinds that act on each design's light fields
 KINDS_FOR_DESIGN = {"galvo": ("galvo", "depth"), "kaleidoscope": ("kaleidoscope",), "microlens": ("kaleidoscope",)}
@@ -46,7 +49,7 @@ def optics_record(optics: dict, width: int, height: int, where: str = "the data"
         raise EventFieldError(f"{where}: its metadata describes no light-field optics (optics.design is {design!r}; "
                               "expected galvo, kaleidoscope or microlens): a calibration cannot be checked against it")
     record = {"design": design, "width": int(width), "height": int(height)}
-    keys = ("scan",) + GALVO_KEYS if design == "galvo" else ("n",) + SPATIAL_KEYS
+    keys = ("scan",) + GALVO_KEYS if design == "galvo" else ("n",) + SPATIAL_KEYS + SPATIAL_CARRIED
     record.update({k: _plain(optics[k]) for k in keys if optics.get(k) is not None})
     missing = [k for k in ("scan",) + GALVO_KEYS if k not in record] if design == "galvo" else []
     if missing:

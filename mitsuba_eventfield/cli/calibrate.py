@@ -41,6 +41,11 @@ def add_parsers(sub) -> None:
                     help="the target's depth (scene units), when it is not at the focus distance: its parallax is "
                     "taken out of the registration")
     ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
+    ck.add_argument("--optics", help="JSON of the set-up's nominal kaleidoscope optics, for a camera frame that "
+                                     "carries none: \"design\": \"kaleidoscope\" and the sensor's parameters "
+                                     "(focal_length, focus_distance, tube_width, tube_height, tube_length, "
+                                     "relay_distance; aperture_radius, relay_aperture), in metres as in a scene; "
+                                     "recordings of the set-up then take their views from the calibration")
     ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
 
 
@@ -53,7 +58,7 @@ def _capture(path: str, a):
         if not a.optics:
             raise EventFieldError(f"{path}: the recording carries no optics: pass --optics FILE.json, the set-up's "
                                   "nominal galvo optics (fov_x_deg, mirror_distance, mirror_separation, scan)")
-        ev.meta["optics"] = nominal_optics(a.optics)
+        ev.meta["optics"] = nominal_optics(a.optics, ev.width, ev.height)
     return with_contrast(ev, a.contrast, path)
 
 
@@ -111,6 +116,11 @@ def _kaleidoscope(a) -> None:
     from ..images import read_exr
     frame = luminance_channel(a.frame)
     meta = read_exr(a.frame)[1].get("optics")
+    if a.optics:
+        if isinstance(meta, dict) and meta.get("design"):
+            raise EventFieldError(f"--optics {a.optics}: the frame {a.frame} carries its own ({meta['design']}) "
+                                  "optics; --optics is for a camera frame without them")
+        meta = nominal_optics(a.optics, frame.shape[1], frame.shape[0], design="kaleidoscope")
     # the tiles of a frame whose metadata says n are known; a bare frame's are found by their seams
     n = meta.get("n") if isinstance(meta, dict) and meta.get("design") == "kaleidoscope" else None
     try:

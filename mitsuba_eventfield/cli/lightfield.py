@@ -88,17 +88,44 @@ def with_contrast(ev, contrast, where: str):
     return ev
 
 
-def nominal_optics(path: str) -> dict:
-    """A galvo set-up's nominal optics from a JSON file (``--optics``), for a camera recording that carries
-    none: the fields a render records in ``meta["optics"]`` (design "galvo", fov_x_deg, mirror_distance,
-    mirror_separation, scan), each checked. Calibrating a recording needs them to start from; the calibration
-    then records them for the light-field commands."""
-    from ..optics.scan import curve_from_dict
-    from ..validate import json_file, positive
+# what from_events needs of each design's optics, beyond what a calibration's optics record always holds
+LIGHTFIELD_FIELDS = {"galvo": ("scan", "fov_x_deg", "mirror_distance", "mirror_separation"),
+                     "kaleidoscope": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance"),
+                     "microlens": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance")}
+
+
+def nominal_optics(path: str, width: int, height: int, design: str = "galvo") -> dict:
+    """A set-up's nominal optics from a JSON file (``--optics``), for a camera recording or frame that carries
+    none, as a render records them in ``meta["optics"]``; ``design`` is the one the command takes. Galvo: the
+    fields a render records (fov_x_deg, mirror_distance, mirror_separation, scan), each checked. Kaleidoscope
+    (or microlens): the sensor plugin's own parameters (focal_length, focus_distance, tube_width, ...), from
+    which the sensor itself, on this ``width`` x ``height`` film, gives the views, tiles and sub-apertures
+    (``kaleidoscope_sensor.optics_of``). Calibrating needs them to start from; the calibration then records
+    them for the light-field commands."""
+    from ..validate import json_file
     optics = json_file(path, "optics file")
-    if not isinstance(optics, dict) or optics.get("design") != "galvo":
-        raise EventFieldError(f"{path}: expected a JSON object with design \"galvo\" and "
-                              f"{', '.join(LIGHTFIELD_FIELDS['galvo'])}")
+    found = optics.get("design") if isinstance(optics, dict) else None
+    if design == "galvo":
+        fields = LIGHTFIELD_FIELDS["galvo"]
+    else:
+        from ..backend import ensure_variant
+        from ..plugins.kaleidoscope_sensor import PARAMETERS, optics_of
+        fields = PARAMETERS[design]
+    if found != design:
+        raise EventFieldError(f"{path}: design = {found!r}: this command takes {design} optics (a JSON object with "
+                              f"\"design\": \"{design}\" and {', '.join(fields)})")
+    if design == "galvo":
+        return _galvo_nominal(path, optics)
+    ensure_variant()                                  # the sensor plugin is registered with the variant
+    try:
+        return optics_of(design, {k: v for k, v in optics.items() if k != "design"}, width, height)
+    except ValueError as e:
+        raise EventFieldError(f"{path}: {e}") from None
+
+
+def _galvo_nominal(path: str, optics: dict) -> dict:
+    from ..optics.scan import curve_from_dict
+    from ..validate import positive
     missing = [k for k in LIGHTFIELD_FIELDS["galvo"] if k not in optics]
     if missing:
         raise EventFieldError(f"{path}: galvo optics without {', '.join(missing)}")
@@ -172,12 +199,6 @@ def _out_meta(a, events, lf=None, **extra):
                  "inputs": _inputs(a), "method": getattr(a, "method", None) or "default",
                  "optics": events.meta.get("optics"), "pixel_model": events.meta.get("pixel_model"),
                  "calibration": calibration}, **extra)
-
-
-# what from_events needs of each design's optics, beyond what a calibration's optics record always holds
-LIGHTFIELD_FIELDS = {"galvo": ("scan", "fov_x_deg", "mirror_distance", "mirror_separation"),
-                     "kaleidoscope": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance"),
-                     "microlens": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance")}
 
 
 def recording_optics(calibration, ev, where) -> dict:

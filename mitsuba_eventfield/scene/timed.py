@@ -313,6 +313,14 @@ def _unused_defines(e: Exception, text: str, xml_params: dict) -> str | None:
             f"are {', '.join(declared) or 'none'}")
 
 
+def plugin_message(e: Exception) -> str | None:
+    """The message of the Python exception a plugin raised inside a Mitsuba load (the last ``...Error: ...`` line
+    of the traceback Mitsuba embeds), or None when the error came from Mitsuba itself."""
+    import re
+    errors = re.findall(r"^\s*(?:\w+\.)*\w*(?:Error|Exception): (.+)$", str(e), flags=re.M)
+    return errors[-1] if errors and "Traceback (most recent call last)" in str(e) else None
+
+
 def _mitsuba_message(e: Exception) -> str:
     """The informative part of a Mitsuba loader error, on one line.
 
@@ -322,9 +330,7 @@ def _mitsuba_message(e: Exception) -> str:
     import re
     raw = str(e)
     if "Traceback (most recent call last)" in raw:
-        head = raw.split("Traceback (most recent call last)")[0]
-        errors = re.findall(r"^\s*(?:\w+\.)*\w*(?:Error|Exception): (.+)$", raw, flags=re.M)
-        raw = head + (errors[-1] if errors else "")
+        raw = raw.split("Traceback (most recent call last)")[0] + (plugin_message(e) or "")
     text = " ".join(raw.split())
     for marker in ("Error while loading", "Critical Dr.Jit compiler failure"):
         if marker in text:

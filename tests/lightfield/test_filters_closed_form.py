@@ -57,3 +57,17 @@ def test_complementary_relaxes_towards_the_latest_frame():
                                        atol=1e-12)
     # 20 ms after the second frame (5 time constants of 4 ms) the state is that frame's, not the first one's
     assert abs(out[-1, 0, 0] - frames[1, 0, 0]) < 0.02 and abs(out[-1, 0, 0] - frames[0, 0, 0]) > 1
+
+
+def test_events_at_the_start_instant_are_integrated():
+    """A camera recording's stream starts at its first event (its reader has no other start): the direct and
+    high-pass reconstructions dropped every event of that first microsecond (a kaleidoscope recording refocused
+    differently from the same events with a render's metadata). An event at t_start came after the start image,
+    and counts; one at a frame's time belongs to that frame."""
+    x, t, p = np.array([0, 1, 0]), np.array([1000, 1000, 3000]), np.array([1, -1, 1])
+    recording = ef.EventStream(x, np.zeros(3, int), t, p, 2, 1, {"t_start_us": 1000})
+    direct = reconstruct.direct(recording, [0.001, 0.002, 0.003], c_on=C_ON, c_off=C_OFF)
+    np.testing.assert_allclose(direct[:, 0], [[C_ON, -C_OFF], [C_ON, -C_OFF], [2 * C_ON, -C_OFF]], rtol=1e-12)
+    high = reconstruct.highpass(recording, [0.001, 0.002], cutoff_hz=CUTOFF, c_on=C_ON, c_off=C_OFF)
+    decay = math.exp(-ALPHA * 0.001)
+    np.testing.assert_allclose(high[:, 0], [[C_ON, -C_OFF], [C_ON * decay, -C_OFF * decay]], rtol=1e-12)

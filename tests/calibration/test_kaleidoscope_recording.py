@@ -1,0 +1,101 @@
+"""A kaleidoscope camera recording, which carries no optics, refocused and read for depth through a calibration
+made from a bare camera frame and the set-up's nominal optics (``calibrate kaleidoscope --optics``): before,
+such a calibration's record lacked the views, and the light-field commands refused every recording.
+
+Oracle: the same events with the render's own metadata (the sensor's optics, tested against geometry in
+tests/plugins/test_kaleidoscope.py) give the same refocused image and depth map, value for value, and the grid
+card of the scene sits 1 m away (scenes/moving_grid/grid_shapes.xml)."""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import ROOT, TEST_VARIANT
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.images import read_exr, write_exr
+
+SCENE = os.path.join(ROOT, "scenes", "moving_grid", "kaleidoscope.xml")
+# the scene's sensor, as its XML gives it (aperture and relay aperture at their defaults)
+NOMINAL = {"design": "kaleidoscope", "focal_length": 0.05, "focus_distance": 1.0, "tube_width": 0.012,
+           "tube_height": 0.012, "tube_length": 0.06, "relay_distance": 0.03}
+GRID_DEPTH = 1.0
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", *map(str, args)], capture_output=True,
+                          text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    """The render (.h5, with optics), the same events as an AEDAT4 camera recording (no optics, no thresholds),
+    the frame of the target with its metadata and stripped of it, and the nominal optics file."""
+    d = tmp_path_factory.mktemp("kaleido_recording")
+    ef.set_variant(TEST_VARIANT)
+    events = ef.render_events(ef.load_scene(SCENE, views_px=120), 0.01, steps=20)
+    ef.write_events(str(d / "rec.h5"), events)
+    ef.write_events(str(d / "rec.aedat4"), events)
+    r = _cli("frame", SCENE, "-o", d / "frame.exr", "-D", "views_px=120")
+    assert r.returncode == 0, r.stderr
+    write_exr(str(d / "bare.exr"), {"Y": read_exr(str(d / "frame.exr"))[0]["Y"]})
+    (d / "nominal.json").write_text(json.dumps(NOMINAL))
+    return d, events
+
+
+def test_a_camera_recording_takes_its_views_from_the_calibration(capture):
+    d, events = capture
+    recording = ef.read_events(str(d / "rec.aedat4"))
+    assert "optics" not in recording.meta and "pixel_model" not in recording.meta and recording.equals(events)
+    r = _cli("calibrate", "kaleidoscope", d / "bare.exr", "--optics", d / "nominal.json", "-o", d / "bare.json")
+    assert r.returncode == 0 and "3x3 views of 40x40 px" in r.stdout, r.stderr
+    record = json.load(open(d / "bare.json"))["kaleidoscope"]["optics"]
+    rendered = events.meta["optics"]
+    assert record["views"] == rendered["views"] and record["n"] == 3
+    for key in ("lens_to_image_plane", "image_plane_size", "aperture_radius", "focus_distance"):
+        assert record[key] == pytest.approx(rendered[key], rel=1e-12), key
+    outputs = {}
+    for name, source, extra in (("recording", "rec.aedat4", ["--calibration", d / "bare.json", "--contrast", "0.2"]),
+                                ("render", "rec.h5", [])):
+        r = _cli("refocus", d / source, "--depth", "1.0", "-o", d / f"rf_{name}.png", *extra)
+        assert r.returncode == 0, r.stderr
+        r = _cli("depth", d / source, "--near", "0.5", "--far", "3", "-o", d / f"dp_{name}.png", *extra)
+        assert r.returncode == 0, r.stderr
+        outputs[name] = (read_exr(str(d / f"rf_{name}.exr"))[0]["Y"], read_exr(str(d / f"dp_{name}.exr"))[0])
+    (image, depth), (image_ref, depth_ref) = outputs["recording"], outputs["render"]
+    assert image.std() > 1 and np.array_equal(image, image_ref)
+    assert np.array_equal(depth["depth"], depth_ref["depth"])
+    confident = depth["confidence"] > 0.3
+    assert confident.mean() > 0.2
+    assert abs(np.median(depth["depth"][confident]) / GRID_DEPTH - 1) < 0.03
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"design": "galvo"}, r"nominal\.json: design = 'galvo': this command takes kaleidoscope optics \(a JSON object "
+                          r"with \"design\": \"kaleidoscope\" and focal_length, "),
+    ({"relay_distanc": 0.03}, r"nominal\.json: relay_distanc: not a parameter of the kaleidoscope \(allowed: "),
+    ({"relay_distance": 0.02}, r"nominal\.json: sensor 'kaleidoscope': \(relay_distance \+ tube_length\) / "
+                               r"relay_distance = 4 must be an odd integer n .*relay_distance = 0\.03 for 3x3"),
+    ({"tube_length": "6 cm"}, r"nominal\.json: tube_length = '6 cm': expected a number \(metres\)$"),
+    ({"tube_width": 0.01}, r"nominal\.json: sensor 'kaleidoscope': film 120x120 and tube 0\.01x0\.012 differ in "
+                           r"aspect ratio"),
+])
+def test_nominal_optics_are_checked(capture, tmp_path, change, message):
+    import re
+    d, _ = capture
+    bad = tmp_path / "nominal.json"
+    bad.write_text(json.dumps(dict(NOMINAL, **change)))
+    r = _cli("calibrate", "kaleidoscope", d / "bare.exr", "--optics", bad, "-o", tmp_path / "k.json")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and re.search(message, err[0]), err
+    assert not (tmp_path / "k.json").exists()
+
+
+def test_optics_for_a_frame_that_carries_its_own_are_refused(capture, tmp_path):
+    d, _ = capture
+    r = _cli("calibrate", "kaleidoscope", d / "frame.exr", "--optics", d / "nominal.json", "-o", tmp_path / "k.json")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "carries its own (kaleidoscope) optics" in err[0], err
+    assert not (tmp_path / "k.json").exists()
