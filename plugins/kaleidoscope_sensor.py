@@ -235,7 +235,7 @@ def optics_of(layout: str, params: dict, width: int, height: int) -> dict:
     these parameters (names of ``PARAMETERS``, defaults as the table's) on a ``width`` x ``height`` film, from
     the sensor itself, so that a camera recording's light field takes its views from the same code as a
     render's. Raises ValueError with one line naming the parameter (the sensor's own checks)."""
-    from mitsuba_eventfield.scene.timed import plugin_message
+    from mitsuba_eventfield.errors import plugin_message
     if layout not in PARAMETERS:
         raise ValueError(f"design = {layout!r}: allowed values are {', '.join(PARAMETERS)}")
     unknown = sorted(set(params) - set(PARAMETERS[layout]))

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import backend
-from ..errors import EventFieldError
+from ..errors import EventFieldError, plugin_message
 from . import instancing
 from . import sampler as sampler_module
 from .motion import Motion, load_motion, motion_path_for, parse_motion
@@ -311,14 +311,6 @@ def _unused_defines(e: Exception, text: str, xml_params: dict) -> str | None:
     unknown = [k for k in xml_params if k not in declared]
     return (f"-D {', '.join(unknown) or ', '.join(xml_params)}: not a value the scene declares; its <default> values "
             f"are {', '.join(declared) or 'none'}")
-
-
-def plugin_message(e: Exception) -> str | None:
-    """The message of the Python exception a plugin raised inside a Mitsuba load (the last ``...Error: ...`` line
-    of the traceback Mitsuba embeds), or None when the error came from Mitsuba itself."""
-    import re
-    errors = re.findall(r"^\s*(?:\w+\.)*\w*(?:Error|Exception): (.+)$", str(e), flags=re.M)
-    return errors[-1] if errors and "Traceback (most recent call last)" in str(e) else None
 
 
 def _mitsuba_message(e: Exception) -> str:
