@@ -72,6 +72,9 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     backend.ensure_variant()
     check_on_device(on_device, output)
     group = None if frames_per_kernel is None else positive(frames_per_kernel, "frames_per_kernel", integer=True)
+    if isinstance(frames, FrameSource) and (times is not None or fps is not None):
+        raise EventFieldError(f"{frames.name}: a FrameSource yields its frames' times: times and fps are for arrays, "
+                              "paths and device arrays")
     source = frames if isinstance(frames, FrameSource) else \
         open_frames(frames, fps, srgb, times) if isinstance(frames, (str, os.PathLike)) else \
         from_device(frames, times, fps, srgb) if is_device_array(frames) else from_array(frames, times, fps, srgb)

@@ -117,3 +117,11 @@ def test_a_preset_by_name_in_pixel_and_pixel_values_checked(capfd):
         ef.events_from_frames(frames, fps=1000, pixel=3)
     code, err = _cli(["x.npz", "-o", "o.h5", "--pixel", "seed=1.5"], capfd)
     assert code == 2 and err == "eventfield: error: --pixel seed='1.5': seed takes an integer", err
+
+
+def test_a_frame_source_keeps_its_own_times():
+    from mitsuba_eventfield.simulate.frame_sources import from_array
+    source = from_array(_ramp(), UNEVEN)
+    assert ef.events_from_frames(source, threshold=0.2).t.tolist() == [4000, 8000]
+    with pytest.raises(ef.EventFieldError, match=r"^frames: a FrameSource yields its frames' times"):
+        ef.events_from_frames(from_array(_ramp(), UNEVEN), [0.0, 0.1, 0.2])
