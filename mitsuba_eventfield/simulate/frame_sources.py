@@ -102,8 +102,7 @@ def check_times(times, count: int, where: str) -> np.ndarray:
     if len(back):
         i = back[0] + 1
         raise EventFieldError(f"{where}: times[{i}] = {float(t[i])!r} is not after times[{i - 1}] = "
-                              f"{float(t[i - 1])!r}: times "
-                              "must be strictly increasing (seconds)")
+                              f"{float(t[i - 1])!r}: times must be strictly increasing (seconds)")
     return t
 
 
