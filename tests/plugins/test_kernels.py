@@ -14,8 +14,12 @@ def _misses(history):
 
 def _steady_render(timed, steps=12):
     """(events, steady-state JIT kernels, those compiled late) of a 12-step render after a warm-up render
-    that compiles every kernel once, with Dr.Jit's kernel history on."""
-    ef.render_events(timed, 0.002, steps=3)
+    that compiles every kernel once, with Dr.Jit's kernel history on. The warm-up is the same render at other
+    instants: the same step batches and chunk spans (a batch's time sort takes one kernel variant per bit
+    count of its span: a shorter warm-up left the measured render's last two-pass sort to compile late, and
+    the test passed only after another test had compiled it), while a time baked into a kernel as a literal
+    would still compile anew at every step of the measured render."""
+    ef.render_events(timed, 0.001 * steps, steps=steps, t_start=0.05)
     dr.kernel_history()                                     # clear
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
