@@ -70,10 +70,12 @@ def direct(events: EventStream, times, log_start=None, t_start: float | None = N
     start = np.zeros((h, w)) if log_start is None else np.asarray(log_start, dtype=np.float64).reshape(h, w)
     t0 = events.meta.get("t_start_us", 0) * 1e-6 if t_start is None else t_start
     t_us = np.rint(np.concatenate([[t0], times]) * 1e6).astype(np.int64)
-    # an event at exactly t belongs to the frame at t (the ideal pixel fired by then), and one at exactly the
-    # start to what is integrated: it came after the start image (a camera recording's stream starts at its
-    # first event, which was dropped; a render's events round to microseconds, so one can sit on its start)
-    idx = np.r_[np.searchsorted(events.t, t_us[:1], side="left"), np.searchsorted(events.t, t_us[1:], side="right")]
+    # an event at exactly t belongs to the frame at t (the ideal pixel fired by then), so a start image given
+    # for ``t_start`` holds the events at t_start (a galvo period's prior, chained integration). From the
+    # stream's own start nothing of the stream precedes, and every event counts: a camera recording's stream
+    # starts at its first event, which was dropped
+    idx = np.r_[np.searchsorted(events.t, t_us[:1], side="left" if t_start is None else "right"),
+                np.searchsorted(events.t, t_us[1:], side="right")]
     pix, wts = _pixel_index(events), _signed_weights(events, c_on, c_off)
     out = np.empty((len(times), h, w))
     acc = start.ravel().copy()
@@ -101,7 +103,8 @@ def _filtered(events, times, cutoff_hz, c_on, c_off, frames=None, frame_times=No
     state = frames[0].copy() if frames is not None else np.zeros(h * w)
     target = frames[0] if frames is not None else np.zeros(h * w)
     out, k_out, t_prev = np.empty((len(times), h, w)), 0, t0
-    i1 = np.searchsorted(t_ev, t0, side="left")     # events at the start instant count, as in ``direct``
+    # from the stream's own start every event counts (as in ``direct``); the first frame holds those at its time
+    i1 = np.searchsorted(t_ev, t0, side="left" if frames is None else "right")
     for t in marks:
         i0, i1 = i1, np.searchsorted(t_ev, t, side="right")
         decay = math.exp(-alpha * (t - t_prev))

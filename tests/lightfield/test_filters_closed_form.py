@@ -71,3 +71,10 @@ def test_events_at_the_start_instant_are_integrated():
     high = reconstruct.highpass(recording, [0.001, 0.002], cutoff_hz=CUTOFF, c_on=C_ON, c_off=C_OFF)
     decay = math.exp(-ALPHA * 0.001)
     np.testing.assert_allclose(high[:, 0], [[C_ON, -C_OFF], [C_ON * decay, -C_OFF * decay]], rtol=1e-12)
+    # from a given start (a prior that holds the events up to it, chained integration) they are not counted
+    # twice; nor on top of a first frame at their time
+    chained = reconstruct.direct(recording, [0.003], direct[0], t_start=0.001, c_on=C_ON, c_off=C_OFF)
+    np.testing.assert_allclose(chained[0], direct[2], rtol=1e-12)
+    anchored = reconstruct.complementary(recording, [0.001], frames=[np.zeros((1, 2))], frame_times=[0.001],
+                                         cutoff_hz=CUTOFF, c_on=C_ON, c_off=C_OFF)
+    assert np.all(anchored == 0)
