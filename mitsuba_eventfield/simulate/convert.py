@@ -23,7 +23,8 @@ from ..events.io import format_of
 from ..plugins import event_batch, event_fill, pixel_model, pixel_step
 from ..validate import positive
 from .device_stream import check_on_device
-from .frame_sources import FrameSource, check_span, from_array, from_device, is_device_array, open_frames
+from .frame_sources import (FrameSource, check_span, from_array, from_device, is_device_array, open_frames,
+                            read_times)
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary
 
@@ -72,6 +73,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     backend.ensure_variant()
     check_on_device(on_device, output)
     group = None if frames_per_kernel is None else positive(frames_per_kernel, "frames_per_kernel", integer=True)
+    times = read_times(times)                    # a timestamps file, for any kind of input
     if isinstance(frames, FrameSource) and (times is not None or fps is not None):
         raise EventFieldError(f"{frames.name}: a FrameSource yields its frames' times: times and fps are for arrays, "
                               "paths and device arrays")

@@ -80,30 +80,40 @@ def intensity(frame: np.ndarray, srgb: bool = False, bgr: bool = False, where: s
 def _uniform_rate(fps: float | None, where: str) -> float:
     """The frame rate, checked: frames without times need one."""
     if fps is None:
-        raise EventFieldError(f"{where}: give the frame rate (--fps / fps=): the frames carry no times")
+        raise EventFieldError(f"{where}: give the frame rate (--fps / fps=) or the frames' times (--times FILE / "
+                              "times=): the frames carry no times")
     return number(fps, f"{where}: fps", 0, lo_open=True, error=EventFieldError)
 
 
-def check_times(times, count: int, where: str) -> np.ndarray:
-    """``times`` as float64 seconds, one a frame, finite and strictly increasing; else one line naming the
-    first value that is not."""
+def check_times(times, count: int | None, where: str, name: str = "times", unit: str = "seconds") -> np.ndarray:
+    """``times`` as float64, one a frame (``count`` frames; None: not known yet, at least 2), finite and
+    strictly increasing; else one line naming the first value that is not (``name`` and ``unit`` as the
+    caller's input calls them)."""
     try:
         t = np.asarray(times, dtype=np.float64)
     except (TypeError, ValueError):
-        raise EventFieldError(f"{where}: times: expected numbers (seconds), got {np.asarray(times).dtype}") from None
+        raise EventFieldError(f"{where}: {name}: expected numbers ({unit}), got {np.asarray(times).dtype}") from None
     if t.ndim != 1:
-        raise EventFieldError(f"{where}: times: shape {t.shape}: expected one value a frame (a 1-D array)")
-    if len(t) != count:
-        raise EventFieldError(f"{where}: times: {len(t)} values for {count} frames")
+        raise EventFieldError(f"{where}: {name}: shape {t.shape}: expected one value a frame (a 1-D array)")
+    if count is not None and len(t) != count:
+        raise EventFieldError(times_mismatch(where, len(t), count, name))
+    if len(t) < 2:
+        raise EventFieldError(f"{where}: {name}: {len(t)} values: a conversion needs at least 2 frames")
     bad = np.flatnonzero(~np.isfinite(t))
     if len(bad):
-        raise EventFieldError(f"{where}: times[{bad[0]}] = {float(t[bad[0]])!r}: times must be finite (seconds)")
+        raise EventFieldError(f"{where}: {name}[{bad[0]}] = {float(t[bad[0]])!r}: {name} must be finite ({unit})")
     back = np.flatnonzero(np.diff(t) <= 0)
     if len(back):
         i = back[0] + 1
-        raise EventFieldError(f"{where}: times[{i}] = {float(t[i])!r} is not after times[{i - 1}] = "
-                              f"{float(t[i - 1])!r}: times must be strictly increasing (seconds)")
+        raise EventFieldError(f"{where}: {name}[{i}] = {float(t[i])!r} is not after {name}[{i - 1}] = "
+                              f"{float(t[i - 1])!r}: {name} must be strictly increasing ({unit})")
     return t
+
+
+def times_mismatch(where: str, given: int, frames, name: str = "times") -> str:
+    """The one message for times that do not match the frames one to one (``frames``: a count, or text such as
+    "more than 29" where the end is not known yet)."""
+    return f"{where}: {name}: {given} values for {frames} frames: give one time a frame"
 
 
 def read_times(times):
@@ -111,11 +121,14 @@ def read_times(times):
     and ``#`` comments skipped; a timestamps file as ESIM's and rpg_vid2e's tools write). None stays None."""
     if times is None or not isinstance(times, (str, os.PathLike)):
         return times
+    import warnings
     path = os.fspath(times)
     try:
         if path.lower().endswith(".npy"):
             return np.load(path, allow_pickle=False)
-        return np.loadtxt(path, dtype=np.float64, comments="#", ndmin=1)
+        with warnings.catch_warnings():     # an empty file: NumPy warns, and check_times says it in one line
+            warnings.simplefilter("ignore", UserWarning)
+            return np.loadtxt(path, dtype=np.float64, comments="#", ndmin=1)
     except OSError as e:
         raise EventFieldError(f"{path}: cannot read the frame times ({e.strerror or type(e).__name__})") from None
     except ValueError as e:
@@ -136,12 +149,11 @@ def _times_of(times, count: int | None, fps, where: str):
     if times is None:
         rate = _uniform_rate(fps, where)
         return (lambda i: i / rate), ((count - 1) / rate if count else None)
-    t = check_times(times, count if count is not None else len(np.ravel(times)), where)
+    t = check_times(times, count, where)
 
     def time_of(i):
         if i >= len(t):
-            raise EventFieldError(f"{where}: times: {len(t)} values, and the frames go on past them: give one "
-                                  "time a frame")
+            raise EventFieldError(times_mismatch(where, len(t), f"more than {len(t)}"))
         return float(t[i])
     return time_of, float(t[-1] - t[0])
 
@@ -241,7 +253,7 @@ def from_npz(path: str, fps=None, srgb=False, times=None) -> FrameSource:
         raise EventFieldError(f"{path}: not a readable .npz ({' '.join(str(e).split())[:100] or type(e).__name__})") \
             from None
     if times_key == "timestamps_us":
-        times = check_times(times, len(times), path) * 1e-6
+        times = check_times(times, None, path, name="timestamps_us", unit="microseconds") * 1e-6
     src = from_array(frames, times, fps, srgb, where=path)
     src.describe = {"kind": "npz", "path": os.path.abspath(path)}
     return src
@@ -367,8 +379,7 @@ def from_video(path: str, fps=None, srgb=False, times=None) -> FrameSource:
                         raise EventFieldError(f"{path}: frame {i + 1} of {count} unreadable (the video is cut or "
                                               "damaged): nothing written")
                     if times is not None and i != len(times):
-                        raise EventFieldError(f"{path}: times: {len(times)} values for {i} frames: give one time "
-                                              "a frame")
+                        raise EventFieldError(times_mismatch(path, len(times), i))
                     return
                 yield time_of(i), intensity(img, srgb, bgr=True, where=f"{path} frame {i}")
                 i += 1
@@ -391,8 +402,7 @@ def check_span(where: str, span_s: float | None) -> None:
 
 def open_frames(path: str, fps=None, srgb=False, times=None) -> FrameSource:
     """The right reader for ``path``: a folder of images, an ``.npz`` stack or a video file; ``times``: the
-    frames' times in seconds (an array, or a file :func:`read_times` reads) instead of a frame rate."""
-    times = read_times(times)
+    frames' times in seconds instead of a frame rate."""
     if os.path.isdir(path):
         return from_folder(path, fps, srgb, times)
     if not os.path.exists(path):

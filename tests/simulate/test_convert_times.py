@@ -57,15 +57,19 @@ def test_a_folder_at_given_times_equals_the_same_frames_as_an_array(tmp_path, ca
     assert ef.events_from_frames(str(tmp_path / "f"), str(tmp_path / "t.npy")).equals(from_array)
 
 
-def test_a_video_at_given_times(tmp_path, capfd):
+def _video(path, frames=30):
     cv2 = pytest.importorskip("cv2")
-    path = str(tmp_path / "v.avi")
-    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), 100, (32, 24))
-    for k in range(30):
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 100, (32, 24))
+    for k in range(frames):
         img = np.full((24, 32, 3), 40, np.uint8)
         img[:, k] = 220                                     # a bright column sweeping right
         writer.write(img)
     writer.release()
+    return str(path)
+
+
+def test_a_video_at_given_times(tmp_path, capfd):
+    path = _video(tmp_path / "v.avi")
     times = np.cumsum(np.r_[0, np.full(29, 0.002)])        # 500 Hz, where the container says 100
     ev = ef.events_from_frames(path, times)
     assert ev.meta["duration_us"] == 58000 and 0 <= ev.t.min() and ev.t.max() <= 58000
@@ -73,7 +77,8 @@ def test_a_video_at_given_times(tmp_path, capfd):
     assert at_rate.meta["duration_us"] == 290000 and len(at_rate) == len(ev)
     np.savetxt(tmp_path / "short.txt", times[:-1])
     code, err = _cli([path, "-o", tmp_path / "o.h5", "--times", tmp_path / "short.txt"], capfd)
-    assert code == 2 and err == f"eventfield: error: {path}: times: 29 values for 30 frames", err
+    assert code == 2 and err == f"eventfield: error: {path}: times: 29 values for 30 frames: give one time a " \
+        "frame", err
     assert not (tmp_path / "o.h5").exists()
 
 
@@ -82,7 +87,7 @@ def test_a_video_at_given_times(tmp_path, capfd):
                         r"increasing \(seconds\)$"),
     ([0.0, float("nan"), 0.02], r"^frames: times\[1\] = nan: times must be finite \(seconds\)$"),
     ([[0.0], [0.01], [0.02]], r"^frames: times: shape \(3, 1\): expected one value a frame \(a 1-D array\)$"),
-    ([0.0, 0.01], r"^frames: times: 2 values for 3 frames$"),
+    ([0.0, 0.01], r"^frames: times: 2 values for 3 frames: give one time a frame$"),
 ])
 def test_bad_times_are_named(times, message):
     with pytest.raises(ef.EventFieldError, match=message):
@@ -125,3 +130,43 @@ def test_a_frame_source_keeps_its_own_times():
     assert ef.events_from_frames(source, threshold=0.2).t.tolist() == [4000, 8000]
     with pytest.raises(ef.EventFieldError, match=r"^frames: a FrameSource yields its frames' times"):
         ef.events_from_frames(from_array(_ramp(), UNEVEN), [0.0, 0.1, 0.2])
+
+
+def test_times_against_a_video_read_to_its_end(tmp_path):
+    """A Matroska file's frame count is an estimate: given times are checked frame by frame, then at the end,
+    with the same message as where the count is exact."""
+    path = _video(tmp_path / "v.mkv")
+    times = np.arange(30) * 0.002
+    assert ef.events_from_frames(path, times).meta["duration_us"] == 58000
+    for wrong, frames in ((times[:-1], "more than 29"), (np.arange(31) * 0.002, "30")):
+        with pytest.raises(ef.EventFieldError, match=rf"v\.mkv: times: {len(wrong)} values for {frames} frames: "
+                                                     r"give one time a frame$"):
+            ef.events_from_frames(path, wrong)
+
+
+def test_times_files_and_clocks_for_every_input(tmp_path):
+    """A timestamps file works for an array as for a path; an empty one, an npz's own microseconds beside given
+    times, and a folder's rate beside times are each one line."""
+    np.savetxt(tmp_path / "t.txt", UNEVEN)
+    assert ef.events_from_frames(_ramp(), str(tmp_path / "t.txt"), threshold=0.2).t.tolist() == [4000, 8000]
+    (tmp_path / "empty.txt").write_text("# nothing\n")
+    with pytest.raises(ef.EventFieldError, match=r"^frames: times: 0 values for 3 frames: give one time a frame$"):
+        ef.events_from_frames(_ramp(), str(tmp_path / "empty.txt"))
+    np.savez(tmp_path / "us.npz", frames=_ramp(), timestamps_us=[0, 10000, 10000])
+    with pytest.raises(ef.EventFieldError, match=r"us\.npz: times given: this stack carries its own times "
+                                                 r"\('timestamps_us'\)"):
+        ef.events_from_frames(str(tmp_path / "us.npz"), UNEVEN)
+    with pytest.raises(ef.EventFieldError, match=r"us\.npz: timestamps_us\[2\] = 10000\.0 is not after "
+                                                 r"timestamps_us\[1\] = 10000\.0: timestamps_us must be strictly "
+                                                 r"increasing \(microseconds\)$"):
+        ef.events_from_frames(str(tmp_path / "us.npz"))
+    cv2 = pytest.importorskip("cv2")
+    (tmp_path / "f").mkdir()
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / "f" / f"{i}.png"), np.full((4, 4), 50 * (i + 1), np.uint8))
+    with pytest.raises(ef.EventFieldError, match=r"f: fps = 10 and times given: give the frames' times or their "
+                                                 r"rate, not both$"):
+        ef.events_from_frames(str(tmp_path / "f"), UNEVEN, fps=10)
+    with pytest.raises(ef.EventFieldError, match=r"f: give the frame rate \(--fps / fps=\) or the frames' times "
+                                                 r"\(--times FILE / times=\)"):
+        ef.events_from_frames(str(tmp_path / "f"))
