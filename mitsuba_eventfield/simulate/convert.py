@@ -58,9 +58,9 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     (folder of images, ``.npz`` with ``frames`` and ``times``, or a video), or a ``FrameSource``; a (T, H, W)
     float stack already on the device (a Dr.Jit tensor, or PyTorch / CuPy through DLPack) stays there
     (``frame_sources.from_device``; with ``on_device`` nothing crosses to the host at all). ``times``:
-    seconds per frame (an array, or for a path a timestamps file: ``.npy`` or text, one time a line), or
-    ``fps`` (not both; an ``.npz`` with its own times takes neither). ``preset`` / ``pixel`` / ``threshold``: the pixel model, as for
-    :func:`render_events`. ``srgb=True`` decodes gamma-encoded frames to linear light first.
+    seconds per frame (an array, or a timestamps file: ``.npy`` or text, one time a line), or ``fps`` (not
+    both; an ``.npz`` with its own times takes neither). ``preset`` / ``pixel`` / ``threshold``: the pixel
+    model, as for :func:`render_events`. ``srgb=True`` decodes gamma-encoded frames to linear light first.
     ``frames_per_kernel``: frames the pixel model takes per kernel where it can (``event_batch``; the events
     are the same, only the speed changes); None picks by film size and backend.
 
@@ -73,13 +73,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     backend.ensure_variant()
     check_on_device(on_device, output)
     group = None if frames_per_kernel is None else positive(frames_per_kernel, "frames_per_kernel", integer=True)
-    times = read_times(times)                    # a timestamps file, for any kind of input
-    if isinstance(frames, FrameSource) and (times is not None or fps is not None):
-        raise EventFieldError(f"{frames.name}: a FrameSource yields its frames' times: times and fps are for arrays, "
-                              "paths and device arrays")
-    source = frames if isinstance(frames, FrameSource) else \
-        open_frames(frames, fps, srgb, times) if isinstance(frames, (str, os.PathLike)) else \
-        from_device(frames, times, fps, srgb) if is_device_array(frames) else from_array(frames, times, fps, srgb)
+    source = frame_source(frames, times, fps, srgb)
     too_large = event_fill.film_limit_error(source.width, source.height)
     if too_large:
         raise EventFieldError(f"{source.name}: {too_large}")
@@ -114,6 +108,20 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
         sink.abort()
         raise
     return summary if output else stream
+
+
+def frame_source(frames, times, fps, srgb: bool) -> FrameSource:
+    """The reader of ``frames`` (a FrameSource, a path, a device array or an array), with ``times`` (an array
+    or a timestamps file, read here for every kind of input) or ``fps``."""
+    times = read_times(times)
+    if isinstance(frames, FrameSource):
+        if times is not None or fps is not None:
+            raise EventFieldError(f"{frames.name}: a FrameSource yields its frames' times: times and fps are for "
+                                  "arrays, paths and device arrays")
+        return frames
+    if isinstance(frames, (str, os.PathLike)):
+        return open_frames(frames, fps, srgb, times)
+    return from_device(frames, times, fps, srgb) if is_device_array(frames) else from_array(frames, times, fps, srgb)
 
 
 def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progress: bool,
