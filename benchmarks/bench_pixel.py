@@ -138,7 +138,7 @@ def draw_floors(n_pix, frames, reps=20):
 
     def hashed(b, state, acc):
         def u(stream):
-            return counter_rng.uniform(mi, pixel, b, counter_rng.stream_word(seed, stream))
+            return counter_rng.draw(mi, pixel, b, seed, stream)
         g = mi.warp.square_to_std_normal(mi.Point2f(u(counter_rng.JITTER_ON), u(counter_rng.JITTER_OFF)))
         wait = -dr.log(1.0 - u(counter_rng.NOISE_WAIT))
         return b + 1, state, acc + g.x + g.y + u(counter_rng.NOISE_POLARITY) + wait

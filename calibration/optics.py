@@ -12,8 +12,9 @@ Compared, within ``REL_TOL``: film width and height (exactly), and
   table sizes, mirror bandwidth). Not its phase: that is what the galvo calibration measures. For a Lissajous
   figure the two phases minus a common time shift (its shape) are compared. Not ``max_angle_deg`` either (the
   mirror's safety limit, not optics), nor aperture and focus (blur only);
-* kaleidoscope: the view count n, and the main lens and tube where both records know them (a calibration made
-  from a bare EXR frame knows only its size and the tiles it found).
+* kaleidoscope: the view count n, and the main lens (focal length, focus, aperture) and tube (size, relay
+  distance and aperture) where both records know them (a calibration made from a bare EXR frame without
+  ``--optics`` knows only its size and the tiles it found).
 """
 from __future__ import annotations
 
@@ -27,10 +28,10 @@ from mitsuba_eventfield.errors import EventFieldError
 REL_TOL = 1e-3                  # 0.1 %: galvo depth is ~z / pivot = 10x as sensitive to the scales (1 % of depth)
 PHASE_TOL_DEG = 0.1             # Lissajous shape (relative phase after the best common time shift)
 GALVO_KEYS = ("fov_x_deg", "mirror_distance", "mirror_separation")
-SPATIAL_KEYS = ("focal_length", "focus_distance", "tube", "relay_distance")
+SPATIAL_KEYS = ("focal_length", "focus_distance", "tube", "relay_distance", "aperture_radius", "relay_aperture")
 # carried, not compared (they follow from n and the keys above): the views a camera recording of the set-up,
 # which carries no optics, takes its light field from (cli/lightfield.recording_optics)
-SPATIAL_CARRIED = ("views", "lens_to_image_plane", "image_plane_size", "aperture_radius", "relay_aperture")
+SPATIAL_CARRIED = ("views", "lens_to_image_plane", "image_plane_size")
 SCAN_NOT_COMPARED = ("phase", "phase_x", "phase_y", "max_angle_deg")
 # the calibration kinds that act on each design's light fields
 KINDS_FOR_DESIGN = {"galvo": ("galvo", "depth"), "kaleidoscope": ("kaleidoscope",), "microlens": ("kaleidoscope",)}

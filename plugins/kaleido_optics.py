@@ -31,6 +31,15 @@ from __future__ import annotations
 import math
 
 
+# what describes a set-up of each layout (the ``kaleidoscope`` sensor's parameter table), e.g. in a nominal
+# optics file for a camera recording (``kaleidoscope_sensor.optics_of``); the microlens image plane is
+# tube_width x tube_height
+SETUP_PARAMETERS = {"kaleidoscope": ("focal_length", "focus_distance", "aperture_radius", "tube_width", "tube_height",
+                                     "tube_length", "relay_distance", "relay_aperture"),
+                    "microlens": ("focal_length", "focus_distance", "aperture_radius", "tube_width", "tube_height",
+                                  "views")}
+
+
 def kaleido_geometry(tube_width, tube_height, tube_length, relay_distance, focal_length, focus_distance,
                      aperture_radius, relay_aperture, where="sensor 'kaleidoscope'"):
     """Derived constants and checks; raises ValueError naming the parameter and what would be allowed."""

@@ -224,29 +224,25 @@ def _define_class():
 sensor_class = per_variant(_define_class)   # the KaleidoscopeSensor class of the active variant
 
 
-# what describes a set-up of each layout (the parameter table above), e.g. in a nominal optics file
-PARAMETERS = {"kaleidoscope": ("focal_length", "focus_distance", "aperture_radius", "tube_width", "tube_height",
-                               "tube_length", "relay_distance", "relay_aperture"),
-              "microlens": ("focal_length", "focus_distance", "aperture_radius", "views")}
-
-
 def optics_of(layout: str, params: dict, width: int, height: int) -> dict:
     """The optics record (:meth:`optics_metadata`: views, tiles, sub-apertures) of a ``layout`` set-up with
-    these parameters (names of ``PARAMETERS``, defaults as the table's) on a ``width`` x ``height`` film, from
+    these parameters (names of ``kaleido_optics.SETUP_PARAMETERS``, defaults as the table's) on a ``width`` x ``height`` film, from
     the sensor itself, so that a camera recording's light field takes its views from the same code as a
     render's. Raises ValueError with one line naming the parameter (the sensor's own checks)."""
     from mitsuba_eventfield.errors import plugin_message
-    if layout not in PARAMETERS:
-        raise ValueError(f"design = {layout!r}: allowed values are {', '.join(PARAMETERS)}")
-    unknown = sorted(set(params) - set(PARAMETERS[layout]))
+    allowed = kaleido_optics.SETUP_PARAMETERS
+    if layout not in allowed:
+        raise ValueError(f"design = {layout!r}: allowed values are {', '.join(allowed)}")
+    unknown = sorted(set(params) - set(allowed[layout]))
     if unknown:
         raise ValueError(f"{', '.join(unknown)}: not a parameter of the {layout} (allowed: "
-                         f"{', '.join(PARAMETERS[layout])})")
+                         f"{', '.join(allowed[layout])})")
     values = {}
     for name, v in params.items():
         integer = name == "views"
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and v != int(v)):
-            raise ValueError(f"{name} = {v!r}: expected {'an integer' if integer else 'a number (metres)'}")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or \
+                (integer and v != int(v)):
+            raise ValueError(f"{name} = {v!r}: expected {'an integer' if integer else 'a finite number (metres)'}")
         values[name] = int(v) if integer else float(v)
     try:
         sensor = mi.load_dict({"type": "kaleidoscope", "layout": layout, **values,

@@ -41,11 +41,12 @@ def add_parsers(sub) -> None:
                     help="the target's depth (scene units), when it is not at the focus distance: its parallax is "
                     "taken out of the registration")
     ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
+    from ..plugins.kaleido_optics import SETUP_PARAMETERS      # pure (no Mitsuba): --help stays quick
     ck.add_argument("--optics", help="JSON of the set-up's nominal kaleidoscope optics, for a camera frame that "
                                      "carries none: \"design\": \"kaleidoscope\" and the sensor's parameters "
-                                     "(focal_length, focus_distance, tube_width, tube_height, tube_length, "
-                                     "relay_distance; aperture_radius, relay_aperture), in metres as in a scene; "
-                                     "recordings of the set-up then take their views from the calibration")
+                                     f"({', '.join(SETUP_PARAMETERS['kaleidoscope'])}; each optional, defaults as "
+                                     "the sensor's), in metres as in a scene; recordings of the set-up then take "
+                                     "their views from the calibration")
     ck.add_argument("-o", "--output", required=True, help="calibration JSON (created or extended)")
 
 

@@ -109,8 +109,9 @@ def nominal_optics(path: str, width: int, height: int, design: str = "galvo") ->
         fields = LIGHTFIELD_FIELDS["galvo"]
     else:
         from ..backend import ensure_variant
-        from ..plugins.kaleidoscope_sensor import PARAMETERS, optics_of
-        fields = PARAMETERS[design]
+        from ..plugins.kaleido_optics import SETUP_PARAMETERS
+        from ..plugins.kaleidoscope_sensor import optics_of
+        fields = SETUP_PARAMETERS[design]
     if found != design:
         raise EventFieldError(f"{path}: design = {found!r}: this command takes {design} optics (a JSON object with "
                               f"\"design\": \"{design}\" and {', '.join(fields)})")

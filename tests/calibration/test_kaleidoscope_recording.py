@@ -78,7 +78,7 @@ def test_a_camera_recording_takes_its_views_from_the_calibration(capture):
     ({"relay_distanc": 0.03}, r"nominal\.json: relay_distanc: not a parameter of the kaleidoscope \(allowed: "),
     ({"relay_distance": 0.02}, r"nominal\.json: sensor 'kaleidoscope': \(relay_distance \+ tube_length\) / "
                                r"relay_distance = 4 must be an odd integer n .*relay_distance = 0\.03 for 3x3"),
-    ({"tube_length": "6 cm"}, r"nominal\.json: tube_length = '6 cm': expected a number \(metres\)$"),
+    ({"tube_length": "6 cm"}, r"nominal\.json: tube_length = '6 cm': expected a finite number \(metres\)$"),
     ({"tube_width": 0.01}, r"nominal\.json: sensor 'kaleidoscope': film 120x120 and tube 0\.01x0\.012 differ in "
                            r"aspect ratio"),
 ])
@@ -99,3 +99,15 @@ def test_optics_for_a_frame_that_carries_its_own_are_refused(capture, tmp_path):
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1 and "carries its own (kaleidoscope) optics" in err[0], err
     assert not (tmp_path / "k.json").exists()
+
+
+def test_microlens_set_ups_from_their_parameters():
+    """The microlens layout's image plane is tube_width x tube_height (its set-up parameters must name them),
+    and a count that is not a finite integer is one line, not an overflow."""
+    from mitsuba_eventfield.plugins.kaleidoscope_sensor import optics_of
+    ef.set_variant(TEST_VARIANT)
+    optics = optics_of("microlens", {"views": 3, "tube_width": 0.009, "tube_height": 0.006}, 90, 60)
+    assert optics["n"] == 3 and optics["image_plane_size"] == [0.009, 0.006] and len(optics["views"]) == 9
+    for views in (float("inf"), 2.5):
+        with pytest.raises(ValueError, match=r"^views = .*: expected an integer$"):
+            optics_of("microlens", {"views": views}, 90, 60)
