@@ -5,6 +5,7 @@
 * ``depth``: curve size against known depths, the paper's linear model and the geometric inverse-depth model;
 * ``kaleidoscope``: tile seams, flips, sub-pixel view registration, flat-field;
 * ``optics``: the optics a calibration was made for, and the check that refuses one made for other optics;
+* ``nominal``: the optics of data that carries none (a nominal optics file; a recording's from its calibration);
 * ``store``: save / load calibration files (JSON) and apply them to light fields.
 """
 from .depth import DepthCalibration, fit_depth  # noqa: F401

@@ -72,8 +72,11 @@ def track_patch(frames, centre, half: int = 12, search: int = 16) -> PatchTrack:
     k, h, w = frames.shape
     cx, cy = int(round(centre[0])), int(round(centre[1]))
     if not (half + search <= cx < w - half - search and half + search <= cy < h - half - search):
+        lo = half + search
+        where = (f"x in [{lo}, {w - lo - 1}] and y in [{lo}, {h - lo - 1}]" if w > 2 * lo and h > 2 * lo else
+                 f"frames of at least {2 * lo + 1}x{2 * lo + 1} pixels")
         raise CalibrationError(f"patch at ({cx}, {cy}) with half-size {half} and search radius {search} does not "
-                               f"fit in the {w}x{h} frames")
+                               f"fit in the {w}x{h} frames (allowed: {where})")
     tpl = frames[0, cy - half:cy + half + 1, cx - half:cx + half + 1]
     if tpl.std() < MIN_PATCH_STD:
         raise CalibrationError(f"patch at ({cx}, {cy}) is textureless (std {tpl.std():.4f} < {MIN_PATCH_STD}): "

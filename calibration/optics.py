@@ -30,7 +30,7 @@ PHASE_TOL_DEG = 0.1             # Lissajous shape (relative phase after the best
 GALVO_KEYS = ("fov_x_deg", "mirror_distance", "mirror_separation")
 SPATIAL_KEYS = ("focal_length", "focus_distance", "tube", "relay_distance", "aperture_radius", "relay_aperture")
 # carried, not compared (they follow from n and the keys above): the views a camera recording of the set-up,
-# which carries no optics, takes its light field from (cli/lightfield.recording_optics)
+# which carries no optics, takes its light field from (``calibration.nominal.recording_optics``)
 SPATIAL_CARRIED = ("views", "lens_to_image_plane", "image_plane_size")
 SCAN_NOT_COMPARED = ("phase", "phase_x", "phase_y", "max_angle_deg")
 # the calibration kinds that act on each design's light fields

@@ -8,7 +8,8 @@ import numpy as np
 from ..errors import EventFieldError
 from ..validate import MAX_VIEWS, number_list
 from .args import num
-from .lightfield import galvo_frames, luminance_channel, nominal_optics, start_log, with_contrast
+from ..calibration.nominal import nominal_optics
+from .lightfield import galvo_frames, luminance_channel, start_log, with_contrast
 
 OPTICS_HELP = ("JSON of the set-up's nominal galvo optics (design, fov_x_deg, mirror_distance, mirror_separation, "
                "scan), for a camera recording that carries none")
@@ -20,7 +21,7 @@ def add_parsers(sub) -> None:
     cg = csub.add_parser("galvo", help="phase and curve size of the scan from a capture of a static scene")
     cg.add_argument("file", help="event file (galvo)")
     cg.add_argument("--patch", action="append", required=True, metavar="X,Y", help="textured patch centre (repeatable)")
-    cg.add_argument("--views", type=num(3, MAX_VIEWS, integer=True), default=24,
+    cg.add_argument("--views", type=num(4, MAX_VIEWS, integer=True), default=24,     # 3 unknowns: 4 frames
                     help="frames reconstructed over the scan period (default 24)")
     cg.add_argument("--period", type=num(0, integer=True), default=0, help="scan period index (default 0)")
     cg.add_argument("--start-frame", help="EXR of the linear frame at the stream start (else: galvo solver)")
@@ -55,6 +56,9 @@ def _capture(path: str, a):
     carries none (a camera recording: refused in one line without them)."""
     from ..events.io import read_events
     ev = read_events(path)
+    if ev.meta.get("optics") and a.optics:
+        raise EventFieldError(f"--optics {a.optics}: {path} carries its own ({ev.meta['optics'].get('design')}) "
+                              "optics; --optics is for a camera recording without them")
     if not ev.meta.get("optics"):
         if not a.optics:
             raise EventFieldError(f"{path}: the recording carries no optics: pass --optics FILE.json, the set-up's "

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 
@@ -88,59 +89,6 @@ def with_contrast(ev, contrast, where: str):
     return ev
 
 
-# what from_events needs of each design's optics, beyond what a calibration's optics record always holds
-LIGHTFIELD_FIELDS = {"galvo": ("scan", "fov_x_deg", "mirror_distance", "mirror_separation"),
-                     "kaleidoscope": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance"),
-                     "microlens": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance")}
-
-
-def nominal_optics(path: str, width: int, height: int, design: str = "galvo") -> dict:
-    """A set-up's nominal optics from a JSON file (``--optics``), for a camera recording or frame that carries
-    none, as a render records them in ``meta["optics"]``; ``design`` is the one the command takes. Galvo: the
-    fields a render records (fov_x_deg, mirror_distance, mirror_separation, scan), each checked. Kaleidoscope
-    (or microlens): the sensor plugin's own parameters (focal_length, focus_distance, tube_width, ...), from
-    which the sensor itself, on this ``width`` x ``height`` film, gives the views, tiles and sub-apertures
-    (``kaleidoscope_sensor.optics_of``). Calibrating needs them to start from; the calibration then records
-    them for the light-field commands."""
-    from ..validate import json_file
-    optics = json_file(path, "optics file")
-    found = optics.get("design") if isinstance(optics, dict) else None
-    if design == "galvo":
-        fields = LIGHTFIELD_FIELDS["galvo"]
-    else:
-        from ..backend import ensure_variant
-        from ..plugins.kaleido_optics import SETUP_PARAMETERS
-        from ..plugins.kaleidoscope_sensor import optics_of
-        fields = SETUP_PARAMETERS[design]
-    if found != design:
-        raise EventFieldError(f"{path}: design = {found!r}: this command takes {design} optics (a JSON object with "
-                              f"\"design\": \"{design}\" and {', '.join(fields)})")
-    if design == "galvo":
-        return _galvo_nominal(path, optics)
-    ensure_variant()                                  # the sensor plugin is registered with the variant
-    try:
-        return optics_of(design, {k: v for k, v in optics.items() if k != "design"}, width, height)
-    except ValueError as e:
-        raise EventFieldError(f"{path}: {e}") from None
-
-
-def _galvo_nominal(path: str, optics: dict) -> dict:
-    from ..optics.scan import curve_from_dict
-    from ..validate import positive
-    missing = [k for k in LIGHTFIELD_FIELDS["galvo"] if k not in optics]
-    if missing:
-        raise EventFieldError(f"{path}: galvo optics without {', '.join(missing)}")
-    try:
-        for key in ("fov_x_deg", "mirror_distance", "mirror_separation"):
-            optics[key] = positive(optics[key], f"{path}: {key}")
-        if not isinstance(optics["scan"], dict):
-            raise EventFieldError(f"{path}: scan = {optics['scan']!r}: expected a scan curve record")
-        curve_from_dict(optics["scan"], where=f"{path}: scan")
-    except ConfigError as e:
-        raise EventFieldError(str(e)) from None
-    return optics
-
-
 def luminance_channel(path):
     """The Y (or else R) channel of an EXR frame, with a named error when it has neither."""
     from ..images import read_exr
@@ -202,30 +150,11 @@ def _out_meta(a, events, lf=None, **extra):
                  "calibration": calibration}, **extra)
 
 
-def recording_optics(calibration, ev, where) -> dict:
-    """The optics of a recording (which carries none) from the calibration made for its set-up: the optics record
-    its parts share, checked against the recording's film size and for what the light field needs."""
-    records = [getattr(part, "optics", None) or {} for part in calibration.values()]
-    designs = sorted({r.get("design") for r in records if r.get("design")})
-    source = getattr(calibration, "path", "calibration")
-    if len(designs) != 1:
-        raise EventFieldError(f"{source}: cannot give optics to {where}, which carries none: the calibration is for "
-                              f"{' and '.join(map(str, designs)) or 'no'} optics, it must be for one design")
-    record = next(r for r in records if r.get("design") == designs[0])
-    if (record.get("width"), record.get("height")) != (ev.width, ev.height):
-        raise EventFieldError(f"{source}: made for a {record.get('width')}x{record.get('height')} film, the "
-                              f"recording {where} is {ev.width}x{ev.height}")
-    missing = [k for k in LIGHTFIELD_FIELDS[designs[0]] if record.get(k) is None]
-    if missing:
-        raise EventFieldError(f"{source}: its {designs[0]} optics record lacks {', '.join(missing)}, which the light "
-                              f"field of {where} (a recording without optics) needs")
-    return {k: v for k, v in record.items() if k not in ("width", "height")}
-
-
 def _lightfield(a, ev):
     """The light field the light-field commands share, calibrated when asked (a calibration made for other
     optics than this stream's is refused before any reconstruction)."""
     from ..calibration import apply_to_lightfield, check_optics, load_calibration, optics_record
+    from ..calibration.nominal import recording_optics
     from ..lightfield.model import from_events
     if not ev.meta.get("optics") and not a.calibration:
         raise EventFieldError(f"{a.file}: the recording carries no optics (no light-field metadata): pass "
@@ -308,8 +237,8 @@ def _check_times(a, ev, times, option: str) -> None:
     t1 = t0 + ev.duration_us * 1e-6
     for t in times:
         if not t0 <= t <= t1 + 1e-9:
-            raise EventFieldError(f"{a.file}: {option} {t * 1e3:g} ms: the stream covers {t0 * 1e3:g} to "
-                                  f"{t1 * 1e3:g} ms")
+            raise EventFieldError(f"{a.file}: {option} {t * 1e3:.3f} ms: the stream covers {t0 * 1e3:.3f} to "
+                                  f"{t1 * 1e3:.3f} ms (times are on the file's clock)")
     if len(times) > 1 and np.any(np.diff(times) <= 0):
         raise EventFieldError(f"{option} {getattr(a, 'times', '')}: times must be increasing")
 
@@ -341,14 +270,16 @@ def _reconstruct_times(a, ev):
         _check_times(a, ev, times, "--times")
         return times
     fps = a.fps or 1000.0
-    n = max(1, int(round(ev.duration_us * 1e-6 * fps)))
-    return t0 + (np.arange(n) + 1) / fps
+    # whole frame intervals within the stream (rounding the count up put a frame past its end: a recording's
+    # 9.889 ms at 400 fps read 4 frames, the last 0.111 ms after its last event); at least the stream's end
+    n = int(math.floor(ev.duration_us * 1e-6 * fps + 1e-9))
+    return t0 + (np.arange(n) + 1) / fps if n else np.array([t0 + ev.duration_us * 1e-6])
 
 
 def _method_arguments(a, ev) -> dict:
     t0 = ev.meta.get("t_start_us", 0) * 1e-6
-    if a.method == "direct":
-        return {"log_start": start_log(a.start_frame, ev), "t_start": t0}
+    if a.method == "direct":             # from the stream's own start (its first microsecond's events count)
+        return {"log_start": start_log(a.start_frame, ev)}
     if a.method not in ("highpass", "complementary"):
         return {}
     kw = {"cutoff_hz": a.cutoff}

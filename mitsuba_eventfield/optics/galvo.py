@@ -28,6 +28,11 @@ same axis (``paraxial_disparity`` keeps the on-axis part, for step-size estimate
 from __future__ import annotations
 
 import math
+
+# the fields of a galvo set-up's optics record (the ``galvo`` sensor's ``optics_metadata``, a render's
+# ``meta["optics"]``, a nominal optics file for a camera recording)
+OPTICS_RECORD_KEYS = ("design", "scan", "fov_x_deg", "aperture_radius", "focus_distance", "mirror_distance",
+                      "mirror_separation", "angle_convention")
 from dataclasses import dataclass
 
 import numpy as np

@@ -93,6 +93,17 @@ def test_nominal_optics_are_checked(capture, tmp_path, change, message):
     assert not (tmp_path / "k.json").exists()
 
 
+def test_a_calibration_without_the_views_says_how_to_make_one(capture, tmp_path):
+    d, _ = capture
+    r = _cli("calibrate", "kaleidoscope", d / "bare.exr", "-o", tmp_path / "k.json")       # no --optics
+    assert r.returncode == 0, r.stderr
+    r = _cli("refocus", d / "rec.aedat4", "--calibration", tmp_path / "k.json", "--contrast", "0.2", "--depth", "1",
+             "-o", tmp_path / "rf.png")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "optics record lacks views, lens_to_image_plane" in err[0] \
+        and "eventfield calibrate kaleidoscope FRAME.exr --optics TUBE.json" in err[0], err
+
+
 def test_optics_for_a_frame_that_carries_its_own_are_refused(capture, tmp_path):
     d, _ = capture
     r = _cli("calibrate", "kaleidoscope", d / "frame.exr", "--optics", d / "nominal.json", "-o", tmp_path / "k.json")
@@ -111,3 +122,21 @@ def test_microlens_set_ups_from_their_parameters():
     for views in (float("inf"), 2.5):
         with pytest.raises(ValueError, match=r"^views = .*: expected an integer$"):
             optics_of("microlens", {"views": views}, 90, 60)
+
+
+def test_reconstructing_a_recording(capture):
+    """Frames from the recording equal the render's at the same instants (its first microsecond's events
+    included: the stream starts there), and --fps places frames within the recording (they ran past its end)."""
+    d, events = capture
+    for name, source, extra in (("recording", "rec.aedat4", ["--contrast", "0.2"]), ("render", "rec.h5", [])):
+        r = _cli("reconstruct", d / source, "-o", d / f"rc_{name}", "--times", "2.5,5,9.9", *extra)
+        assert r.returncode == 0, r.stderr
+    for k in range(3):
+        a, b = (read_exr(str(d / f"rc_{name}" / f"frame_{k:04d}.exr"))[0]["Y"] for name in ("recording", "render"))
+        assert a.std() > 0 and np.array_equal(a, b), k
+    r = _cli("reconstruct", d / "rec.aedat4", "-o", d / "rc_fps", "--fps", "400", "--contrast", "0.2")
+    assert r.returncode == 0, r.stderr
+    times = [read_exr(str(d / "rc_fps" / f"frame_{k:04d}.exr"))[1]["time_s"] for k in range(3)]
+    start = events.t[0] * 1e-6
+    assert times == pytest.approx([start + 0.0025, start + 0.005, start + 0.0075], abs=1e-9)
+    assert not (d / "rc_fps" / "frame_0003.exr").exists()

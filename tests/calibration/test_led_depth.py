@@ -113,3 +113,14 @@ def test_depth_calibration_of_camera_recordings_from_nominal_optics(tmp_path, ca
     ga, gb = a.geometry(rendered), b.geometry(rendered)
     assert (gb.pivot_x, gb.pivot_y) == pytest.approx((ga.pivot_x, ga.pivot_y), rel=0.02)
     assert gb.pivot_x == pytest.approx(PIVOT, rel=PIVOT_TOL)
+    # the optics file's fields are the sensor's own record's (a misspelt optional one was left out silently),
+    # and --optics beside a file that carries optics is refused (it was ignored)
+    from mitsuba_eventfield.optics.galvo import OPTICS_RECORD_KEYS
+    assert tuple(sorted(optics)) == tuple(sorted(OPTICS_RECORD_KEYS))
+    json.dump(dict(json.load(open(nominal)), fov_x_dge=40), open(str(tmp_path / "typo.json"), "w"))
+    assert cli.main(["calibrate", "depth", *raw, "--optics", str(tmp_path / "typo.json"), "--contrast", "0.2",
+                     "-o", str(tmp_path / "y.json")]) == 2
+    assert "typo.json: fov_x_dge: not a field of galvo optics (allowed: design, scan" in capsys.readouterr().err
+    assert cli.main(["calibrate", "depth", *h5, "--optics", nominal, "-o", str(tmp_path / "y.json")]) == 2
+    assert "carries its own (galvo) optics; --optics is for a camera recording" in capsys.readouterr().err
+    assert not (tmp_path / "y.json").exists()

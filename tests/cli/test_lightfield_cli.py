@@ -110,4 +110,5 @@ def test_calibrate_commands(galvo_capture, tmp_path):
     data = json.loads(open(cal).read())
     assert {"galvo", "kaleidoscope"} <= set(data)                  # extended, not overwritten
     bad = run("calibrate", "galvo", str(d / "g.h5"), "--patch", "1,1", "-o", cal)
-    assert bad.returncode == 2 and "does not fit in the 120x90 frames" in bad.stderr
+    assert bad.returncode == 2 and "does not fit in the 120x90 frames (allowed: x in [28, 91] and y in [28, 61])" \
+        in bad.stderr, bad.stderr

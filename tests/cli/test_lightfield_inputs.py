@@ -89,10 +89,10 @@ def test_depth_range_and_empty_streams(captures, capsys):
 def test_times_outside_the_stream(captures, capsys):
     d, _, _ = captures
     for command, message in ((["reconstruct", d / "g.h5", "-o", d / "r", "--times", "2,30"],
-                              "--times 30 ms: the stream covers 0 to 4 ms"),
+                              "--times 30.000 ms: the stream covers 0.000 to 4.000 ms (times are on the file's clock)"),
                              (["reconstruct", d / "g.h5", "-o", d / "r", "--times", "2,2"], "times must be increasing"),
                              (["refocus", d / "k.h5", "-o", d / "k.png", "--depth", "1", "--time", "100"],
-                              "--time 100 ms: the stream covers 0 to 10 ms")):
+                              "--time 100.000 ms: the stream covers 0.000 to 10.000 ms")):
         code, err = _run(command, capsys)
         assert code == 2 and message in err, err
     assert not (d / "r").exists() and not (d / "k.png").exists()
