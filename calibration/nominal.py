@@ -11,9 +11,10 @@ LIGHTFIELD_FIELDS = {"galvo": ("scan", "fov_x_deg", "mirror_distance", "mirror_s
                      "microlens": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance")}
 
 
-def nominal_optics(path: str, width: int, height: int, design: str = "galvo") -> dict:
+def nominal_optics(path: str, width: int, height: int, design: str | None = "galvo") -> dict:
     """A set-up's nominal optics from a JSON file (``--optics``), for a camera recording or frame that carries
-    none, as a render records them in ``meta["optics"]``; ``design`` is the one the command takes. Galvo: the
+    none, as a render records them in ``meta["optics"]``; ``design`` is the one the command takes (None: the
+    file's own, any light-field design). Galvo: the
     fields a render records (fov_x_deg, mirror_distance, mirror_separation, scan), each checked. Kaleidoscope
     (or microlens): the sensor plugin's own parameters (focal_length, focus_distance, tube_width, ...), from
     which the sensor itself, on this ``width`` x ``height`` film, gives the views, tiles and sub-apertures
@@ -22,6 +23,11 @@ def nominal_optics(path: str, width: int, height: int, design: str = "galvo") ->
     from mitsuba_eventfield.validate import json_file
     optics = json_file(path, "optics file")
     found = optics.get("design") if isinstance(optics, dict) else None
+    if design is None:
+        if found not in LIGHTFIELD_FIELDS:
+            raise EventFieldError(f"{path}: design = {found!r}: expected a JSON object whose \"design\" is one of "
+                                  f"{', '.join(LIGHTFIELD_FIELDS)}")
+        design = found
     if design == "galvo":
         fields = LIGHTFIELD_FIELDS["galvo"]
     else:

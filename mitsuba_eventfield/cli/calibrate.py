@@ -9,7 +9,7 @@ from ..errors import EventFieldError
 from ..validate import MAX_VIEWS, number_list
 from .args import num
 from ..calibration.nominal import nominal_optics
-from .lightfield import galvo_frames, luminance_channel, start_log, with_contrast
+from .lightfield import galvo_frames, give_optics, luminance_channel, start_log, with_contrast
 
 OPTICS_HELP = ("JSON of the set-up's nominal galvo optics (design, fov_x_deg, mirror_distance, mirror_separation, "
                "scan), for a camera recording that carries none")
@@ -56,14 +56,7 @@ def _capture(path: str, a):
     carries none (a camera recording: refused in one line without them)."""
     from ..events.io import read_events
     ev = read_events(path)
-    if ev.meta.get("optics") and a.optics:
-        raise EventFieldError(f"--optics {a.optics}: {path} carries its own ({ev.meta['optics'].get('design')}) "
-                              "optics; --optics is for a camera recording without them")
-    if not ev.meta.get("optics"):
-        if not a.optics:
-            raise EventFieldError(f"{path}: the recording carries no optics: pass --optics FILE.json, the set-up's "
-                                  "nominal galvo optics (fov_x_deg, mirror_distance, mirror_separation, scan)")
-        ev.meta["optics"] = nominal_optics(a.optics, ev.width, ev.height)
+    give_optics(ev, path, a.optics, design="galvo", takes_calibration=False)
     return with_contrast(ev, a.contrast, path)
 
 

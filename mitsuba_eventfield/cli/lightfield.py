@@ -17,6 +17,9 @@ CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a r
                  "(default: the file's pixel-model metadata)")
 
 
+OPTICS_HELP = ("JSON of the set-up's nominal optics, for a recording that carries none and no calibration: "
+               "\"design\" galvo (fov_x_deg, mirror_distance, mirror_separation, scan, as a render's "
+               "meta['optics']) or kaleidoscope / microlens (the sensor's parameters, metres)")
 DEFAULT_PERIOD, DEFAULT_VIEWS = 0, 32     # refocus / depth on a galvo stream
 GALVO_ONLY, KALEIDOSCOPE_ONLY = ("period", "views"), ("time",)
 
@@ -37,6 +40,7 @@ def add_parsers(sub) -> None:
                                                "model; kaleidoscope view registration, flat field; a camera "
                                                "recording (.raw, .dat, .aedat4) takes its optics from it")
     lf_args.add_argument("--contrast", help=CONTRAST_HELP)
+    lf_args.add_argument("--optics", help=OPTICS_HELP)
 
     rc = sub.add_parser("reconstruct", help="log-intensity frames from events: EXR + PNG per frame")
     rc.add_argument("file")
@@ -47,6 +51,7 @@ def add_parsers(sub) -> None:
     g.add_argument("--fps", type=num(0, 1e6, lo_open=True), help="frames per second over the whole stream")
     rc.add_argument("--start-frame", help="EXR of the linear frame at the stream start")
     rc.add_argument("--contrast", help=CONTRAST_HELP)
+    rc.add_argument("--optics", help=OPTICS_HELP + " (--method galvo)")
     rc.add_argument("--cutoff", type=num(0, 1e6, lo_open=True), default=5.0,
                     help="filter cutoff in Hz (highpass, complementary)")
 
@@ -150,20 +155,39 @@ def _out_meta(a, events, lf=None, **extra):
                  "calibration": calibration}, **extra)
 
 
+def give_optics(ev, where: str, optics_file: str | None, calibration=None, design: str | None = None,
+                takes_calibration: bool = True) -> None:
+    """The optics of a stream that carries none (a camera recording), into its metadata: the set-up's nominal
+    ones (``--optics``: any light-field design, or ``design``) or those of the calibration made for it
+    (``--calibration``). A stream that carries its own refuses ``--optics`` (it would be ignored); one without
+    either is refused, saying what the command takes."""
+    from ..calibration.nominal import nominal_optics, recording_optics
+    if ev.meta.get("optics"):
+        if optics_file:
+            raise EventFieldError(f"--optics {optics_file}: {where} carries its own "
+                                  f"({ev.meta['optics'].get('design')}) optics; --optics is for a camera recording "
+                                  "without them")
+        return
+    if optics_file:
+        ev.meta["optics"] = nominal_optics(optics_file, ev.width, ev.height, design=design)
+    elif calibration is not None:
+        ev.meta["optics"] = recording_optics(calibration, ev, where)
+    else:
+        options = "--calibration (a calibration file made for its set-up) or --optics" if takes_calibration \
+            else "--optics"
+        raise EventFieldError(f"{where}: the recording carries no optics (no light-field metadata): pass {options} "
+                              f"FILE.json (the set-up's nominal {design or 'light-field'} optics)")
+
+
 def _lightfield(a, ev):
     """The light field the light-field commands share, calibrated when asked (a calibration made for other
     optics than this stream's is refused before any reconstruction)."""
     from ..calibration import apply_to_lightfield, check_optics, load_calibration, optics_record
-    from ..calibration.nominal import recording_optics
     from ..lightfield.model import from_events
-    if not ev.meta.get("optics") and not a.calibration:
-        raise EventFieldError(f"{a.file}: the recording carries no optics (no light-field metadata): pass "
-                              "--calibration, a calibration file made for its set-up")
-    calibration = optics = None
-    if a.calibration:
-        calibration = load_calibration(a.calibration)
-        if not ev.meta.get("optics"):
-            ev.meta["optics"] = recording_optics(calibration, ev, a.file)
+    calibration = load_calibration(a.calibration) if a.calibration else None
+    give_optics(ev, a.file, a.optics, calibration)
+    optics = None
+    if calibration is not None:
         optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
         check_optics(calibration, optics)
     period, views = _design_options(a, ev)
@@ -294,6 +318,8 @@ def _method_arguments(a, ev) -> dict:
 def run_reconstruct(a) -> int:
     from ..lightfield.reconstruct import reconstruct
     ev = read_input(a)
+    if a.method == "galvo" or a.optics:       # the galvo solve reads the scan; other methods need no optics
+        give_optics(ev, a.file, a.optics, takes_calibration=False)
     times = _reconstruct_times(a, ev)
     try:
         frames = reconstruct(ev, times, a.method, **_method_arguments(a, ev))

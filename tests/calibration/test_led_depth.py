@@ -104,7 +104,8 @@ def test_depth_calibration_of_camera_recordings_from_nominal_optics(tmp_path, ca
     json.dump({k: optics[k] for k in ("design", "fov_x_deg", "mirror_distance", "mirror_separation", "scan")},
               open(nominal, "w"))
     assert cli.main(["calibrate", "depth", *raw, "-o", str(tmp_path / "x.json")]) == 2
-    assert "the recording carries no optics: pass --optics FILE.json" in capsys.readouterr().err
+    assert "the recording carries no optics (no light-field metadata): pass --optics FILE.json (the set-up's " \
+        "nominal galvo optics)" in capsys.readouterr().err
     assert cli.main(["calibrate", "depth", *h5, "-o", str(tmp_path / "from_h5.json")]) == 0
     assert cli.main(["calibrate", "depth", *raw, "--optics", nominal, "--contrast", "0.2",
                      "-o", str(tmp_path / "from_raw.json")]) == 0, capsys.readouterr().err

@@ -209,3 +209,31 @@ def test_calibration_without_the_fields_a_light_field_needs(galvo_recording, tmp
              "--contrast", "0.1")
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1 and "lacks mirror_separation" in err[0], err
+
+
+def test_a_recording_with_its_nominal_optics(galvo_recording, tmp_path):
+    """Without a calibration, the set-up's nominal optics (``--optics``) give a recording its light field and
+    its galvo reconstruction (which reads the scan); a file with optics of its own refuses them."""
+    import json
+    d, raw, cal = galvo_recording
+    optics = json.load(open(cal))["depth"]["optics"]
+    nominal = tmp_path / "optics.json"
+    nominal.write_text(json.dumps({k: optics[k] for k in ("design", "fov_x_deg", "mirror_distance",
+                                                          "mirror_separation", "scan")}))
+    r = _cli("refocus", raw, "-o", tmp_path / "rf.png", "--depth", "1", "--views", "8", "--optics", nominal,
+             "--contrast", "0.1")
+    assert r.returncode == 0, r.stderr
+    r = _cli("reconstruct", raw, "-o", tmp_path / "rc", "--method", "galvo", "--times", "2,4", "--contrast", "0.1")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "carries no optics" in err[0] and "pass --optics" in err[0], err
+    r = _cli("reconstruct", raw, "-o", tmp_path / "rc", "--method", "galvo", "--times", "2,4", "--contrast", "0.1",
+             "--optics", nominal)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in (tmp_path / "rc").glob("*.exr")) == ["frame_0000.exr", "frame_0001.exr"]
+    h5 = tmp_path / "g.h5"
+    recording = ef.read_events(raw)
+    recording.meta["optics"] = optics                     # the same events, now carrying optics
+    ef.write_events(str(h5), recording)
+    r = _cli("refocus", h5, "-o", tmp_path / "x.png", "--depth", "1", "--optics", nominal, "--contrast", "0.1")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "carries its own (galvo) optics" in err[0], err
