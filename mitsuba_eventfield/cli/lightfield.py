@@ -49,7 +49,10 @@ def add_parsers(sub) -> None:
     g = rc.add_mutually_exclusive_group()
     g.add_argument("--times", help="comma-separated times in ms")
     g.add_argument("--fps", type=num(0, 1e6, lo_open=True), help="frames per second over the whole stream")
-    rc.add_argument("--start-frame", help="EXR of the linear frame at the stream start")
+    rc.add_argument("--start-frame", help="EXR of the linear frame at the stream start (or at --start-time)")
+    rc.add_argument("--start-time", type=num(), metavar="MS",
+                    help="the start frame's time in ms on the file's clock (a frame camera beside the event camera; "
+                         "default: the stream's start); the events up to it are in the frame, frames come after it")
     rc.add_argument("--contrast", help=CONTRAST_HELP)
     rc.add_argument("--optics", help=OPTICS_HELP + " (--method galvo)")
     rc.add_argument("--cutoff", type=num(0, 1e6, lo_open=True), default=5.0,
@@ -287,23 +290,40 @@ def _depths_and_paths(a, lf, depths) -> list:
 
 
 # ------------------------------------------------------------------ commands
+def _start_time(a, ev):
+    """``--start-time`` in seconds (None: the stream's start), checked: with a start frame, inside the stream."""
+    if a.start_time is None:
+        return None
+    if not a.start_frame:
+        raise EventFieldError("--start-time is the time of --start-frame: give the frame too")
+    t = a.start_time * 1e-3
+    _check_times(a, ev, [t], "--start-time")
+    return t
+
+
 def _reconstruct_times(a, ev):
     t0 = ev.meta.get("t_start_us", 0) * 1e-6
+    start = _start_time(a, ev)
     if a.times:
         times = np.array(times_ms(a.times)) * 1e-3
         _check_times(a, ev, times, "--times")
+        if start is not None and times[0] < start:
+            raise EventFieldError(f"--times {a.times}: {times[0] * 1e3:.3f} ms is before --start-time "
+                                  f"{a.start_time:.3f} ms (frames are integrated forward from the start frame)")
         return times
     fps = a.fps or 1000.0
+    first = t0 if start is None else start
     # whole frame intervals within the stream (rounding the count up put a frame past its end: a recording's
     # 9.889 ms at 400 fps read 4 frames, the last 0.111 ms after its last event); at least the stream's end
-    n = int(math.floor(ev.duration_us * 1e-6 * fps + 1e-9))
-    return t0 + (np.arange(n) + 1) / fps if n else np.array([t0 + ev.duration_us * 1e-6])
+    end = t0 + ev.duration_us * 1e-6
+    n = int(math.floor((end - first) * fps + 1e-9))
+    return first + (np.arange(n) + 1) / fps if n else np.array([end])
 
 
 def _method_arguments(a, ev) -> dict:
-    t0 = ev.meta.get("t_start_us", 0) * 1e-6
-    if a.method == "direct":             # from the stream's own start (its first microsecond's events count)
-        return {"log_start": start_log(a.start_frame, ev)}
+    t_frame = _start_time(a, ev)         # None: the start frame (if any) is at the stream's own start
+    if a.method == "direct":             # from the stream's start (its first microsecond's events count) or the frame's
+        return {"log_start": start_log(a.start_frame, ev), "t_start": t_frame}
     if a.method not in ("highpass", "complementary"):
         return {}
     kw = {"cutoff_hz": a.cutoff}
@@ -311,7 +331,8 @@ def _method_arguments(a, ev) -> dict:
         start = start_log(a.start_frame, ev)
         if start is None:
             raise EventFieldError("--method complementary needs --start-frame (a frame to anchor to)")
-        kw.update(frames=start[None], frame_times=[t0])
+        t0 = ev.meta.get("t_start_us", 0) * 1e-6
+        kw.update(frames=start[None], frame_times=[t0 if t_frame is None else t_frame])
     return kw
 
 
