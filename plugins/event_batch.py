@@ -275,8 +275,9 @@ class Chunk:
         """One kernel: every pixel through the ``B`` steps (``pixel_step.step``, the per-step kernel's own
         definition, and ``event_select.select_events``, the per-step path's selection);
         ``each_step(lane, pixel, log_prev, step, selection, t0, t1, *carry)`` is traced into the loop body
-        (``lane``: the (step, pixel) lane's frame-major index, ``b n_pix + pixel``) and returns the new ``carry`` (per-pixel values it keeps across steps). Returns the state after the last
-        step and the last carry (lazy)."""
+        (``lane``: the (step, pixel) lane's frame-major index, ``b n_pix + pixel``) and returns the new
+        ``carry`` (per-pixel values it keeps across steps). Returns the state after the last step and the last
+        carry (lazy)."""
         cfg = self.view.config
         pixel, lanes, view, state = self._at_pixels()
         n_d = event_fill._opaque(self.n_pix, mi.UInt32)

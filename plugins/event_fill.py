@@ -356,8 +356,8 @@ def pixel_xy(pixel, width: int):
 def fill(cr: Crossings, ends, total: int, base_us: int = 0, resolution_us: float = 0.0,
          stats: dict | None = None) -> DeviceEvents:
     """The events of ``cr`` (``ends``: each lane's slot end, its crossings then its noise event; ``total``:
-    every event), time-sorted, with timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor clock ``resolution_us`` when > 0.
-    ``cr.write`` has one lane a pixel write its own events into its slot range (the fill of esim_torch's
+    every event), time-sorted, with timestamps ``rint(t 1e6) + base_us`` microseconds floored to the sensor
+    clock ``resolution_us`` when > 0. ``cr.write`` has one lane a pixel write its own events into its slot range (the fill of esim_torch's
     count / prefix-sum / fill) through :class:`Slots`, two words an event: the sort key (microseconds from the
     chunk's first one) and x | y << 16 | ON << 31, so no event searches for its pixel or divides by the width,
     and the sort moves 8 bytes an event. The two words share one 64-bit slot
