@@ -321,6 +321,9 @@ def _reconstruct_times(a, ev):
 
 
 def _method_arguments(a, ev) -> dict:
+    if a.start_frame and a.method not in ("direct", "complementary"):    # it was taken, ignored and recorded
+        raise EventFieldError(f"--method {a.method} reconstructs from the events alone: --start-frame is used by the "
+                              "direct and complementary methods")
     t_frame = _start_time(a, ev)         # None: the start frame (if any) is at the stream's own start
     if a.method == "direct":             # from the stream's start (its first microsecond's events count) or the frame's
         return {"log_start": start_log(a.start_frame, ev), "t_start": t_frame}

@@ -171,3 +171,8 @@ def test_a_start_frame_taken_during_the_recording(capture, tmp_path):
              tmp_path / "f5.exr", "--start-time", "5", "--times", "4,9")
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1 and "4.000 ms is before --start-time 5.000 ms" in err[0], err
+    r = _cli("reconstruct", d / "rec.aedat4", "-o", tmp_path / "hp", "--contrast", "0.2", "--method", "highpass",
+             "--start-frame", tmp_path / "f5.exr", "--times", "9")                 # the frame was ignored
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "--method highpass reconstructs from the events alone" in err[0]
+    assert not (tmp_path / "hp").exists()
