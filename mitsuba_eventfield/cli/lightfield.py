@@ -9,6 +9,7 @@ import sys
 import numpy as np
 
 from ..errors import ConfigError, EventFieldError
+from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import num, save_image, times_ms
 
@@ -20,7 +21,7 @@ CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a r
 OPTICS_HELP = ("JSON of the set-up's nominal optics, for a recording that carries none and no calibration: "
                "\"design\" galvo (fov_x_deg, mirror_distance, mirror_separation, scan, as a render's "
                "meta['optics']) or kaleidoscope / microlens (the sensor's parameters, metres)")
-DEFAULT_PERIOD, DEFAULT_VIEWS = 0, 32     # refocus / depth on a galvo stream
+DEFAULT_PERIOD = 0     # refocus / depth on a galvo stream: its first scan period, DEFAULT_VIEWS views
 GALVO_ONLY, KALEIDOSCOPE_ONLY = ("period", "views"), ("time",)
 
 

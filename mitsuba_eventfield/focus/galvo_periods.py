@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..events.stream import EventStream
 from ..lightfield.galvo_solve import DYNAMIC_LAGS, geometry_and_angles, start_image
+from ..optics.galvo import VIEWS_PER_PERIOD
 
 
 # A period whose robust weights turn down more than this share of the equations is flagged (``reliable``):
@@ -66,7 +67,7 @@ def default_depth_range(optics: dict) -> tuple:
     return 2.0 * (float(optics["mirror_distance"]) + float(optics["mirror_separation"])), 1000.0
 
 
-def reconstruct_periods(events: EventStream, views: int = 32, periods=None, depth_range=None, samples: int = 16,
+def reconstruct_periods(events: EventStream, views: int = VIEWS_PER_PERIOD, periods=None, depth_range=None, samples: int = 16,
                         depth_planes: int = 16, depth_iterations: int = 1, robust_iterations: int = 4,
                         prior_weight: float = 0.05, c_on=None, c_off=None):
     """Per whole scan period (all, or the indices ``periods``, in order): (LightField of ``views`` views,

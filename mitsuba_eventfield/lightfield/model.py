@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..events.stream import EventStream
-from ..optics.galvo import GalvoGeometry, scan_image_path_px
+from ..optics.galvo import VIEWS_PER_PERIOD, GalvoGeometry, scan_image_path_px
 from ..optics.scan import curve_from_dict, scan_period
 from ..validate import MAX_VIEWS, array, finite, instance, number
 
@@ -264,7 +264,7 @@ def galvo_period_starts(events, periods=None) -> dict:
     return {p: t0 + p * period for p in wanted}
 
 
-def galvo_lightfields(events, views: int = 32, method: str = "direct", periods=None, **method_kw):
+def galvo_lightfields(events, views: int = VIEWS_PER_PERIOD, method: str = "direct", periods=None, **method_kw):
     """Sliding light fields from a galvo stream, one per scan period: reconstruct ``views`` frames per period
     (``method`` of ``reconstruct``) and place each at its scan position. Yields LightField objects; bad
     arguments are refused at the call, before the first one is asked for."""
@@ -309,7 +309,7 @@ def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool
                       {"ij": stack.ij.tolist(), "levels": levels})
 
 
-def from_events(events, period: int = 0, views: int = 32, time: float | None = None, method: str | None = None,
+def from_events(events, period: int = 0, views: int = VIEWS_PER_PERIOD, time: float | None = None, method: str | None = None,
                 log_start=None, **method_kw) -> LightField:
     """One light field from an event stream, whatever its optics.
 

@@ -162,6 +162,8 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     * as many steps as keep the fastest known image motion (scan plus objects) under 0.5 px a step, or 2 px
       where the first instant's Monte-Carlo noise (two seeds at ``probe_spp``, default the render's spp;
       ``accuracy_limit.noise_map``) has a median of at least NOISE_LIMITED x C;
+    * under a periodic scan, at least ``optics.galvo.VIEWS_PER_PERIOD`` steps a period (a light-field view
+      interpolated between instants reads depth confidently wrong);
     * with a low-pass pixel (``cutoff_hz``) no step longer than two of its time constants, 1 / (pi f_c): the
       filter is stepped with its input held over a step (davis346, 300 Hz, on the demo: 95 steps of 1.05 ms
       against 12 gave inter-event intervals 0.042 against 0.063 KS at 16 spp, 0.016 against 0.083 at 64);
@@ -181,7 +183,7 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     if speed is None:
         chosen = {"by": "default for motion not known before rendering", "steps": UNKNOWN_MOTION_STEPS}
         return replace(st, steps=UNKNOWN_MOTION_STEPS, chosen=chosen), None
-    floors = _floors(st, integ.config)
+    floors = _floors(st, integ.config, timed)
     fine = _steps_for(speed, st.duration, FINE_PX_PER_STEP)
     sigma, first, noise, bound = None, None, None, FINE_PX_PER_STEP
     others = max(v for k, v in floors.items() if k != "low-pass pixel")
@@ -224,7 +226,7 @@ def uniform_default_steps(timed, duration: float, spp: int, integ) -> tuple:
     as an unasked render (:func:`default_steps`), not a rule of its own."""
     st = stepping(timed, duration, None, False, 0.5, None, None, spp, 0, "fixed", 0.0)
     speed, _ = _fastest_motion(st, timed)
-    floors = _floors(st, integ.config)
+    floors = _floors(st, integ.config, timed)
     if speed is None:
         steps = max(UNKNOWN_MOTION_STEPS, *floors.values())
         return min(steps, MAX_STEPS), {"by": "default for motion not known before rendering"
@@ -258,9 +260,13 @@ def _fastest_motion(st: Stepping, timed) -> tuple:
     return (None if d is None else float(d.max() / (times[1] - times[0]))), sampled
 
 
-def _floors(st: Stepping, pixel) -> dict:
-    """The fewest steps the pixel model needs, whatever the motion (``default_steps``)."""
+def _floors(st: Stepping, pixel, timed) -> dict:
+    """The fewest steps the pixel model and the light field need, whatever the motion (``default_steps``)."""
+    from ..optics.galvo import VIEWS_PER_PERIOD
+    period = timed.scan_period
     return {"minimum": MIN_DEFAULT_STEPS,
+            # a rendered instant for each of a scan period's light-field views (optics.galvo.VIEWS_PER_PERIOD)
+            "light-field views": int(math.ceil(st.duration / period * VIEWS_PER_PERIOD - 1e-9)) if period else 0,
             "low-pass pixel": int(math.ceil(st.duration * math.pi * pixel.cutoff_hz - 1e-9)),
             # shot noise fires at most one event a pixel a step, with probability rate x dt (the Poisson mean
             # while that is at most 1): keep it under SHOT_NOISE_PER_STEP

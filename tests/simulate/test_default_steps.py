@@ -109,25 +109,37 @@ def test_noisy_scene_takes_two_pixel_steps_until_samples_quiet_the_noise():
     assert quiet.meta["render"]["timing_limit"] is not None            # placed steps get the accuracy-limit note
 
 
+def _motion_bound(chosen) -> float:
+    """The px-a-step bound the motion's step count used (``chosen["px_per_step"]`` is None where a floor
+    decided)."""
+    from mitsuba_eventfield.simulate import stepping
+    noisy = (chosen["noise_over_threshold"] or 0) >= stepping.NOISE_LIMITED
+    return stepping.NOISY_PX_PER_STEP if noisy else stepping.FINE_PX_PER_STEP
+
+
 def test_galvo_default_steps_keep_the_phase_grid_and_reuse_periods():
     """Under a periodic scan the default is a whole number of steps per period, so a static scene's later
-    periods are fed from the first (reused) and the bound holds for scan and blades together."""
+    periods are fed from the first (reused) and the bound holds for scan and blades together; and at least a
+    rendered instant for each of a period's light-field views (at 48x36 the motion alone asks for fewer)."""
+    from mitsuba_eventfield.optics.galvo import VIEWS_PER_PERIOD
     timed = ef.load_scene(bundled_scene("galvo_static/galvo_static.xml"), width=48, height=36)
     period = timed.scan_period
     ev = ef.render_events(timed, 3 * period)
     steps = ev.meta["render"]["steps"]
     chosen = _chosen(ev)
-    per_period = math.ceil(chosen["steps_for_motion"] / 3)               # rounded up to whole steps a period
-    assert steps == 3 * per_period and chosen["steps_for_motion"] > 3
+    per_period = max(math.ceil(chosen["steps_for_motion"] / 3), VIEWS_PER_PERIOD)   # whole steps a period
+    assert steps == 3 * per_period and 3 < chosen["steps_for_motion"] < 3 * VIEWS_PER_PERIOD
+    assert chosen["by"] == "light-field views" and chosen["steps_for_lightfield_views"] == 3 * VIEWS_PER_PERIOD
+    bound = _motion_bound(chosen)
     assert chosen["steps_for_motion"] == math.ceil(chosen["largest_image_speed_px_per_s"] * 3 * period
-                                                   / chosen["px_per_step"] * (1 - 1e-9))
-    assert ev.meta["render"]["image_motion_px_per_step"]["scan"] <= chosen["px_per_step"] * 1.05
+                                                   / bound * (1 - 1e-9))
+    assert ev.meta["render"]["image_motion_px_per_step"]["scan"] <= bound * 1.05
     assert ev.meta["render"]["reused_steps"] + ev.meta["render"]["copied_steps"] >= 2 * steps // 3
     fan = ef.load_scene(bundled_scene("fan/fan.xml"), width=48, height=36)
     ev = ef.render_events(fan, 2 * fan.scan_period)
     chosen, motion = _chosen(ev), ev.meta["render"]["image_motion_px_per_step"]
     assert ev.meta["render"]["steps"] % 2 == 0
-    assert motion["scan"] + motion["objects"] <= chosen["px_per_step"] * 1.05
+    assert motion["scan"] + motion["objects"] <= _motion_bound(chosen) * 1.05
 
 
 def test_unknown_motion_takes_the_fixed_default(tmp_path):
@@ -198,3 +210,20 @@ def test_placed_default_steps_are_the_adaptive_motion_steps_at_its_bound():
     for a in "xytp":
         assert np.array_equal(getattr(default, a), getattr(asked, a))
     assert default.meta["render"]["timing_limit"] == asked.meta["render"]["timing_limit"] is not None
+
+
+def test_galvo_default_steps_give_each_light_field_view_an_instant():
+    """The default's light-field floor: galvo_static at 120x90 over one 4 ms period took 11 steps at 2 px (its
+    Monte-Carlo noise is 0.3 C), and the events-only light field's depth read the 0.5 m card and the 2.5 m wall
+    both at 0.40 m, with a third of their pixels confident. Scored against Mitsuba's depth output."""
+    from mitsuba_eventfield.evaluation import truth
+    from mitsuba_eventfield.optics.galvo import VIEWS_PER_PERIOD
+    timed = ef.load_scene(bundled_scene("galvo_static/galvo_static.xml"), width=120, height=90)
+    ev = ef.render_events(timed, timed.scan_period)
+    assert ev.meta["render"]["steps"] == VIEWS_PER_PERIOD and _chosen(ev)["by"] == "light-field views"
+    dm = ef.depth_from_focus(ef.lightfield.from_events(ev), 0.3, 4.0, 32, "variance")
+    z = truth.truth_depth(timed, 0.0)
+    for name, region, tolerance in (("card", z < 1, 0.06), ("wall", z > 2, 0.1)):     # measured 2.6 %, 1.5 %
+        sure = region & (dm.confidence > 0.3)
+        assert sure.sum() > 0.2 * region.sum(), name
+        assert abs(np.median(dm.depth[sure] / z[sure]) - 1) < tolerance, name
