@@ -14,12 +14,11 @@ LIGHTFIELD_FIELDS = {"galvo": ("scan", "fov_x_deg", "mirror_distance", "mirror_s
 def nominal_optics(path: str, width: int, height: int, design: str | None = "galvo") -> dict:
     """A set-up's nominal optics from a JSON file (``--optics``), for a camera recording or frame that carries
     none, as a render records them in ``meta["optics"]``; ``design`` is the one the command takes (None: the
-    file's own, any light-field design). Galvo: the
-    fields a render records (fov_x_deg, mirror_distance, mirror_separation, scan), each checked. Kaleidoscope
-    (or microlens): the sensor plugin's own parameters (focal_length, focus_distance, tube_width, ...), from
-    which the sensor itself, on this ``width`` x ``height`` film, gives the views, tiles and sub-apertures
-    (``kaleidoscope_sensor.optics_of``). Calibrating needs them to start from; the calibration then records
-    them for the light-field commands."""
+    file's own, any light-field design). Galvo: the fields a render records (fov_x_deg, mirror_distance,
+    mirror_separation, scan), each checked, and no others. Kaleidoscope (or microlens): the sensor plugin's
+    own parameters (focal_length, focus_distance, tube_width, ...), from which the sensor itself, on this
+    ``width`` x ``height`` film, gives the views, tiles and sub-apertures (``kaleidoscope_sensor.optics_of``).
+    Calibrating needs them to start from; the calibration then records them for the light-field commands."""
     from mitsuba_eventfield.validate import json_file
     optics = json_file(path, "optics file")
     found = optics.get("design") if isinstance(optics, dict) else None
