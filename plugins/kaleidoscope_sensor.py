@@ -226,9 +226,9 @@ sensor_class = per_variant(_define_class)   # the KaleidoscopeSensor class of th
 
 def optics_of(layout: str, params: dict, width: int, height: int) -> dict:
     """The optics record (:meth:`optics_metadata`: views, tiles, sub-apertures) of a ``layout`` set-up with
-    these parameters (names of ``kaleido_optics.SETUP_PARAMETERS``, defaults as the table's) on a ``width`` x ``height`` film, from
-    the sensor itself, so that a camera recording's light field takes its views from the same code as a
-    render's. Raises ValueError with one line naming the parameter (the sensor's own checks)."""
+    these parameters (names of ``kaleido_optics.SETUP_PARAMETERS``, defaults as the table's) on a ``width`` x
+    ``height`` film, from the sensor itself, so that a camera recording's light field takes its views from the
+    same code as a render's. Raises ValueError with one line naming the parameter (the sensor's own checks)."""
     from mitsuba_eventfield.errors import plugin_message
     allowed = kaleido_optics.SETUP_PARAMETERS
     if layout not in allowed:
