@@ -250,6 +250,12 @@ def run_info(a) -> int:
             print(f"  {key}: {json.dumps(m[key], default=str)}")
     if "scene" in m:
         print(f"  scene: {m['scene'].get('scene_path')}")
+    if "optics" not in m:           # a camera recording: what the commands that read it need besides
+        print("  optics: none recorded (a camera recording): refocus, depth and calibrate take them from "
+              "--calibration or --optics FILE.json")
+    if "threshold_on" not in (m.get("pixel_model") or {}):
+        print("  contrast thresholds: none recorded: reconstruct, refocus, depth and calibrate take --contrast "
+              "ON[,OFF]")
     return 0
 
 

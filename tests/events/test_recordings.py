@@ -183,6 +183,8 @@ def _cli(*args):
 def test_recording_without_optics_needs_a_calibration(galvo_recording):
     d, raw, cal = galvo_recording
     assert "optics" not in ef.read_events(raw).meta
+    r = _cli("info", raw)                                       # says what the other commands will need
+    assert r.returncode == 0 and "optics: none recorded" in r.stdout and "--contrast ON[,OFF]" in r.stdout, r.stdout
     r = _cli("refocus", raw, "-o", d / "rf.png", "--depth", "1", "--views", "8")
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1 and "carries no contrast thresholds" in err[0], err
