@@ -153,9 +153,9 @@ def _count_pass(view: "PixelView", shape: tuple):
     """The count pass of a chunk: ``fn(arrays, state, frames, t, dt, step_last) -> (state after, ends, fired,
     head)`` for a pixel model and chunk shape (film width, pixels, steps, radiance or log frames, frame buffer
     length), frozen (:func:`_frozen`). ``ends``: each (step, pixel) lane's slot end (its kept crossings, then
-    its noise event: one lane a pixel; until 2026-11-26 noise had a second lane a pixel, twice the scan and a
-    scatter more a step, 0.1 ms a step of the demo's every-effect pixel); ``head``: every step's last slot end, then with a refractory period or shot noise the
-    chunk's crossings and noise hits before any was dropped, and its kept noise events. The first two are
+    its noise event: one lane a pixel; a second lane a pixel for noise, until 2026-11-26, cost twice the scan
+    and a scatter more a step, 0.1 ms a step of the demo's every-effect pixel); ``head``: every step's last
+    slot end, then with a refractory period or shot noise the chunk's crossings and noise hits before any was dropped, and its kept noise events. The first two are
     differences of the pixels' own counters (k_on + k_off, noise_k) over the chunk, which the loop carries
     anyway; the kept noise events are the hits where nothing drops them, else one tally carried through the
     loop (four per-pixel tallies before, as fast)."""

@@ -302,9 +302,10 @@ def _start_time(a, ev):
     return t
 
 
-def _reconstruct_times(a, ev):
+def _reconstruct_times(a, ev, start):
+    """The frames' times (seconds): ``--times``, else ``--fps`` frames from the start frame's time ``start``
+    (None: the stream's start)."""
     t0 = ev.meta.get("t_start_us", 0) * 1e-6
-    start = _start_time(a, ev)
     if a.times:
         times = np.array(times_ms(a.times)) * 1e-3
         _check_times(a, ev, times, "--times")
@@ -321,11 +322,11 @@ def _reconstruct_times(a, ev):
     return first + (np.arange(n) + 1) / fps if n else np.array([end])
 
 
-def _method_arguments(a, ev) -> dict:
+def _method_arguments(a, ev, t_frame) -> dict:
+    """The reconstruction method's arguments; ``t_frame``: the start frame's time (None: the stream's start)."""
     if a.start_frame and a.method not in ("direct", "complementary"):    # it was taken, ignored and recorded
         raise EventFieldError(f"--method {a.method} reconstructs from the events alone: --start-frame is used by the "
                               "direct and complementary methods")
-    t_frame = _start_time(a, ev)         # None: the start frame (if any) is at the stream's own start
     if a.method == "direct":             # from the stream's start (its first microsecond's events count) or the frame's
         return {"log_start": start_log(a.start_frame, ev), "t_start": t_frame}
     if a.method not in ("highpass", "complementary"):
@@ -345,9 +346,10 @@ def run_reconstruct(a) -> int:
     ev = read_input(a)
     if a.method == "galvo" or a.optics:       # the galvo solve reads the scan; other methods need no optics
         give_optics(ev, a.file, a.optics, takes_calibration=False)
-    times = _reconstruct_times(a, ev)
+    t_frame = _start_time(a, ev)
+    times = _reconstruct_times(a, ev, t_frame)
     try:
-        frames = reconstruct(ev, times, a.method, **_method_arguments(a, ev))
+        frames = reconstruct(ev, times, a.method, **_method_arguments(a, ev, t_frame))
     except ValueError as e:
         raise EventFieldError(f"{a.file}: {e}") from None
     os.makedirs(a.output, exist_ok=True)
