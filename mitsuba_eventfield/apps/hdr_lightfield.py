@@ -116,9 +116,12 @@ def _check(depths, views, solver_depth, steps, samples, spp):
 
 def refocus_bilinear(lf, depth: float) -> np.ndarray:
     """``focus.refocus`` of a galvo light field (exact homographies; each pixel the mean of the views that
-    cover it, ``refocus.covered_mean``) with bilinear interpolation instead of Lanczos for HDR content:
-    Lanczos rings below zero next to an LED 1000 times brighter than its surround, and the rings survive the
-    average as holes and halos. Bilinear weights are never negative."""
+    cover it, ``refocus.covered_mean``) with bilinear interpolation instead of Lanczos for HDR content. The
+    refocus keeps a Lanczos sample within the values of its 3 x 3 neighbours, so it no longer rings below zero
+    next to an LED 1000 times brighter than its surround; but within that reach its lobes still carry the
+    LED's light into the surround (halos). Scored with it (tests/apps/test_hdr.py, 96 x 72), the events' worst
+    region read 0.74 against the short exposure's 1.10; bilinear weights are never negative, and the ratio is
+    0.48."""
     import cv2
 
     from ..focus.refocus import covered_mean

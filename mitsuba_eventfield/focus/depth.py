@@ -12,8 +12,9 @@ with the nearest plane beyond it (``_refine_ends``), never past the range's ends
 
 Confidence in [0, 1] is c / (c + c0) with c = peak - median of a pixel's focus curve and c0 = 5% of the
 90th percentile of c over the image: a textureless pixel has a flat curve and gets ~0 instead of a confident
-wrong depth. That floor is relative, so three absolute checks set confidence to 0 (``DepthMap.evidence``,
-``DepthMap.at_limit``; thresholds from ``evaluation.failure``'s texture-contrast and depth-range sweeps):
+wrong depth. That floor is relative, so five checks set confidence to 0 (``DepthMap.evidence``,
+``DepthMap.at_limit``, ``DepthMap.own_texture``, ``DepthMap.resolution_px``; thresholds from
+``evaluation.failure``'s texture-contrast and depth-range sweeps and the scenes named below):
 
 * **No parallax in the views.** Where the views barely change over the light field, the focus curve's peak
   comes from the alignment warps alone (identical views refocus sharpest where the warps spread least), not
@@ -37,6 +38,22 @@ wrong depth. That floor is relative, so three absolute checks set confidence to 
   peaked on a ghost inside the range (63 % of its pixels confident, 100 % off). Now 99-100 % of its pixels
   are flagged from 0.52 to 1 m, and none when searched from 0.3-0.48 m. Not caught: an object nearer than
   half the nearest depth searched.
+* **No texture of its own.** The focus window lends a textureless pixel the peak of the texture beside it
+  (edge fattening): on scenes/offaxis_cards (96 x 72, events only, 0.3-4 m) the plain wall up to 9.5 px from the
+  cards read a card's depth, confidently. ``own_texture`` is the pixel's log gradient (3 x 3 mean) in the images
+  refocused at its sharpest plane and the two beside it (the most of the three); below ``OWN_TEXTURE_SHARE`` = 0.2 of the image's 90th percentile a pixel is not
+  confident. A confident wall pixel now lies within 3.3 px of a card (the span of the gradient stencil and
+  its mean across an occluding edge, where the depth of a plain background is not in the data); the cards'
+  pixels stay confident (tests/lightfield/test_offaxis_cards.py).
+* **Depth finer than the optics resolve.** ``depth_resolution_px`` is how far a point at the pixel's depth
+  moves in the views (RMS about their mean) when its depth grows by ``DEPTH_TOLERANCE`` = 10 %; below
+  ``RESOLVABLE_PX`` = 0.05 px the depth is not confident. From events the textured cards of offaxis_cards
+  localise to 0.03-0.12 px (2-3 % depth error at 1.2 and 0.5 m, where 10 % moves 0.16 and 0.37 px); with a
+  rendered start frame to 0.011-0.015 px. scenes/galvo_static at 120 x 90 moves its 2.5 m wall 0.012 px for
+  10 %: 31 % of that image was confident, 75 % of it more than 10 % off (the wall at the far end of the range)
+  and 39 % of it moved by more than 10 % when the period's window moved by 3 us. Now only the card's text is
+  confident, 4 % off, and stays put (tests/lightfield/test_depth_confidence.py). A region's median resolves
+  more than its pixels: the same wall's median depth reads 2.52 m (tests/simulate/test_default_steps.py).
 """
 from __future__ import annotations
 
@@ -55,6 +72,9 @@ from .refocus import aligned_views, check_lightfield, depth_planes, refocus
 MEASURES = IMAGE_MEASURES + ("variance",)
 MIN_EVIDENCE = 0.3          # module docstring: views that change less than this share of what the scan must give
 MIN_CHANGES = 2.0           # module docstring: level changes along the views per pixel, mean over the window
+OWN_TEXTURE_SHARE = 0.2     # module docstring: a pixel's own texture against the image's 90th percentile
+DEPTH_TOLERANCE = 0.1       # module docstring: a confident depth is told from one this share farther ...
+RESOLVABLE_PX = 0.05        # ... by its views moving at least this far (RMS over the views, pixels)
 
 
 @dataclass
@@ -65,6 +85,8 @@ class DepthMap:
     measure: str
     evidence: np.ndarray | None = None   # (H, W) views' change over what the scan must give (module docstring)
     at_limit: np.ndarray | None = None   # (H, W) bool: peak at an end of the range searched (a bound, not a depth)
+    own_texture: np.ndarray | None = None     # (H, W) log gradient at the pixel, refocused at its depth
+    resolution_px: np.ndarray | None = None   # (H, W) view motion telling its depth from DEPTH_TOLERANCE farther
 
     def confident_share(self, threshold: float = 0.5, mask=None) -> float:
         """Share of the pixels (of ``mask``) whose confidence reaches ``threshold``: 0 when the light field
@@ -73,7 +95,9 @@ class DepthMap:
         return float(sel[mask].mean() if mask is not None else sel.mean())
 
 
-def _volume(lf: LightField, planes, measure, window):
+def _volume(lf: LightField, planes, measure, window, textures: list | None = None):
+    """(D, H, W) focus of each plane; ``textures``: a list that gets each plane's log texture
+    (``_log_texture`` of the image refocused there: for ``variance``, the mean of the aligned log views)."""
     vol = []
     for z in planes:
         if measure == "variance":
@@ -86,11 +110,16 @@ def _volume(lf: LightField, planes, measure, window):
                 cov = c if cov is None else cov + c
             cov = np.maximum(cov, 1)
             var = np.maximum(s2 / cov - (s1 / cov) ** 2, 0)
+            if textures is not None:
+                textures.append(_log_texture(s1 / cov))
             var = cv2.boxFilter(var.astype(np.float32), -1, (window, window), borderType=cv2.BORDER_REFLECT)
             vol.append(-var)                                    # focus = agreement = low variance
         else:
             img = refocus(lf, float(z), on_motion="ignore")
-            vol.append(focus_measure(img if img.ndim == 2 else img.mean(-1), measure, window))
+            img = img if img.ndim == 2 else img.mean(-1)
+            vol.append(focus_measure(img, measure, window))
+            if textures is not None:
+                textures.append(_log_texture(np.log(np.maximum(img, 1e-6))))
     return np.stack(vol)
 
 
@@ -103,7 +132,8 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
     window = check_window(window, "depth_from_focus")
     zs = depth_planes(near, far, planes)
     inv = 1.0 / zs
-    vol = _volume(lf, zs, measure, window)                     # (D, H, W)
+    textures = []
+    vol = _volume(lf, zs, measure, window, textures)           # (D, H, W)
     k = np.argmax(vol, axis=0)
     h, w = k.shape
     kk = np.clip(k, 1, len(zs) - 2)
@@ -121,11 +151,15 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
     contrast = vol.max(axis=0) - np.median(vol, axis=0)
     floor = 0.05 * float(np.percentile(contrast, 90)) + 1e-12
     conf = contrast / (contrast + floor)
-    # the two absolute checks of the module docstring
+    # the checks of the module docstring
     evidence = parallax_evidence(lf, zs, window)
     at_limit = _beyond(vol, outer_vol)
-    conf = np.where((evidence >= MIN_EVIDENCE) & ~at_limit, conf, 0.0)
-    return DepthMap(depth, np.clip(np.nan_to_num(conf), 0, 1), zs, measure, evidence, at_limit)
+    own = own_texture(textures, k)
+    resolution = depth_resolution_px(lf, depth, zs[0], zs[-1])
+    sure = (evidence >= MIN_EVIDENCE) & ~at_limit & (own >= OWN_TEXTURE_SHARE * float(np.percentile(own, 90))) \
+        & (resolution >= RESOLVABLE_PX)
+    conf = np.where(sure, conf, 0.0)
+    return DepthMap(depth, np.clip(np.nan_to_num(conf), 0, 1), zs, measure, evidence, at_limit, own, resolution)
 
 
 # inverse depths beyond each end of the range, as fractions of the end's: up to half the nearest depth searched
@@ -237,8 +271,7 @@ def parallax_evidence(lf: LightField, depths, window: int = 7) -> np.ndarray:
     parallax (then identical views are consistent with it)."""
     views = lf.views if lf.views.ndim == 3 else lf.views.mean(axis=-1)
     logs = np.log(np.maximum(views, 1e-6)).astype(np.float32)
-    mean = logs.mean(axis=0)
-    grad = np.hypot(cv2.Sobel(mean, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(mean, cv2.CV_32F, 0, 1, ksize=3)) / 8
+    grad = _log_texture(logs.mean(axis=0))
     box = lambda img: cv2.boxFilter(img.astype(np.float32), -1, (window, window),  # noqa: E731
                                     borderType=cv2.BORDER_REFLECT)
     least = float(view_spread_px(lf, depths).min())
@@ -249,3 +282,46 @@ def parallax_evidence(lf: LightField, depths, window: int = 7) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(expected > 1e-4, box(logs.std(axis=0)) / expected, 0.0)
     return np.where(changes >= MIN_CHANGES, ratio, 0.0).astype(np.float64)
+
+
+def _log_texture(log_img) -> np.ndarray:
+    """(H, W) log-brightness gradient magnitude at each pixel (Sobel / 8: the slope of a ramp per pixel)."""
+    g = np.asarray(log_img, np.float32)
+    return np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)) / 8
+
+
+def own_texture(textures: list, k: np.ndarray) -> np.ndarray:
+    """(H, W): each pixel's log texture (3 x 3 mean) in the images refocused at its sharpest plane ``k`` and
+    the planes beside it, the most of the three (``textures``: one ``_log_texture`` per plane). The focus window
+    lends a textureless pixel the peak of texture beside it; this is the pixel's own (module docstring). The
+    planes beside count because a depth between two far-apart planes (few planes) is sharp in neither: with 4
+    planes over 0.4-3 m, 15 % of a textured card at 1.5 m had too little texture at its sharpest plane alone."""
+    own = np.zeros(k.shape, np.float32)
+    for i, t in enumerate(textures):
+        near = np.abs(k - i) <= 1
+        own[near] = np.maximum(own[near], cv2.boxFilter(t, -1, (3, 3), borderType=cv2.BORDER_REFLECT)[near])
+    return own
+
+
+RESOLUTION_GRID_PX = 8      # the view motion varies slowly over the image: computed every 8 pixels, interpolated
+
+
+def depth_resolution_px(lf: LightField, depth: np.ndarray, near: float, far: float,
+                        tolerance: float = DEPTH_TOLERANCE) -> np.ndarray:
+    """(H, W): how far (RMS over the views, about their mean, pixels) a point at each pixel's ``depth`` moves in
+    the views when its depth grows by ``tolerance`` of itself: what the light field gives to tell the two depths
+    apart. The views' displacement is close to affine in inverse depth, so its slope is taken between ``near``
+    and ``far`` (the range searched), on a grid of pixel centres that ``cv2.resize`` interpolates."""
+    h, w = lf.shape
+    gh, gw = max(2, -(-h // RESOLUTION_GRID_PX)), max(2, -(-w // RESOLUTION_GRID_PX))
+    gx, gy = np.meshgrid((np.arange(gw) + 0.5) * w / gw - 0.5, (np.arange(gh) + 0.5) * h / gh - 0.5)
+    points = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])           # (3, N): cv2.resize's centres
+
+    def displacement(z):
+        p = lf.alignments(float(z)) @ points                                   # (K, 3, N)
+        d = p[:, :2] / p[:, 2:3] - points[:2]
+        return d - d.mean(axis=0)
+    slope = (displacement(near) - displacement(far)) / (1.0 / near - 1.0 / far)    # px per unit inverse depth
+    rms = np.sqrt(np.mean(np.sum(slope ** 2, axis=1), axis=0)).reshape(gh, gw).astype(np.float32)
+    per_inverse_depth = cv2.resize(rms, (w, h), interpolation=cv2.INTER_LINEAR)
+    return per_inverse_depth * tolerance / ((1.0 + tolerance) * np.maximum(depth, 1e-12))

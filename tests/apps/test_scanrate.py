@@ -25,8 +25,10 @@ def test_runner_depth_every_period(runner_capture, capsys):
     with capsys.disabled():
         print("\n[depth at the scan rate, runner, 128x96]\n" + r.report())
     assert len(r.depth_maps) == 2 and r.meta["depth_maps_per_second"] == 100
-    for e in r.errors:                          # measured: near 0.020, far 0.042, coverage 0.86
-        assert e["near"] < 0.035 and e["far"] < 0.07 and e["coverage"] > 0.75 and e["near_pixels"] > 300
+    # measured: near 0.022, far 0.014, coverage 0.66. Before the own-texture and resolution checks
+    # (focus/depth.py) 0.86 of the textured pixels were confident and the far error was 0.042
+    for e in r.errors:
+        assert e["near"] < 0.035 and e["far"] < 0.03 and e["coverage"] > 0.55 and e["near_pixels"] > 300
     # the runner recedes 2.5 cm per period; each map places it within 2% of Mitsuba
     est = [e["near_estimate_z"] for e in r.errors]
     true = [e["near_truth_z"] for e in r.errors]

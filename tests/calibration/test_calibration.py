@@ -220,8 +220,10 @@ def test_calibration_file_round_trip_and_use_in_refocus(tmp_path):
     card, wall = np.s_[50:80, 95:140], np.s_[20:110, 10:40]
     good = right.confidence > 0.3
     assert abs(np.median(right.depth[card][good[card]]) - 0.5) < 0.05
-    # at 173 px a 10 cm pivot separates 2.5 m from 5 m by 0.1 px of disparity: the wall is only "far"
-    assert np.median(right.depth[wall][good[wall]]) > 1.0
+    # at 173 px a 10 cm pivot separates 2.5 m from 5 m by 0.1 px of disparity: per pixel the wall is beyond what
+    # the views resolve (not confident: focus/depth.py), and over the whole wall it is only "far"
+    assert good[wall].mean() < 0.05 and np.median(right.resolution_px[wall]) < 0.05
+    assert np.median(right.depth[wall]) > 1.0
     assert abs(np.median(wrong.depth[card][(wrong.confidence > 0.3)[card]]) - 0.5) > 0.1
     with pytest.raises(ef.EventFieldError, match="not a version 2"):
         (tmp_path / "bad.json").write_text('{"format": "x"}')

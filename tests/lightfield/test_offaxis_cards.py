@@ -113,7 +113,25 @@ def test_depth_does_not_hang_on_the_microsecond_the_period_starts(cards):
     for shift_us in (1, 5):
         both = (base.confidence > 0.3) & (depth[shift_us].confidence > 0.3)
         change = np.abs(depth[shift_us].depth[both] / base.depth[both] - 1)
-        assert both.mean() > 0.3 and np.median(change) < 0.005 and (change > 0.1).mean() < 0.02, shift_us
+        assert both.mean() > 0.25 and np.median(change) < 0.005 and (change > 0.1).mean() < 0.02, shift_us
     for name, mask in _card_masks(z, textured).items():
         sure = mask & (base.confidence > 0.3)
         assert abs(np.median(base.depth[sure] / z[sure]) - 1) < 0.05, name      # measured 3.1 % and 2.0 %
+
+
+def test_a_plain_wall_beside_a_card_does_not_borrow_its_depth(cards):
+    """Edge fattening: the focus window of a plain wall pixel beside a card holds the card's texture, so its
+    focus curve peaks at the card's depth. Without the own-texture check (``OWN_TEXTURE_SHARE`` = 0), 519 wall
+    pixels more than 4 px from a card, up to 9.5 px, read a card's depth confidently (events only, 0.3-4 m). Now a
+    confident wall pixel lies within the 3 px that the texture measure itself spans across the cards' edges
+    (measured at most 3.3 px), and the cards stay confident."""
+    import cv2
+    events, _, z, _ = cards
+    lf = ef.lightfield.from_events(events, period=0, views=32, method="galvo")
+    dm = ef.depth_from_focus(lf, 0.3, 4.0, 32, "variance")
+    sure, wall, card = dm.confidence > 0.3, z > 2.0, z < 2.0
+    from_card = cv2.distanceTransform((~card).astype(np.uint8), cv2.DIST_L2, 3)
+    assert (sure & wall & (from_card > 4)).sum() == 0                    # measured 0 (max 3.3 px)
+    assert sure[card].mean() > 0.95                                      # measured 1.0
+    err = np.abs(dm.depth[sure & card] / z[sure & card] - 1)
+    assert np.median(err) < 0.05                                         # measured 2.4 %

@@ -296,7 +296,11 @@ def test_scan_frequency_sweep_loses_events_beyond_the_cap(capsys):
               f"{fast['edge_contrast']:.2f}")
     assert slow["offered_ev_s"] < cap < fast["offered_ev_s"]
     assert slow["dropped_fraction"] < 0.02 < 0.3 < fast["dropped_fraction"]
-    assert slow["edge_contrast"] > 0.9 > 0.7 > fast["edge_contrast"]
+    # measured: edge contrast 1.00 / 0.95, SSIM 0.997 / 0.886 against the uncapped pixel's refocus. (Before the
+    # refocus kept Lanczos samples within their neighbours' values, rings clipped to black holes in the letters
+    # read as an edge contrast of 0.45 at 1000 Hz.)
+    assert slow["edge_contrast"] > 0.98 > fast["edge_contrast"]
+    assert slow["ssim_vs_uncapped"] > 0.98 and fast["ssim_vs_uncapped"] < 0.93
 
 
 def test_a_readout_cap_scaled_below_what_the_limiter_enforces_is_refused_up_front(tmp_path):

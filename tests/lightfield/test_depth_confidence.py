@@ -1,0 +1,108 @@
+"""What a depth map's confidence promises, against geometry and Mitsuba's depth output: refocused values stay
+within the views' (no Lanczos rings), the depth resolution a galvo gives each pixel against ray-traced mirrors,
+and a scene whose wall the optics cannot resolve reports the card it can and not the wall
+(focus/depth.py's module docstring; docs/design.md, "Where methods fail")."""
+import math
+import os
+
+import cv2
+import numpy as np
+import pytest
+from conftest import ROOT
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.evaluation import truth
+from mitsuba_eventfield.focus.depth import RESOLVABLE_PX, depth_resolution_px
+from mitsuba_eventfield.lightfield.model import Disparity, LightField
+from mitsuba_eventfield.optics import galvo as galvo_optics
+
+W, H, FOV, D1, SEP = 96, 72, 40.0, 0.2, 0.01
+GALVO_STATIC = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
+
+
+def _galvo_lf(stack, amplitude_deg=2.0):
+    """A galvo light field of ``stack`` (K, H, W) on a circle of mechanical ``amplitude_deg``, exact geometry."""
+    k = len(stack)
+    phase = 2 * np.pi * np.arange(k) / k
+    amp = math.radians(amplitude_deg)
+    angles = np.stack([amp * np.cos(phase), amp * np.sin(phase)], axis=-1)
+    g = galvo_optics.GalvoGeometry(W, H, galvo_optics.focal_length_px(W, FOV), D1, D1 + SEP)
+    return LightField(stack, 2 * angles, np.zeros(k), Disparity(*g.paraxial_disparity()), "galvo", {}, g), angles, g
+
+
+def test_refocus_stays_within_the_views_next_to_black_letters():
+    """Black blocks (0.013) on a bright wall (6.4), the contrast of scenes/galvo_static, on a plane at 0.9 m (each
+    view the reference moved by its exact homography). Every refocused pixel is an average of the views'
+    intensities, so it lies within their range. Averaged plain Lanczos warps (the resampling the refocus uses)
+    ring below zero there: the oracle that the check has something to catch."""
+    ref = np.full((H, W), 6.4, np.float32)
+    for y0, x0 in ((10, 10), (30, 50), (50, 20)):
+        ref[y0:y0 + 12, x0:x0 + 8] = 0.013
+    flat, _, _ = _galvo_lf(np.stack([ref] * 16))
+    stack = np.stack([cv2.warpPerspective(ref, m, (W, H), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_REFLECT_101)
+                      for m in flat.alignments(0.9)])
+    lf, _, _ = _galvo_lf(stack)
+    for depth in (0.45, 0.9, 3.0):
+        img = ef.refocus(lf, depth, on_motion="ignore")
+        assert img.min() >= 0.013 * (1 - 1e-5) and img.max() <= 6.4 * (1 + 1e-5), depth
+        plain = np.mean([cv2.warpPerspective(v, m, (W, H), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
+                                             borderMode=cv2.BORDER_REFLECT_101)
+                         for v, m in zip(stack, lf.alignments(depth))], axis=0)
+        assert plain.min() < 0 and plain.max() > 6.45, depth      # measured -0.09 .. -0.17 and 6.51 .. 6.67
+    sharp = ef.refocus(lf, 0.9, on_motion="ignore")
+    assert sharp[14:18, 12:16].max() < 0.02 and sharp[34:38, 52:56].max() < 0.02   # in focus: black (0.013)
+
+
+@pytest.mark.parametrize("depth", [0.45, 1.0, 2.5])
+def test_depth_resolution_matches_ray_traced_mirrors(depth):
+    """``depth_resolution_px``: how far (RMS over the views, about their mean) a point moves when its depth grows
+    by 10 %. Oracle: the point on each pixel's ray at ``depth`` and at 1.1 ``depth`` traced through the rotated
+    mirrors (``optics.galvo.project_point``), not the homographies; the function interpolates a slope taken over
+    the range searched (0.3-4 m), so it is held to 3 %."""
+    lf, angles, g = _galvo_lf(np.ones((24, H, W), np.float32))
+    res = depth_resolution_px(lf, np.full((H, W), depth), 0.3, 4.0)
+    for i, j in ((36, 48), (5, 5), (60, 90), (10, 80)):
+        u, v = j + 0.5, i + 0.5                               # array index -> continuous pixel coordinates
+
+        def seen(z):
+            p = ((W / 2 - u) / g.focal_px * z, (H / 2 - v) / g.focal_px * z, z)
+            x, y = galvo_optics.project_point(np, p, angles[:, 0], angles[:, 1], D1, SEP, g.focal_px, W, H)
+            return np.stack([x, y], axis=-1)
+        move = seen(depth) - seen(1.1 * depth)
+        move -= move.mean(axis=0)
+        want = float(np.sqrt(np.mean(np.sum(move ** 2, axis=1))))
+        assert res[i, j] == pytest.approx(want, rel=0.03), (i, j)
+
+
+@pytest.fixture(scope="module")
+def galvo_static():
+    """One 250 Hz scan period of scenes/galvo_static at 120 x 90 (its default 32 steps), Mitsuba's depth."""
+    scene = ef.load_scene(GALVO_STATIC, width=120, height=90)
+    events = ef.render_events(scene, 0.004)
+    return events, truth.truth_depth(scene, 0.0)
+
+
+def test_a_wall_the_optics_cannot_resolve_is_not_confident(galvo_static):
+    """At 120 x 90 the scan moves a point at 2.5 m 0.012 px further (RMS) than one at 2.75 m: the text wall's
+    depth is beyond what the views can tell, and before the resolution check 31 % of the image was confident,
+    75 % of it more than 10 % off (the wall read at the far end of the range), and 39 % of it moved by more
+    than 10 % when the period's window moved by 3 us. Now only the card's text (0.5 m) is confident, and right,
+    and stays put."""
+    events, z = galvo_static
+    events = ef.EventStream(events.x, events.y, events.t, events.p, events.width, events.height, dict(events.meta))
+    maps = []
+    for shift_us in (0, 3):
+        events.meta["t_start_us"] = shift_us
+        lf = ef.lightfield.from_events(events, period=0, views=32, method="galvo")
+        maps.append(ef.depth_from_focus(lf, 0.3, 4.0, 32, "variance"))
+    dm = maps[0]
+    wall, card = z > 2.0, z < 1.0
+    assert np.median(dm.resolution_px[wall]) < 0.25 * RESOLVABLE_PX             # measured 0.012
+    sure = dm.confidence > 0.3
+    assert sure[wall].mean() < 0.01                                          # measured 0
+    assert sure[card].mean() > 0.1                                           # measured 0.24 (the text on it)
+    err = np.abs(dm.depth[sure] / z[sure] - 1)
+    assert np.median(err) < 0.06 and (err > 0.1).mean() < 0.05               # measured 4.3 %, 0
+    both = sure & (maps[1].confidence > 0.3)
+    moved = np.abs(maps[1].depth[both] / dm.depth[both] - 1)
+    assert both.sum() > 0.8 * sure.sum() and (moved > 0.1).mean() < 0.02      # measured 0
