@@ -372,7 +372,7 @@ def run_refocus(a) -> int:
 
 
 def run_depth(a) -> int:
-    from ..focus.depth import MEASURES, depth_from_focus
+    from ..focus.depth import DEPTH_TOLERANCE, MEASURES, RESOLVABLE_PX, depth_from_focus
     from ..images import depth_png, write_exr, write_png
     ev = read_input(a)
     if not (0 < a.near < a.far) or a.planes < 2:
@@ -397,6 +397,11 @@ def run_depth(a) -> int:
              f"({confident.mean():.0%} of the pixels)") if confident.any() else \
         f"no pixel is confident (>= {a.min_confidence:g}): no depth found (too little texture, parallax or events)"
     print(f"wrote {root}.exr (depth, confidence) and {root}.png; {found}; from {_inputs(a)}")
+    unresolved = float((dm.resolution_px < RESOLVABLE_PX).mean())
+    if unresolved >= 0.1:        # say why a region is not confident where its texture is plain to see
+        print(f"{unresolved:.0%} of the pixels lie where {DEPTH_TOLERANCE:.0%} of depth moves the views by less than "
+              f"{RESOLVABLE_PX} px "
+              "(beyond this light field's depth resolution: a larger film or scan resolves more)")
     return 0
 
 

@@ -52,7 +52,7 @@ wrong depth. That floor is relative, so five checks set confidence to 0 (``Depth
   rendered start frame to 0.011-0.015 px. scenes/galvo_static at 120 x 90 moves its 2.5 m wall 0.012 px for
   10 %: 31 % of that image was confident, 75 % of it more than 10 % off (the wall at the far end of the range)
   and 39 % of it moved by more than 10 % when the period's window moved by 3 us. Now only the card's text is
-  confident, 4 % off, and stays put (tests/lightfield/test_depth_confidence.py). A region's median resolves
+  confident, 4 % off, and 0.5 % of it moves by more than 10 % (tests/lightfield/test_depth_confidence.py). A region's median resolves
   more than its pixels: the same wall's median depth reads 2.52 m (tests/simulate/test_default_steps.py).
 """
 from __future__ import annotations

@@ -296,7 +296,7 @@ def test_scan_frequency_sweep_loses_events_beyond_the_cap(capsys):
               f"{fast['edge_contrast']:.2f}")
     assert slow["offered_ev_s"] < cap < fast["offered_ev_s"]
     assert slow["dropped_fraction"] < 0.02 < 0.3 < fast["dropped_fraction"]
-    # measured: edge contrast 1.00 / 0.95, SSIM 0.997 / 0.886 against the uncapped pixel's refocus. (Before the
+    # measured: edge contrast 1.00 / 0.94, SSIM 0.997 / 0.886 against the uncapped pixel's refocus. (Before the
     # refocus kept Lanczos samples within their neighbours' values, rings clipped to black holes in the letters
     # read as an edge contrast of 0.45 at 1000 Hz.)
     assert slow["edge_contrast"] > 0.98 > fast["edge_contrast"]
