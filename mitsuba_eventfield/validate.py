@@ -24,10 +24,11 @@ MAX_SPP = 65536
 
 
 def number(value, name: str, lo=None, hi=None, *, integer: bool = False, lo_open: bool = False,
-           strict: bool = False, error=ConfigError):
+           strict: bool = False, error=ConfigError, inf_ok: bool = False):
     """``value`` as a float (or int) if finite and in [lo, hi] (``lo_open``: lo excluded); else ``error``
     naming ``name``, the value and the range. ``strict``: only real numbers (library arguments; the command
-    line passes text, which is parsed)."""
+    line passes text, which is parsed). ``inf_ok``: the caller takes infinity itself (before calling this),
+    so the range an error names is closed at inf (``describe_range``)."""
     kind = "a whole number" if integer else "a number"
     try:
         if isinstance(value, bool) or (strict and not isinstance(value, numbers.Real)):
@@ -38,14 +39,14 @@ def number(value, name: str, lo=None, hi=None, *, integer: bool = False, lo_open
                 raise ValueError
             v = int(v)
     except (TypeError, ValueError, OverflowError):
-        raise error(f"{name} = {value!r}: must be {kind} {describe_range(lo, hi, lo_open)}") from None
+        raise error(f"{name} = {value!r}: must be {kind} {describe_range(lo, hi, lo_open, inf_ok)}") from None
     if not math.isfinite(v):
         bounded = lo is not None or hi is not None
         raise error(f"{name} = {value!r}: must be a finite number" +
-                    (f" in {describe_range(lo, hi, lo_open)}" if bounded else ""))
+                    (f" in {describe_range(lo, hi, lo_open, inf_ok)}" if bounded else ""))
     too_low = lo is not None and (v <= lo if lo_open else v < lo)
     if too_low or (hi is not None and v > hi):
-        raise error(f"{name} = {value!r}: allowed range is {describe_range(lo, hi, lo_open)}")
+        raise error(f"{name} = {value!r}: allowed range is {describe_range(lo, hi, lo_open, inf_ok)}")
     return v
 
 
@@ -106,9 +107,12 @@ def json_file(path: str, what: str):
         raise EventFieldError(f"{path}: not a {what} (invalid JSON: {e})") from None
 
 
-def describe_range(lo, hi, lo_open=False) -> str:
-    left = "(" if lo_open else "["
-    return f"{left}{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
+def describe_range(lo, hi, lo_open=False, inf_ok=False) -> str:
+    """The interval [lo, hi] as an error message writes it; an open end where a bound is None (the value must
+    be finite) unless ``inf_ok`` (infinity itself is accepted: "(0, inf]")."""
+    left = "(" if lo_open or lo is None else "["
+    right = "]" if hi is not None or inf_ok else ")"
+    return f"{left}{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}{right}"
 
 
 def number_list(text: str, name: str, lo=None, hi=None, lo_open=False, allow_inf=False) -> list:
@@ -125,7 +129,7 @@ def number_list(text: str, name: str, lo=None, hi=None, lo_open=False, allow_inf
         if allow_inf and item.lower() == "inf":
             out.append(math.inf)
             continue
-        out.append(number(item, name, lo, hi, lo_open=lo_open))
+        out.append(number(item, name, lo, hi, lo_open=lo_open, inf_ok=allow_inf))
     if not out:
         raise ConfigError(f"{name} = {text!r}: expected one or more comma-separated numbers")
     return out

@@ -199,3 +199,16 @@ def test_every_facade_callable_has_a_case():
     stale = sorted(set(EXEMPT) & covered | set(EXEMPT) - callables)
     assert not stale, f"EXEMPT entries that have a case or are not facade callables: {stale}"
     assert set(KNOWN_FAILURES) <= set(CASES), sorted(set(KNOWN_FAILURES) - set(CASES))
+
+
+def test_a_range_is_closed_at_infinity_only_where_infinity_is_taken():
+    """An error's range says whether inf itself is allowed: ``number`` refuses it (open end), a light field's
+    depth takes it (closed end)."""
+    with pytest.raises(ef.ConfigError, match=r"allowed range is \(0, inf\)$"):
+        ef.make_curve("circle", frequency=0.0, amplitude=0.5)
+    with pytest.raises(ef.ConfigError, match=r"\(0, inf\)"):
+        ef.make_curve("circle", frequency=math.inf, amplitude=0.5)
+    for call in (lambda z: LF.check_depth(z), lambda z: ef.focal_stack(LF, [z])):
+        with pytest.raises(ef.ConfigError, match=r"allowed range is \(0, inf\]$"):
+            call(-1.0)
+    assert LF.check_depth(math.inf) == math.inf and np.isfinite(ef.focal_stack(LF, [math.inf])).all()

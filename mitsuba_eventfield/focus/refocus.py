@@ -380,4 +380,5 @@ def _depth_list(depths, name: str) -> np.ndarray:
     """One or more depths, each > 0 (math.inf allowed)."""
     if isinstance(depths, (str, bytes)) or not np.iterable(depths) or not len(depths):
         raise ConfigError(f"{name} = {depths!r}: expected one or more depths > 0")
-    return np.array([number(z, name, 0, lo_open=True, strict=True) if z != math.inf else math.inf for z in depths])
+    return np.array([number(z, name, 0, lo_open=True, strict=True, inf_ok=True) if z != math.inf else math.inf
+                     for z in depths])

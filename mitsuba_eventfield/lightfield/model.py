@@ -163,8 +163,8 @@ class LightField:
     def check_depth(self, depth, name: str = "depth") -> float:
         """``depth`` as a float if the light field can be refocused there (:meth:`depth_range`; finite depths at
         most ``MAX_DEPTH``, infinity as ``math.inf``), else a ConfigError naming ``name`` and the range."""
-        z = number(depth, name, 0, lo_open=True, strict=True) if not (isinstance(depth, numbers.Real)
-                                                                      and depth == math.inf) else math.inf
+        at_infinity = isinstance(depth, numbers.Real) and depth == math.inf
+        z = math.inf if at_infinity else number(depth, name, 0, lo_open=True, strict=True, inf_ok=True)
         near, far = self.depth_range()
         # the ends belong to the range (at a galvo's pivot the views align exactly: a depth search may start there)
         if not (near * (1 - 1e-9) <= z <= far) or (z != math.inf and z > MAX_DEPTH):

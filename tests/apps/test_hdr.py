@@ -55,7 +55,7 @@ def test_hdr_cli_outputs_and_bad_depth(tmp_path):
     assert row["figure"] == "Fig. 7" and f"long exposure {m['errors']['ldr_long']['bright']:.2f}" in row["measured"]
     assert row["command"].startswith("eventfield hdr ") and "-D width=48" in row["command"]
     bad = subprocess.run(cmd[:-2] + ["--depth", "-1"], capture_output=True, text=True, env=env, timeout=600)
-    assert bad.returncode == 2 and "argument --depth: '-1': allowed range is (0, inf]" in bad.stderr
+    assert bad.returncode == 2 and "argument --depth: '-1': allowed range is (0, inf)" in bad.stderr
 
 
 @pytest.fixture(scope="module")
@@ -115,9 +115,9 @@ def test_hdr_refocus_does_not_ring_next_to_an_led(hdr_lf):
     assert min(float(p.min()) for p in plain) < 0                      # Lanczos alone rings below the surround
 
 
-@pytest.mark.parametrize("kw, words", [({"depths": (0.6, -1.0)}, ["depths = -1.0", "(0, inf]"]),
+@pytest.mark.parametrize("kw, words", [({"depths": (0.6, -1.0)}, ["depths = -1.0", "(0, inf)"]),
                                        ({"views": 1}, ["views = 1", "[2, 4096]"]),
-                                       ({"solver_depth": 0.0}, ["solver_depth = 0.0", "(0, inf]"])])
+                                       ({"solver_depth": 0.0}, ["solver_depth = 0.0", "(0, inf)"])])
 def test_hdr_lightfield_refuses_bad_input_before_rendering(kw, words):
     with pytest.raises(ValueError) as err:
         hdr.lightfield(LF_SCENE, **kw)
@@ -149,4 +149,4 @@ def test_hdr_lightfield_cli_outputs_and_paper_row(tmp_path):
     cmd[cmd.index(str(out))] = str(tmp_path / "bad")
     bad = subprocess.run(cmd + ["--depths", "0.6,0"], capture_output=True, text=True, timeout=600)
     assert bad.returncode == 2 and bad.stderr.strip() == \
-        "eventfield: error: --depths = '0': allowed range is (0, inf]", bad.stderr
+        "eventfield: error: --depths = '0': allowed range is (0, inf)", bad.stderr

@@ -75,7 +75,7 @@ def test_reconstruct_refocus_depth_outputs(galvo_capture):
     (["refocus", "{d}/g.h5", "-o", "{d}/x.png", "--depth", "1", "--period", "9"],
      "scan period 9 is not in the stream: allowed 0..0"),
     (["calibrate", "galvo", "{d}/g.h5", "--patch", "30,30", "--period", "-1", "-o", "{d}/x.json"],
-     "argument --period: '-1': allowed range is [0, inf]"),
+     "argument --period: '-1': allowed range is [0, inf)"),
     (["calibrate", "kaleidoscope", "{d}/depth_only.exr", "-o", "{d}/x.json"],
      "depth_only.exr: needs a Y (or R) channel; it has Z"),
 ])

@@ -121,7 +121,7 @@ def test_damaged_or_pickled_npz_is_one_line(tmp_path, capfd):
 
 def test_python_arguments_are_checked():
     ones = np.ones((3, 4, 4), np.float32)
-    cases = [(dict(frames=ones, fps="abc"), r"^frames: fps = 'abc': must be a number \(0, inf\]$"),
+    cases = [(dict(frames=ones, fps="abc"), r"^frames: fps = 'abc': must be a number \(0, inf\)$"),
              (dict(frames=ones, fps=100, threshold="x"), r"^threshold = 'x': must be a number"),
              (dict(frames=[np.ones((24, 32)), np.ones((20, 30))], fps=100), r"^frames: the frames differ in size"),
              (dict(frames=np.ones((3, 4, 4), np.int32), fps=100), r"^frames\[0\]: pixel type int32: integer frames")]
