@@ -397,10 +397,10 @@ def run_depth(a) -> int:
              f"({confident.mean():.0%} of the pixels)") if confident.any() else \
         f"no pixel is confident (>= {a.min_confidence:g}): no depth found (too little texture, parallax or events)"
     print(f"wrote {root}.exr (depth, confidence) and {root}.png; {found}; from {_inputs(a)}")
-    unresolved = float((dm.resolution_px < RESOLVABLE_PX).mean())
+    unresolved = float(dm.unresolved.mean())
     if unresolved >= 0.1:        # say why a region is not confident where its texture is plain to see
-        print(f"{unresolved:.0%} of the pixels lie where {DEPTH_TOLERANCE:.0%} of depth moves the views by less than "
-              f"{RESOLVABLE_PX} px "
+        print(f"{unresolved:.0%} of the pixels are textured but lie where {DEPTH_TOLERANCE:.0%} more depth moves the "
+              f"views by less than {RESOLVABLE_PX} px "
               "(beyond this light field's depth resolution: a larger film or scan resolves more)")
     return 0
 

@@ -39,7 +39,7 @@ wrong depth. That floor is relative, so five checks set confidence to 0 (``Depth
   are flagged from 0.52 to 1 m, and none when searched from 0.3-0.48 m. Not caught: an object nearer than
   half the nearest depth searched.
 * **No texture of its own.** The focus window lends a textureless pixel the peak of the texture beside it
-  (edge fattening): on scenes/offaxis_cards (96 x 72, events only, 0.3-4 m) the plain wall up to 9.5 px from the
+  (edge fattening): on scenes/offaxis_cards (96 x 72, events only, 0.3-4 m) the plain wall up to 10.8 px from the
   cards read a card's depth, confidently. ``own_texture`` is the pixel's log gradient (3 x 3 mean) in the images
   refocused at its sharpest plane and the two beside it (the most of the three); below ``OWN_TEXTURE_SHARE`` = 0.2 of the image's 90th percentile a pixel is not
   confident. A confident wall pixel now lies within 3.3 px of a card (the span of the gradient stencil and
@@ -48,12 +48,12 @@ wrong depth. That floor is relative, so five checks set confidence to 0 (``Depth
 * **Depth finer than the optics resolve.** ``depth_resolution_px`` is how far a point at the pixel's depth
   moves in the views (RMS about their mean) when its depth grows by ``DEPTH_TOLERANCE`` = 10 %; below
   ``RESOLVABLE_PX`` = 0.05 px the depth is not confident. From events the textured cards of offaxis_cards
-  localise to 0.03-0.12 px (2-3 % depth error at 1.2 and 0.5 m, where 10 % moves 0.16 and 0.37 px); with a
-  rendered start frame to 0.011-0.015 px. scenes/galvo_static at 120 x 90 moves its 2.5 m wall 0.012 px for
+  localise to 0.03-0.11 px (2-3 % depth error at 1.2 and 0.5 m, where 10 % moves 0.14 and 0.34 px); with a
+  rendered start frame to 0.010-0.014 px. scenes/galvo_static at 120 x 90 moves its 2.5 m wall 0.010 px for
   10 %: 31 % of that image was confident, 75 % of it more than 10 % off (the wall at the far end of the range)
   and 39 % of it moved by more than 10 % when the period's window moved by 3 us. Now only the card's text is
   confident, 4 % off, and 0.5 % of it moves by more than 10 % (tests/lightfield/test_depth_confidence.py). A region's median resolves
-  more than its pixels: the same wall's median depth reads 2.52 m (tests/simulate/test_default_steps.py).
+  more than its pixels: the same wall's median depth reads 2.67 m (tests/simulate/test_default_steps.py).
 """
 from __future__ import annotations
 
@@ -87,6 +87,11 @@ class DepthMap:
     at_limit: np.ndarray | None = None   # (H, W) bool: peak at an end of the range searched (a bound, not a depth)
     own_texture: np.ndarray | None = None     # (H, W) log gradient at the pixel, refocused at its depth
     resolution_px: np.ndarray | None = None   # (H, W) view motion telling its depth from DEPTH_TOLERANCE farther
+    # (H, W) the confidence before the own-texture and resolution checks: how well the depth aligns the pixel's
+    # views, for methods that map the views at each pixel's depth (focus.galvo_periods). There a depth the
+    # optics cannot resolve costs less than RESOLVABLE_PX of alignment, and the image's median would cost more
+    focus_confidence: np.ndarray | None = None
+    unresolved: np.ndarray | None = None      # (H, W) bool: fails the resolution check alone (module docstring)
 
     def confident_share(self, threshold: float = 0.5, mask=None) -> float:
         """Share of the pixels (of ``mask``) whose confidence reaches ``threshold``: 0 when the light field
@@ -156,10 +161,12 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
     at_limit = _beyond(vol, outer_vol)
     own = own_texture(textures, k)
     resolution = depth_resolution_px(lf, depth, zs[0], zs[-1])
-    sure = (evidence >= MIN_EVIDENCE) & ~at_limit & (own >= OWN_TEXTURE_SHARE * float(np.percentile(own, 90))) \
-        & (resolution >= RESOLVABLE_PX)
-    conf = np.where(sure, conf, 0.0)
-    return DepthMap(depth, np.clip(np.nan_to_num(conf), 0, 1), zs, measure, evidence, at_limit, own, resolution)
+    aligns = (evidence >= MIN_EVIDENCE) & ~at_limit
+    textured = own >= OWN_TEXTURE_SHARE * float(np.percentile(own, 90))
+    resolved = resolution >= RESOLVABLE_PX
+    focus_conf = np.clip(np.nan_to_num(np.where(aligns, conf, 0.0)), 0, 1)
+    return DepthMap(depth, np.where(textured & resolved, focus_conf, 0.0), zs, measure, evidence, at_limit, own,
+                    resolution, focus_conf, aligns & textured & ~resolved)
 
 
 # inverse depths beyond each end of the range, as fractions of the end's: up to half the nearest depth searched

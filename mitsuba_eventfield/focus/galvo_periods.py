@@ -53,7 +53,9 @@ def _depth_from_views(events, t_start, log_start, views, depth_range, planes):
     lf = from_galvo(direct(events, times, log_start, t_start), times, events.meta["optics"])
     dm = depth_from_focus(lf, depth_range[0], depth_range[1], planes, measure="variance")
     inv = 1.0 / dm.depth
-    sure = dm.confidence > 0.5
+    # the views are mapped at each pixel's depth: a depth beyond the optics' resolution still aligns them (to
+    # within RESOLVABLE_PX), the image's median would not (galvo_static at 120 x 90: log error 0.26 against 0.20)
+    sure = dm.focus_confidence > 0.5
     fill = float(np.median(inv[sure])) if sure.any() else float(np.median(inv))
     inv = np.where(sure, inv, fill).astype(np.float32)
     inv = cv2.medianBlur(inv, 5).astype(np.float64)          # one wrong plane in a window does not survive

@@ -74,7 +74,7 @@ def _warp_plain(img, homography, border, interpolation):
 
 def _no_ringing(warped, img, homography, border):
     """``warped`` clipped to the least and greatest value of each sample's 3 x 3 source neighbourhood (those
-    images warped bilinearly), divided and multiplied by ``RING_MARGIN``. Lanczos rings at a strong edge: on
+    images warped bilinearly), widened by the factor ``RING_MARGIN``. Lanczos rings at a strong edge: on
     scenes/galvo_static (black letters, 0.013, on a wall of up to 6.4) its negative lobes took 444 of 10,800
     refocused pixels below zero (then clipped to 0, black holes in the letters), and the log of the aligned
     views that the ``variance`` focus measure takes fell to log(1e-6) there, a spike that drowned the focus
@@ -88,7 +88,10 @@ def _no_ringing(warped, img, homography, border):
                      cv2.INTER_LINEAR)
     hi = _warp_plain(cv2.dilate(img, _NEIGHBOURS, borderType=cv2.BORDER_REFLECT), homography, border,
                      cv2.INTER_LINEAR)
-    return np.clip(warped, lo / RING_MARGIN, hi * RING_MARGIN)
+    # widened away from zero on either side (views are intensities, but a LightField does not refuse signed ones)
+    lo = np.where(lo > 0, lo / RING_MARGIN, lo * RING_MARGIN)
+    hi = np.where(hi > 0, hi * RING_MARGIN, hi / RING_MARGIN)
+    return np.clip(warped, lo, hi)
 
 
 def _with_motion(maps: np.ndarray, motion_px) -> np.ndarray:

@@ -57,7 +57,7 @@ def test_reconstruct_refocus_depth_outputs(galvo_capture):
     assert set(dm) == {"depth", "confidence"} and meta["planes"] == 16
     conf = dm["confidence"] > 0.3
     # the card (0.5 m, image centre-right area) is confident and near; the wall (2.5 m) is not confident: at
-    # 120 x 90 its points move 0.014 px in the views for 10 % of depth, beyond what they resolve (focus/depth.py)
+    # 120 x 90 its points move 0.011 px in the views for 10 % more depth, beyond what they resolve (focus/depth.py)
     card, wall = np.s_[38:55, 62:85], np.s_[5:25, 5:40]
     assert conf[card].mean() > 0.2 and abs(np.median(dm["depth"][card][conf[card]]) / 0.5 - 1) < 0.25
     assert conf[wall].mean() < 0.05 and "beyond this light field's depth resolution" in r.stdout

@@ -121,8 +121,8 @@ def test_depth_does_not_hang_on_the_microsecond_the_period_starts(cards):
 
 def test_a_plain_wall_beside_a_card_does_not_borrow_its_depth(cards):
     """Edge fattening: the focus window of a plain wall pixel beside a card holds the card's texture, so its
-    focus curve peaks at the card's depth. Without the own-texture check (``OWN_TEXTURE_SHARE`` = 0), 519 wall
-    pixels more than 4 px from a card, up to 9.5 px, read a card's depth confidently (events only, 0.3-4 m). Now a
+    focus curve peaks at the card's depth. Without the own-texture check (``OWN_TEXTURE_SHARE`` = 0), 603 wall
+    pixels more than 4 px from a card, up to 10.8 px, read a card's depth confidently (events only, 0.3-4 m). Now a
     confident wall pixel lies within the 3 px that the texture measure itself spans across the cards' edges
     (measured at most 3.3 px), and the cards stay confident."""
     import cv2
