@@ -125,3 +125,27 @@ def test_the_events_only_solver_maps_unresolved_pixels_at_their_own_depth(galvo_
     assert np.median(rec.depth[wall]) > 1.5                               # measured 2.42 m
     assert (rec.confidence[wall] > 0.5).mean() < 0.01                     # the map's confidence stays honest
     assert log_error(rec.log_start, frame, truth.textured(frame, 0.05)) < 0.23     # measured 0.204
+
+
+def test_kaleidoscope_refocus_stays_within_the_views_next_to_black_blocks():
+    """The shift-invariant refocus (exact Fourier shifts, focus/refocus.py) rings at a sharp edge as Lanczos
+    does: 3 x 3 views of black blocks (0.013) on 6.4, refocused half a pixel off their alignment, had pixels
+    clipped to 0. Now every pixel lies within the views' range, widened by ``RING_MARGIN``; the test's own
+    Fourier sum (the same phase ramps, unclipped) shows the rings it removes."""
+    from mitsuba_eventfield.lightfield.model import Disparity as D
+    ref = np.full((64, 64), 6.4, np.float32)
+    ref[20:32, 20:28] = 0.013
+    ref[40:50, 36:44] = 0.013
+    pos = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)], float)
+    views = np.stack([np.roll(ref, (2 * int(p[1]), 2 * int(p[0])), axis=(0, 1)) for p in pos])   # aligned at 2
+    lf = ef.LightField(views, pos, np.zeros(len(pos)), D((0.0, 0.0), (1.0, 1.0)))
+    for alpha in (0.7, 1.5, 2.0):
+        img = ef.refocus(lf, alpha=(alpha, alpha), on_motion="ignore")
+        assert img.min() >= 0.013 / RING_MARGIN * (1 - 1e-5) and img.max() <= 6.4 * RING_MARGIN * (1 + 1e-5), alpha
+    fy, fx = np.fft.fftfreq(64)[:, None], np.fft.fftfreq(64)[None, :]
+    spectra = np.fft.fft2(views)
+    plain = np.real(np.fft.ifft2(np.mean([s * np.exp(2j * np.pi * (fx * 1.5 * p[0] + fy * 1.5 * p[1]))
+                                          for s, p in zip(spectra, pos)], axis=0)))
+    assert plain.min() < 0                                  # the unclipped sum rings below zero
+    sharp = ef.refocus(lf, alpha=(2.0, 2.0), on_motion="ignore")
+    assert sharp[24:28, 22:26].max() < 0.02                 # aligned: the block is black
