@@ -65,11 +65,12 @@ def add_parsers(sub) -> None:
 
     dp = sub.add_parser("depth", parents=[lf_args], help="depth from focus: EXR (depth, confidence) + colour PNG")
     dp.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside)")
-    dp.add_argument("--near", type=num(0, lo_open=True), required=True, help="nearest depth searched")
-    dp.add_argument("--far", type=num(0, lo_open=True), required=True, help="farthest depth searched")
-    dp.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=32)
+    dp.add_argument("--near", type=num(0, lo_open=True), required=True, help="nearest depth searched (scene units)")
+    dp.add_argument("--far", type=num(0, lo_open=True), required=True, help="farthest depth searched (scene units)")
+    dp.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=32, help="planes searched (default 32)")
     dp.add_argument("--measure", default="variance", help="sml, tenengrad or variance (default)")
-    dp.add_argument("--min-confidence", type=num(0, 1), default=0.2, help="greyed out below this in the PNG")
+    dp.add_argument("--min-confidence", type=num(0, 1), default=0.2, help="greyed out below this in the PNG (default 0.2; "
+                    "a confidence is near 0 or above ~0.75, not a probability: focus/depth.py)")
 
 
 # ------------------------------------------------------------------ inputs shared with calibrate
@@ -188,6 +189,9 @@ def _lightfield(a, ev):
     optics than this stream's is refused before any reconstruction)."""
     from ..calibration import apply_to_lightfield, check_optics, load_calibration, optics_record
     from ..lightfield.model import from_events
+    from ..lightfield.reconstruct import methods
+    if a.method is not None and a.method not in (*methods(), PERIODS):
+        raise EventFieldError(f"--method {a.method!r}: allowed: {', '.join((*methods(), PERIODS))}")
     calibration = load_calibration(a.calibration) if a.calibration else None
     give_optics(ev, a.file, a.optics, calibration)
     optics = None
@@ -372,15 +376,17 @@ def run_refocus(a) -> int:
 
 
 def run_depth(a) -> int:
-    from ..focus.depth import DEPTH_TOLERANCE, MEASURES, RESOLVABLE_PX, depth_from_focus
+    from ..focus.depth import MEASURES, depth_from_focus
     from ..images import depth_png, write_exr, write_png
     ev = read_input(a)
-    if not (0 < a.near < a.far) or a.planes < 2:
-        raise EventFieldError(f"--near {a.near} --far {a.far} --planes {a.planes}: need 0 < near < far, "
-                              "planes >= 2")
+    if not 0 < a.near < a.far:                    # (--planes is checked by its parser)
+        raise EventFieldError(f"--near {a.near} --far {a.far}: need 0 < near < far")
     if a.measure not in MEASURES:
         raise EventFieldError(f"--measure {a.measure!r}: allowed: {', '.join(MEASURES)}")
     lf = _lightfield(a, ev)
+    if a.method == "highpass" and lf.kind == "galvo":    # a new user's galvo_static: the text wall read 0.43 m
+        print("eventfield: warning: --method highpass keeps each view's changes, not the image the scan moves: "
+              "galvo depth from it is unreliable (the default, galvo, solves the image from the events)")
     try:
         for value, name in ((a.near, "--near"), (a.far, "--far")):
             lf.check_depth(value, name)
@@ -393,15 +399,14 @@ def run_depth(a) -> int:
     write_exr(root + ".exr", {"depth": dm.depth, "confidence": dm.confidence}, meta)
     write_png(root + ".png", picture)
     confident = dm.confidence >= a.min_confidence
+    notes = dm.notes()           # why textured regions are not confident
     found = (f"median depth of confident pixels {float(np.median(dm.depth[confident])):.4g} "
              f"({confident.mean():.0%} of the pixels)") if confident.any() else \
-        f"no pixel is confident (>= {a.min_confidence:g}): no depth found (too little texture, parallax or events)"
+        f"no pixel is confident (>= {a.min_confidence:g}): no depth found (" + \
+        ("see below" if notes else "too little texture, parallax or events") + ")"
     print(f"wrote {root}.exr (depth, confidence) and {root}.png; {found}; from {_inputs(a)}")
-    unresolved = float(dm.unresolved.mean())
-    if unresolved >= 0.1:        # say why a region is not confident where its texture is plain to see
-        print(f"{unresolved:.0%} of the pixels are textured but lie where {DEPTH_TOLERANCE:.0%} more depth moves the "
-              f"views by less than {RESOLVABLE_PX} px "
-              "(beyond this light field's depth resolution: a larger film or scan resolves more)")
+    for line in notes:
+        print(line)
     return 0
 
 

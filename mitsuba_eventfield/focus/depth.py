@@ -12,7 +12,9 @@ with the nearest plane beyond it (``_refine_ends``), never past the range's ends
 
 Confidence in [0, 1] is c / (c + c0) with c = peak - median of a pixel's focus curve and c0 = 5% of the
 90th percentile of c over the image: a textureless pixel has a flat curve and gets ~0 instead of a confident
-wrong depth. That floor is relative, so five checks set confidence to 0 (``DepthMap.evidence``,
+wrong depth. It is a score, not a probability: with the checks below, nearly every pixel is either 0 or
+above ~0.75, so thresholds from 0.2 to 0.7 select nearly the same pixels. ``DepthMap.notes`` says, in
+words, why textured pixels were not confident. That floor is relative, so five checks set confidence to 0 (``DepthMap.evidence``,
 ``DepthMap.at_limit``, ``DepthMap.own_texture``, ``DepthMap.resolution_px``; thresholds from
 ``evaluation.failure``'s texture-contrast and depth-range sweeps and the scenes named below):
 
@@ -75,6 +77,7 @@ MIN_CHANGES = 2.0           # module docstring: level changes along the views pe
 OWN_TEXTURE_SHARE = 0.2     # module docstring: a pixel's own texture against the image's 90th percentile
 DEPTH_TOLERANCE = 0.1       # module docstring: a confident depth is told from one this share farther ...
 RESOLVABLE_PX = 0.05        # ... by its views moving at least this far (RMS over the views, pixels)
+NOTE_SHARE = 0.02           # DepthMap.notes: a reason is reported where it holds for this share of the image
 
 
 @dataclass
@@ -92,6 +95,35 @@ class DepthMap:
     # optics cannot resolve costs less than RESOLVABLE_PX of alignment, and the image's median would cost more
     focus_confidence: np.ndarray | None = None
     unresolved: np.ndarray | None = None      # (H, W) bool: fails the resolution check alone (module docstring)
+
+    def notes(self) -> list:
+        """Why textured pixels are not confident, as report lines (each only where it holds for at least
+        ``NOTE_SHARE`` of the image): sharpest nearer or farther than the depths searched (``at_limit``), or
+        beyond the depth resolution (``unresolved``, with the farthest depth the light field resolves: it grows
+        in proportion to the views' parallax, for a galvo the film's width, the scan's amplitude and the
+        mirror's distance). A pixel sharpest beyond the far end where that end is itself unresolved counts as
+        unresolved."""
+        if self.at_limit is None or self.own_texture is None or self.resolution_px is None:
+            return []
+        textured = (self.own_texture >= OWN_TEXTURE_SHARE * float(np.percentile(self.own_texture, 90))) & \
+            (self.evidence >= MIN_EVIDENCE)
+        near, far = float(self.planes[0]), float(self.planes[-1])
+        nearer = textured & self.at_limit & (1.0 / self.depth > 0.5 * (1.0 / near + 1.0 / far))
+        farther = textured & self.at_limit & ~nearer
+        unresolved = self.unresolved | (farther & (self.resolution_px < RESOLVABLE_PX))
+        out = []
+        for share, where, hint in ((nearer.mean(), f"nearer than {near:.4g}", "search from nearer"),
+                                   ((farther & ~unresolved).mean(), f"farther than {far:.4g}", "search farther")):
+            if share >= NOTE_SHARE:
+                out.append(f"{share:.0%} of the pixels are textured but sharpest {where}, beyond the depths "
+                           f"searched: {hint}")
+        if unresolved.mean() >= NOTE_SHARE:
+            # resolution_px falls as 1 / depth: the depth where it reaches RESOLVABLE_PX, per pixel
+            farthest = float(np.median(self.resolution_px * self.depth) / RESOLVABLE_PX)
+            out.append(f"{unresolved.mean():.0%} of the pixels are textured but beyond the depth resolution: past a "
+                       f"depth of about {farthest:.3g}, {DEPTH_TOLERANCE:.0%} more depth moves the views by less than "
+                       f"{RESOLVABLE_PX} px (a wider scan or a larger film resolves farther, in proportion)")
+        return out
 
     def confident_share(self, threshold: float = 0.5, mask=None) -> float:
         """Share of the pixels (of ``mask``) whose confidence reaches ``threshold``: 0 when the light field

@@ -149,3 +149,15 @@ def test_kaleidoscope_refocus_stays_within_the_views_next_to_black_blocks():
     assert plain.min() < 0                                  # the unclipped sum rings below zero
     sharp = ef.refocus(lf, alpha=(2.0, 2.0), on_motion="ignore")
     assert sharp[24:28, 22:26].max() < 0.02                 # aligned: the block is black
+
+
+def test_the_map_says_why_textured_pixels_are_not_confident(galvo_static):
+    """``DepthMap.notes``: searched from 0.6 m, the card (0.5 m) is sharpest nearer than the range; at 120 x 90
+    the depth resolution ends at about 0.55 m (the card's own pixels resolve 0.055 px for 10 %), and the text wall
+    lies past it. Searched over 0.3-4 m, no pixel is said to lie outside the range."""
+    events, z, _ = galvo_static
+    lf = ef.lightfield.from_events(events, period=0, views=32, method="galvo")
+    inside = ef.depth_from_focus(lf, 0.3, 4.0, 32, "variance").notes()
+    assert len(inside) == 1 and "beyond the depth resolution: past a depth of about 0.5" in inside[0], inside
+    narrow = ef.depth_from_focus(lf, 0.6, 4.0, 32, "variance").notes()
+    assert any("sharpest nearer than 0.6" in line for line in narrow), narrow
