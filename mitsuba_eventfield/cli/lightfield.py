@@ -69,8 +69,9 @@ def add_parsers(sub) -> None:
     dp.add_argument("--far", type=num(0, lo_open=True), required=True, help="farthest depth searched (scene units)")
     dp.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=32, help="planes searched (default 32)")
     dp.add_argument("--measure", default="variance", help="sml, tenengrad or variance (default)")
-    dp.add_argument("--min-confidence", type=num(0, 1), default=0.2, help="greyed out below this in the PNG (default 0.2; "
-                    "a confidence is near 0 or above ~0.75, not a probability: focus/depth.py)")
+    dp.add_argument("--min-confidence", type=num(0, 1), default=0.2,
+                    help="greyed out below this in the PNG (default 0.2; a confidence is near 0 or above ~0.75, "
+                         "not a probability: focus/depth.py)")
 
 
 # ------------------------------------------------------------------ inputs shared with calibrate

@@ -12,11 +12,12 @@ with the nearest plane beyond it (``_refine_ends``), never past the range's ends
 
 Confidence in [0, 1] is c / (c + c0) with c = peak - median of a pixel's focus curve and c0 = 5% of the
 90th percentile of c over the image: a textureless pixel has a flat curve and gets ~0 instead of a confident
-wrong depth. It is a score, not a probability: with the checks below, nearly every pixel is either 0 or
-above ~0.75, so thresholds from 0.2 to 0.7 select nearly the same pixels. ``DepthMap.notes`` says, in
-words, why textured pixels were not confident. That floor is relative, so five checks set confidence to 0 (``DepthMap.evidence``,
+wrong depth. That floor is relative, so five checks set confidence to 0 (``DepthMap.evidence``,
 ``DepthMap.at_limit``, ``DepthMap.own_texture``, ``DepthMap.resolution_px``; thresholds from
-``evaluation.failure``'s texture-contrast and depth-range sweeps and the scenes named below):
+``evaluation.failure``'s texture-contrast and depth-range sweeps and the scenes named below). The confidence
+is a score, not a probability: with these checks nearly every pixel is either 0 or above ~0.75, so thresholds
+from 0.2 to 0.7 select nearly the same pixels. ``DepthMap.notes`` says, in words, why textured pixels were not
+confident.
 
 * **No parallax in the views.** Where the views barely change over the light field, the focus curve's peak
   comes from the alignment warps alone (identical views refocus sharpest where the warps spread least), not
@@ -41,12 +42,13 @@ words, why textured pixels were not confident. That floor is relative, so five c
   are flagged from 0.52 to 1 m, and none when searched from 0.3-0.48 m. Not caught: an object nearer than
   half the nearest depth searched.
 * **No texture of its own.** The focus window lends a textureless pixel the peak of the texture beside it
-  (edge fattening): on scenes/offaxis_cards (96 x 72, events only, 0.3-4 m) the plain wall up to 10.8 px from the
-  cards read a card's depth, confidently. ``own_texture`` is the pixel's log gradient (3 x 3 mean) in the images
-  refocused at its sharpest plane and the two beside it (the most of the three); below ``OWN_TEXTURE_SHARE`` = 0.2 of the image's 90th percentile a pixel is not
-  confident. A confident wall pixel now lies within 3.3 px of a card (the span of the gradient stencil and
-  its mean across an occluding edge, where the depth of a plain background is not in the data); the cards'
-  pixels stay confident (tests/lightfield/test_offaxis_cards.py).
+  (edge fattening): on scenes/offaxis_cards (96 x 72, events only, 0.3-4 m) the plain wall up to 10.8 px from
+  the cards read a card's depth, confidently. ``own_texture`` is the pixel's log gradient (3 x 3 mean) in the
+  images refocused at its sharpest plane and the two beside it (the most of the three); below
+  ``OWN_TEXTURE_SHARE`` = 0.2 of the image's 90th percentile a pixel is not confident. A confident wall pixel
+  now lies within 3.3 px of a card (the span of the gradient stencil and its mean across an occluding edge,
+  where the depth of a plain background is not in the data); the cards' pixels stay confident
+  (tests/lightfield/test_offaxis_cards.py).
 * **Depth finer than the optics resolve.** ``depth_resolution_px`` is how far a point at the pixel's depth
   moves in the views (RMS about their mean) when its depth grows by ``DEPTH_TOLERANCE`` = 10 %; below
   ``RESOLVABLE_PX`` = 0.05 px the depth is not confident. From events the textured cards of offaxis_cards
@@ -54,8 +56,10 @@ words, why textured pixels were not confident. That floor is relative, so five c
   rendered start frame to 0.010-0.014 px. scenes/galvo_static at 120 x 90 moves its 2.5 m wall 0.010 px for
   10 %: 31 % of that image was confident, 75 % of it more than 10 % off (the wall at the far end of the range)
   and 39 % of it moved by more than 10 % when the period's window moved by 3 us. Now only the card's text is
-  confident, 4 % off, and 0.5 % of it moves by more than 10 % (tests/lightfield/test_depth_confidence.py). A region's median resolves
-  more than its pixels: the same wall's median depth reads 2.67 m (tests/simulate/test_default_steps.py).
+  confident, 4 % off, and 0.5 % of it moves by more than 10 % (tests/lightfield/test_depth_confidence.py). A
+  region's median resolves more than its pixels: the same wall's median depth reads 2.67 m
+  (tests/simulate/test_default_steps.py). Not caught: the check reads the pixel's estimated depth, so an
+  unresolved pixel estimated too near passes it (docs/design.md, "Where methods fail").
 """
 from __future__ import annotations
 

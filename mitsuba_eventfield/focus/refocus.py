@@ -56,7 +56,7 @@ class MotionBlurWarning(UserWarning):
 
 
 _NEIGHBOURS = np.ones((3, 3), np.uint8)
-RING_MARGIN = 1.25          # _no_ringing: a sample may pass its neighbours' values by this factor (a log step of 0.22)
+RING_MARGIN = 1.25          # _no_ringing: a sample may pass its neighbours' values by this factor (log step 0.22)
 
 
 def _warp(img, homography, border=cv2.BORDER_CONSTANT, interpolation=cv2.INTER_LANCZOS4):
