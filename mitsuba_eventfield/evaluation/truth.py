@@ -65,8 +65,5 @@ def conventional_frame(timed, t_mid: float, fps: float = 60.0, samples: int = 16
 def textured(log_image: np.ndarray, threshold: float = 0.1) -> np.ndarray:
     """Pixels whose log image changes by more than ``threshold`` per pixel (Sobel gradient magnitude): where
     focus and depth can be measured at all."""
-    import cv2
-    img = np.asarray(log_image, np.float32)
-    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3) / 8
-    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3) / 8
-    return np.hypot(gx, gy) > threshold
+    from ..focus.measures import log_gradient
+    return log_gradient(log_image) > threshold

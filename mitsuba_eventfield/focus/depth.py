@@ -72,7 +72,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..lightfield.model import LightField
 from .measures import (IMAGE_MEASURES, focus_measure,  # noqa: F401  (focus_measure, refine_peak: re-exported)
-                       check_window, parabola_offset, parabola_vertex, refine_peak)
+                       check_window, log_gradient, parabola_offset, parabola_vertex, refine_peak)
 from .refocus import aligned_views, check_lightfield, depth_planes, refocus
 
 MEASURES = IMAGE_MEASURES + ("variance",)
@@ -138,7 +138,7 @@ class DepthMap:
 
 def _volume(lf: LightField, planes, measure, window, textures: list | None = None):
     """(D, H, W) focus of each plane; ``textures``: a list that gets each plane's log texture
-    (``_log_texture`` of the image refocused there: for ``variance``, the mean of the aligned log views)."""
+    (``log_gradient`` of the image refocused there: for ``variance``, the mean of the aligned log views)."""
     vol = []
     for z in planes:
         if measure == "variance":
@@ -152,7 +152,7 @@ def _volume(lf: LightField, planes, measure, window, textures: list | None = Non
             cov = np.maximum(cov, 1)
             var = np.maximum(s2 / cov - (s1 / cov) ** 2, 0)
             if textures is not None:
-                textures.append(_log_texture(s1 / cov))
+                textures.append(log_gradient(s1 / cov))
             var = cv2.boxFilter(var.astype(np.float32), -1, (window, window), borderType=cv2.BORDER_REFLECT)
             vol.append(-var)                                    # focus = agreement = low variance
         else:
@@ -160,7 +160,7 @@ def _volume(lf: LightField, planes, measure, window, textures: list | None = Non
             img = img if img.ndim == 2 else img.mean(-1)
             vol.append(focus_measure(img, measure, window))
             if textures is not None:
-                textures.append(_log_texture(np.log(np.maximum(img, 1e-6))))
+                textures.append(log_gradient(np.log(np.maximum(img, 1e-6))))
     return np.stack(vol)
 
 
@@ -314,7 +314,7 @@ def parallax_evidence(lf: LightField, depths, window: int = 7) -> np.ndarray:
     parallax (then identical views are consistent with it)."""
     views = lf.views if lf.views.ndim == 3 else lf.views.mean(axis=-1)
     logs = np.log(np.maximum(views, 1e-6)).astype(np.float32)
-    grad = _log_texture(logs.mean(axis=0))
+    grad = log_gradient(logs.mean(axis=0))
     box = lambda img: cv2.boxFilter(img.astype(np.float32), -1, (window, window),  # noqa: E731
                                     borderType=cv2.BORDER_REFLECT)
     least = float(view_spread_px(lf, depths).min())
@@ -327,15 +327,9 @@ def parallax_evidence(lf: LightField, depths, window: int = 7) -> np.ndarray:
     return np.where(changes >= MIN_CHANGES, ratio, 0.0).astype(np.float64)
 
 
-def _log_texture(log_img) -> np.ndarray:
-    """(H, W) log-brightness gradient magnitude at each pixel (Sobel / 8: the slope of a ramp per pixel)."""
-    g = np.asarray(log_img, np.float32)
-    return np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)) / 8
-
-
 def own_texture(textures: list, k: np.ndarray) -> np.ndarray:
     """(H, W): each pixel's log texture (3 x 3 mean) in the images refocused at its sharpest plane ``k`` and
-    the planes beside it, the most of the three (``textures``: one ``_log_texture`` per plane). The focus window
+    the planes beside it, the most of the three (``textures``: one ``log_gradient`` per plane). The focus window
     lends a textureless pixel the peak of texture beside it; this is the pixel's own (module docstring). The
     planes beside count because a depth between two far-apart planes (few planes) is sharp in neither: with 4
     planes over 0.4-3 m, 15 % of a textured card at 1.5 m had too little texture at its sharpest plane alone."""

@@ -37,6 +37,13 @@ def focus_measure(img: np.ndarray, measure: str = "sml", window: int = 7) -> np.
     return cv2.boxFilter(m, -1, (window, window), normalize=True, borderType=cv2.BORDER_REFLECT)
 
 
+def log_gradient(log_img) -> np.ndarray:
+    """(H, W) gradient magnitude of a log image per pixel (Sobel / 8: the slope of a ramp per pixel); the one
+    texture measure of depth from focus's own-texture and evidence checks and the scoring's textured pixels."""
+    g = np.asarray(log_img, np.float32)
+    return np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)) / 8
+
+
 def parabola_offset(before, peak, after):
     """Offset in [-0.5, 0.5] steps of the vertex of the parabola through three samples around a maximum
     (0 where they do not curve downwards). Numbers or arrays that broadcast."""

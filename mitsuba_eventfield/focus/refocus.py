@@ -59,13 +59,14 @@ _NEIGHBOURS = np.ones((3, 3), np.uint8)
 RING_MARGIN = 1.25          # _no_ringing: a sample may pass its neighbours' values by this factor (log step 0.22)
 
 
-def _warp(img, homography, border=cv2.BORDER_CONSTANT, interpolation=cv2.INTER_LANCZOS4):
+def _warp(img, homography, border=cv2.BORDER_CONSTANT, interpolation=cv2.INTER_LANCZOS4, bounds=None):
     """img sampled at homography @ (x, y, 1) (array indices), Lanczos, zero (or reflected) outside. A Lanczos
-    sample is kept within the values of the pixels around it (``_no_ringing``)."""
+    sample is kept within the values of the pixels around it (``_no_ringing``; ``bounds``: a [low, high] sum
+    that gets the bounds used)."""
     warped = _warp_plain(img, homography, border, interpolation)
     if interpolation != cv2.INTER_LANCZOS4:
         return warped
-    return _no_ringing(warped, img, homography, border)
+    return _no_ringing(warped, img, homography, border, bounds)
 
 
 def _warp_plain(img, homography, border, interpolation):
@@ -73,7 +74,7 @@ def _warp_plain(img, homography, border, interpolation):
                                flags=interpolation | cv2.WARP_INVERSE_MAP, borderMode=border, borderValue=0)
 
 
-def _no_ringing(warped, img, homography, border):
+def _no_ringing(warped, img, homography, border, bounds=None):
     """``warped`` clipped to the least and greatest value of each sample's 3 x 3 source neighbourhood (those
     images warped bilinearly), widened by the factor ``RING_MARGIN``. Lanczos rings at a strong edge: on
     scenes/galvo_static (black letters, 0.013, on a wall of up to 6.4) its negative lobes took 444 of 10,800
@@ -84,8 +85,12 @@ def _no_ringing(warped, img, homography, border):
     reference view came out at 60.7 dB PSNR with plain Lanczos, 48.8 dB clipped without a margin, 60.7 dB with
     a factor of 1.1 or more (bicubic: 52.3, bilinear: 32.8). The factor bounds the rings in the log, where
     events and focus measures look: a black letter's -1.7 undershoot becomes 0.8 of its value. It costs 26 %
-    of a refocus (346 x 260, 32 views: 130 against 103 ms)."""
-    return np.clip(warped, *_ring_bounds(img, homography, border))
+    of a refocus (346 x 260, 32 views: 130 against 103 ms). ``bounds``: a [low, high] sum the bounds are added to
+    (``_fourier_within_views``)."""
+    lo, hi = _ring_bounds(img, homography, border)
+    if bounds is not None:
+        bounds[0], bounds[1] = bounds[0] + lo, bounds[1] + hi
+    return np.clip(warped, lo, hi)
 
 
 def _ring_bounds(img, homography, border) -> tuple:
@@ -329,14 +334,15 @@ def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None,
     return np.maximum(_covered_borders(lf, shifts, spectra.shifted_sum(shifts) / len(lf.views)), 0.0)
 
 
-def covered_mean(lf: LightField, maps, interpolation=cv2.INTER_LANCZOS4) -> tuple:
+def covered_mean(lf: LightField, maps, interpolation=cv2.INTER_LANCZOS4, bounds=None) -> tuple:
     """(each pixel's mean over the views whose sample (``maps``: reference-to-view index maps) falls inside
     their image (``covered``), how many such views, the mean over all views with reflected borders). Values
     are sampled with reflected borders all the same: Lanczos next to a view's edge would mix in the zeros of
-    a constant border."""
+    a constant border. ``bounds``: a [low, high] sum of the views' Lanczos bounds (``_warp``)."""
     total = cover = every = None
     for view, m in zip(lf.views, maps):
-        w = _warp(view.astype(np.float32), m, border=cv2.BORDER_REFLECT_101, interpolation=interpolation)
+        w = _warp(view.astype(np.float32), m, border=cv2.BORDER_REFLECT_101, interpolation=interpolation,
+                  bounds=bounds)
         w = w.astype(np.float64)
         c = covered(lf.shape, m).astype(np.float64)
         c = c[..., None] if w.ndim == 3 else c
@@ -364,20 +370,18 @@ def _covered_borders(lf: LightField, shifts, fourier: np.ndarray) -> np.ndarray:
     spread."""
     maps = np.tile(np.eye(3), (len(shifts), 1, 1))
     maps[:, :2, 2] = shifts
-    mean, cover, _ = covered_mean(lf, maps)
-    return np.where((cover > 0) & (cover < len(lf.views)), mean, _fourier_within_views(lf, maps, fourier))
+    bounds = [0.0, 0.0]
+    mean, cover, _ = covered_mean(lf, maps, bounds=bounds)
+    return np.where((cover > 0) & (cover < len(lf.views)), mean,
+                    _fourier_within_views(fourier, bounds, len(lf.views)))
 
 
-def _fourier_within_views(lf: LightField, maps, fourier: np.ndarray) -> np.ndarray:
-    """The Fourier shift-and-add kept within the mean of the views' ``_ring_bounds``: an exact sub-pixel shift
-    rings at a sharp edge as Lanczos does (black blocks, 0.013, on 6.4 in a 3 x 3 kaleidoscope refocused half a
-    pixel off their alignment: 68 pixels below every view's value, clipped to 0)."""
-    lo = hi = 0.0
-    for view, m in zip(lf.views, maps):
-        bounds = _ring_bounds(view.astype(np.float32), m, cv2.BORDER_REFLECT_101)
-        lo, hi = lo + bounds[0], hi + bounds[1]
-    n = len(lf.views)
-    return np.clip(fourier, lo / n, hi / n)
+def _fourier_within_views(fourier: np.ndarray, bounds, views: int) -> np.ndarray:
+    """The Fourier shift-and-add kept within the mean of the views' ``_ring_bounds`` (their sum ``bounds``, taken
+    by the same views' warps in ``covered_mean``): an exact sub-pixel shift rings at a sharp edge as Lanczos does
+    (black blocks, 0.013, on 6.4 in a 3 x 3 kaleidoscope refocused half a pixel off their alignment: 68 pixels
+    below every view's value, clipped to 0)."""
+    return np.clip(fourier, bounds[0] / views, bounds[1] / views)
 
 
 def depth_planes(near: float, far: float, count: int) -> np.ndarray:
