@@ -18,3 +18,20 @@ def plugin_message(e: Exception) -> str | None:
         return None
     errors = re.findall(r"^\s*(?:\w+\.)*\w*(?:Error|Exception): (.+)$", str(e), flags=re.M)
     return errors[-1] if errors else None
+
+
+# The signals that asked this process to stop, in order: the ``eventfield`` command's handler adds each before
+# it raises KeyboardInterrupt, and clears them when the command ends. Why a record as well as the exception: an
+# interrupt raised while a library runs our Python (Dr.Jit recording a frozen render, Mitsuba calling a plugin)
+# can be swallowed there, and the render then ran to its end and published its output with exit status 0 (the
+# CLI's Ctrl-C / SIGTERM test, about 1 run in 40 on a loaded machine). The loops of long jobs call
+# :func:`raise_if_stopped` once a step, and the sink before it publishes anything.
+STOP_SIGNALS: list[int] = []
+
+
+def raise_if_stopped() -> None:
+    """Raise KeyboardInterrupt when a stop signal was received (``STOP_SIGNALS``) and its own exception may
+    have been lost on the way: a cheap check for every step of a render or conversion."""
+    if STOP_SIGNALS:
+        import signal
+        raise KeyboardInterrupt(signal.Signals(STOP_SIGNALS[0]).name)

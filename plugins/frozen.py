@@ -10,6 +10,8 @@ import threading
 
 import drjit as dr
 
+from mitsuba_eventfield.errors import raise_if_stopped
+
 FREEZE_ENV = "EVENTFIELD_FREEZE"
 
 
@@ -64,6 +66,7 @@ class FrozenOrTraced:
                 stop = _interrupt_in(e)
                 if stop is not None:
                     raise stop from e
+                raise_if_stopped()      # the interrupt's own exception lost in Dr.Jit's wrapping: still a stop
                 why = " ".join(str(e.__cause__ or e).split()).split("validate(): ")[-1].split(". ")[0][:160]
                 self.refused = why or "refused"
             finally:

@@ -10,6 +10,7 @@ import sys
 import threading
 
 from . import apps, calibrate, designs, device, evaluate, events, lightfield, paper, scan_frequency
+from ..errors import STOP_SIGNALS
 from .args import OUTPUT_DIRS, Parser, check_outputs, one_line
 
 MODULES = (events, lightfield, calibrate, evaluate, apps, designs, scan_frequency, paper, device)
@@ -26,14 +27,14 @@ def build_parser() -> Parser:
     return ap
 
 
-received: list = []
+received = STOP_SIGNALS      # the signals this command received (errors.STOP_SIGNALS: the loops check it too)
 
 
 def _signals_as_interrupts():
     """SIGINT and SIGTERM raise KeyboardInterrupt, so every ``finally`` runs (outputs off, temporary files
     removed); the signal is remembered because a library between us and the handler (Dr.Jit calling a Python
-    plugin) may hand it back wrapped in another exception. Returns the previous handlers, or {} off the main
-    thread (where Python allows no handlers)."""
+    plugin) may hand it back wrapped in another exception, or swallow it (``errors.raise_if_stopped``). Returns
+    the previous handlers, or {} off the main thread (where Python allows no handlers)."""
     received.clear()
 
     def on_signal(signum, frame):
@@ -111,7 +112,9 @@ def main(argv=None) -> int:
             signal.signal(sig, handler)
         if not was_quiet:
             quiet_mitsuba_log(False)
-    signum = received[0] if received else signal.SIGINT
+        stopped = list(received)
+        received.clear()        # a later render in this process (main called again, the Python API) goes on
+    signum = stopped[0] if stopped else signal.SIGINT
     from ..simulate.checkpoint import KEPT
     kept = (f"; its last checkpoint is kept in {KEPT[-1]}: run the same command with --resume to go on"
             if KEPT else "")

@@ -18,7 +18,7 @@ import numpy as np
 from .. import backend
 from .._version import __version__
 from ..atomic import check_writable
-from ..errors import EventFieldError
+from ..errors import EventFieldError, raise_if_stopped
 from ..events.io import format_of
 from ..plugins import event_batch, event_fill, pixel_model, pixel_step
 from ..validate import positive
@@ -137,6 +137,7 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
     t_first = t_prev = t_last_committed = None
     try:
         for index, (t, frame) in enumerate(_frames(source)):
+            raise_if_stopped()                # a Ctrl-C a library swallowed (errors.STOP_SIGNALS)
             if not source.device and frame.shape != (source.height, source.width):
                 raise EventFieldError(f"{source.name}: frame size {frame.shape[1]}x{frame.shape[0]} differs from "
                                       f"{source.width}x{source.height}")

@@ -16,14 +16,13 @@ import time
 
 from .. import backend
 from ..atomic import check_writable
-from ..errors import ConfigError, EventFieldError
+from ..errors import ConfigError, EventFieldError, raise_if_stopped
 from ..events.io import format_of
 from ..plugins.event_fill import film_limit_error
 from ..scene.timed import TimedScene, load_scene
 from ..validate import available_memory
 from .periodic import period_blocks, phase_grid, reuse_plan
-from . import sample_allocation, static_pixels
-from . import step_batch
+from . import sample_allocation, static_pixels, step_batch
 from .frames import FrameRenderer, frozen_render, render_frames  # noqa: F401  (render_frames: re-exported)
 from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
@@ -192,6 +191,7 @@ class _Loop:
             dt = (st.duration / st.steps) if st.steps else max(st.min_step, st.max_step / 16)
         c_min = min(integ.threshold_on, integ.threshold_off)
         while t < t_end - 1e-12:
+            raise_if_stopped()                           # a Ctrl-C a library swallowed (errors.STOP_SIGNALS)
             if self.checkpoints is not None and self.checkpoints.due():
                 if self.batch is not None:
                     self.batch.flush()                   # the saved pixel state is that of every step so far

@@ -8,6 +8,7 @@ join at the end, and a peak of one copy of the events). Left on the device (``on
 they are until the end, then are joined once and their ON events counted with one read."""
 from __future__ import annotations
 
+from ..errors import raise_if_stopped
 from ..events.buffer import EventBuffer
 from ..events.io import format_of, write_events
 from ..events.streaming import STREAMED, open_writer
@@ -177,6 +178,7 @@ class Sink:
 
     def finish(self, end_us, meta):
         self.drain()
+        raise_if_stopped()        # nothing is published after a stop signal, even one whose interrupt was lost
         if self.on_device:
             return DeviceEventStream.join(self.device_chunks, self.width, self.height, {**self.meta, **meta})
         if self.writer is not None:

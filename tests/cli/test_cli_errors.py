@@ -189,6 +189,53 @@ def test_interrupt_inside_mitsuba_render_is_one_line(tmp_path):
     assert os.listdir(tmp_path) == []
 
 
+def _swallowed_stop(monkeypatch, module, name, at_call, sig=signal.SIGTERM):
+    """Wrap ``module.name`` so that its ``at_call``-th call records ``sig`` as the CLI's handler does, while its
+    KeyboardInterrupt is lost (as inside a library that swallows it: the flaky test above, 1 run in ~40)."""
+    from mitsuba_eventfield import errors
+    original, calls = getattr(module, name), []
+
+    def wrapped(*args, **kwargs):
+        out = original(*args, **kwargs)
+        calls.append(1)
+        if len(calls) == at_call:
+            errors.STOP_SIGNALS.append(sig)
+        return out
+    monkeypatch.setattr(module, name, wrapped)
+    return calls
+
+
+def test_a_swallowed_interrupt_still_stops_the_render_and_keeps_nothing(tmp_path, monkeypatch, capsys):
+    from mitsuba_eventfield import errors
+    from mitsuba_eventfield.simulate import render as render_module
+    calls = _swallowed_stop(monkeypatch, render_module._Loop, "_step_events", 3)
+    out = tmp_path / "g.h5"
+    rc = cli.main(["render", GALVO, "-o", str(out), *SMALL, "--duration", "0.004", "--steps", "32", "--quiet"])
+    assert rc == 143 and len(calls) == 3          # stopped at the next step, not at the end (32 steps)
+    assert _messages(capsys.readouterr().err) == ["eventfield: terminated (no partial output kept)"]
+    assert os.listdir(tmp_path) == [] and errors.STOP_SIGNALS == []     # cleared: the next command runs
+    monkeypatch.undo()
+    assert cli.main(["render", GALVO, "-o", str(out), *SMALL, "--duration", "0.004", "--steps", "32",
+                     "--quiet"]) == 0
+
+
+def test_a_swallowed_interrupt_at_the_last_frame_publishes_nothing(tmp_path, monkeypatch, capsys):
+    """The signal lands in the last step of a conversion: no step follows to notice it, the sink does before it
+    publishes the file."""
+    import numpy as np
+    from mitsuba_eventfield.simulate import convert as convert_module
+    frames = np.random.default_rng(0).uniform(0.1, 1.0, (6, 12, 16)).astype(np.float32)
+    np.savez(tmp_path / "clip.npz", frames=frames, times=np.arange(6) * 1e-3)
+    # the six frames are one kernel's group, committed after the frame loop
+    calls = _swallowed_stop(monkeypatch, convert_module, "_commit_group", 1, signal.SIGINT)
+    out = tmp_path / "out" / "c.h5"
+    os.makedirs(out.parent)
+    rc = cli.main(["convert", str(tmp_path / "clip.npz"), "-o", str(out), "--quiet"])
+    assert rc == 130 and len(calls) == 1
+    assert _messages(capsys.readouterr().err) == ["eventfield: interrupted (no partial output kept)"]
+    assert os.listdir(out.parent) == []
+
+
 def test_sigkill_leftover_is_named_and_removed_by_the_next_run(tmp_path):
     out = tmp_path / "fan.h5"
     proc = _render_process(str(out))
