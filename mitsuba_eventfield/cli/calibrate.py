@@ -9,7 +9,7 @@ from ..calibration.nominal import nominal_optics
 from ..errors import EventFieldError
 from ..validate import MAX_VIEWS, number_list
 from .args import num
-from .lightfield import galvo_frames, give_optics, luminance_channel, start_log, with_contrast
+from .inputs import galvo_frames, give_optics, luminance_channel, start_log, with_contrast
 
 OPTICS_HELP = ("JSON of the set-up's nominal galvo optics (design, fov_x_deg, mirror_distance, mirror_separation, "
                "scan), for a camera recording that carries none")

@@ -12,6 +12,7 @@ from ..errors import ConfigError, EventFieldError
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import num, save_image, times_ms
+from .inputs import give_optics, read_input, start_log
 
 
 CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a recording that carries none "
@@ -29,8 +30,9 @@ def add_parsers(sub) -> None:
     lf_args = argparse.ArgumentParser(add_help=False)
     lf_args.add_argument("file", help="event file")
     lf_args.add_argument("--method", help="reconstruction: direct, highpass, complementary, galvo, periods (default: "
-                                          "direct with --start-frame, else galvo / highpass); periods: galvo, the "
-                                          "demo's solver (per-pixel depth from focus; ~7x slower, depths ~2x closer)")
+                                          "direct with --start-frame, else periods / highpass); periods: galvo, "
+                                          "the demo's solver, each pixel at its own depth from focus; galvo: one "
+                                          "depth for the whole image (2-8x faster, near depths read up to 10 % far)")
     lf_args.add_argument("--start-frame", help="EXR of the linear frame at the stream start (eventfield frame)")
     lf_args.add_argument("--period", type=num(0, integer=True),      # None: not given (refused on a kaleidoscope)
                          help=f"galvo: scan period index (default {DEFAULT_PERIOD})")
@@ -74,74 +76,6 @@ def add_parsers(sub) -> None:
                          "not a probability: focus/depth.py)")
 
 
-# ------------------------------------------------------------------ inputs shared with calibrate
-def read_input(a):
-    """The event file of a command, with ``--contrast`` (when given) as its contrast thresholds; a stream that has
-    none (a camera recording) and no ``--contrast`` is refused in one line."""
-    from ..events.io import read_events
-    ev = read_events(a.file)
-    if not len(ev):        # refocused, a flat image; as a depth map, no confident pixel: both written as done
-        raise EventFieldError(f"{a.file}: no events: nothing to reconstruct")
-    return with_contrast(ev, getattr(a, "contrast", None), a.file)
-
-
-def with_contrast(ev, contrast, where: str):
-    """``ev`` with ``--contrast`` (when given) as its contrast thresholds; a stream that has none (a camera
-    recording) and no ``--contrast`` is refused in one line."""
-    if contrast:
-        c = number_list(contrast, "--contrast", lo=0, lo_open=True)
-        if len(c) not in (1, 2):
-            raise EventFieldError(f"--contrast {contrast!r}: expected ON or ON,OFF")
-        ev.meta["pixel_model"] = dict(ev.meta.get("pixel_model") or {}, threshold_on=c[0], threshold_off=c[-1])
-    pm = ev.meta.get("pixel_model") or {}
-    if pm.get("threshold_on") is None or pm.get("threshold_off") is None:
-        raise EventFieldError(f"{where}: the recording carries no contrast thresholds (pixel-model metadata): pass "
-                              "--contrast ON[,OFF], log intensity per event (e.g. 0.2)")
-    return ev
-
-
-def luminance_channel(path):
-    """The Y (or else R) channel of an EXR frame, with a named error when it has neither."""
-    from ..images import read_exr
-    channels, _ = read_exr(path)
-    img = channels.get("Y", channels.get("R"))
-    if img is None:
-        raise EventFieldError(f"{path}: needs a Y (or R) channel; it has {', '.join(sorted(channels)) or 'none'}")
-    return img
-
-
-def start_log(path, events):
-    """Log intensity (as the pixel sees it) of a linear EXR frame, checked against the stream's size."""
-    from ..plugins.pixel_model import linlog_np
-    if path is None:
-        return None
-    img = luminance_channel(path)
-    if img.shape != (events.height, events.width):
-        raise EventFieldError(f"{path}: needs a Y (or R) channel of {events.width}x{events.height}, got "
-                              f"{img.shape[::-1]}")
-    return linlog_np(img, events.meta.get("pixel_model", {}).get("linlog_threshold", 1e-3))
-
-
-def galvo_frames(ev, period, views, start_frame_log=None):
-    """Reconstructed log frames and their times over one scan period of a galvo stream, and its scan curve."""
-    from ..lightfield.model import galvo_period_starts, galvo_view_times
-    from ..lightfield.reconstruct import reconstruct
-    from ..optics.scan import curve_from_dict
-    optics = ev.meta.get("optics", {})
-    if optics.get("design") != "galvo":
-        raise EventFieldError("not a galvo event stream (optics.design != 'galvo')" if optics else
-                              "the stream carries no optics (a camera recording?): a galvo stream is needed")
-    curve = curve_from_dict(optics["scan"])
-    try:
-        t0 = galvo_period_starts(ev, [period])[period]
-    except ValueError as e:
-        raise EventFieldError(f"--period: {e}") from None
-    times = galvo_view_times(optics, t0, views)     # bin centres, as the light-field commands use
-    method = "direct" if start_frame_log is not None else "galvo"
-    kw = {"log_start": start_frame_log, "t_start": t0} if start_frame_log is not None else {"t_start": t0}
-    return reconstruct(ev, times, method, **kw), times, curve
-
-
 def _inputs(a) -> str:
     """What a light-field output was made from: a start frame is information beyond the events (a frame
     camera beside the event camera, or a render), and the results differ with it (the near card of
@@ -161,30 +95,6 @@ def _out_meta(a, events, lf=None, **extra):
                  "calibration": calibration}, **extra)
 
 
-def give_optics(ev, where: str, optics_file: str | None, calibration=None, design: str | None = None,
-                takes_calibration: bool = True) -> None:
-    """The optics of a stream that carries none (a camera recording), into its metadata: the set-up's nominal
-    ones (``--optics``: any light-field design, or ``design``) or those of the calibration made for it
-    (``--calibration``). A stream that carries its own refuses ``--optics`` (it would be ignored); one without
-    either is refused, saying what the command takes."""
-    from ..calibration.nominal import nominal_optics, recording_optics
-    if ev.meta.get("optics"):
-        if optics_file:
-            raise EventFieldError(f"--optics {optics_file}: {where} carries its own "
-                                  f"({ev.meta['optics'].get('design')}) optics; --optics is for a camera recording "
-                                  "without them")
-        return
-    if optics_file:
-        ev.meta["optics"] = nominal_optics(optics_file, ev.width, ev.height, design=design)
-    elif calibration is not None:
-        ev.meta["optics"] = recording_optics(calibration, ev, where)
-    else:
-        options = "--calibration (a calibration file made for its set-up) or --optics" if takes_calibration \
-            else "--optics"
-        raise EventFieldError(f"{where}: the recording carries no optics (no light-field metadata): pass {options} "
-                              f"FILE.json (the set-up's nominal {design or 'light-field'} optics)")
-
-
 def _lightfield(a, ev):
     """The light field the light-field commands share, calibrated when asked (a calibration made for other
     optics than this stream's is refused before any reconstruction)."""
@@ -200,6 +110,8 @@ def _lightfield(a, ev):
         optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
         check_optics(calibration, optics)
     period, views = _design_options(a, ev)
+    if a.method is None and not a.start_frame and (ev.meta.get("optics") or {}).get("design") == "galvo":
+        a.method = PERIODS       # the one-depth solver (Python API default) read galvo_static's card 10 % far
     _warn_coarse_steps(a.file, ev)
     try:
         if a.method == PERIODS:
@@ -217,9 +129,11 @@ PERIODS = "periods"      # --method: the galvo solver per period with per-pixel 
 
 def _periods_lightfield(a, ev, period: int, views: int):
     """The light field of galvo scan period ``period`` as the demo makes it (``focus.galvo_periods``: the period's
-    image solved from its events with per-pixel depth from focus). The default galvo solver assumes one depth
-    for the whole image: on the demo's own stream (offaxis_cards, 160x120) it reads the cards at 0.5025 /
-    1.2058 m against 0.4990 / 1.1963 m (truth 0.5 / 1.2), with 0.8 s against 6.1 s for the light field."""
+    image solved from its events with per-pixel depth from focus), the default without a start frame. The
+    one-depth solver (``--method galvo``, the Python API's default) is faster, biased where depths differ: cards
+    of offaxis_cards (160x120) 0.5025 / 1.2058 m against 0.4990 / 1.1963 (truth 0.5 / 1.2), 0.8 against 6.1 s
+    a light field; galvo_static's (346x260) 0.549 against 0.490 m (0.491 with the rendered start frame), 27
+    against 59 s for `eventfield depth`. A solver's warning waits in ``lf.meta`` for the command's checks."""
     from ..focus.galvo_periods import reconstruct_periods
     design = (ev.meta.get("optics") or {}).get("design")
     if design != "galvo":
@@ -229,10 +143,15 @@ def _periods_lightfield(a, ev, period: int, views: int):
                               "the direct and complementary methods")
     lf, solved = next(reconstruct_periods(ev, views, periods=[period]))
     if not solved.reliable:
-        print(f"eventfield: warning: {a.file}: scan period {period}: the solver turned down {solved.outliers:.0%} "
-              "of its equations as not fitting a static scene at the depths found (moving content, depths beyond "
-              "the range searched, noise)", file=sys.stderr)
+        lf.meta["warning"] = (f"{a.file}: scan period {period}: the solver turned down {solved.outliers:.0%} of its "
+                              "equations as not fitting a static scene at the depths found (moving content, depths "
+                              "beyond the range searched, noise)")
     return lf
+
+
+def _solver_warning(lf) -> None:
+    if lf.meta.get("warning"):
+        print(f"eventfield: warning: {lf.meta['warning']}", file=sys.stderr)
 
 
 def _warn_coarse_steps(path: str, ev) -> None:
@@ -276,23 +195,18 @@ def _check_times(a, ev, times, option: str) -> None:
         raise EventFieldError(f"{option} {getattr(a, 'times', '')}: times must be increasing")
 
 
-def _depths_and_paths(a, lf, depths) -> list:
-    """(depth, output root) of every refocused image, each depth checked against the light field and every
-    output path before any image is written (a failure at the second depth left the first one's files)."""
+def _refocus_roots(a, depths) -> list:
+    """(depth, output root) of every refocused image, every output path checked before the light field is made
+    and any image written (a failure at the second depth left the first one's files; a bad path was found only
+    after the solve)."""
     from ..atomic import check_writable
     if len(set(depths)) != len(depths):
         raise EventFieldError(f"--depth {a.depth}: a depth is given twice")
-    out = []
-    for z in depths:
-        try:
-            z = lf.check_depth(z, "--depth")
-        except ConfigError as e:
-            raise EventFieldError(f"{a.file}: {e}") from None
-        root = os.path.splitext(a.output)[0] + (f"_{z:g}" if len(depths) > 1 else "")
+    roots = [(z, os.path.splitext(a.output)[0] + (f"_{z:g}" if len(depths) > 1 else "")) for z in depths]
+    for _, root in roots:
         for ext in (".png", ".exr"):
             check_writable(root + ext, "refocused image")
-        out.append((z, root))
-    return out
+    return roots
 
 
 # ------------------------------------------------------------------ commands
@@ -369,8 +283,14 @@ def run_refocus(a) -> int:
     from ..focus.refocus import refocus
     ev = read_input(a)
     depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
+    roots = _refocus_roots(a, depths)
     lf = _lightfield(a, ev)
-    for z, root in _depths_and_paths(a, lf, depths):
+    try:                                   # every depth before the first image
+        roots = [(lf.check_depth(z, "--depth"), root) for z, root in roots]
+    except ConfigError as e:
+        raise EventFieldError(f"{a.file}: {e}") from None
+    _solver_warning(lf)
+    for z, root in roots:
         save_image(root + ".png", refocus(lf, z), _out_meta(a, ev, lf, depth=z, views=len(lf.views)))
         print(f"wrote {root}.png/.exr (refocused at {z:g}; from {_inputs(a)})")
     return 0
@@ -387,12 +307,13 @@ def run_depth(a) -> int:
     lf = _lightfield(a, ev)
     if a.method == "highpass" and lf.kind == "galvo":    # a new user's galvo_static: the text wall read 0.43 m
         print("eventfield: warning: --method highpass keeps each view's changes, not the image the scan moves: "
-              "galvo depth from it is unreliable (the default, galvo, solves the image from the events)")
+              "galvo depth from it is unreliable (the default, periods, solves the image from the events)")
     try:
         for value, name in ((a.near, "--near"), (a.far, "--far")):
             lf.check_depth(value, name)
     except ConfigError as e:
         raise EventFieldError(f"{a.file}: {e}") from None
+    _solver_warning(lf)
     dm = depth_from_focus(lf, a.near, a.far, a.planes, a.measure)
     root = os.path.splitext(a.output)[0]
     meta = _out_meta(a, ev, lf, near=a.near, far=a.far, planes=a.planes, measure=a.measure, views=len(lf.views))

@@ -314,7 +314,9 @@ def from_events(events, period: int = 0, views: int = VIEWS_PER_PERIOD, time: fl
     """One light field from an event stream, whatever its optics.
 
     * galvo: the scan period ``period`` (index from the stream start), ``views`` views. Default method:
-      ``direct`` from ``log_start`` when given, else the static-scene ``galvo`` solver;
+      ``direct`` from ``log_start`` when given, else the static-scene ``galvo`` solver at one depth (biased
+      where depths differ: galvo_static's 0.5 m card read 0.549 m; ``focus.galvo_periods.reconstruct_periods``,
+      the CLI's default, maps each pixel at its own depth: 0.490 m);
     * kaleidoscope / microlens: the film at ``time`` seconds (default: stream end), split into its views.
       Default method: ``direct`` from ``log_start`` when given, else ``highpass`` (moving content only).
     """

@@ -280,7 +280,10 @@ def allowed_px_per_step(chosen: dict | None) -> float:
     """The image motion a step may have without a warning: ``MAX_PX_PER_STEP``, or more where the default steps
     chose it (``chosen``: ``stepping.default_steps``' reasons, in the metadata as ``stepping.chosen``) because
     Monte-Carlo noise limits the render. The render's own note and the light-field commands' warning read this
-    one bound: the commands warned "render it with more steps" on the default render of galvo_static."""
+    one bound: the commands warned "render it with more steps" on the default render of galvo_static. The
+    default steps record their bound whichever floor decides (steps >= those for motion keep it): recorded
+    only where the motion decided, galvo_static's 160 steps (set by the light-field views, 1.8 px a step under
+    the noise-limited 2) were warned about again."""
     return max(MAX_PX_PER_STEP, (chosen or {}).get("px_per_step") or 0.0)
 
 

@@ -198,9 +198,6 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     for_motion = _steps_for(speed, st.duration, bound)
     steps = max(floor, for_motion)
     decided_by = "image motion" if for_motion >= floor else max(floors, key=lambda k: -1 if k in waived else floors[k])
-    # the bound holds whichever floor decides (steps >= for_motion): recorded either way, as the coarse-step
-    # note and the light-field commands' warning read it (None here made both warn on galvo_static's default
-    # render, whose 160 steps the light-field views set: 1.8 px a step under the noise-limited 2 px)
     chosen = {"by": decided_by, "px_per_step": bound,
               "largest_image_speed_px_per_s": speed, "noise_over_threshold": noise,
               "steps_for_motion": for_motion, **{_steps_key(k): v for k, v in floors.items()},

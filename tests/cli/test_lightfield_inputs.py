@@ -221,7 +221,7 @@ def test_a_stream_rendered_with_coarse_steps_is_flagged(tmp_path, capsys):
     path = str(tmp_path / "coarse.h5")
     ef.write_events(path, ev)
     capsys.readouterr()
-    assert cli(["refocus", path, "-o", str(tmp_path / "r.png"), "--depth", "1"]) == 0
+    assert cli(["refocus", path, "-o", str(tmp_path / "r.png"), "--depth", "1", "--method", "galvo"]) == 0
     err = capsys.readouterr().err
     assert "px of image motion a step (more than 1)" in err and err.count("\n") == 1, err
 
@@ -244,19 +244,23 @@ def test_the_coarse_step_warning_reads_the_bound_the_render_chose(capsys):
 
 
 def test_the_demos_galvo_solver_through_the_cli(captures, capsys, tmp_path):
-    """``--method periods`` is the demo's events-only solver (``focus.galvo_periods``: per-pixel depth), which the
-    CLI's default one-depth solver is not: its depth map is the one depth from focus gives on that solver's light
-    field, recorded as such; refused, in one line, on a kaleidoscope stream or with a start frame."""
+    """``--method periods`` is the demo's events-only solver (``focus.galvo_periods``: per-pixel depth), the
+    default of a galvo stream without a start frame (``--method galvo``, one depth for the whole image, is
+    another): its depth map is the one depth from focus gives on that solver's light field, recorded as such;
+    refused, in one line, on a kaleidoscope stream or with a start frame."""
     from mitsuba_eventfield.focus.depth import depth_from_focus
     from mitsuba_eventfield.focus.galvo_periods import reconstruct_periods
     d, ev, _ = captures
     args = ["--near", "0.4", "--far", "3", "--planes", "8", "--views", "8"]
     assert cli(["depth", str(d / "g.h5"), "-o", str(tmp_path / "p.png"), "--method", "periods", *args]) == 0
-    assert cli(["depth", str(d / "g.h5"), "-o", str(tmp_path / "g.png"), *args]) == 0
+    assert cli(["depth", str(d / "g.h5"), "-o", str(tmp_path / "g.png"), "--method", "galvo", *args]) == 0
+    assert cli(["depth", str(d / "g.h5"), "-o", str(tmp_path / "default.png"), *args]) == 0
     got, meta = read_exr(str(tmp_path / "p.exr"))
     expected = depth_from_focus(next(reconstruct_periods(ev, 8, periods=[0]))[0], 0.4, 3.0, 8, "variance")
     assert meta["method"] == "periods" and np.array_equal(got["depth"], expected.depth.astype(got["depth"].dtype))
-    assert not np.array_equal(got["depth"], read_exr(str(tmp_path / "g.exr"))[0]["depth"])   # not the default
+    default, default_meta = read_exr(str(tmp_path / "default.exr"))
+    assert default_meta["method"] == "periods" and np.array_equal(default["depth"], got["depth"])
+    assert not np.array_equal(got["depth"], read_exr(str(tmp_path / "g.exr"))[0]["depth"])   # not one depth
     capsys.readouterr()
     frame = tmp_path / "start.exr"
     assert cli(["frame", GALVO, "-D", "width=48", "-D", "height=36", "-o", str(frame)]) == 0
@@ -267,3 +271,27 @@ def test_the_demos_galvo_solver_through_the_cli(captures, capsys, tmp_path):
         code, err = _run(["depth", *extra, "-o", tmp_path / "x.png", "--method", "periods", *args[:6]], capsys)
         assert code == 2 and message in err and err.count("\n") == 0, err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_events_only_depth_defaults_to_each_pixel_at_its_own_depth(tmp_path, capsys):
+    """galvo_static (card at 0.5 m before a wall at 2.5 m), 120x90, one scan period at the default steps. The
+    reference is the depth map made with the rendered start frame (the images themselves right: what is left is
+    depth from focus at this resolution, 0.464 m here, 0.491 at 346x260). From the events alone the default
+    (the per-period solver, each pixel at its own depth) reads the card within 3 % of that; the one-depth solver
+    (``--method galvo``, the default until 2026-11-27) read it 10.6 % farther (0.549 m against 0.491 at
+    346x260)."""
+    h5, frame = tmp_path / "s.h5", tmp_path / "start.exr"
+    small = ["-D", "width=120", "-D", "height=90"]
+    assert cli(["render", GALVO, "-o", str(h5), *small, "--duration", "0.004", "--quiet"]) == 0
+    assert cli(["frame", GALVO, "-o", str(frame), *small]) == 0
+    card = {}
+    for name, extra in (("start", ["--start-frame", str(frame)]), ("default", []), ("galvo", ["--method", "galvo"])):
+        assert cli(["depth", str(h5), "-o", str(tmp_path / f"{name}.png"), "--near", "0.4", "--far", "4", *extra]) == 0
+        channels, meta = read_exr(str(tmp_path / f"{name}.exr"))
+        near = (channels["confidence"] >= 0.5) & (channels["depth"] < 1.0)       # the wall is at 2.5 m
+        assert near.sum() > 300, name
+        card[name] = float(np.median(channels["depth"][near]))
+        if name == "default":
+            assert meta["method"] == "periods" and meta["inputs"] == "events only"
+    assert abs(math.log(card["default"] / card["start"])) < 0.03, card
+    assert abs(math.log(card["galvo"] / card["start"])) > 3 * abs(math.log(card["default"] / card["start"])), card

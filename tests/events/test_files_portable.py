@@ -306,7 +306,7 @@ def test_every_exr_kind_reads_in_opencv(exr_files):
 
 
 def test_cli_luminance_reader_on_each_kind(exr_files):
-    from mitsuba_eventfield.cli.lightfield import luminance_channel as _luminance_channel
+    from mitsuba_eventfield.cli.inputs import luminance_channel as _luminance_channel
     np.testing.assert_array_equal(_luminance_channel(exr_files["image"]), _exr_kinds()["image"]["Y"])
     np.testing.assert_array_equal(_luminance_channel(exr_files["rgb"]), _exr_kinds()["rgb"]["R"])
     with pytest.raises(ef.EventFieldError, match="needs a Y .* it has confidence, depth"):

@@ -1,0 +1,98 @@
+"""What the commands that read event files share (``reconstruct``, ``refocus``, ``depth``, ``calibrate``): the
+event file with its contrast thresholds, a start frame, a galvo period's frames, and the optics of a recording
+that carries none."""
+from __future__ import annotations
+
+from ..errors import EventFieldError
+from ..validate import number_list
+
+
+def read_input(a):
+    """The event file of a command, with ``--contrast`` (when given) as its contrast thresholds; a stream that has
+    none (a camera recording) and no ``--contrast`` is refused in one line."""
+    from ..events.io import read_events
+    ev = read_events(a.file)
+    if not len(ev):        # refocused, a flat image; as a depth map, no confident pixel: both written as done
+        raise EventFieldError(f"{a.file}: no events: nothing to reconstruct")
+    return with_contrast(ev, getattr(a, "contrast", None), a.file)
+
+
+def with_contrast(ev, contrast, where: str):
+    """``ev`` with ``--contrast`` (when given) as its contrast thresholds; a stream that has none (a camera
+    recording) and no ``--contrast`` is refused in one line."""
+    if contrast:
+        c = number_list(contrast, "--contrast", lo=0, lo_open=True)
+        if len(c) not in (1, 2):
+            raise EventFieldError(f"--contrast {contrast!r}: expected ON or ON,OFF")
+        ev.meta["pixel_model"] = dict(ev.meta.get("pixel_model") or {}, threshold_on=c[0], threshold_off=c[-1])
+    pm = ev.meta.get("pixel_model") or {}
+    if pm.get("threshold_on") is None or pm.get("threshold_off") is None:
+        raise EventFieldError(f"{where}: the recording carries no contrast thresholds (pixel-model metadata): pass "
+                              "--contrast ON[,OFF], log intensity per event (e.g. 0.2)")
+    return ev
+
+
+def luminance_channel(path):
+    """The Y (or else R) channel of an EXR frame, with a named error when it has neither."""
+    from ..images import read_exr
+    channels, _ = read_exr(path)
+    img = channels.get("Y", channels.get("R"))
+    if img is None:
+        raise EventFieldError(f"{path}: needs a Y (or R) channel; it has {', '.join(sorted(channels)) or 'none'}")
+    return img
+
+
+def start_log(path, events):
+    """Log intensity (as the pixel sees it) of a linear EXR frame, checked against the stream's size."""
+    from ..plugins.pixel_model import linlog_np
+    if path is None:
+        return None
+    img = luminance_channel(path)
+    if img.shape != (events.height, events.width):
+        raise EventFieldError(f"{path}: needs a Y (or R) channel of {events.width}x{events.height}, got "
+                              f"{img.shape[::-1]}")
+    return linlog_np(img, events.meta.get("pixel_model", {}).get("linlog_threshold", 1e-3))
+
+
+def galvo_frames(ev, period, views, start_frame_log=None):
+    """Reconstructed log frames and their times over one scan period of a galvo stream, and its scan curve."""
+    from ..lightfield.model import galvo_period_starts, galvo_view_times
+    from ..lightfield.reconstruct import reconstruct
+    from ..optics.scan import curve_from_dict
+    optics = ev.meta.get("optics", {})
+    if optics.get("design") != "galvo":
+        raise EventFieldError("not a galvo event stream (optics.design != 'galvo')" if optics else
+                              "the stream carries no optics (a camera recording?): a galvo stream is needed")
+    curve = curve_from_dict(optics["scan"])
+    try:
+        t0 = galvo_period_starts(ev, [period])[period]
+    except ValueError as e:
+        raise EventFieldError(f"--period: {e}") from None
+    times = galvo_view_times(optics, t0, views)     # bin centres, as the light-field commands use
+    method = "direct" if start_frame_log is not None else "galvo"
+    kw = {"log_start": start_frame_log, "t_start": t0} if start_frame_log is not None else {"t_start": t0}
+    return reconstruct(ev, times, method, **kw), times, curve
+
+
+def give_optics(ev, where: str, optics_file: str | None, calibration=None, design: str | None = None,
+                takes_calibration: bool = True) -> None:
+    """The optics of a stream that carries none (a camera recording), into its metadata: the set-up's nominal
+    ones (``--optics``: any light-field design, or ``design``) or those of the calibration made for it
+    (``--calibration``). A stream that carries its own refuses ``--optics`` (it would be ignored); one without
+    either is refused, saying what the command takes."""
+    from ..calibration.nominal import nominal_optics, recording_optics
+    if ev.meta.get("optics"):
+        if optics_file:
+            raise EventFieldError(f"--optics {optics_file}: {where} carries its own "
+                                  f"({ev.meta['optics'].get('design')}) optics; --optics is for a camera recording "
+                                  "without them")
+        return
+    if optics_file:
+        ev.meta["optics"] = nominal_optics(optics_file, ev.width, ev.height, design=design)
+    elif calibration is not None:
+        ev.meta["optics"] = recording_optics(calibration, ev, where)
+    else:
+        options = "--calibration (a calibration file made for its set-up) or --optics" if takes_calibration \
+            else "--optics"
+        raise EventFieldError(f"{where}: the recording carries no optics (no light-field metadata): pass {options} "
+                              f"FILE.json (the set-up's nominal {design or 'light-field'} optics)")
