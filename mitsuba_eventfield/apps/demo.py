@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..evaluation.truth import centre_frame, textured, truth_depth
-from ..focus.depth import depth_from_focus
+from ..focus.depth import REASON_META, depth_from_focus
 from ..focus.refocus import refocus
 from ..scene import bundled_scene
 from .capture import capture
@@ -111,7 +111,7 @@ def write_outputs(result: DemoResult, out_dir: str) -> dict:
         write_exr(root + ".exr", {"Y": img}, {"depth_m": z})
         paths["refocus"].append(write_png(root + ".png", _display(img)))
     dm = result.depth
-    write_exr(os.path.join(out_dir, "depth.exr"), {"depth": dm.depth, "confidence": dm.confidence}, result.meta)
+    write_exr(os.path.join(out_dir, "depth.exr"), dm.channels(), {**result.meta, **REASON_META})
     paths["depth"] = write_png(os.path.join(out_dir, "depth.png"), depth_png(dm.depth, dm.confidence, NEAR, FAR, 0.6))
     paths["figure"] = figure(result, os.path.join(out_dir, "demo.png"))
     paths["metrics"] = write_json(os.path.join(out_dir, "metrics.json"), {"cards": result.cards, **result.meta})

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..focus.depth import depth_from_focus
+from ..focus.depth import REASON_META, depth_from_focus
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events
 from .result import AppResult, time_split_line
@@ -236,8 +236,8 @@ def write_outputs(result: ScanRateDepth, out_dir: str) -> dict:
     for k, (dm, z) in enumerate(zip(result.depth_maps, result.truth)):
         meta = {**result.meta, "period_index": k, "time_s": float(result.times[k])}
         paths["exr"].append(write_exr(os.path.join(out_dir, f"depth_p{k:03d}.exr"),
-                                      {"depth": dm.depth, "confidence": dm.confidence,
-                                       "truth": np.where(np.isfinite(z), z, 0.0)}, meta))
+                                      {**dm.channels(), "truth": np.where(np.isfinite(z), z, 0.0)},
+                                      {**meta, **REASON_META}))
         p = os.path.join(out_dir, f"depth_p{k:03d}.png")
         write_png(p, depth_png(dm.depth, dm.confidence, near, far, result.meta["min_confidence"]))
         paths["png"].append(p)

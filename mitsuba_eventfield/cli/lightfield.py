@@ -65,7 +65,8 @@ def add_parsers(sub) -> None:
     rf.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside; _<depth> suffix for several)")
     rf.add_argument("--depth", required=True, help="comma-separated depths in scene units (inf allowed)")
 
-    dp = sub.add_parser("depth", parents=[lf_args], help="depth from focus: EXR (depth, confidence) + colour PNG")
+    dp = sub.add_parser("depth", parents=[lf_args], help="depth from focus: EXR (depth, confidence, reason) + colour "
+                                                         "PNG")
     dp.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside)")
     dp.add_argument("--near", type=num(0, lo_open=True), required=True, help="nearest depth searched (scene units)")
     dp.add_argument("--far", type=num(0, lo_open=True), required=True, help="farthest depth searched (scene units)")
@@ -297,7 +298,7 @@ def run_refocus(a) -> int:
 
 
 def run_depth(a) -> int:
-    from ..focus.depth import MEASURES, depth_from_focus
+    from ..focus.depth import MEASURES, REASON_META, depth_from_focus
     from ..images import depth_png, write_exr, write_png
     ev = read_input(a)
     if not 0 < a.near < a.far:                    # (--planes is checked by its parser)
@@ -318,7 +319,7 @@ def run_depth(a) -> int:
     root = os.path.splitext(a.output)[0]
     meta = _out_meta(a, ev, lf, near=a.near, far=a.far, planes=a.planes, measure=a.measure, views=len(lf.views))
     picture = depth_png(dm.depth, dm.confidence, a.near, a.far, a.min_confidence)   # before either file
-    write_exr(root + ".exr", {"depth": dm.depth, "confidence": dm.confidence}, meta)
+    write_exr(root + ".exr", dm.channels(), {**meta, **REASON_META})
     write_png(root + ".png", picture)
     confident = dm.confidence >= a.min_confidence
     notes = dm.notes()           # why textured regions are not confident
@@ -326,7 +327,7 @@ def run_depth(a) -> int:
              f"({confident.mean():.0%} of the pixels)") if confident.any() else \
         f"no pixel is confident (>= {a.min_confidence:g}): no depth found (" + \
         ("see below" if notes else "too little texture, parallax or events") + ")"
-    print(f"wrote {root}.exr (depth, confidence) and {root}.png; {found}; from {_inputs(a)}")
+    print(f"wrote {root}.exr (depth, confidence, reason) and {root}.png; {found}; from {_inputs(a)}")
     for line in notes:
         print(line)
     return 0

@@ -82,6 +82,13 @@ OWN_TEXTURE_SHARE = 0.2     # module docstring: a pixel's own texture against th
 DEPTH_TOLERANCE = 0.1       # module docstring: a confident depth is told from one this share farther ...
 RESOLVABLE_PX = 0.05        # ... by its views moving at least this far (RMS over the views, pixels)
 NOTE_SHARE = 0.02           # DepthMap.notes: a reason is reported where it holds for this share of the image
+# DepthMap.reasons: why a pixel is not confident, one code a pixel (the depth EXR's "reason" channel)
+REASONS = {0: "passed every check (its confidence is its focus curve's peak over the median)",
+           1: "no parallax evidence: its views change less than the scan must make them (no texture or no events)",
+           2: "no texture of its own at its depth (beside an edge: the focus window's texture lent to it)",
+           3: "sharpest nearer than the depths searched", 4: "sharpest farther than the depths searched",
+           5: "beyond the depth resolution: 10 % more depth moves its views less than RESOLVABLE_PX"}
+REASON_META = {"reason_codes": {str(code): words for code, words in REASONS.items()}}
 
 
 @dataclass
@@ -107,17 +114,14 @@ class DepthMap:
         in proportion to the views' parallax, for a galvo the film's width, the scan's amplitude and the
         mirror's distance). A pixel sharpest beyond the far end where that end is itself unresolved counts as
         unresolved."""
-        if self.at_limit is None or self.own_texture is None or self.resolution_px is None:
+        reasons = self.reasons()
+        if reasons is None:
             return []
-        textured = (self.own_texture >= OWN_TEXTURE_SHARE * float(np.percentile(self.own_texture, 90))) & \
-            (self.evidence >= MIN_EVIDENCE)
         near, far = float(self.planes[0]), float(self.planes[-1])
-        nearer = textured & self.at_limit & (1.0 / self.depth > 0.5 * (1.0 / near + 1.0 / far))
-        farther = textured & self.at_limit & ~nearer
-        unresolved = self.unresolved | (farther & (self.resolution_px < RESOLVABLE_PX))
+        unresolved = reasons == 5
         out = []
-        for share, where, hint in ((nearer.mean(), f"nearer than {near:.4g}", "search from nearer"),
-                                   ((farther & ~unresolved).mean(), f"farther than {far:.4g}", "search farther")):
+        for share, where, hint in (((reasons == 3).mean(), f"nearer than {near:.4g}", "search from nearer"),
+                                   ((reasons == 4).mean(), f"farther than {far:.4g}", "search farther")):
             if share >= NOTE_SHARE:
                 out.append(f"{share:.0%} of the pixels are textured but sharpest {where}, beyond the depths "
                            f"searched: {hint}")
@@ -128,6 +132,28 @@ class DepthMap:
                        f"depth of about {farthest:.3g}, {DEPTH_TOLERANCE:.0%} more depth moves the views by less than "
                        f"{RESOLVABLE_PX} px (a wider scan or a larger film resolves farther, in proportion)")
         return out
+
+    def reasons(self) -> np.ndarray | None:
+        """(H, W) uint8: the first of ``REASONS`` that holds at each pixel (None for a map made without the
+        checks). A pixel sharpest beyond the far end where that end is itself unresolved is unresolved (5)."""
+        if self.at_limit is None or self.own_texture is None or self.resolution_px is None:
+            return None
+        near, far = float(self.planes[0]), float(self.planes[-1])
+        nearer = self.at_limit & (1.0 / self.depth > 0.5 * (1.0 / near + 1.0 / far))
+        farther = self.at_limit & ~nearer
+        out = np.zeros(self.depth.shape, np.uint8)
+        own = self.own_texture < OWN_TEXTURE_SHARE * float(np.percentile(self.own_texture, 90))
+        for code, where in ((4, farther), (5, self.unresolved | (farther & (self.resolution_px < RESOLVABLE_PX))),
+                            (3, nearer), (2, own), (1, self.evidence < MIN_EVIDENCE)):
+            out[where] = code           # the last written wins: 1 before 2 before 3 ...
+        return out
+
+    def channels(self) -> dict:
+        """The map as EXR channels: depth, confidence and, where the checks ran, reason (``REASONS``' codes;
+        their words go in the file's metadata as ``reason_codes``: ``REASON_META``). Every depth writer uses it."""
+        reasons = self.reasons()
+        return {"depth": self.depth, "confidence": self.confidence,
+                **({"reason": reasons.astype(np.float32)} if reasons is not None else {})}
 
     def confident_share(self, threshold: float = 0.5, mask=None) -> float:
         """Share of the pixels (of ``mask``) whose confidence reaches ``threshold``: 0 when the light field

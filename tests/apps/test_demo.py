@@ -29,7 +29,7 @@ def test_demo_command_writes_what_it_says(tmp_path):
                  "metrics.json"):
         assert os.path.getsize(out / name) > 0, name
     channels, _ = read_exr(str(out / "depth.exr"))
-    assert channels["depth"].shape == (48, 64) and set(channels) == {"depth", "confidence"}
+    assert channels["depth"].shape == (48, 64) and set(channels) == {"depth", "confidence", "reason"}
 
 
 def test_depth_panels_share_depth_pngs_scale_without_warnings(tmp_path):

@@ -57,7 +57,7 @@ def test_scanrate_cli_outputs_and_errors(tmp_path):
     assert len(metrics["errors"]) == 1 and "near" in metrics["summary"] and metrics["calibrated"] == ["depth"]
     assert len(json.loads((out / "calibration.json").read_text())["depth"]["depths"]) == 6
     channels, meta = read_exr(str(out / "depth_p000.exr"))
-    assert set(channels) == {"depth", "confidence", "truth"} and meta["period_index"] == 0
+    assert set(channels) == {"depth", "confidence", "reason", "truth"} and meta["period_index"] == 0
     assert channels["depth"].shape == (48, 64) and (out / "scanrate_depth.png").exists()
     bad = subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", "scanrate-depth", RUNNER, "-o",
                           str(tmp_path / "b"), "--near", "2", "--far", "1"], capture_output=True, text=True, timeout=120)

@@ -55,7 +55,7 @@ def test_reconstruct_refocus_depth_outputs(galvo_capture):
             "--start-frame", str(d / "start.exr"), "--views", "16", "--measure", "tenengrad")
     assert r.returncode == 0, r.stderr
     dm, meta = read_exr(str(d / "depth.exr"))
-    assert set(dm) == {"depth", "confidence"} and meta["planes"] == 16
+    assert set(dm) == {"depth", "confidence", "reason"} and meta["planes"] == 16
     conf = dm["confidence"] > 0.3
     # the card (0.5 m, image centre-right area) is confident and near; the wall (2.5 m) is not confident: at
     # 120 x 90 its points move 0.011 px in the views for 10 % more depth, beyond what they resolve (focus/depth.py)

@@ -293,5 +293,8 @@ def test_events_only_depth_defaults_to_each_pixel_at_its_own_depth(tmp_path, cap
         card[name] = float(np.median(channels["depth"][near]))
         if name == "default":
             assert meta["method"] == "periods" and meta["inputs"] == "events only"
+            # why a pixel is not confident, a code a pixel (focus.depth.REASONS), explained in the metadata
+            assert np.all(channels["reason"][channels["confidence"] > 0] == 0) and (channels["reason"] == 5).any()
+            assert meta["reason_codes"]["2"].startswith("no texture of its own")
     assert abs(math.log(card["default"] / card["start"])) < 0.03, card
     assert abs(math.log(card["galvo"] / card["start"])) > 3 * abs(math.log(card["default"] / card["start"])), card

@@ -161,3 +161,40 @@ def test_the_map_says_why_textured_pixels_are_not_confident(galvo_static):
     assert len(inside) == 1 and "beyond the depth resolution: past a depth of about 0.5" in inside[0], inside
     narrow = ef.depth_from_focus(lf, 0.6, 4.0, 32, "variance").notes()
     assert any("sharpest nearer than 0.6" in line for line in narrow), narrow
+
+
+def test_each_pixel_names_the_check_it_fails(galvo_static):
+    """``DepthMap.reasons``: one code a pixel, the first check it fails (``REASONS``), consistent with the
+    confidence (0 wherever a check fails) and with the notes. On galvo_static at 120 x 90 against Mitsuba's depth:
+    the text wall (2.5 m) past the depth resolution is code 5 where textured; searched from 0.6 m the card's
+    textured pixels (0.5 m) are sharpest nearer than the range, code 3."""
+    from mitsuba_eventfield.focus.depth import REASON_META, REASONS
+    events, z, _ = galvo_static
+    lf = ef.lightfield.from_events(events, period=0, views=32, method="galvo")
+    wall, card = z > 2.0, z < 1.0
+    for near in (0.3, 0.6):
+        dm = ef.depth_from_focus(lf, near, 4.0, 32, "variance")
+        reasons = dm.reasons()
+        assert reasons.dtype == np.uint8 and set(np.unique(reasons)) <= set(REASONS)
+        assert np.all(dm.confidence[reasons > 0] == 0)
+        passed = reasons == 0
+        assert np.array_equal(dm.confidence[passed], dm.focus_confidence[passed])
+        assert np.all(dm.evidence[passed] >= 0.3) and not dm.at_limit[passed].any()
+        textured_wall = wall & ((reasons >= 3) | (reasons == 0))    # evidence and texture of its own
+        assert textured_wall.sum() > 500
+        if near == 0.3:
+            assert (reasons[textured_wall] == 5).mean() > 0.9                # measured 1.00
+            assert (reasons[card] == 0).mean() > 0.2                         # the card's text
+            assert not (reasons == 3).any() and not (reasons == 4).any()
+        else:
+            # the rest (measured 0.29) sharpest inside the range, at >= 0.6 m, where 10 % moves its views less
+            # than RESOLVABLE_PX: code 5
+            textured_card = card & (reasons >= 3)
+            assert (reasons[textured_card] == 3).mean() > 0.5               # measured 0.71
+        for line in dm.notes():                                     # the notes count the same codes
+            code = 3 if "nearer than" in line else 4 if "farther than" in line else 5
+            assert line.startswith(f"{(reasons == code).mean():.0%} of the pixels"), line
+        channels = dm.channels()
+        assert list(channels) == ["depth", "confidence", "reason"]
+        assert np.array_equal(channels["reason"], reasons.astype(np.float32))
+    assert REASON_META["reason_codes"]["5"].startswith("beyond the depth resolution")
