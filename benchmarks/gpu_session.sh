@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # What issue 15 still needs measured on a CUDA GPU, in a few device commands (device minutes are scarce; each
-# command must finish within the device tool's 10 minutes). After ../shared/gpu/prepare.sh, from the device tool:
+# command must finish within the device tool's 10 minutes). After
+# EXTRA="isal==1.9.1 threadpoolctl==3.6.0" ../shared/gpu/prepare.sh (wheels that machine lacks: ISA-L for the
+# writer, threadpoolctl for the galvo solver), from the device tool:
 #   run(command="bash benchmarks/gpu_session.sh known", carry=[".gpu"])   the tests to check first, with tracebacks
 #   run(command="bash benchmarks/gpu_session.sh bench", carry=[".gpu"])   engine, converter, writer, pixel, fan
 #                                                                         1280x720, memory, motion
