@@ -19,7 +19,7 @@ CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a r
                  "(default: the file's pixel-model metadata)")
 
 
-OPTICS_HELP = ("JSON of the set-up's nominal optics, for a recording that carries none and no calibration: "
+OPTICS_HELP = ("a JSON file of the set-up's nominal optics, for a recording that carries none and no calibration: "
                "\"design\" galvo (fov_x_deg, mirror_distance, mirror_separation, scan, as a render's "
                "meta['optics']) or kaleidoscope / microlens (the sensor's parameters, metres)")
 DEFAULT_PERIOD = 0     # refocus / depth on a galvo stream: its first scan period, DEFAULT_VIEWS views
@@ -32,7 +32,7 @@ def add_parsers(sub) -> None:
     lf_args.add_argument("--method", help="reconstruction: direct, highpass, complementary, galvo, periods (default: "
                                           "direct with --start-frame, else periods / highpass); periods: galvo, "
                                           "the demo's solver, each pixel at its own depth from focus; galvo: one "
-                                          "depth for the whole image (2-8x faster, near depths read up to 10 % far)")
+                                          "depth for the whole image (2-8x faster, near depths read up to 10 %% far)")
     lf_args.add_argument("--start-frame", help="EXR of the linear frame at the stream start (eventfield frame)")
     lf_args.add_argument("--period", type=num(0, integer=True),      # None: not given (refused on a kaleidoscope)
                          help=f"galvo: scan period index (default {DEFAULT_PERIOD})")
@@ -100,7 +100,7 @@ def _lightfield(a, ev):
     """The light field the light-field commands share, calibrated when asked (a calibration made for other
     optics than this stream's is refused before any reconstruction)."""
     from ..calibration import apply_to_lightfield, check_optics, load_calibration, optics_record
-    from ..lightfield.model import from_events
+    from ..lightfield.model import default_method, from_events
     from ..lightfield.reconstruct import methods
     if a.method is not None and a.method not in (*methods(), PERIODS):
         raise EventFieldError(f"--method {a.method!r}: allowed: {', '.join((*methods(), PERIODS))}")
@@ -111,8 +111,11 @@ def _lightfield(a, ev):
         optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
         check_optics(calibration, optics)
     period, views = _design_options(a, ev)
-    if a.method is None and not a.start_frame and (ev.meta.get("optics") or {}).get("design") == "galvo":
-        a.method = PERIODS       # the one-depth solver (Python API default) read galvo_static's card 10 % far
+    design = (ev.meta.get("optics") or {}).get("design")
+    if a.method is None:         # named, so that the outputs' metadata says which (it said "default")
+        # without a start frame a galvo stream takes the per-period solver: the one-depth solver (the Python
+        # API's default) read galvo_static's card 10 % far
+        a.method = PERIODS if design == "galvo" and not a.start_frame else default_method(design, bool(a.start_frame))
     _warn_coarse_steps(a.file, ev)
     try:
         if a.method == PERIODS:
@@ -298,6 +301,7 @@ def run_refocus(a) -> int:
 
 
 def run_depth(a) -> int:
+    from ..atomic import check_writable
     from ..focus.depth import MEASURES, REASON_META, depth_from_focus
     from ..images import depth_png, write_exr, write_png
     ev = read_input(a)
@@ -305,6 +309,7 @@ def run_depth(a) -> int:
         raise EventFieldError(f"--near {a.near} --far {a.far}: need 0 < near < far")
     if a.measure not in MEASURES:
         raise EventFieldError(f"--measure {a.measure!r}: allowed: {', '.join(MEASURES)}")
+    check_writable(os.path.splitext(a.output)[0] + ".exr", "depth map")     # the PNG's sibling, before the solve
     lf = _lightfield(a, ev)
     if a.method == "highpass" and lf.kind == "galvo":    # a new user's galvo_static: the text wall read 0.43 m
         print("eventfield: warning: --method highpass keeps each view's changes, not the image the scan moves: "

@@ -87,7 +87,8 @@ REASONS = {0: "passed every check (its confidence is its focus curve's peak over
            1: "no parallax evidence: its views change less than the scan must make them (no texture or no events)",
            2: "no texture of its own at its depth (beside an edge: the focus window's texture lent to it)",
            3: "sharpest nearer than the depths searched", 4: "sharpest farther than the depths searched",
-           5: "beyond the depth resolution: 10 % more depth moves its views less than RESOLVABLE_PX"}
+           5: f"beyond the depth resolution: {DEPTH_TOLERANCE:.0%} more depth moves its views less than "
+              f"{RESOLVABLE_PX} px"}
 REASON_META = {"reason_codes": {str(code): words for code, words in REASONS.items()}}
 
 

@@ -309,6 +309,12 @@ def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool
                       {"ij": stack.ij.tolist(), "levels": levels})
 
 
+def default_method(design: str | None, start_frame: bool) -> str:
+    """The reconstruction :func:`from_events` uses when none is named: ``direct`` from a start frame, else the
+    static-scene ``galvo`` solver for a galvo stream and ``highpass`` for the others."""
+    return "direct" if start_frame else ("galvo" if design == "galvo" else "highpass")
+
+
 def from_events(events, period: int = 0, views: int = VIEWS_PER_PERIOD, time: float | None = None, method: str | None = None,
                 log_start=None, **method_kw) -> LightField:
     """One light field from an event stream, whatever its optics.
@@ -323,8 +329,7 @@ def from_events(events, period: int = 0, views: int = VIEWS_PER_PERIOD, time: fl
     optics = events.meta.get("optics", {})
     design = optics.get("design")
     t0 = events.meta.get("t_start_us", 0) * 1e-6
-    if method is None:
-        method = "direct" if log_start is not None else ("galvo" if design == "galvo" else "highpass")
+    method = default_method(design, log_start is not None) if method is None else method
     kw = dict(method_kw)
     if method == "direct":
         kw.update(log_start=log_start, t_start=t0)

@@ -18,7 +18,9 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import EventFieldError
-from ..validate import MAX_CONVERT_S, available_memory, number
+from ..validate import available_memory
+from .frame_times import (  # noqa: F401  (check_span, read_times: re-exported)
+    check_span, check_times, one_clock, read_times, times_mismatch, times_of, uniform_rate)
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr", ".pgm", ".ppm")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg")
@@ -77,87 +79,6 @@ def intensity(frame: np.ndarray, srgb: bool = False, bgr: bool = False, where: s
     return np.ascontiguousarray(v, np.float32)
 
 
-def _uniform_rate(fps: float | None, where: str) -> float:
-    """The frame rate, checked: frames without times need one."""
-    if fps is None:
-        raise EventFieldError(f"{where}: give the frame rate (--fps / fps=) or the frames' times (--times FILE / "
-                              "times=): the frames carry no times")
-    return number(fps, f"{where}: fps", 0, lo_open=True, error=EventFieldError)
-
-
-def check_times(times, count: int | None, where: str, name: str = "times", unit: str = "seconds") -> np.ndarray:
-    """``times`` as float64, one a frame (``count`` frames; None: not known yet, at least 2), finite and
-    strictly increasing; else one line naming the first value that is not (``name`` and ``unit`` as the
-    caller's input calls them)."""
-    try:
-        t = np.asarray(times, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise EventFieldError(f"{where}: {name}: expected numbers ({unit}), got {np.asarray(times).dtype}") from None
-    if t.ndim != 1:
-        raise EventFieldError(f"{where}: {name}: shape {t.shape}: expected one value a frame (a 1-D array)")
-    if count is not None and len(t) != count:
-        raise EventFieldError(times_mismatch(where, len(t), count, name))
-    if len(t) < 2:
-        raise EventFieldError(f"{where}: {name}: {len(t)} values: a conversion needs at least 2 frames")
-    bad = np.flatnonzero(~np.isfinite(t))
-    if len(bad):
-        raise EventFieldError(f"{where}: {name}[{bad[0]}] = {float(t[bad[0]])!r}: {name} must be finite ({unit})")
-    back = np.flatnonzero(np.diff(t) <= 0)
-    if len(back):
-        i = back[0] + 1
-        raise EventFieldError(f"{where}: {name}[{i}] = {float(t[i])!r} is not after {name}[{i - 1}] = "
-                              f"{float(t[i - 1])!r}: {name} must be strictly increasing ({unit})")
-    return t
-
-
-def times_mismatch(where: str, given: int, frames, name: str = "times") -> str:
-    """The one message for times that do not match the frames one to one (``frames``: a count, or text such as
-    "more than 29" where the end is not known yet)."""
-    return f"{where}: {name}: {given} values for {frames} frames: give one time a frame"
-
-
-def read_times(times):
-    """Frame times in seconds from an array, or from a file: ``.npy``, or text with one time a line (blank lines
-    and ``#`` comments skipped; a timestamps file as ESIM's and rpg_vid2e's tools write). None stays None."""
-    if times is None or not isinstance(times, (str, os.PathLike)):
-        return times
-    import warnings
-    path = os.fspath(times)
-    try:
-        if path.lower().endswith(".npy"):
-            return np.load(path, allow_pickle=False)
-        with warnings.catch_warnings():     # an empty file: NumPy warns, and check_times says it in one line
-            warnings.simplefilter("ignore", UserWarning)
-            return np.loadtxt(path, dtype=np.float64, comments="#", ndmin=1)
-    except OSError as e:
-        raise EventFieldError(f"{path}: cannot read the frame times ({e.strerror or type(e).__name__})") from None
-    except ValueError as e:
-        raise EventFieldError(f"{path}: frame times: expected one number (seconds) a line "
-                              f"({' '.join(str(e).split())[:100]})") from None
-
-
-def _one_clock(times, fps, where: str) -> None:
-    """Refuse times given together with a frame rate: one of them would be ignored."""
-    if times is not None and fps is not None:
-        raise EventFieldError(f"{where}: fps = {fps!r} and times given: give the frames' times or their rate, "
-                              "not both")
-
-
-def _times_of(times, count: int | None, fps, where: str):
-    """(time of frame i, span in seconds or None): from ``times`` (seconds, checked against ``count`` frames
-    where known) or else the frame rate."""
-    if times is None:
-        rate = _uniform_rate(fps, where)
-        return (lambda i: i / rate), ((count - 1) / rate if count else None)
-    t = check_times(times, count, where)
-
-    def time_of(i):
-        if i >= len(t):
-            raise EventFieldError(times_mismatch(where, len(t), f"more than {len(t)}"))
-        return float(t[i])
-    return time_of, float(t[-1] - t[0])
-
-
 def from_array(frames, times=None, fps=None, srgb=False, where="frames") -> FrameSource:
     """An in-memory stack (T, H, W[, C]) with times in seconds (or a frame rate)."""
     try:
@@ -166,9 +87,9 @@ def from_array(frames, times=None, fps=None, srgb=False, where="frames") -> Fram
         raise EventFieldError(f"{where}: the frames differ in size (a stack needs one size)") from None
     if a.ndim not in (3, 4) or a.shape[0] < 2 or 0 in a.shape[1:3]:
         raise EventFieldError(f"{where}: shape {a.shape}: expected (T, H, W) or (T, H, W, C) with T >= 2, H, W >= 1")
-    _one_clock(times, fps, where)
+    one_clock(times, fps, where)
     t = check_times(times, a.shape[0], where) if times is not None else \
-        np.arange(a.shape[0]) / _uniform_rate(fps, where)
+        np.arange(a.shape[0]) / uniform_rate(fps, where)
 
     def frames_iter():
         for i in range(a.shape[0]):
@@ -206,8 +127,8 @@ def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> Fra
     shape = tuple(tensor.shape)
     if len(shape) != 3 or shape[0] < 2 or 0 in shape[1:]:
         raise EventFieldError(f"{where}: shape {shape}: device frames must be (T, H, W) with T >= 2, H, W >= 1")
-    _one_clock(times, fps, where)
-    t = check_times(times, shape[0], where) if times is not None else np.arange(shape[0]) / _uniform_rate(fps, where)
+    one_clock(times, fps, where)
+    t = check_times(times, shape[0], where) if times is not None else np.arange(shape[0]) / uniform_rate(fps, where)
     flat = tensor.array
     if bool(dr.any(~dr.isfinite(flat) | (flat < 0))[0]):
         raise EventFieldError(f"{where}: intensities must be finite and >= 0")
@@ -236,6 +157,8 @@ def from_npz(path: str, fps=None, srgb=False, times=None) -> FrameSource:
     if "frames" not in data:
         raise EventFieldError(f"{path}: no 'frames' array (found: {', '.join(data.files) or 'nothing'})")
     times_key = next((k for k in ("times", "timestamps_us") if k in data), None)
+    if "times" in data and "timestamps_us" in data:         # one would be ignored (it was: 'timestamps_us')
+        raise EventFieldError(f"{path}: both 'times' (seconds) and 'timestamps_us' are given: keep one")
     if times_key and (fps is not None or times is not None):
         given = f"fps = {fps!r}" if fps is not None else "times given"
         raise EventFieldError(f"{path}: {given}: this stack carries its own times ('{times_key}'); give times or "
@@ -285,8 +208,8 @@ def from_folder(path: str, fps=None, srgb=False, times=None) -> FrameSource:
     names = sorted((n for n in os.listdir(path) if n.lower().endswith(IMAGE_SUFFIXES)), key=_natural_key)
     if len(names) < 2:
         raise EventFieldError(f"{path}: {len(names)} images ({', '.join(IMAGE_SUFFIXES)}); need at least 2")
-    _one_clock(times, fps, path)
-    time_of, span = _times_of(times, len(names), fps, path)
+    one_clock(times, fps, path)
+    time_of, span = times_of(times, len(names), fps, path)
     first = intensity(_read_image(os.path.join(path, names[0])), srgb, bgr=True, where=names[0])
     h, w = first.shape
 
@@ -359,11 +282,11 @@ def from_video(path: str, fps=None, srgb=False, times=None) -> FrameSource:
     count = max(0, int(cap.get(cv2.CAP_PROP_FRAME_COUNT))) or None
     w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
     cap.release()
-    _one_clock(times, fps, path)
+    one_clock(times, fps, path)
     slack = VIDEO_COUNT_SLACK.get(os.path.splitext(path)[1].lower())
     # given times are checked against the container's count where it is exact, else frame by frame
-    time_of, span = _times_of(times, count if slack == 0 else None, None, path) if times is not None else \
-        _times_of(None, count, rate if rate and rate > 0 else None, path)
+    time_of, span = times_of(times, count if slack == 0 else None, None, path) if times is not None else \
+        times_of(None, count, rate if rate and rate > 0 else None, path)
 
     def frames_iter() -> Iterator[tuple[float, np.ndarray]]:
         video = _open_video(path)
@@ -389,15 +312,6 @@ def from_video(path: str, fps=None, srgb=False, times=None) -> FrameSource:
                                                          "fps": float(rate) if times is None else None,
                                                          "times": "given" if times is not None else "from the frame rate"},
                        span_s=span)
-
-
-def check_span(where: str, span_s: float | None) -> None:
-    """Frames spanning more than ``MAX_CONVERT_S`` are refused (before any work where the span is known, else
-    when a frame passes it): an HDF5 file indexes every millisecond (8 bytes each), and ``--fps 1e-9`` asked
-    for 36 TiB of index."""
-    if span_s is not None and span_s > MAX_CONVERT_S:
-        raise EventFieldError(f"{where}: the frames span {span_s:.6g} s: allowed up to {MAX_CONVERT_S:g} s in one "
-                              "conversion (check the times' unit or the frame rate; split longer inputs)")
 
 
 def open_frames(path: str, fps=None, srgb=False, times=None) -> FrameSource:

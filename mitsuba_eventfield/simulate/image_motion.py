@@ -258,11 +258,17 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
         return
     parts = [f"the {k} {v:.3g} px" for k, v in (("scan", scan), ("objects", objects)) if v]
     what = " and ".join(parts) + (f", together {worst:.3g} px" if len(parts) > 1 else "")   # the check is on the sum
-    if worst <= allowed_px_per_step(chosen) * (1 + 1e-6):
-        summary.notes.append(f"steps of about {worst:.3g} px of image motion (per step {what}), chosen because "
-                             f"Monte-Carlo noise ({chosen['noise_over_threshold']:.2g} C) limits this render: "
-                             "finer steps would add noise events, not accuracy; with more samples (e.g. --spp 16) "
-                             "the default steps are finer")
+    allowed = allowed_px_per_step(chosen)
+    if worst <= allowed * (1 + 1e-6):
+        # what decided the count, in the words of the metadata's stepping.chosen.by: "not accuracy", said when a
+        # floor (the light-field views) had set the steps, contradicted the timing note that followed ("limited
+        # by the time step ... twice the steps quarter it")
+        by = chosen.get("by")
+        why = "the image motion at" if by == "image motion" else f"the {by}, within"
+        summary.notes.append(f"steps of about {worst:.3g} px of image motion (per step {what}): as many as {why} "
+                             f"the {allowed:g} px a step the default allows where Monte-Carlo noise "
+                             f"({chosen['noise_over_threshold']:.2g} C) limits this render, as each step's render "
+                             "adds noise events; with more samples (e.g. --spp 16) the default steps are finer")
         return
     need = int(math.ceil(steps * worst / MAX_PX_PER_STEP))
     # not "--steps N": the applications choose their own steps and take no such option

@@ -279,7 +279,7 @@ class _Loop:
         """Keep a period's events; at its end, if the pixel state came back, later periods are copies."""
         steps_per_period = self.grid[0]
         self.period_events[j] = events
-        if j != steps_per_period - 1:
+        if j != steps_per_period - 1 or (p_idx + 1) * steps_per_period >= self.st.steps:   # none left to copy
             return
         key = self.integ.periodic_key()
         if key is not None and self.prev_key is not None and bool((key == self.prev_key).numpy().all()):

@@ -74,6 +74,16 @@ def test_inverted_model_refused():
         fit_depth([0.4, 0.7, np.inf], [100.0, 120.0, 130.0])
     with pytest.raises(CalibrationError, match="at least 3 distinct depths"):
         fit_depth([0.4, 0.7], [100.0, 120.0])
+    # two captures' depths swapped: a positive pivot in front of the nearest depth, but not pinned by the data
+    # (0.061 +- 0.046 here; the right labels 0.0996 +- 0.0007); it was written, and depth maps with it had no
+    # confident pixel
+    noisy = _exact_scales(0.1) + np.random.default_rng(0).normal(0, 0.5, len(Z))
+    assert fit_depth(Z, noisy).std["pivot"] < 0.01
+    with pytest.raises(CalibrationError, match=r"scales along x: the fit does not pin the pivot \(0\.06\d* \+- "
+                                               r"0\.046, rms 10\.5 px/rad\): check that each capture is given its own"):
+        fit_depth(Z[[1, 0, 2, 3, 4]], noisy)
+    with pytest.raises(CalibrationError, match="scales along y: the fit does not pin the pivot"):
+        fit_depth(Z, noisy, scales_y=noisy[[1, 0, 2, 3, 4]])
 
 
 def test_depth_fit_records_its_quality(tmp_path, galvo_stream):

@@ -80,3 +80,24 @@ def test_corrupt_event_file_is_a_clear_error(tmp_path):
     bad.write_bytes(b"not hdf5")
     r = run("info", str(bad))
     assert r.returncode == 2 and "cannot read as h5" in r.stderr
+
+
+def test_every_command_prints_its_help():
+    """``--help`` of every command and subcommand (argparse formats each help with %: a bare "10 % far" in one
+    option's help made ``refocus --help`` and ``depth --help`` exit with a TypeError)."""
+    import argparse
+
+    from mitsuba_eventfield.cli.main import build_parser
+
+    def parsers(p, name):
+        yield name, p
+        for action in p._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub, child in action.choices.items():
+                    yield from parsers(child, f"{name} {sub}")
+    seen = []
+    for name, p in parsers(build_parser(), "eventfield"):
+        text = p.format_help()
+        assert text.startswith("usage: ") and len(text) > 100, name
+        seen.append(name)
+    assert {"eventfield refocus", "eventfield depth", "eventfield calibrate galvo"} <= set(seen) and len(seen) > 20

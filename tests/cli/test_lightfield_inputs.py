@@ -72,6 +72,17 @@ def test_refocus_checks_every_depth_and_output_before_writing(captures, capsys):
     assert os.listdir(out) == ["a_0.6.png"]
 
 
+def test_depth_checks_its_exr_before_the_solve(captures, capsys, tmp_path):
+    """The depth map's EXR beside its PNG is checked with the other arguments: a folder in its place failed
+    only after the solve (whose warning then preceded the error)."""
+    d, _, _ = captures
+    (tmp_path / "x.exr").mkdir()
+    code, err = _run(["depth", d / "g.h5", "-o", tmp_path / "x.png", "--near", "0.4", "--far", "3", "--views", "8"],
+                     capsys)
+    assert code == 2 and err.endswith("x.exr: is a directory") and len(err.splitlines()) == 1, err
+    assert sorted(os.listdir(tmp_path)) == ["x.exr"]
+
+
 def test_depth_range_and_empty_streams(captures, capsys):
     d, _, _ = captures
     for extra, message in ((["--near", "0.35", "--far", "1e300"], "--far = 1e+300: this galvo light field"),
@@ -291,6 +302,7 @@ def test_events_only_depth_defaults_to_each_pixel_at_its_own_depth(tmp_path, cap
         near = (channels["confidence"] >= 0.5) & (channels["depth"] < 1.0)       # the wall is at 2.5 m
         assert near.sum() > 300, name
         card[name] = float(np.median(channels["depth"][near]))
+        assert meta["method"] == {"start": "direct", "default": "periods", "galvo": "galvo"}[name]   # not "default"
         if name == "default":
             assert meta["method"] == "periods" and meta["inputs"] == "events only"
             # why a pixel is not confident, a code a pixel (focus.depth.REASONS), explained in the metadata

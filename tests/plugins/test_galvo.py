@@ -158,6 +158,10 @@ def test_static_period_reuse_equals_full_render():
     assert r["reused_steps"] == 21 and r["copied_steps"] == 20
     assert any("reused" in n for n in r["notes"]) and any("repeated" in n for n in r["notes"])
     assert full.meta["render"]["reused_steps"] == full.meta["render"]["copied_steps"] == 0
+    # two periods: the state repeats after the second, with no period left to copy; said anyway ("the events of
+    # the later periods are exact copies") until 2026-11-27
+    two = ef.render_events(timed, 0.008, steps=40).meta["render"]
+    assert two["copied_steps"] == 0 and not any("repeated" in n for n in two["notes"])
 
 
 def test_event_copy_equals_computation_over_many_periods():

@@ -110,6 +110,16 @@ def test_one_clock_only(tmp_path, capfd):
     (tmp_path / "bad.txt").write_text("0.0\nzero point one\n")
     with pytest.raises(ef.EventFieldError, match=r"bad\.txt: frame times: expected one number \(seconds\) a line"):
         ef.events_from_frames(str(tmp_path / "own.npz"), str(tmp_path / "bad.txt"))
+    # the line as an editor counts it, comments and blank lines included (NumPy said "row 1": rows from 0, the
+    # comment and blank line left out)
+    (tmp_path / "bad.txt").write_text("0.0\n# then\n\n0.1 0.2\n0.3\n")
+    with pytest.raises(ef.EventFieldError, match=r"bad\.txt: frame times: expected one number \(seconds\) a line "
+                                                 r"\(line 4: '0\.1 0\.2'\)$"):
+        ef.events_from_frames(_ramp(), str(tmp_path / "bad.txt"))
+    np.savez(tmp_path / "both.npz", frames=_ramp(), times=UNEVEN, timestamps_us=np.asarray(UNEVEN) * 2e6)
+    with pytest.raises(ef.EventFieldError, match=r"both\.npz: both 'times' \(seconds\) and 'timestamps_us' are "
+                                                 r"given: keep one$"):       # the second was ignored
+        ef.events_from_frames(str(tmp_path / "both.npz"))
     assert not (tmp_path / "o.h5").exists()
 
 

@@ -104,7 +104,8 @@ def test_noisy_scene_takes_two_pixel_steps_until_samples_quiet_the_noise():
         assert ev.meta["render"]["image_motion_px_per_step"]["objects"] <= bound * 1.02
     assert quiet.meta["render"]["steps"] == pytest.approx(4 * noisy.meta["render"]["steps"], abs=3)
     notes = noisy.meta["render"]["notes"]
-    assert any("chosen because Monte-Carlo noise" in n for n in notes)
+    assert any("as many as the image motion at the 2 px a step the default allows where Monte-Carlo noise" in n
+               for n in notes)
     assert not any("steps coarser than the image motion" in n for n in notes)
     assert quiet.meta["render"]["timing_limit"] is not None            # placed steps get the accuracy-limit note
 
@@ -246,5 +247,7 @@ def test_the_noise_bound_is_recorded_when_the_light_field_views_decide(capsys):
     assert chosen["px_per_step"] == 2.0 and chosen["noise_over_threshold"] >= 0.25
     assert 1.0 < ev.meta["render"]["image_motion_px_per_step"]["scan"] < 2.0
     assert not any("steps coarser" in n for n in ev.meta["render"]["notes"])
+    assert any("as many as the light-field views, within the 2 px a step the default allows" in n
+               for n in ev.meta["render"]["notes"])            # what set the steps, as stepping.chosen.by says
     _warn_coarse_steps("gs.h5", ev)
     assert capsys.readouterr().err == ""
