@@ -58,8 +58,12 @@ confident.
   and 39 % of it moved by more than 10 % when the period's window moved by 3 us. Now only the card's text is
   confident, 4 % off, and 0.5 % of it moves by more than 10 % (tests/lightfield/test_depth_confidence.py). A
   region's median resolves more than its pixels: the same wall's median depth reads 2.67 m
-  (tests/simulate/test_default_steps.py). Not caught: the check reads the pixel's estimated depth, so an
-  unresolved pixel estimated too near passes it (docs/design.md, "Where methods fail").
+  (tests/simulate/test_default_steps.py). The check is read at the farthest depth whose focus is within
+  ``1 - PLATEAU`` = 10 % of the curve's contrast of its peak (``indistinct_depth``), not at the estimate: an
+  unresolved wall's curve is that flat from somewhat nearer than its resolution limit out to the end of the
+  range, and the estimate fell near: on the README's galvo_static render (346 x 260) 699 wall pixels away
+  from the card read 1.41-1.57 m confidently (resolution limit 1.59 m, truth 2.5), now none; the card keeps
+  3459 of its 3466 (tests/lightfield/test_depth_confidence.py).
 """
 from __future__ import annotations
 
@@ -80,15 +84,16 @@ MIN_EVIDENCE = 0.3          # module docstring: views that change less than this
 MIN_CHANGES = 2.0           # module docstring: level changes along the views per pixel, mean over the window
 OWN_TEXTURE_SHARE = 0.2     # module docstring: a pixel's own texture against the image's 90th percentile
 DEPTH_TOLERANCE = 0.1       # module docstring: a confident depth is told from one this share farther ...
-RESOLVABLE_PX = 0.05        # ... by its views moving at least this far (RMS over the views, pixels)
+RESOLVABLE_PX = 0.05        # ... by its views moving at least this far (RMS over the views, pixels) ...
+PLATEAU = 0.9               # ... at the farthest depth whose focus is within 10 % of the curve's contrast of its peak
 NOTE_SHARE = 0.02           # DepthMap.notes: a reason is reported where it holds for this share of the image
 # DepthMap.reasons: why a pixel is not confident, one code a pixel (the depth EXR's "reason" channel)
 REASONS = {0: "passed every check (its confidence is its focus curve's peak over the median)",
            1: "no parallax evidence: its views change less than the scan must make them (no texture or no events)",
            2: "no texture of its own at its depth (beside an edge: the focus window's texture lent to it)",
            3: "sharpest nearer than the depths searched", 4: "sharpest farther than the depths searched",
-           5: f"beyond the depth resolution: {DEPTH_TOLERANCE:.0%} more depth moves its views less than "
-              f"{RESOLVABLE_PX} px"}
+           5: f"beyond the depth resolution: its focus curve does not tell its depth from one where "
+              f"{DEPTH_TOLERANCE:.0%} more depth moves its views less than {RESOLVABLE_PX} px"}
 REASON_META = {"reason_codes": {str(code): words for code, words in REASONS.items()}}
 
 
@@ -107,6 +112,7 @@ class DepthMap:
     # optics cannot resolve costs less than RESOLVABLE_PX of alignment, and the image's median would cost more
     focus_confidence: np.ndarray | None = None
     unresolved: np.ndarray | None = None      # (H, W) bool: fails the resolution check alone (module docstring)
+    indistinct_depth: np.ndarray | None = None  # (H, W) the farthest depth the focus curve does not tell from its peak
 
     def notes(self) -> list:
         """Why textured pixels are not confident, as report lines (each only where it holds for at least
@@ -226,10 +232,11 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
     resolution = depth_resolution_px(lf, depth, zs[0], zs[-1])
     aligns = (evidence >= MIN_EVIDENCE) & ~at_limit
     textured = own >= OWN_TEXTURE_SHARE * float(np.percentile(own, 90))
-    resolved = resolution >= RESOLVABLE_PX
+    indistinct = np.maximum(indistinct_depth(vol, k, zs), depth)
+    resolved = resolution * depth / indistinct >= RESOLVABLE_PX       # resolution_px falls as 1 / depth
     focus_conf = np.clip(np.nan_to_num(np.where(aligns, conf, 0.0)), 0, 1)
     return DepthMap(depth, np.where(textured & resolved, focus_conf, 0.0), zs, measure, evidence, at_limit, own,
-                    resolution, focus_conf, aligns & textured & ~resolved)
+                    resolution, focus_conf, aligns & textured & ~resolved, indistinct)
 
 
 # inverse depths beyond each end of the range, as fractions of the end's: up to half the nearest depth searched
@@ -368,6 +375,23 @@ def own_texture(textures: list, k: np.ndarray) -> np.ndarray:
 
 
 RESOLUTION_GRID_PX = 8      # the view motion varies slowly over the image: computed every 8 pixels, interpolated
+
+
+def indistinct_depth(vol: np.ndarray, k: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """(H, W): the farthest depth searched that each pixel's focus curve does not tell from its sharpest plane
+    ``k``: planes from ``k`` outwards (farther) while the focus stays within ``1 - PLATEAU`` of the curve's
+    contrast (peak over median) of its peak. Depths are told apart worse the farther they are, so this end of
+    the interval decides whether the pixel's depth is resolved (module docstring)."""
+    peak, median = vol.max(axis=0), np.median(vol, axis=0)
+    level = peak - (1.0 - PLATEAU) * (peak - median)
+    end, going = k.copy(), np.ones(k.shape, bool)
+    for j in range(1, len(planes)):
+        going &= (k + j < len(planes)) & (np.take_along_axis(vol, np.minimum(k + j, len(planes) - 1)[None], 0)[0]
+                                          >= level)
+        if not going.any():
+            break
+        end[going] = k[going] + j
+    return planes[end]
 
 
 def depth_resolution_px(lf: LightField, depth: np.ndarray, near: float, far: float,
