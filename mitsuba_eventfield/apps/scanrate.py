@@ -227,7 +227,7 @@ def figure(result: ScanRateDepth, path: str, columns: int = 4) -> str:
 
 
 def write_outputs(result: ScanRateDepth, out_dir: str) -> dict:
-    """Per period an EXR (depth, confidence, truth) and a colour depth PNG; the figure; metrics.json."""
+    """Per period an EXR (depth, confidence, reason, truth) and a colour depth PNG; the figure; metrics.json."""
     from ..atomic import write_json
     from ..images import depth_png, write_exr, write_png
     os.makedirs(out_dir, exist_ok=True)

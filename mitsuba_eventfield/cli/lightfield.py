@@ -96,9 +96,10 @@ def _out_meta(a, events, lf=None, **extra):
                  "calibration": calibration}, **extra)
 
 
-def _lightfield(a, ev):
+def _lightfield(a, ev, nearest: float | None = None):
     """The light field the light-field commands share, calibrated when asked (a calibration made for other
-    optics than this stream's is refused before any reconstruction)."""
+    optics than this stream's is refused before any reconstruction). ``nearest``: the nearest depth the command
+    needs (--near, the nearest --depth), searched by the per-period solver too."""
     from ..calibration import apply_to_lightfield, check_optics, load_calibration, optics_record
     from ..lightfield.model import default_method, from_events
     from ..lightfield.reconstruct import methods
@@ -119,7 +120,7 @@ def _lightfield(a, ev):
     _warn_coarse_steps(a.file, ev)
     try:
         if a.method == PERIODS:
-            lf = _periods_lightfield(a, ev, period, views)
+            lf = _periods_lightfield(a, ev, period, views, nearest)
         else:
             lf = from_events(ev, period=period, views=views, time=None if a.time is None else a.time * 1e-3,
                              method=a.method, log_start=start_log(a.start_frame, ev))
@@ -131,21 +132,25 @@ def _lightfield(a, ev):
 PERIODS = "periods"      # --method: the galvo solver per period with per-pixel depth (focus.galvo_periods)
 
 
-def _periods_lightfield(a, ev, period: int, views: int):
+def _periods_lightfield(a, ev, period: int, views: int, nearest: float | None = None):
     """The light field of galvo scan period ``period`` as the demo makes it (``focus.galvo_periods``: the period's
     image solved from its events with per-pixel depth from focus), the default without a start frame. The
     one-depth solver (``--method galvo``, the Python API's default) is faster, biased where depths differ: cards
     of offaxis_cards (160x120) 0.5025 / 1.2058 m against 0.4990 / 1.1963 (truth 0.5 / 1.2), 0.8 against 6.1 s
     a light field; galvo_static's (346x260) 0.549 against 0.490 m (0.491 with the rendered start frame), 27
     against 59 s for `eventfield depth`. A solver's warning waits in ``lf.meta`` for the command's checks."""
-    from ..focus.galvo_periods import reconstruct_periods
+    from ..focus.galvo_periods import default_depth_range, reconstruct_periods
     design = (ev.meta.get("optics") or {}).get("design")
     if design != "galvo":
         raise EventFieldError(f"{a.file}: --method {PERIODS} is for a galvo stream; this one is {design}")
     if a.start_frame:
         raise EventFieldError(f"--method {PERIODS} reconstructs from the events alone: --start-frame is used by "
                               "the direct and complementary methods")
-    lf, solved = next(reconstruct_periods(ev, views, periods=[period]))
+    optics = ev.meta["optics"]
+    near, far = default_depth_range(optics)          # its pixels' depths: nearer ones when the command asks
+    if nearest is not None and math.isfinite(nearest):
+        near = min(near, max(float(nearest), float(optics["mirror_distance"]) + float(optics["mirror_separation"])))
+    lf, solved = next(reconstruct_periods(ev, views, periods=[period], depth_range=(near, far)))
     if not solved.reliable:
         lf.meta["warning"] = (f"{a.file}: scan period {period}: the solver turned down {solved.outliers:.0%} of its "
                               "equations as not fitting a static scene at the depths found (moving content, depths "
@@ -288,7 +293,7 @@ def run_refocus(a) -> int:
     ev = read_input(a)
     depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
     roots = _refocus_roots(a, depths)
-    lf = _lightfield(a, ev)
+    lf = _lightfield(a, ev, nearest=min(depths))
     try:                                   # every depth before the first image
         roots = [(lf.check_depth(z, "--depth"), root) for z, root in roots]
     except ConfigError as e:
@@ -310,7 +315,7 @@ def run_depth(a) -> int:
     if a.measure not in MEASURES:
         raise EventFieldError(f"--measure {a.measure!r}: allowed: {', '.join(MEASURES)}")
     check_writable(os.path.splitext(a.output)[0] + ".exr", "depth map")     # the PNG's sibling, before the solve
-    lf = _lightfield(a, ev)
+    lf = _lightfield(a, ev, nearest=a.near)
     if a.method == "highpass" and lf.kind == "galvo":    # a new user's galvo_static: the text wall read 0.43 m
         print("eventfield: warning: --method highpass keeps each view's changes, not the image the scan moves: "
               "galvo depth from it is unreliable (the default, periods, solves the image from the events)")

@@ -34,15 +34,29 @@ def _signals_as_interrupts():
     """SIGINT and SIGTERM raise KeyboardInterrupt, so every ``finally`` runs (outputs off, temporary files
     removed); the signal is remembered because a library between us and the handler (Dr.Jit calling a Python
     plugin) may hand it back wrapped in another exception, or swallow it (``errors.raise_if_stopped``). Returns
-    the previous handlers, or {} off the main thread (where Python allows no handlers)."""
-    received.clear()
-
+    the previous handlers, or {} off the main thread (where Python allows no handlers, and the record belongs
+    to the main thread's command, if one runs)."""
     def on_signal(signum, frame):
         received.append(signum)
         raise KeyboardInterrupt(signal.Signals(signum).name)
     if threading.current_thread() is not threading.main_thread():
         return {}
+    received.clear()
     return {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _restore_signals(previous: dict) -> list:
+    """Put back the handlers ``previous`` held and return the signals this command received, the record
+    cleared (also when a second signal interrupts the restoring: a stale record would stop every later render
+    in the process at its first step)."""
+    try:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    finally:
+        stopped = list(received)
+        if threading.current_thread() is threading.main_thread():     # the record is the main thread's
+            received.clear()
+    return stopped
 
 
 def _run(args) -> int:
@@ -83,9 +97,10 @@ def main(argv=None) -> int:
     KEPT.clear()                     # this command's kept checkpoints only (main may run many in one process)
     # our lines only: no Mitsuba notes (monochrome film, "winding down" on Ctrl-C); restored when main returns
     was_quiet = quiet_mitsuba_log()
-    previous = _signals_as_interrupts()
     show_warning, warnings.showwarning = warnings.showwarning, _warning_line
+    previous = {}
     try:
+        previous = _signals_as_interrupts()
         return _run(args)
     except EventFieldError as e:
         print(f"eventfield: error: {one_line(e)}", file=sys.stderr)
@@ -107,13 +122,10 @@ def main(argv=None) -> int:
                   "(EVENTFIELD_DEBUG=1 shows the traceback)", file=sys.stderr)
             return 3
     finally:
+        stopped = _restore_signals(previous)     # first: a later render in this process goes on
         warnings.showwarning = show_warning
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
         if not was_quiet:
             quiet_mitsuba_log(False)
-        stopped = list(received)
-        received.clear()        # a later render in this process (main called again, the Python API) goes on
     signum = stopped[0] if stopped else signal.SIGINT
     from ..simulate.checkpoint import KEPT
     kept = (f"; its last checkpoint is kept in {KEPT[-1]}: run the same command with --resume to go on"

@@ -143,7 +143,8 @@ class DepthMap:
     def reasons(self) -> np.ndarray | None:
         """(H, W) uint8: the first of ``REASONS`` that holds at each pixel (None for a map made without the
         checks). A pixel sharpest beyond the far end where that end is itself unresolved is unresolved (5)."""
-        if self.at_limit is None or self.own_texture is None or self.resolution_px is None:
+        checks = (self.at_limit, self.own_texture, self.resolution_px, self.evidence, self.unresolved)
+        if any(c is None for c in checks):
             return None
         near, far = float(self.planes[0]), float(self.planes[-1])
         nearer = self.at_limit & (1.0 / self.depth > 0.5 * (1.0 / near + 1.0 / far))

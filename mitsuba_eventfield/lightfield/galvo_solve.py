@@ -36,7 +36,9 @@ No rendered frame is used anywhere; everything comes from the events and the opt
 """
 from __future__ import annotations
 
+import contextlib
 import math
+import threading
 
 import numpy as np
 
@@ -143,9 +145,33 @@ def _solve(a, b, prior, prior_weight, robust_iterations, threshold, iterations, 
     bound, and OpenBLAS's threads, spinning against other busy processes, made them 10-45x slower (0.1 against
     4.7 ms for 720 k values); this solve at 173x130 took 2.0-4.5 s against 5.2-10.9 s with two other processes
     on the two cores, and the same 1.5 s on an idle machine."""
-    from threadpoolctl import threadpool_limits
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _one_blas_thread():
         return _solve_robust(a, b, prior, prior_weight, robust_iterations, threshold, iterations, tolerance)
+
+
+_blas = {"lock": threading.Lock(), "solves": 0, "limiter": None}
+
+
+@contextlib.contextmanager
+def _one_blas_thread():
+    """BLAS on one thread while any solve runs. BLAS limits are process-wide: two solves in threads (a Dask
+    sweep) each saving and restoring them would leave them at one thread for good when they end out of order,
+    so the first solve sets the limit and the last one puts back what was there. (OpenBLAS's count set from a
+    worker thread was not always seen from another thread: then a solve there runs on BLAS's own threads, as
+    fast on an idle machine.)"""
+    from threadpoolctl import threadpool_limits
+    with _blas["lock"]:
+        if _blas["solves"] == 0:
+            _blas["limiter"] = threadpool_limits(limits=1, user_api="blas")
+        _blas["solves"] += 1
+    try:
+        yield
+    finally:
+        with _blas["lock"]:
+            _blas["solves"] -= 1
+            if _blas["solves"] == 0:
+                _blas["limiter"].restore_original_limits()
+                _blas["limiter"] = None     # the next first solve reads the limits afresh
 
 
 def _solve_robust(a, b, prior, prior_weight, robust_iterations, threshold, iterations, tolerance):

@@ -65,8 +65,9 @@ def read_times(times):
     except OSError as e:
         raise EventFieldError(f"{path}: cannot read the frame times ({e.strerror or type(e).__name__})") from None
     except ValueError as e:
-        raise EventFieldError(f"{path}: frame times: expected one number (seconds) a line "
-                              f"({_bad_line(path) or ' '.join(str(e).split())[:100]})") from None
+        text = not path.lower().endswith(".npy")        # a .npy's own reason (an object array), not its bytes
+        why = (text and _bad_line(path)) or " ".join(str(e).split())[:100]
+        raise EventFieldError(f"{path}: frame times: expected one number (seconds) a line ({why})") from None
 
 
 def _bad_line(path: str) -> str | None:

@@ -310,3 +310,22 @@ def test_events_only_depth_defaults_to_each_pixel_at_its_own_depth(tmp_path, cap
             assert meta["reason_codes"]["2"].startswith("no texture of its own")
     assert abs(math.log(card["default"] / card["start"])) < 0.03, card
     assert abs(math.log(card["galvo"] / card["start"])) > 3 * abs(math.log(card["default"] / card["start"])), card
+
+
+def test_the_default_solver_searches_the_depths_the_command_asks_for(captures, capsys, tmp_path, monkeypatch):
+    """The per-period solver maps each pixel at a depth searched from twice the mirrors' pivot (0.22 m here)
+    on; ``depth --near`` and ``refocus --depth`` nearer than that extend its search (down to the pivot, where
+    the galvo's views begin), so that the new default does not clamp what the command asks for."""
+    from mitsuba_eventfield.focus import galvo_periods
+    d, _, _ = captures
+    ranges, solver = [], galvo_periods.reconstruct_periods
+
+    def spy(*args, **kwargs):
+        ranges.append(kwargs.get("depth_range"))
+        return solver(*args, **kwargs)
+    monkeypatch.setattr(galvo_periods, "reconstruct_periods", spy)
+    args = ["--views", "8", "--planes", "4"]
+    assert cli(["depth", str(d / "g.h5"), "-o", str(tmp_path / "a.png"), "--near", "0.4", "--far", "3", *args]) == 0
+    assert cli(["depth", str(d / "g.h5"), "-o", str(tmp_path / "b.png"), "--near", "0.15", "--far", "3", *args]) == 0
+    assert cli(["refocus", str(d / "g.h5"), "-o", str(tmp_path / "r.png"), "--depth", "0.13,inf", "--views", "8"]) == 0
+    assert [r[0] for r in ranges] == pytest.approx([0.22, 0.15, 0.13]) and all(r[1] == 1000.0 for r in ranges)

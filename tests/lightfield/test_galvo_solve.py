@@ -88,3 +88,38 @@ def test_bad_input_is_one_named_error(cards):
     events.meta["optics"] = {"design": "kaleidoscope"}
     with pytest.raises(ConfigError, match="galvo event stream"):
         galvo_solve.start_image(events, 0.0)
+
+
+def test_blas_runs_on_one_thread_during_a_solve_and_comes_back_after_overlapping_ones():
+    """The solver's one-thread BLAS (``galvo_solve._one_blas_thread``) is process-wide: solves overlapping in
+    threads, ending out of order, must leave the process's own limits as they were (each saving and restoring
+    its own would leave them at one thread for good). Read from the calling thread: OpenBLAS's thread count,
+    set from a worker thread, was not always seen there."""
+    import threading
+
+    from threadpoolctl import threadpool_info
+
+    from mitsuba_eventfield.lightfield import galvo_solve
+
+    def blas_threads():
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    before = blas_threads()
+    with galvo_solve._one_blas_thread():
+        assert blas_threads() == [1] * len(before)
+    assert blas_threads() == before
+    entered, release = [], [threading.Event() for _ in range(3)]
+
+    def solve(k):
+        with galvo_solve._one_blas_thread():
+            entered.append(k)
+            release[k].wait(10)
+    threads = [threading.Thread(target=solve, args=(k,)) for k in range(3)]
+    for t in threads:
+        t.start()
+    while len(entered) < 3:
+        threading.Event().wait(0.01)
+    for k in (1, 0, 2):                   # not in the order they began
+        assert galvo_solve._blas["solves"] == 3 - (1, 0, 2).index(k)
+        release[k].set()
+        threads[k].join()
+    assert galvo_solve._blas["solves"] == 0 and galvo_solve._blas["limiter"] is None and blas_threads() == before

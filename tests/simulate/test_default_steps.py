@@ -111,11 +111,13 @@ def test_noisy_scene_takes_two_pixel_steps_until_samples_quiet_the_noise():
 
 
 def _motion_bound(chosen) -> float:
-    """The px-a-step bound the motion's step count used (``chosen["px_per_step"]`` is None where a floor
-    decided)."""
+    """The px-a-step bound the motion's step count used, from the noise the stepping measured (independently of
+    ``chosen["px_per_step"]``, which records it)."""
     from mitsuba_eventfield.simulate import stepping
     noisy = (chosen["noise_over_threshold"] or 0) >= stepping.NOISE_LIMITED
-    return stepping.NOISY_PX_PER_STEP if noisy else stepping.FINE_PX_PER_STEP
+    bound = stepping.NOISY_PX_PER_STEP if noisy else stepping.FINE_PX_PER_STEP
+    assert chosen["px_per_step"] == bound
+    return bound
 
 
 def test_galvo_default_steps_keep_the_phase_grid_and_reuse_periods():
