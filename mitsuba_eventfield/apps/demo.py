@@ -68,7 +68,8 @@ def run(width: int = 160, height: int = 120, views: int = 32, progress: bool = F
     depth = depth_from_focus(lf, NEAR, FAR, PLANES, "tenengrad")
     t2 = time.perf_counter()
     cards, wrong = _score(scene, depth)                        # scoring only: the method never saw the truth
-    meta = {"confident_wrong": wrong, "scene": DEMO_SCENE, "width": width, "height": height, "views": views, "planes": PLANES,
+    meta = {"confident_wrong": wrong, "scene": DEMO_SCENE, "width": width, "height": height, "views": views,
+            "planes": PLANES,
             "inputs": "events only (the galvo solver per period, focus.galvo_periods; no frame camera)",
             "scored_against": "Mitsuba's depth output of the centre view (truth.truth_depth)",
             "time_split_s": {"render_events": cap.seconds["render_events"],
