@@ -146,11 +146,8 @@ def _periods_lightfield(a, ev, period: int, views: int, nearest: float | None = 
     if a.start_frame:
         raise EventFieldError(f"--method {PERIODS} reconstructs from the events alone: --start-frame is used by "
                               "the direct and complementary methods")
-    optics = ev.meta["optics"]
-    near, far = default_depth_range(optics)          # its pixels' depths: nearer ones when the command asks
-    if nearest is not None and math.isfinite(nearest):
-        near = min(near, max(float(nearest), float(optics["mirror_distance"]) + float(optics["mirror_separation"])))
-    lf, solved = next(reconstruct_periods(ev, views, periods=[period], depth_range=(near, far)))
+    depth_range = default_depth_range(ev.meta["optics"], nearest)     # nearer ones when the command asks
+    lf, solved = next(reconstruct_periods(ev, views, periods=[period], depth_range=depth_range))
     if not solved.reliable:
         lf.meta["warning"] = (f"{a.file}: scan period {period}: the solver turned down {solved.outliers:.0%} of its "
                               "equations as not fitting a static scene at the depths found (moving content, depths "

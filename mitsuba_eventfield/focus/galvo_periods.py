@@ -62,11 +62,16 @@ def _depth_from_views(events, t_start, log_start, views, depth_range, planes):
     return 1.0 / np.maximum(inv, 1e-9), dm.confidence
 
 
-def default_depth_range(optics: dict) -> tuple:
+def default_depth_range(optics: dict, nearest: float | None = None) -> tuple:
     """Depths searched when none are given: from twice the Y mirror's pivot distance (an assumed near limit:
     give ``depth_range`` for nearer scenes) to 1000 (practically infinity; the search is uniform in inverse
-    depth, where a galvo's view shift is affine)."""
-    return 2.0 * (float(optics["mirror_distance"]) + float(optics["mirror_separation"])), 1000.0
+    depth, where a galvo's view shift is affine). ``nearest``: a nearer depth a caller needs (the CLI's
+    ``--near``), searched too, down to the pivot itself (before it the mirrors show nothing)."""
+    pivot = float(optics["mirror_distance"]) + float(optics["mirror_separation"])
+    near = 2.0 * pivot
+    if nearest is not None and math.isfinite(nearest):
+        near = min(near, max(float(nearest), pivot))
+    return near, 1000.0
 
 
 def reconstruct_periods(events: EventStream, views: int = VIEWS_PER_PERIOD, periods=None, depth_range=None, samples: int = 16,
