@@ -12,17 +12,18 @@ from ..optics.galvo import pixel_ray_slopes
 from ..simulate.render import render_frames
 
 
-def centre_pinhole(timed, spp: int = 1):
+def centre_pinhole(timed, spp: int = 1, scale: int = 1):
     """A perspective sensor with the scene sensor's field of view, pose (at the scene's current time: call
-    ``timed.set_time`` first) and film size: the galvo's centre view (zero mirror angles), which refocus and
-    depth maps are aligned to, i.e. what a conventional camera in its place would see."""
+    ``timed.set_time`` first) and film size (times ``scale`` on each axis): the galvo's centre view (zero mirror
+    angles), which refocus and depth maps are aligned to, i.e. what a conventional camera in its place would
+    see."""
     import mitsuba as mi
     sensor = timed.sensor
     optics = sensor.optics_metadata()
     if "fov_x_deg" not in optics:
         raise ValueError(f"a centre pinhole needs a sensor with a field of view (fov_x_deg); got "
                          f"{optics.get('design')}")
-    size = sensor.film().size()
+    size = [int(v) * int(scale) for v in sensor.film().size()]
     return mi.load_dict({
         "type": "perspective", "fov": optics["fov_x_deg"], "fov_axis": "x", "near_clip": 1e-4,
         "to_world": mi.ScalarTransform4f(np.array(sensor.world_transform().matrix).reshape(4, 4)),
@@ -31,17 +32,28 @@ def centre_pinhole(timed, spp: int = 1):
         "sampler": {"type": "stratified", "sample_count": spp, "jitter": False}})
 
 
-def truth_depth(timed, t: float, spp: int = 1) -> np.ndarray:
-    """z depth (H, W) of the sensor's centre view at time ``t`` (s); inf where the ray hits nothing."""
+def truth_depth(timed, t: float, spp: int = 1, scale: int = 1) -> np.ndarray:
+    """z depth (H, W) of the sensor's centre view at time ``t`` (s), through each pixel's centre (or, with
+    ``scale``, of a ``scale`` times finer grid: (H scale, W scale)); inf where the ray hits nothing."""
     import mitsuba as mi
     timed.set_time(t)
-    pinhole = centre_pinhole(timed, spp)
+    pinhole = centre_pinhole(timed, spp, scale)
     w, h = (int(v) for v in pinhole.film().size())
     aov = mi.load_dict({"type": "aov", "aovs": "dd:depth"})
     dist = np.array(mi.render(timed.scene, sensor=pinhole, integrator=aov))[..., 0].astype(np.float64)
     xx, yy = pixel_ray_slopes(w, h, timed.sensor.optics_metadata()["fov_x_deg"])
     z = dist / np.sqrt(1 + xx * xx + yy * yy)
     return np.where(dist > 0, z, np.inf)
+
+
+def truth_depth_range(timed, t: float, sub: int = 4) -> tuple:
+    """(nearest, farthest) z depth (H, W) within each pixel's footprint at time ``t``: ``sub`` x ``sub`` rays a
+    pixel. Where a pixel straddles an occluding edge, both depths are the truth; scoring against the centre
+    ray alone counts a pixel a card half covers as wrong at the card's depth."""
+    z = truth_depth(timed, t, scale=sub)
+    h, w = z.shape[0] // sub, z.shape[1] // sub
+    blocks = z.reshape(h, sub, w, sub)
+    return blocks.min(axis=(1, 3)), blocks.max(axis=(1, 3))
 
 
 def centre_frame(timed, t: float, log: bool = True, spp: int = 4) -> np.ndarray:

@@ -3,7 +3,8 @@ tracking, refocus scoring, calibration peak finding) calls. NumPy and OpenCV onl
 
 Measures (``focus_measure``): ``sml`` (sum-modified-Laplacian) and ``tenengrad`` (Sobel gradient energy), both
 averaged over a window. ``depth.depth_from_focus`` adds ``variance`` (angular consistency of the aligned
-views), which needs the views rather than one image.
+views), which needs the views rather than one image. Texture: ``log_gradient`` (symmetric, per pixel) and
+``one_sided_texture`` (a pixel's most uniform side: not lent across an occluding edge).
 """
 from __future__ import annotations
 
@@ -38,10 +39,44 @@ def focus_measure(img: np.ndarray, measure: str = "sml", window: int = 7) -> np.
 
 
 def log_gradient(log_img) -> np.ndarray:
-    """(H, W) gradient magnitude of a log image per pixel (Sobel / 8: the slope of a ramp per pixel); the one
-    texture measure of depth from focus's own-texture and evidence checks and the scoring's textured pixels."""
+    """(H, W) gradient magnitude of a log image per pixel (Sobel / 8: the slope of a ramp per pixel): the
+    texture measure of depth from focus's evidence check and of the scoring's textured pixels."""
     g = np.asarray(log_img, np.float32)
     return np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)) / 8
+
+
+def one_sided_texture(log_img, box: int = 7) -> np.ndarray:
+    """(H, W) texture on each pixel's most uniform side: the standard deviation of the log image about its
+    best-fitting plane over a ``box`` x ``box`` square with the pixel at one of its corners, the least of the
+    four such squares.
+
+    A symmetric measure (a gradient, a window around the pixel) is as high on the plain side of an occluding
+    edge as on the textured side: the edge itself is the texture. A pixel of a plain wall beside a nearer
+    card has one side (away from the card) that is plain, so its least corner square is flat; a pixel of the
+    card has card texture on every side. The plane is taken out because defocus leaves a linear ramp as it is:
+    a ramp (shading, or the blurred edge of a card refocused far from it) tells no depth, and with the plain
+    deviation a wall 5-7 px from offaxis_cards' near card, refocused at 0.3 m, passed as textured. Depth from
+    focus reads this as the texture a pixel's depth rests on (``depth.own_texture``)."""
+    g = np.asarray(array(log_img, "one_sided_texture: log_img", 2), np.float64)
+    box = check_window(box, "one_sided_texture")
+
+    def mean(a):         # over the centred square; reflected at the image's border, the coordinates with it
+        return cv2.boxFilter(a, -1, (box, box), borderType=cv2.BORDER_REFLECT)
+
+    m = mean(g)
+    var = mean(g * g) - m * m
+    for x in np.indices(g.shape, np.float64):                      # y, then x: the plane's two slopes
+        mx = mean(x)
+        var_x = mean(x * x) - mx * mx
+        cov = mean(g * x) - m * mx
+        var = var - np.where(var_x > 1e-9, cov * cov / np.maximum(var_x, 1e-9), 0.0)
+    spread = np.sqrt(np.maximum(var, 0.0)).astype(np.float32)
+    o = (box - 1) // 2                 # the centred square moved by o: the pixel at one of its corners
+    if o == 0:
+        return spread
+    padded = np.pad(spread, o, mode="edge")
+    h, w = g.shape
+    return np.min([padded[o + dy:o + dy + h, o + dx:o + dx + w] for dy in (-o, o) for dx in (-o, o)], axis=0)
 
 
 def parabola_offset(before, peak, after):

@@ -17,14 +17,15 @@ def test_demo_measures_both_cards_from_events_alone():
         assert card["error"] < 0.03 and card["confident"] > 0.5, (name, card)
     near, far = (r.refocused[z] for z in sorted(r.refocused))
     assert near.shape == far.shape == (72, 96) and np.all(np.isfinite(near))
-    # the confident pixels more than 10 % off, anywhere (the cards' own pixels alone hid them: a new user counted
-    # 1154 of 5403 on the background of the 160 x 120 demo, 983 after the resolution check read the indistinct
-    # depth): the band beside the cards' occluding edges, reported
+    # the confident pixels more than 10 % off every depth within the pixel, anywhere (the cards' own pixels alone
+    # hid them: a new user counted 1154 of 5403 on the background of the 160 x 120 demo, 983 after the resolution
+    # check read the indistinct depth, 84 since own texture is measured on the pixel's most uniform side): at
+    # this size 22 (1.3 %), all on the cards' occluding edges, reported
     wrong = r.meta["confident_wrong"]
     sure = r.depth.confidence >= 0.6
-    assert 0 < wrong["pixels"] < sure.sum() and wrong["share"] == wrong["pixels"] / sure.sum()
-    assert wrong["near_edge"] == wrong["pixels"] and 1 <= wrong["max_px_from_edge"] <= demo.EDGE_BAND_PX
-    assert f"{wrong['pixels']} pixels" in r.report()
+    assert wrong["share"] < 0.05 and wrong["share"] == wrong["pixels"] / sure.sum()
+    assert wrong["near_edge"] == wrong["pixels"] and wrong["max_px_from_edge"] <= 2
+    assert (f"{wrong['pixels']} pixels" if wrong["pixels"] else "no confident pixel is more") in r.report()
 
 
 def test_demo_command_writes_what_it_says(tmp_path):

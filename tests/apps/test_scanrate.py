@@ -25,10 +25,13 @@ def test_runner_depth_every_period(runner_capture, capsys):
     with capsys.disabled():
         print("\n[depth at the scan rate, runner, 128x96]\n" + r.report())
     assert len(r.depth_maps) == 2 and r.meta["depth_maps_per_second"] == 100
-    # measured: near 0.022, far 0.014, coverage 0.66. Before the own-texture and resolution checks
-    # (focus/depth.py) 0.86 of the textured pixels were confident and the far error was 0.042
+    # measured: near 0.018, far 0.011, coverage 0.47, the near tail (90th percentile) 0.05. Before the own-texture
+    # and resolution checks (focus/depth.py) 0.86 of the textured pixels were confident and the far error was
+    # 0.042; while own texture was measured around a pixel (not on its most uniform side), coverage 0.66 (the
+    # plain sides of the letters' and the runner's edges) and the near tail 0.13 (the wall beside the runner)
     for e in r.errors:
-        assert e["near"] < 0.035 and e["far"] < 0.03 and e["coverage"] > 0.55 and e["near_pixels"] > 300
+        assert e["near"] < 0.035 and e["far"] < 0.03 and e["coverage"] > 0.4 and e["near_pixels"] > 200
+        assert e["near_p90"] < 0.08
     # the runner recedes 2.5 cm per period; each map places it within 2% of Mitsuba
     est = [e["near_estimate_z"] for e in r.errors]
     true = [e["near_truth_z"] for e in r.errors]

@@ -151,9 +151,11 @@ def test_depth_between_few_planes_refined_at_the_ends(kaleido_lf, near, far, pla
         if not near < z < far:
             continue
         conf = dm.confidence[region] > 0.5
-        # measured 1.0 (0.6 m) and 0.95 / 0.86 (1.5 m, 3 / 4 planes): with 4 planes over 0.4-3 m the far card lies
+        # measured 1.0 (0.6 m) and 0.95 / 0.73 (1.5 m, 3 / 4 planes): with 4 planes over 0.4-3 m the far card lies
         # between planes at 0.95 and 3 m, blurred at both, and its faintest pixels fall below the own-texture check
-        assert conf.mean() > 0.8
+        # (texture on every side of the pixel; 0.86 while texture anywhere around it counted, which also lent a
+        # card's texture to the plain wall beside it: tests/lightfield/test_offaxis_cards.py)
+        assert conf.mean() > 0.7
         measured = np.median(dm.depth[region][conf])
         assert abs(measured - z) / z < 0.06, (z, measured)
         ends = np.isclose(dm.depth[region][conf], near) | np.isclose(dm.depth[region][conf], far)
