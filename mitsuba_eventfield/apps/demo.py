@@ -99,7 +99,7 @@ def _score(scene, depth) -> tuple:
                      "error": abs(measured / float(np.median(z[card])) - 1), "confident": float(good.sum() / card.sum())}
     sure = (depth.confidence >= 0.6) & np.isfinite(z)
     nearest, farthest = truth_depth_range(scene, 0.0)
-    wrong = sure & ((depth.depth < nearest / 1.1) | (depth.depth > farthest * 1.1))      # as the cards' error
+    wrong = sure & ((depth.depth < 0.9 * nearest) | (depth.depth > 1.1 * farthest))     # as the cards' error
     log_z = np.log(np.where(np.isfinite(z), z, 1e6)).astype(np.float32)
     edge = cv2.dilate(log_z, np.ones((3, 3), np.uint8)) - cv2.erode(log_z, np.ones((3, 3), np.uint8)) > 0.1
     from_edge = cv2.distanceTransform((~edge).astype(np.uint8), cv2.DIST_L2, 5)

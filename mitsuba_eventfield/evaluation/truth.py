@@ -36,6 +36,8 @@ def truth_depth(timed, t: float, spp: int = 1, scale: int = 1) -> np.ndarray:
     """z depth (H, W) of the sensor's centre view at time ``t`` (s), through each pixel's centre (or, with
     ``scale``, of a ``scale`` times finer grid: (H scale, W scale)); inf where the ray hits nothing."""
     import mitsuba as mi
+    if isinstance(scale, bool) or not isinstance(scale, int) or scale < 1:
+        raise ValueError(f"truth_depth: scale = {scale!r}: expected a whole number >= 1")
     timed.set_time(t)
     pinhole = centre_pinhole(timed, spp, scale)
     w, h = (int(v) for v in pinhole.film().size())

@@ -57,26 +57,34 @@ def one_sided_texture(log_img, box: int = 7) -> np.ndarray:
     a ramp (shading, or the blurred edge of a card refocused far from it) tells no depth, and with the plain
     deviation a wall 5-7 px from offaxis_cards' near card, refocused at 0.3 m, passed as textured. Depth from
     focus reads this as the texture a pixel's depth rests on (``depth.own_texture``)."""
-    g = np.asarray(array(log_img, "one_sided_texture: log_img", 2), np.float64)
+    g = np.asarray(log_img, np.float64)
+    if g.ndim != 2:
+        raise ConfigError(f"one_sided_texture: log_img has shape {g.shape}: expected an (H, W) image")
     box = check_window(box, "one_sided_texture")
 
     def mean(a):         # over the centred square; reflected at the image's border, the coordinates with it
         return cv2.boxFilter(a, -1, (box, box), borderType=cv2.BORDER_REFLECT)
 
+    # OpenCV's box of even size covers c - box // 2 .. c + (box - 1) // 2: the squares with the pixel at a corner
+    # are centred (box - 1) // 2 before it and box // 2 after it on each axis. The image and its coordinates are
+    # reflected by box // 2 first (as the box filter reflects them), so that squares centred beyond the border
+    # exist, and a ramp stays a plane across the reflection
+    h, w = g.shape
+    lo, hi = (box - 1) // 2, box // 2
+    g = np.pad(g, hi, mode="symmetric")
     m = mean(g)
     var = mean(g * g) - m * m
-    for x in np.indices(g.shape, np.float64):                      # y, then x: the plane's two slopes
+    for x in np.indices((h, w), np.float64):                       # y, then x: the plane's two slopes
+        x = np.pad(x - x.mean(), hi, mode="symmetric")             # centred: less cancellation
         mx = mean(x)
         var_x = mean(x * x) - mx * mx
         cov = mean(g * x) - m * mx
         var = var - np.where(var_x > 1e-9, cov * cov / np.maximum(var_x, 1e-9), 0.0)
-    spread = np.sqrt(np.maximum(var, 0.0)).astype(np.float32)
-    o = (box - 1) // 2                 # the centred square moved by o: the pixel at one of its corners
-    if o == 0:
-        return spread
-    padded = np.pad(spread, o, mode="edge")
-    h, w = g.shape
-    return np.min([padded[o + dy:o + dy + h, o + dx:o + dx + w] for dy in (-o, o) for dx in (-o, o)], axis=0)
+    spread = np.sqrt(np.maximum(var, 0.0))
+    spread = np.where(np.isfinite(spread), spread, 0.0)           # no texture where the image is not finite
+    least = np.min([spread[hi + dy:hi + dy + h, hi + dx:hi + dx + w] for dy in (-lo, hi) for dx in (-lo, hi)],
+                   axis=0)
+    return least.astype(np.float32)
 
 
 def parabola_offset(before, peak, after):

@@ -18,9 +18,10 @@ def test_demo_measures_both_cards_from_events_alone():
     near, far = (r.refocused[z] for z in sorted(r.refocused))
     assert near.shape == far.shape == (72, 96) and np.all(np.isfinite(near))
     # the confident pixels more than 10 % off every depth within the pixel, anywhere (the cards' own pixels alone
-    # hid them: a new user counted 1154 of 5403 on the background of the 160 x 120 demo, 983 after the resolution
-    # check read the indistinct depth, 84 since own texture is measured on the pixel's most uniform side): at
-    # this size 22 (1.3 %), all on the cards' occluding edges, reported
+    # hid them: a new user counted 1154 of 5403 on the background of the 160 x 120 demo by the pixel centres' depth,
+    # 983 after the resolution check read the indistinct depth; by each pixel's depth range 890, and 84 since own
+    # texture is measured on the pixel's most uniform side): at this size 22 (1.3 %), all on the cards' occluding
+    # edges, reported
     wrong = r.meta["confident_wrong"]
     sure = r.depth.confidence >= 0.6
     assert wrong["share"] < 0.05 and wrong["share"] == wrong["pixels"] / sure.sum()
