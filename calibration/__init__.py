@@ -15,4 +15,4 @@ from .led import fit_led, fit_point_track, track_led  # noqa: F401,E402
 from .kaleidoscope import KaleidoscopeCalibration, find_tiles, flat_field, known_tiles, register  # noqa: F401,E402
 from .optics import check_optics, kaleidoscope_record, optics_difference, optics_record, same_optics
 from .store import save_calibration  # noqa: F401,E402
-from .store import CalibrationFile, apply_to_lightfield, load_calibration
+from .store import CalibrationFile, apply_to_lightfield, calibrated_events, calibrated_optics, load_calibration

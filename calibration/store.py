@@ -118,13 +118,55 @@ def load_calibration(path: str) -> CalibrationFile:
     return CalibrationFile(out, path)
 
 
+def calibrated_optics(calibration: dict, optics: dict, width: int, height: int) -> dict:
+    """A galvo stream's optics metadata (``events.meta["optics"]`` or its ``optics_record``) with the galvo and
+    depth parts of ``calibration`` in it, so that whatever reads the optics reads the calibrated views: the
+    events-only solvers' equations, the light field's positions and geometry, the depths searched. A galvo
+    calibration's curve with its phase as the record's ``time_offset`` (the view at capture time t is where the
+    curve is at tau0 + t - t_first: ``GalvoCalibration.view_angles``); a depth calibration's pivots and angle
+    gains as ``calibrated_geometry`` (``DepthCalibration.geometry``, read by ``GalvoGeometry.from_optics``);
+    ``calibrated`` lists the parts; ``width`` x ``height``: the film (the gains are per focal length in
+    pixels). The caller checks the calibration against the data first (``check_optics``)."""
+    from mitsuba_eventfield.optics.galvo import GalvoGeometry
+    if optics.get("calibrated"):
+        raise EventFieldError(f"the optics are already calibrated ({', '.join(optics['calibrated'])}): apply a "
+                              "calibration once, to the data's own optics")
+    out, kinds = dict(optics), [k for k in ("galvo", "depth") if k in calibration]
+    if "galvo" in kinds:
+        g = calibration["galvo"]
+        out["scan"] = dict(g.curve, time_offset=float(g.tau0 - g.t_first))
+    if "depth" in kinds:
+        nominal = GalvoGeometry.from_optics(optics, width, height)
+        geometry = calibration["depth"].geometry(nominal)
+        out["calibrated_geometry"] = {k: float(getattr(geometry, k)) for k in ("pivot_x", "pivot_y", "gain_x", "gain_y")}
+    out["calibrated"] = kinds
+    return out
+
+
+def calibrated_events(events, calibration: dict, optics: dict):
+    """``events`` with its optics metadata calibrated (``calibrated_optics``), for reconstructions that read the
+    views' geometry while they solve (``focus.galvo_periods``, the ``galvo`` method); ``optics``: the
+    ``optics_record`` of ``events``, against which the calibration is checked first. Other designs are returned
+    as they are (their calibration acts on the light field: ``apply_to_lightfield``)."""
+    from mitsuba_eventfield.events.stream import EventStream
+    kinds = check_optics(calibration, optics)
+    if optics.get("design") != "galvo" or not set(kinds) & {"galvo", "depth"}:
+        return events
+    meta = dict(events.meta, optics=calibrated_optics(calibration, events.meta["optics"], events.width,
+                                                      events.height))
+    return EventStream(events.x, events.y, events.t, events.p, events.width, events.height, meta)
+
+
 def apply_to_lightfield(lf, calibration: dict, optics: dict):
     """A copy of ``lf`` placed and scaled by the calibration (galvo: view positions from the fitted phase;
-    depth: the disparity model from the inverse-depth fit; kaleidoscope: each view's misalignment as part of
-    its shifts, and the flat field dividing views whose levels come from a frame). ``optics``: the
-    ``optics_record`` of the data ``lf`` was made from; a calibration made for other optics is refused
-    (``optics.check_optics``)."""
+    depth: the disparity model from the inverse-depth fit, both as ``calibrated_optics`` puts them; kaleidoscope:
+    each view's misalignment as part of its shifts, and the flat field dividing views whose levels come from a
+    frame). ``optics``: the ``optics_record`` of the data ``lf`` was made from; a calibration made for other
+    optics is refused (``optics.check_optics``). A galvo light field solved from events alone is calibrated
+    better through its events (``calibrated_events``): the solver then uses the calibrated views too."""
     from mitsuba_eventfield.lightfield.model import LightField, galvo_paraxial_disparity
+    from mitsuba_eventfield.optics.galvo import GalvoGeometry
+    from mitsuba_eventfield.optics.scan import curve_from_dict
     if not isinstance(optics, dict) or "design" not in optics:
         raise EventFieldError("apply_to_lightfield needs the optics record of the light field's data "
                               "(calibration.optics_record(events.meta['optics'], width, height))")
@@ -134,12 +176,14 @@ def apply_to_lightfield(lf, calibration: dict, optics: dict):
     kinds = check_optics(calibration, optics)
     views, positions, disparity, geometry = lf.views, lf.positions.copy(), lf.disparity, lf.galvo
     offsets, applied = lf.view_offsets, set(kinds)
-    if "galvo" in kinds and lf.kind == "galvo":
-        ax, ay = calibration["galvo"].view_angles(lf.times)
-        positions = np.stack([2 * np.asarray(ax), 2 * np.asarray(ay)], axis=-1)
-    if "depth" in kinds and geometry is not None:
-        geometry = calibration["depth"].geometry(geometry)
-        disparity = galvo_paraxial_disparity(geometry)
+    if lf.kind == "galvo" and set(kinds) & {"galvo", "depth"}:
+        placed = calibrated_optics(calibration, optics, optics["width"], optics["height"])
+        if "galvo" in kinds:
+            ax, ay = curve_from_dict(placed["scan"], where="galvo calibration").angles(np.asarray(lf.times))
+            positions = np.stack([2 * np.asarray(ax), 2 * np.asarray(ay)], axis=-1)
+        if "depth" in kinds and geometry is not None:
+            geometry = GalvoGeometry.from_optics(placed, geometry.width, geometry.height)
+            disparity = galvo_paraxial_disparity(geometry)
     if "kaleidoscope" in kinds:
         views, offsets, flat = _kaleidoscope_applied(lf, calibration["kaleidoscope"])
         applied |= {"flat_field"} if flat else set()

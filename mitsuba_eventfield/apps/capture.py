@@ -29,11 +29,17 @@ class Capture:
     seconds: dict
 
 
-def lightfields(events, timed, views: int, start: str = "events", spp: int = 4, depth_range=None) -> tuple:
+def lightfields(events, timed, views: int, start: str = "events", spp: int = 4, depth_range=None,
+                calibration=None) -> tuple:
     """(one LightField per whole scan period of ``events``, what the solver found per period or []), each
-    light field's ``meta["inputs"]`` naming its inputs; ``start`` as for ``capture``."""
+    light field's ``meta["inputs"]`` naming its inputs; ``start`` as for ``capture``. ``calibration``: a galvo /
+    depth calibration of the events' optics, which the solver then solves with (``calibrated_events``)."""
     from ..focus.galvo_periods import reconstruct_periods
     from ..lightfield.model import galvo_lightfields
+    if calibration is not None:
+        from ..calibration import calibrated_events, optics_record
+        record = optics_record(events.meta.get("optics", {}), events.width, events.height)
+        events = calibrated_events(events, calibration, record)
     solved = []
     if start == "frame":
         log_start = render_frames(timed, [0.0], spp=spp)[0]
@@ -73,7 +79,7 @@ def _steps_per_period(timed, periods: int, per_period: int, px_per_step: float) 
 
 def capture(scene_path: str, defines: dict | None = None, periods: int | None = None, views: int = 40,
             start: str = "events", px_per_step: float = 1.0, spp: int = 4, progress: bool = False,
-            truth_views: bool = True, depth_range=None, truth_spp: int = 64) -> Capture:
+            truth_views: bool = True, depth_range=None, truth_spp: int = 64, calibration=None) -> Capture:
     """Events of ``periods`` whole scan periods (default: all of the motion file's duration) and, per period,
     the light field from the events; with ``truth_views`` also the ground-truth light field of the same views
     (for scoring only).
@@ -84,7 +90,7 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     t = 0 that every view integrates onto: a conventional camera beside the event camera, extra information
     the paper's rig does not have; every report says which). Steps: enough that the scan moves the image at
     most ``px_per_step`` pixels per step anywhere in the field. Truth views are rendered at ``truth_spp``
-    (converged: the reference is the scene, not one noisy render)."""
+    (converged: the reference is the scene, not one noisy render). ``calibration``: see ``lightfields``."""
     from ..lightfield.model import from_galvo, galvo_steps_per_period
     if start not in START_METHODS:
         raise ValueError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
@@ -108,7 +114,7 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     events = render_events(timed, periods * period, steps=steps, spp=spp, progress=progress,
                            reuse=reuse_for(start))
     t1 = time.perf_counter()
-    lfs, solved = lightfields(events, timed, views, start, spp, depth_range)
+    lfs, solved = lightfields(events, timed, views, start, spp, depth_range, calibration)
     t2 = time.perf_counter()
     truth = [from_galvo(render_frames(timed, lf.times, spp=truth_spp), lf.times, events.meta["optics"],
                         {"period_index": k}) for k, lf in enumerate(lfs)] if truth_views else []

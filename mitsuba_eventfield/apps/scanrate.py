@@ -6,9 +6,9 @@ depth map from focus (``depth.depth_from_focus``): at 100 Hz, 100 depth maps per
 (``optics.galvo``), so "sharpest refocus plane" is metric depth across the whole field (off-axis pixels move
 (1 + t^2) times more per mirror turn than on-axis ones; one shift per view read them too far).
 
-* ``calibration``: optionally, a galvo/depth calibration from the data (``calibration.apply_to_lightfield``;
-  ``calibrate_depth`` makes the depth one from LED captures through the same galvo) instead of the nominal
-  optics. One made for other optics (scan, film, lens, mirror pivots) is refused before anything is rendered.
+* ``calibration``: optionally, a galvo/depth calibration from the data (``calibration.calibrated_events``: the
+  per-period solver solves with it too; ``calibrate_depth`` makes the depth one from LED captures through the
+  same galvo) instead of the nominal optics. One made for other optics (scan, film, lens, mirror pivots) is refused before anything is rendered.
 
 Ground truth is Mitsuba's own depth (``truth.truth_depth``) at the middle of each period. Errors are relative
 depth errors on *textured* pixels (log-gradient of the rendered centre view, which the depth maps are aligned
@@ -147,16 +147,17 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
         raise ValueError(f"planes = {planes!r}: must be an integer >= 2")
     if not split_depth > 0:
         raise ValueError(f"split_depth = {split_depth}: must be > 0 (scene units)")
-    record = _check_calibration(calibration, scene_path, defines, captured) if calibration else None
+    if calibration:
+        _check_calibration(calibration, scene_path, defines, captured)
     cap = captured or capture(scene_path, defines, periods, views, start, progress=progress,
-                              depth_range=(near, far), truth_views=False)
+                              depth_range=(near, far), truth_views=False, calibration=calibration)
     t0 = time.perf_counter()
-    maps = []
-    for lf in cap.lightfields:
-        if calibration:
-            from ..calibration import apply_to_lightfield
-            lf = apply_to_lightfield(lf, calibration, record)
-        maps.append(depth_from_focus(lf, near, far, planes, measure))
+    lfs = cap.lightfields
+    if calibration and captured is not None:    # solved without it: again, the solver with the calibrated views
+        from .capture import lightfields
+        lfs = lightfields(cap.events, cap.timed, len(lfs[0].views), start, depth_range=(near, far),
+                          calibration=calibration)[0]
+    maps = [depth_from_focus(lf, near, far, planes, measure) for lf in lfs]
     t1 = time.perf_counter()
     times = np.array([float(lf.times.mean()) for lf in cap.lightfields])
     truths, texs, errors = [], [], []

@@ -100,7 +100,7 @@ def _lightfield(a, ev, nearest: float | None = None):
     """The light field the light-field commands share, calibrated when asked (a calibration made for other
     optics than this stream's is refused before any reconstruction). ``nearest``: the nearest depth the command
     needs (--near, the nearest --depth), searched by the per-period solver too."""
-    from ..calibration import apply_to_lightfield, check_optics, load_calibration, optics_record
+    from ..calibration import apply_to_lightfield, calibrated_events, check_optics, load_calibration, optics_record
     from ..lightfield.model import default_method, from_events
     from ..lightfield.reconstruct import methods
     if a.method is not None and a.method not in (*methods(), PERIODS):
@@ -111,6 +111,8 @@ def _lightfield(a, ev, nearest: float | None = None):
     if calibration is not None:
         optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
         check_optics(calibration, optics)
+        # a galvo stream's calibration goes into its optics, so the solvers use the calibrated views too
+        ev = calibrated_events(ev, calibration, optics)
     period, views = _design_options(a, ev)
     design = (ev.meta.get("optics") or {}).get("design")
     if a.method is None:         # named, so that the outputs' metadata says which (it said "default")
@@ -126,7 +128,8 @@ def _lightfield(a, ev, nearest: float | None = None):
                              method=a.method, log_start=start_log(a.start_frame, ev))
     except (ValueError, KeyError, StopIteration) as e:
         raise EventFieldError(f"{a.file}: {e}") from None
-    return apply_to_lightfield(lf, calibration, optics) if calibration is not None else lf
+    calibrated = calibration is not None and not lf.meta.get("calibrated")     # not through the events
+    return apply_to_lightfield(lf, calibration, optics) if calibrated else lf
 
 
 PERIODS = "periods"      # --method: the galvo solver per period with per-pixel depth (focus.galvo_periods)

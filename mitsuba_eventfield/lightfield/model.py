@@ -211,8 +211,11 @@ def from_galvo(log_frames, times, optics: dict, meta: dict | None = None) -> Lig
     curve = curve_from_dict(_galvo_scan(optics, "from_galvo"), where="event metadata")
     ax, ay = curve.angles(times)
     geometry = galvo_geometry(optics, frames.shape[2], frames.shape[1])
+    meta = dict(meta or {})
+    if optics.get("calibrated"):          # optics a calibration placed (calibration.calibrated_optics)
+        meta.setdefault("calibrated", sorted(optics["calibrated"]))
     return LightField(frames, np.stack([2 * ax, 2 * ay], axis=-1), times, galvo_paraxial_disparity(geometry),
-                      "galvo", dict(meta or {}), geometry)
+                      "galvo", meta, geometry)
 
 
 def galvo_steps_per_period(optics: dict, width: int, height: int | None = None, px_per_step: float = 1.0) -> int:

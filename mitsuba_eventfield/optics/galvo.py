@@ -138,9 +138,14 @@ class GalvoGeometry:
 
     @classmethod
     def from_optics(cls, optics: dict, width: int, height: int) -> "GalvoGeometry":
-        """From a galvo sensor's optics metadata (``fov_x_deg``, ``mirror_distance``, ``mirror_separation``)."""
+        """From a galvo sensor's optics metadata (``fov_x_deg``, ``mirror_distance``, ``mirror_separation``), or
+        the ``calibrated`` pivots and gains a depth calibration put there (``calibration.calibrated_optics``)."""
+        f = focal_length_px(width, float(optics["fov_x_deg"]))
+        cal = optics.get("calibrated_geometry")
+        if isinstance(cal, dict):
+            return cls(int(width), int(height), f, *(float(cal[k]) for k in ("pivot_x", "pivot_y", "gain_x", "gain_y")))
         d1, s = float(optics["mirror_distance"]), float(optics["mirror_separation"])
-        return cls(int(width), int(height), focal_length_px(width, float(optics["fov_x_deg"])), d1, d1 + s)
+        return cls(int(width), int(height), f, d1, d1 + s)
 
     def with_pivots(self, pivot_x: float, pivot_y: float, gain_x: float = 1.0, gain_y: float = 1.0):
         return GalvoGeometry(self.width, self.height, self.focal_px, pivot_x, pivot_y, gain_x, gain_y)

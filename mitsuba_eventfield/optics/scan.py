@@ -15,7 +15,8 @@ Curves (``make_curve(name, **params)`` or ``curve_from_dict``), angles in degree
 
 ``with_bandwidth(natural_hz, damping)`` returns what a mirror with a second-order response actually does:
 each sinusoid is scaled by |H| and delayed by arg H (exact for circles and Lissajous; other curves are filtered
-harmonic by harmonic from a table).
+harmonic by harmonic from a table). A record's ``time_offset`` (s) moves the curve ahead in time (``shifted``):
+where a galvo calibration places the views of a recording (``calibration.calibrated_optics``).
 """
 from __future__ import annotations
 
@@ -211,6 +212,7 @@ class TabulatedCurve(ScanCurve):
     source: dict = field(default_factory=dict)       # how the table was made, for metadata
     _table: tuple = field(default=(), repr=False)     # ((x...), (y...)) in radians, len N (periodic)
     kind: str = "tabulated"
+    time_shift: float = 0.0                           # s: angles(t) reads the table at t + time_shift
 
     @property
     def period(self) -> float:
@@ -220,7 +222,7 @@ class TabulatedCurve(ScanCurve):
         xp = _xp(t)
         tx, ty = self._table
         n = len(tx)
-        u = _frac(xp, t / self.period_s) * n
+        u = _frac(xp, (t + self.time_shift) / self.period_s) * n
         if xp is np:
             i0 = np.floor(u).astype(np.int64) % n
             i1 = (i0 + 1) % n
@@ -349,7 +351,8 @@ def _envelope(name, where, max_angle_deg):
 def curve_to_dict(curve: ScanCurve, bandwidth_hz: float = 0.0, damping: float = 0.7) -> dict:
     """A description from which :func:`curve_from_dict` rebuilds the same curve (stored in event metadata)."""
     if isinstance(curve, TabulatedCurve):
-        d = dict(curve.source)        # a filtered table keeps its bandwidth_hz / damping unless overridden
+        d = dict(curve.source, **({"time_offset": curve.time_shift} if curve.time_shift else {}))
+        # a filtered table keeps its bandwidth_hz / damping unless overridden
         if bandwidth_hz:
             d.pop("bandwidth_hz", None), d.pop("damping", None)
     else:
@@ -376,10 +379,19 @@ def curve_from_dict(d: dict, where: str = "scan") -> ScanCurve:
         raise ConfigError(f"{where}: expected a scan record (a dict with 'curve', 'frequency', ...), "
                           f"got {type(d).__name__}")
     d = dict(d)
-    name = d.pop("curve", None)
-    return make_curve(name, max_angle_deg=d.pop("max_angle_deg", DEFAULT_MAX_ANGLE_DEG),
-                      bandwidth_hz=d.pop("bandwidth_hz", 0.0), damping=d.pop("damping", 0.7), where=where,
-                      galvo_model=d.pop("galvo_model", "ideal"), **d)
+    name, shift = d.pop("curve", None), finite(d.pop("time_offset", 0.0), f"{where}: time_offset")
+    curve = make_curve(name, max_angle_deg=d.pop("max_angle_deg", DEFAULT_MAX_ANGLE_DEG),
+                       bandwidth_hz=d.pop("bandwidth_hz", 0.0), damping=d.pop("damping", 0.7), where=where,
+                       galvo_model=d.pop("galvo_model", "ideal"), **d)
+    return shifted(curve, shift) if shift else curve
+
+
+def shifted(curve: ScanCurve, dt: float) -> ScanCurve:
+    """``curve`` ``dt`` seconds ahead: its angles at t are the original's at t + dt (a Lissajous's phases move)."""
+    if isinstance(curve, Lissajous):
+        return replace(curve, phase_x=(curve.phase_x + 360.0 * curve.freq_x * dt) % 360.0,
+                       phase_y=(curve.phase_y + 360.0 * curve.freq_y * dt) % 360.0)
+    return replace(curve, time_shift=curve.time_shift + float(dt))
 
 
 def event_angles(events, actual: bool = True):
