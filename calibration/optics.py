@@ -49,6 +49,9 @@ def optics_record(optics: dict, width: int, height: int, where: str = "the data"
     if design not in KINDS_FOR_DESIGN:
         raise EventFieldError(f"{where}: its metadata describes no light-field optics (optics.design is {design!r}; "
                               "expected galvo, kaleidoscope or microlens): a calibration cannot be checked against it")
+    if optics.get("calibrated"):      # calibrated_optics: fitting or checking against it would mix the two
+        raise EventFieldError(f"{where}: its optics are already calibrated ({', '.join(optics['calibrated'])}): a "
+                              "calibration is made for and checked against the recording's own optics")
     record = {"design": design, "width": int(width), "height": int(height)}
     keys = ("scan",) + GALVO_KEYS if design == "galvo" else ("n",) + SPATIAL_KEYS + SPATIAL_CARRIED
     record.update({k: _plain(optics[k]) for k in keys if optics.get(k) is not None})

@@ -134,7 +134,8 @@ def calibrated_optics(calibration: dict, optics: dict, width: int, height: int) 
     out, kinds = dict(optics), [k for k in ("galvo", "depth") if k in calibration]
     if "galvo" in kinds:
         g = calibration["galvo"]
-        out["scan"] = dict(g.curve, time_offset=float(g.tau0 - g.t_first))
+        # added to a record's own offset (a table keeps its shift there: optics.scan.curve_to_dict)
+        out["scan"] = dict(g.curve, time_offset=float(g.curve.get("time_offset", 0.0)) + float(g.tau0 - g.t_first))
     if "depth" in kinds:
         nominal = GalvoGeometry.from_optics(optics, width, height)
         geometry = calibration["depth"].geometry(nominal)

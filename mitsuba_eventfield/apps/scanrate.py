@@ -153,7 +153,7 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
                               depth_range=(near, far), truth_views=False, calibration=calibration)
     t0 = time.perf_counter()
     lfs = cap.lightfields
-    if calibration and captured is not None:    # solved without it: again, the solver with the calibrated views
+    if calibration and not lfs[0].meta.get("calibrated"):   # a capture solved without it: solve with it
         from .capture import lightfields
         lfs = lightfields(cap.events, cap.timed, len(lfs[0].views), start, depth_range=(near, far),
                           calibration=calibration)[0]

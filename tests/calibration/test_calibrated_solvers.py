@@ -31,8 +31,10 @@ def _lagging(events, lag):
     meta["optics"]["scan"] = stated
     recording = ef.EventStream(events.x, events.y, events.t, events.p, events.width, events.height, meta)
     record = optics_record(meta["optics"], W, H)
-    galvo = GalvoCalibration(curve=stated, t_first=0.0, tau0=-lag, phase_deg=0.0, scale_px_per_rad=(1.0, 1.0),
-                             optics=record)
+    # the first frame of the calibration's captures 3 ms into the clock, where the mirror was at curve time 3 ms
+    # less the lag (t_first != 0 tells tau0 - t_first from its sign errors)
+    galvo = GalvoCalibration(curve=stated, t_first=0.003, tau0=0.003 - lag, phase_deg=0.0,
+                             scale_px_per_rad=(1.0, 1.0), optics=record)
     return recording, record, galvo
 
 
@@ -60,7 +62,9 @@ def test_calibrated_optics_place_the_views_where_the_calibration_does(cards):
     assert np.allclose(curve_from_dict(placed["scan"]).angles(t), galvo.view_angles(t), atol=1e-12)
     geometry = GalvoGeometry.from_optics(placed, W, H)
     want = depth.geometry(GalvoGeometry.from_optics(recording.meta["optics"], W, H))
-    assert geometry == pytest.approx(want) and geometry.pivot_x == pytest.approx(0.15)
+    fields = ("focal_px", "pivot_x", "pivot_y", "gain_x", "gain_y")
+    assert [getattr(geometry, k) for k in fields] == pytest.approx([getattr(want, k) for k in fields], rel=1e-12)
+    assert (geometry.pivot_x, geometry.pivot_y, geometry.gain_x) == pytest.approx((0.15, 0.17, 0.98), rel=1e-6)
     assert placed["calibrated"] == ["galvo", "depth"]
     times = (np.arange(8) + 0.5) / 800
     frames = np.zeros((8, H, W))
@@ -70,6 +74,22 @@ def test_calibrated_optics_place_the_views_where_the_calibration_does(cards):
     assert made.meta["calibrated"] == ["depth", "galvo"] == before.meta["calibrated"]
     with pytest.raises(ef.EventFieldError, match="already calibrated"):
         calibrated_optics(cal, placed, W, H)
+    with pytest.raises(ef.EventFieldError, match="already calibrated"):       # nor checked, nor fitted to
+        optics_record(placed, W, H)
+
+
+def test_a_scan_table_keeps_its_own_time_offset_under_a_calibration():
+    """A tabulated scan (raster) keeps a time shift in its record; a calibration's phase adds to it (a review
+    found it replaced: 0.015 rad off) and the views equal ``GalvoCalibration.view_angles``."""
+    from mitsuba_eventfield.optics.scan import curve_to_dict, make_curve, shifted
+    table = curve_to_dict(shifted(make_curve("raster", frequency=100.0, lines=4), 0.0011))
+    assert table["time_offset"] == pytest.approx(0.0011)
+    optics = {"design": "galvo", "scan": table, "fov_x_deg": 40.0, "mirror_distance": 0.2, "mirror_separation": 0.01}
+    galvo = GalvoCalibration(curve=table, t_first=0.002, tau0=0.0057, phase_deg=0.0, scale_px_per_rad=(1.0, 1.0),
+                             optics=optics_record(optics, W, H))
+    placed = calibrated_optics({"galvo": galvo}, optics, W, H)
+    t = np.linspace(0.0, 0.03, 301)
+    assert np.allclose(curve_from_dict(placed["scan"]).angles(t), galvo.view_angles(t), atol=1e-12)
 
 
 def _card_depths(path, z):
