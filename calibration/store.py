@@ -139,7 +139,8 @@ def calibrated_optics(calibration: dict, optics: dict, width: int, height: int) 
     if "depth" in kinds:
         nominal = GalvoGeometry.from_optics(optics, width, height)
         geometry = calibration["depth"].geometry(nominal)
-        out["calibrated_geometry"] = {k: float(getattr(geometry, k)) for k in ("pivot_x", "pivot_y", "gain_x", "gain_y")}
+        out["calibrated_geometry"] = {k: float(getattr(geometry, k))
+                                      for k in ("pivot_x", "pivot_y", "gain_x", "gain_y")}
     out["calibrated"] = kinds
     return out
 

@@ -23,7 +23,8 @@ from .result import AppResult, time_split_line
 
 DEMO_SCENE = "offaxis_cards/offaxis_cards.xml"
 CARDS = {"near card": 0.5, "far card": 1.2}          # their depths in the scene file (m)
-NEAR, FAR, PLANES = 0.35, 3.0, 32
+NEAR, FAR, PLANES, MEASURE = 0.35, 3.0, 32, "tenengrad"
+MIN_CONFIDENCE = 0.6                                  # the score's and the depth PNG's confident pixels
 
 
 @dataclass
@@ -65,11 +66,11 @@ def run(width: int = 160, height: int = 120, views: int = 32, progress: bool = F
     scene, events, lf = cap.timed, cap.events, cap.lightfields[0]
     t1 = time.perf_counter()
     refocused = {z: refocus(lf, z) for z in CARDS.values()}
-    depth = depth_from_focus(lf, NEAR, FAR, PLANES, "tenengrad")
+    depth = depth_from_focus(lf, NEAR, FAR, PLANES, MEASURE)
     t2 = time.perf_counter()
     cards, wrong = _score(scene, depth)                        # scoring only: the method never saw the truth
     meta = {"confident_wrong": wrong, "scene": DEMO_SCENE, "width": width, "height": height, "views": views,
-            "planes": PLANES,
+            "planes": PLANES, "near": NEAR, "far": FAR, "measure": MEASURE, "min_confidence": MIN_CONFIDENCE,
             "inputs": "events only (the galvo solver per period, focus.galvo_periods; no frame camera)",
             "scored_against": "Mitsuba's depth output of the centre view (truth.truth_depth)",
             "time_split_s": {"render_events": cap.seconds["render_events"],
@@ -93,11 +94,11 @@ def _score(scene, depth) -> tuple:
     out = {}
     for name, true_z in CARDS.items():
         card = tex & (np.abs(z - true_z) < 0.1 * true_z)
-        good = card & (depth.confidence >= 0.6)
+        good = card & (depth.confidence >= MIN_CONFIDENCE)
         measured = float(np.median(depth.depth[good])) if good.any() else float("nan")
         out[name] = {"true_m": float(np.median(z[card])), "measured_m": measured,
                      "error": abs(measured / float(np.median(z[card])) - 1), "confident": float(good.sum() / card.sum())}
-    sure = (depth.confidence >= 0.6) & np.isfinite(z)
+    sure = (depth.confidence >= MIN_CONFIDENCE) & np.isfinite(z)
     nearest, farthest = truth_depth_range(scene, 0.0)
     wrong = sure & ((depth.depth < 0.9 * nearest) | (depth.depth > 1.1 * farthest))     # as the cards' error
     log_z = np.log(np.where(np.isfinite(z), z, 1e6)).astype(np.float32)
@@ -135,7 +136,8 @@ def write_outputs(result: DemoResult, out_dir: str) -> dict:
         paths["refocus"].append(write_png(root + ".png", _display(img)))
     dm = result.depth
     write_exr(os.path.join(out_dir, "depth.exr"), dm.channels(), {**result.meta, **REASON_META})
-    paths["depth"] = write_png(os.path.join(out_dir, "depth.png"), depth_png(dm.depth, dm.confidence, NEAR, FAR, 0.6))
+    paths["depth"] = write_png(os.path.join(out_dir, "depth.png"),
+                               depth_png(dm.depth, dm.confidence, NEAR, FAR, MIN_CONFIDENCE))
     paths["figure"] = figure(result, os.path.join(out_dir, "demo.png"))
     paths["metrics"] = write_json(os.path.join(out_dir, "metrics.json"), {"cards": result.cards, **result.meta})
     return paths
@@ -151,7 +153,7 @@ def figure(result: DemoResult, path: str) -> str:
     from ..images import depth_colourbar, depth_colours, save_figure
     (z_near, near), (z_far, far) = sorted(result.refocused.items())
     dm = result.depth
-    shown = np.where(dm.confidence >= 0.6, dm.depth, np.nan)
+    shown = np.where(dm.confidence >= MIN_CONFIDENCE, dm.depth, np.nan)
     cmap, norm = depth_colours(NEAR, FAR)
     panels = [("events of 1/8 scan period (ON red, OFF blue)",
                event_frame_rgb(result.events, *_preview_window(result.events)), {}),

@@ -16,7 +16,8 @@ def add_parsers(sub) -> None:
     dm.add_argument("-o", "--output", default="out/demo", help="output directory (events, PNGs, EXRs, metrics)")
     dm.add_argument("--width", type=num(16, 4096, integer=True), default=160, help="film width (default 160)")
     dm.add_argument("--height", type=num(12, 4096, integer=True), default=120, help="film height (default 120)")
-    dm.add_argument("--views", type=num(4, MAX_VIEWS, integer=True), default=32, help="views per scan period")
+    dm.add_argument("--views", type=num(4, MAX_VIEWS, integer=True), default=32,
+                    help="views per scan period (default 32)")
     hd = sub.add_parser("hdr", help="HDR light field of a static galvo scene: events vs 8-bit exposures (one view; "
                                      "--lightfield: all views, refocused at several depths)")
     hd.add_argument("scene", nargs="?", help="static galvo scene (default: scenes/hdr_leds; with --lightfield "

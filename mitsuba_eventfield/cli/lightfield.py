@@ -71,7 +71,8 @@ def add_parsers(sub) -> None:
     dp.add_argument("--near", type=num(0, lo_open=True), required=True, help="nearest depth searched (scene units)")
     dp.add_argument("--far", type=num(0, lo_open=True), required=True, help="farthest depth searched (scene units)")
     dp.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=32, help="planes searched (default 32)")
-    dp.add_argument("--measure", default="variance", help="sml, tenengrad or variance (default)")
+    dp.add_argument("--measure", default="variance", help="focus measure: sml, tenengrad or variance (default "
+                    "variance; the demo uses tenengrad)")
     dp.add_argument("--min-confidence", type=num(0, 1), default=0.2,
                     help="greyed out below this in the PNG (default 0.2; a confidence is near 0 or above ~0.75, "
                          "not a probability: focus/depth.py)")
@@ -156,6 +157,23 @@ def _periods_lightfield(a, ev, period: int, views: int, nearest: float | None = 
                               "equations as not fitting a static scene at the depths found (moving content, depths "
                               "beyond the range searched, noise)")
     return lf
+
+
+def _unanchored_warning(a, lf) -> None:
+    """Galvo views that are not the images the scan moves: refocus and depth from them are unreliable (a new
+    user's galvo_static: with highpass the text wall read 0.43 m; with direct and no start frame 1213 of 1430
+    confident pixels were more than 10 % off, the wall at 0.40 m)."""
+    if lf.kind != "galvo" or a.method not in ("highpass", "direct") or (a.method == "direct" and a.start_frame):
+        return
+    what = "keeps each view's changes" if a.method == "highpass" else \
+        "without --start-frame integrates the events onto a flat image"
+    print(f"eventfield: warning: --method {a.method} {what}, not the image the scan moves: galvo refocus and depth "
+          "from it are unreliable (the default, periods, solves the image from the events)")
+
+
+def _calibrated(lf) -> str:
+    """The console's word on a calibration: which parts the light field took."""
+    return f"; calibration applied: {', '.join(lf.meta['calibrated'])}" if lf.meta.get("calibrated") else ""
 
 
 def _solver_warning(lf) -> None:
@@ -298,10 +316,11 @@ def run_refocus(a) -> int:
         roots = [(lf.check_depth(z, "--depth"), root) for z, root in roots]
     except ConfigError as e:
         raise EventFieldError(f"{a.file}: {e}") from None
+    _unanchored_warning(a, lf)
     _solver_warning(lf)
     for z, root in roots:
         save_image(root + ".png", refocus(lf, z), _out_meta(a, ev, lf, depth=z, views=len(lf.views)))
-        print(f"wrote {root}.png/.exr (refocused at {z:g}; from {_inputs(a)})")
+        print(f"wrote {root}.png/.exr (refocused at {z:g}; from {_inputs(a)}{_calibrated(lf)})")
     return 0
 
 
@@ -316,9 +335,7 @@ def run_depth(a) -> int:
         raise EventFieldError(f"--measure {a.measure!r}: allowed: {', '.join(MEASURES)}")
     check_writable(os.path.splitext(a.output)[0] + ".exr", "depth map")     # the PNG's sibling, before the solve
     lf = _lightfield(a, ev, nearest=a.near)
-    if a.method == "highpass" and lf.kind == "galvo":    # a new user's galvo_static: the text wall read 0.43 m
-        print("eventfield: warning: --method highpass keeps each view's changes, not the image the scan moves: "
-              "galvo depth from it is unreliable (the default, periods, solves the image from the events)")
+    _unanchored_warning(a, lf)
     try:
         for value, name in ((a.near, "--near"), (a.far, "--far")):
             lf.check_depth(value, name)
@@ -327,17 +344,19 @@ def run_depth(a) -> int:
     _solver_warning(lf)
     dm = depth_from_focus(lf, a.near, a.far, a.planes, a.measure)
     root = os.path.splitext(a.output)[0]
-    meta = _out_meta(a, ev, lf, near=a.near, far=a.far, planes=a.planes, measure=a.measure, views=len(lf.views))
+    meta = _out_meta(a, ev, lf, near=a.near, far=a.far, planes=a.planes, measure=a.measure, views=len(lf.views),
+                     min_confidence=a.min_confidence)
     picture = depth_png(dm.depth, dm.confidence, a.near, a.far, a.min_confidence)   # before either file
     write_exr(root + ".exr", dm.channels(), {**meta, **REASON_META})
     write_png(root + ".png", picture)
-    confident = dm.confidence >= a.min_confidence
+    confident = (dm.confidence >= a.min_confidence) & (dm.confidence > 0)    # a failed check is never confident
     notes = dm.notes()           # why textured regions are not confident
-    found = (f"median depth of confident pixels {float(np.median(dm.depth[confident])):.4g} "
-             f"({confident.mean():.0%} of the pixels)") if confident.any() else \
+    share = f"{int(confident.sum())} pixels, {100 * confident.mean():.2g} % of the image"
+    found = (f"median depth of confident pixels {float(np.median(dm.depth[confident])):.4g} ({share})") \
+        if confident.any() else \
         f"no pixel is confident (>= {a.min_confidence:g}): no depth found (" + \
         ("see below" if notes else "too little texture, parallax or events") + ")"
-    print(f"wrote {root}.exr (depth, confidence, reason) and {root}.png; {found}; from {_inputs(a)}")
+    print(f"wrote {root}.exr (depth, confidence, reason) and {root}.png; {found}; from {_inputs(a)}{_calibrated(lf)}")
     for line in notes:
         print(line)
     return 0

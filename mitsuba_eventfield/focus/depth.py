@@ -3,8 +3,8 @@
 Measures: ``sml`` and ``tenengrad`` on the refocused image (``focus.focus_measure``), and ``variance``
 (angular consistency: the spread of the aligned views at a pixel is smallest at the right depth), which uses
 the views themselves rather than the refocused image. ``variance`` is the most robust on views reconstructed
-from events but resamples every view per plane (Lanczos): about 8x the cost of the others. (Summing shifted squared views in the Fourier domain instead was 4x faster but
-10x less accurate: squaring doubles the bandwidth and the shift aliases.)
+from events but resamples every view per plane (Lanczos): about 8x the cost of the others. (Summing shifted
+squared views in the Fourier domain was 4x faster, 10x less accurate: squaring doubles the bandwidth.)
 
 The peak is refined between planes by the parabola through it and its neighbours, at an end of the range
 with the nearest plane beyond it (``_refine_ends``), never past the range's ends.
@@ -93,7 +93,7 @@ PLATEAU = 0.9               # ... at the farthest depth whose focus is within 10
 NOTE_SHARE = 0.02           # DepthMap.notes: a reason is reported where it holds for this share of the image
 # DepthMap.reasons: why a pixel is not confident, one code a pixel (the depth EXR's "reason" channel)
 REASONS = {0: "passed every check (its confidence is its focus curve's peak over the median)",
-           1: "no parallax evidence: its views change less than the scan must make them (no texture or no events)",
+           1: "no parallax evidence: its views change less than the optics' parallax must (no texture or events)",
            2: "no texture of its own at its depth (beside an edge: the focus window's texture lent to it)",
            3: "sharpest nearer than the depths searched", 4: "sharpest farther than the depths searched",
            5: f"beyond the depth resolution: its focus curve does not tell its depth from one where "

@@ -23,7 +23,7 @@ def test_demo_measures_both_cards_from_events_alone():
     # texture is measured on the pixel's most uniform side): at this size 22 (1.3 %), all on the cards' occluding
     # edges, reported
     wrong = r.meta["confident_wrong"]
-    sure = r.depth.confidence >= 0.6
+    sure = r.depth.confidence >= demo.MIN_CONFIDENCE
     assert wrong["share"] < 0.05 and wrong["share"] == wrong["pixels"] / sure.sum()
     assert wrong["near_edge"] == wrong["pixels"] and wrong["max_px_from_edge"] <= 2
     assert (f"{wrong['pixels']} pixels" if wrong["pixels"] else "no confident pixel is more") in r.report()

@@ -102,7 +102,7 @@ def _card_depths(path, z):
     return out, meta
 
 
-def test_the_events_only_solver_reads_a_lagging_mirrors_calibration(cards):
+def test_the_events_only_solver_reads_a_lagging_mirrors_calibration(cards, capsys):
     """``eventfield depth`` of a recording whose mirror lags its command by a quarter period, with the galvo
     calibration that measured the lag: the per-period solver now solves with the calibrated views and the map
     equals the one from the true metadata (measured: 0.499 / 1.196 m both). When the calibration only placed
@@ -114,8 +114,10 @@ def test_the_events_only_solver_reads_a_lagging_mirrors_calibration(cards):
     save_calibration(str(tmp / "cal.json"), record, galvo=galvo)
     common = ["--near", "0.3", "--far", "3"]
     assert cli(["depth", str(tmp / "true.h5"), "-o", str(tmp / "true.png"), *common]) == 0
+    capsys.readouterr()
     assert cli(["depth", str(tmp / "lagging.h5"), "--calibration", str(tmp / "cal.json"), "-o",
                 str(tmp / "cal.png"), *common]) == 0
+    assert "; calibration applied: galvo" in capsys.readouterr().out          # the console says so too
     (true_near, true_far), _ = _card_depths(str(tmp / "true.exr"), z)
     (near, far), meta = _card_depths(str(tmp / "cal.exr"), z)
     assert abs(near / true_near - 1) < 0.002 and abs(far / true_far - 1) < 0.002
