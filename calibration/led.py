@@ -33,6 +33,10 @@ import numpy as np
 from .galvo import CalibrationError, GalvoCalibration, _check_fit, _curve_dict, fit_std
 
 CONTRAST_SPLIT = 0.5        # a pixel swinging by more than this share of the largest swing sees the background
+# an LED lights a disc about its scan circle: 4 % of the film at 64 x 48 with a 5.5 px scan radius; a textured
+# scene changes everywhere (galvo_static: most of the film), and its "track" put the pivot behind the camera,
+# which the depth fit then blamed on the depth labels (a new user)
+MAX_FOOTPRINT_SHARE = 0.25
 
 
 def _level_extremes(events, t_start: float, t_end: float, c_on: float, c_off: float):
@@ -78,6 +82,10 @@ def led_start_level(changes, low, high, c_on: float, c_off: float):
             start[part] = full - high[part]
         else:
             footprint[part] = False
+    if footprint.mean() > MAX_FOOTPRINT_SHARE:
+        raise CalibrationError(f"no single LED in the scan period: {footprint.mean():.0%} of the film changes "
+                               f"brightness (an LED and its scan circle light at most {MAX_FOOTPRINT_SHARE:.0%}): a "
+                               "capture of a scene, not of an LED?")
     return start, footprint
 
 

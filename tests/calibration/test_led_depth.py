@@ -73,6 +73,10 @@ def test_led_track_at_64x48_and_its_refusals():
         fit_led(events, period_index=1)
     with pytest.raises(CalibrationError, match="at least 5"):
         fit_led(events, samples=4)
+    # a scene, not an LED (a new user's galvo_static among LED captures: the fit blamed the depth labels)
+    scene = ef.load_scene(os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"), width=64, height=48)
+    with pytest.raises(CalibrationError, match=r"no single LED in the scan period: [0-9]+% of the film changes"):
+        fit_led(ef.render_events(scene, scene.scan_period))
 
 
 def rendered_scales(events, depth):
