@@ -8,7 +8,8 @@ depth map from focus (``depth.depth_from_focus``): at 100 Hz, 100 depth maps per
 
 * ``calibration``: optionally, a galvo/depth calibration from the data (``calibration.calibrated_events``: the
   per-period solver solves with it too; ``calibrate_depth`` makes the depth one from LED captures through the
-  same galvo) instead of the nominal optics. One made for other optics (scan, film, lens, mirror pivots) is refused before anything is rendered.
+  same galvo) instead of the nominal optics. One made for other optics (scan, film, lens, mirror pivots) is
+  refused before anything is rendered.
 
 Ground truth is Mitsuba's own depth (``truth.truth_depth``) at the middle of each period. Errors are relative
 depth errors on *textured* pixels (log-gradient of the rendered centre view, which the depth maps are aligned

@@ -139,11 +139,12 @@ class GalvoGeometry:
     @classmethod
     def from_optics(cls, optics: dict, width: int, height: int) -> "GalvoGeometry":
         """From a galvo sensor's optics metadata (``fov_x_deg``, ``mirror_distance``, ``mirror_separation``), or
-        the ``calibrated`` pivots and gains a depth calibration put there (``calibration.calibrated_optics``)."""
+        the pivots and gains a depth calibration put there (``calibrated_geometry``: calibration.calibrated_optics)."""
         f = focal_length_px(width, float(optics["fov_x_deg"]))
         cal = optics.get("calibrated_geometry")
         if isinstance(cal, dict):
-            return cls(int(width), int(height), f, *(float(cal[k]) for k in ("pivot_x", "pivot_y", "gain_x", "gain_y")))
+            return cls(int(width), int(height), f, *(float(cal[k]) for k in ("pivot_x", "pivot_y", "gain_x",
+                                                                              "gain_y")))
         d1, s = float(optics["mirror_distance"]), float(optics["mirror_separation"])
         return cls(int(width), int(height), f, d1, d1 + s)
 

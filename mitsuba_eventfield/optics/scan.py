@@ -222,7 +222,7 @@ class TabulatedCurve(ScanCurve):
         xp = _xp(t)
         tx, ty = self._table
         n = len(tx)
-        u = _frac(xp, (t + self.time_shift) / self.period_s) * n
+        u = _frac(xp, ((t + self.time_shift) if self.time_shift else t) / self.period_s) * n   # renders: no shift
         if xp is np:
             i0 = np.floor(u).astype(np.int64) % n
             i1 = (i0 + 1) % n
