@@ -111,8 +111,8 @@ class DepthMap:
     at_limit: np.ndarray | None = None   # (H, W) bool: peak at an end of the range searched (a bound, not a depth)
     own_texture: np.ndarray | None = None     # (H, W) texture on its most uniform side at its depth / image's p90
     resolution_px: np.ndarray | None = None   # (H, W) view motion telling its depth from DEPTH_TOLERANCE farther
-    # (H, W) the confidence before the own-texture and resolution checks: how well the depth aligns the pixel's
-    # views, for methods that map the views at each pixel's depth (focus.galvo_periods). There a depth the
+    # (H, W) the confidence before the own-texture, resolution and past-the-end checks: how well the depth aligns
+    # its views, for methods that map the views at each pixel's depth (focus.galvo_periods). There a depth the
     # optics cannot resolve costs less than RESOLVABLE_PX of alignment, and the image's median would cost more
     focus_confidence: np.ndarray | None = None
     unresolved: np.ndarray | None = None      # (H, W) bool: fails the resolution check alone (module docstring)
@@ -170,8 +170,7 @@ class DepthMap:
     def confident_share(self, threshold: float = 0.5, mask=None) -> float:
         """Share of the pixels (of ``mask``) whose confidence reaches ``threshold``: 0 when the light field
         cannot tell depth anywhere (no parallax in its views, everything beyond the range searched)."""
-        sel = self.confidence >= threshold
-        return float(sel[mask].mean() if mask is not None else sel.mean())
+        return float((self.confidence >= threshold)[mask if mask is not None else ...].mean())
 
 
 def _volume(lf: LightField, planes, measure, window, textures: list | None = None):
@@ -223,8 +222,8 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
     step = inv[1] - inv[0]                                     # uniform in inverse depth
     inv_depth = inv[k] + off * step
     outer_inv, outer_vol = _outer_volume(lf, inv, measure, window)
-    inv_depth = _refine_ends(inv, vol, k, *_with_infinity(lf, inv, k, outer_inv, outer_vol, measure, window),
-                             inv_depth)
+    inv_depth, past = _refine_ends(inv, vol, k, *_with_infinity(lf, inv, k, outer_inv, outer_vol, measure, window),
+                                   inv_depth)
     depth = 1.0 / np.maximum(inv_depth, 1e-12)
     # confidence: how far the peak stands above the curve's median, against a floor set by the image's
     # well-textured pixels, so a flat (textureless) curve gets ~0 whatever its noise does
@@ -233,15 +232,15 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
     conf = contrast / (contrast + floor)
     # the checks of the module docstring
     evidence = parallax_evidence(lf, zs, window)
-    at_limit = _beyond(vol, outer_vol)
-    own = own_texture(textures, k)
-    aligns = (evidence >= MIN_EVIDENCE) & ~at_limit
+    beyond = _beyond(vol, outer_vol)   # past: beyond the range too, yet the end plane aligns its views best of
+    at_limit, own = beyond | past, own_texture(textures, k)     # the range (focus_confidence: galvo_periods)
+    aligns = (evidence >= MIN_EVIDENCE) & ~beyond
     resolution = depth_resolution_px(lf, depth, zs[0], zs[-1])
     textured = own >= OWN_TEXTURE_SHARE
     indistinct = np.maximum(indistinct_depth(vol, k, zs), depth)
     resolved = resolution * depth / indistinct >= RESOLVABLE_PX       # resolution_px falls as 1 / depth
     focus_conf = np.clip(np.nan_to_num(np.where(aligns, conf, 0.0)), 0, 1)
-    return DepthMap(depth, np.where(textured & resolved, focus_conf, 0.0), zs, measure, evidence, at_limit, own,
+    return DepthMap(depth, np.where(textured & resolved & ~past, focus_conf, 0.0), zs, measure, evidence, at_limit, own,
                     resolution, focus_conf, aligns & textured & ~resolved, indistinct)
 
 
@@ -311,16 +310,16 @@ def _with_infinity(lf: LightField, inv, k, outer_inv, outer_vol, measure: str, w
 
 
 def _refine_ends(inv, vol, k, outer_inv, outer_vol, inv_depth):
-    """``inv_depth`` with the pixels whose focus curve peaks at an end plane refined like the others: the
-    parabola through the end plane, its neighbour inside the range and the nearest plane beyond it (the
-    outer planes ``beyond_range`` measures anyway; not a plane step away where the step would pass
-    infinity), moved inwards only, at most half the way to the inside neighbour, so the depth stays in the
-    range searched (beyond it is ``at_limit``'s). Without it a card between two of few planes (2-4) read as
-    the end plane, confidently: the README's two-card kaleidoscope scene searched with 3 planes from 0.5 to
-    2 m put the 0.6 m card at 0.50 and the 1.5 m card at 2.00."""
+    """(``inv_depth`` with the pixels whose focus curve peaks at an end plane refined like the others, past):
+    the parabola through the end plane, its inside neighbour and the nearest outer plane (``beyond_range``'s),
+    moved inwards only, at most half the way to the inside neighbour. Without it a card between two of few
+    planes read as the end plane, confidently (kaleidoscope cards, 3 planes over 0.5-2 m: 0.6 m at 0.50, 1.5
+    m at 2.00). ``past``: the vertex lies beyond the end plane (not towards the plane at infinity that
+    ``_with_infinity`` adds), so the peak is beyond the range (``at_limit``): on galvo_static at 96x72 10 of
+    12 wall pixels (2.5 m) read at the near end, 0.40 m, confidently."""
+    past, out = np.zeros(k.shape, bool), inv_depth.copy()
     if outer_vol is None:
-        return inv_depth
-    out = inv_depth.copy()
+        return inv_depth, past
     for end, inside in ((0, 1), (len(inv) - 1, len(inv) - 2)):
         beyond = np.flatnonzero(outer_inv > inv[end]) if end == 0 else np.flatnonzero(outer_inv < inv[end])
         at = k == end
@@ -330,7 +329,8 @@ def _refine_ends(inv, vol, k, outer_inv, outer_vol, inv_depth):
         v = parabola_vertex((outer_inv[j], inv[end], inv[inside]), (outer_vol[j][at], vol[end][at], vol[inside][at]))
         half = inv[end] + 0.5 * (inv[inside] - inv[end])
         out[at] = np.clip(v, min(inv[end], half), max(inv[end], half))
-    return out
+        past[at] = ((v - inv[end]) * (inv[end] - inv[inside]) > 0) & (outer_inv[j] > 0)
+    return out, past
 
 
 def view_spread_px(lf: LightField, depths) -> np.ndarray:

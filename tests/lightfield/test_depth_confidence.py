@@ -226,3 +226,21 @@ def test_a_wall_estimated_too_near_to_fail_the_resolution_check_is_not_confident
     assert (sure & wall).sum() < 400                    # measured 321 (the card: 479, its text and its edge)
     assert np.median(np.abs(np.log(dm.depth[sure & card] / z[sure & card]))) < 0.03   # the card: 0.504 m
     assert np.median(dm.indistinct_depth[wall & (dm.reasons() == 5)]) > 2.0  # where the wall's curves stay flat
+
+
+def test_a_peak_past_the_near_end_is_beyond_the_range(tmp_path):
+    """galvo_static at 96 x 72 with its start frame, searched from 0.4 m (the README's flow, scaled down): 10 wall
+    pixels (2.5 m) between the text lines peaked at the near end plane, their refined vertex beyond it, and read
+    0.40 m confidently (a new user). A vertex past the end plane now flags the pixel as sharpest nearer than the
+    range (code 3), like a sharper plane beyond it does."""
+    from mitsuba_eventfield.cli.main import main as cli
+    from mitsuba_eventfield.images import read_exr
+    size = ["-D", "width=96", "-D", "height=72"]
+    assert cli(["render", GALVO_STATIC, "-o", str(tmp_path / "gs.h5"), "--duration", "0.004", *size]) == 0
+    assert cli(["frame", GALVO_STATIC, "-o", str(tmp_path / "start.exr"), *size]) == 0
+    assert cli(["depth", str(tmp_path / "gs.h5"), "-o", str(tmp_path / "d.png"), "--near", "0.4", "--far", "4",
+                "--start-frame", str(tmp_path / "start.exr")]) == 0
+    channels, _ = read_exr(str(tmp_path / "d.exr"))
+    at_end = channels["depth"] < 0.405
+    assert at_end.sum() > 10 and not (at_end & (channels["confidence"] >= 0.2)).any()    # measured 0 (was 10)
+    assert (channels["reason"][at_end] == 3).sum() >= 10
