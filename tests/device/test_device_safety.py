@@ -11,7 +11,7 @@ import sys
 import threading
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import mitsuba_eventfield as ef
@@ -106,6 +106,10 @@ _preset = st.fixed_dictionaries({"vpp": st.sampled_from([0.1, 4.0, 18.0]),
        phase=st.one_of(st.floats(min_value=-1000, max_value=1000), st.just(math.nan)),
        preset=_preset,
        fault=st.one_of(st.none(), st.tuples(st.sampled_from(["refuse", "raise"]), st.integers(0, 30))))
+# found by the property test (2026-11-27): the link dropped one command of close()'s confirmation, which was not
+# tried again, so close() could not confirm the outputs off
+@example(dialect="siglent", kind="circle", f=1.0, ratio=1.0, amp=1.0, offset=0.0, phase=0.0,
+         preset={"vpp": 0.1, "frequency": 10.0, "offset": 0.0}, fault=("raise", 16))
 def test_no_unsafe_byte_whatever_the_request_preset_or_fault(dialect, kind, f, ratio, amp, offset, phase, preset,
                                                              fault):
     # built directly, past the scan module's own checks: the device must not rely on them
