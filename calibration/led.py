@@ -33,7 +33,8 @@ import numpy as np
 from .galvo import CalibrationError, GalvoCalibration, _check_fit, _curve_dict, fit_std
 
 CONTRAST_SPLIT = 0.5        # a pixel swinging by more than this share of the largest swing sees the background
-# an LED lights a disc about its scan circle: 4 % of the film at 64 x 48 with a 5.5 px scan radius; a textured
+# an LED lights a ring along its scan circle: 0.3-2.8 % of the film in the tests and README (7.8 % at fov 13,
+# amplitude 2; ~20 % for a 2-3 cm sphere at 0.15-0.3 m, wider than the circle: a review); a textured
 # scene changes everywhere (galvo_static: most of the film), and its "track" put the pivot behind the camera,
 # which the depth fit then blamed on the depth labels (a new user)
 MAX_FOOTPRINT_SHARE = 0.25

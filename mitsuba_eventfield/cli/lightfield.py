@@ -168,7 +168,7 @@ def _unanchored_warning(a, lf) -> None:
     what = "keeps each view's changes" if a.method == "highpass" else \
         "without --start-frame integrates the events onto a flat image"
     print(f"eventfield: warning: --method {a.method} {what}, not the image the scan moves: galvo refocus and depth "
-          "from it are unreliable (the default, periods, solves the image from the events)")
+          "from it are unreliable (the default, periods, solves the image from the events)", file=sys.stderr)
 
 
 def _calibrated(lf) -> str:
@@ -351,7 +351,7 @@ def run_depth(a) -> int:
     write_png(root + ".png", picture)
     confident = (dm.confidence >= a.min_confidence) & (dm.confidence > 0)    # a failed check is never confident
     notes = dm.notes()           # why textured regions are not confident
-    share = f"{int(confident.sum())} pixels, {100 * confident.mean():.2g} % of the image"
+    share = f"{int(confident.sum())} pixels, {100 * confident.mean():.3g} % of the image"
     found = (f"median depth of confident pixels {float(np.median(dm.depth[confident])):.4g} ({share})") \
         if confident.any() else \
         f"no pixel is confident (>= {a.min_confidence:g}): no depth found (" + \

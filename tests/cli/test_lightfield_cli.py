@@ -70,13 +70,13 @@ def test_reconstruct_refocus_depth_outputs(galvo_capture):
     # wall at 0.43 m, confidently; the command says so
     r = run("depth", str(d / "g.h5"), "-o", str(d / "depth_hp.png"), "--near", "0.3", "--far", "4", "--planes", "16",
             "--views", "16", "--method", "highpass")
-    assert r.returncode == 0 and "--method highpass keeps each view's changes" in r.stdout, (r.stdout, r.stderr)
+    assert r.returncode == 0 and "--method highpass keeps each view's changes" in r.stderr, (r.stdout, r.stderr)
     # and direct with no start frame integrates onto a flat image (a new user: 1213 of 1430 confident pixels more
     # than 10 % off, without a word); the count the command prints leaves out pixels that failed a check, and
     # the threshold it counted with is in the EXR
     r = run("depth", str(d / "g.h5"), "-o", str(d / "depth_dr.png"), "--near", "0.3", "--far", "4", "--planes", "16",
             "--views", "16", "--method", "direct", "--min-confidence", "0")
-    assert r.returncode == 0 and "--method direct without --start-frame integrates" in r.stdout, (r.stdout, r.stderr)
+    assert r.returncode == 0 and "--method direct without --start-frame integrates" in r.stderr, (r.stdout, r.stderr)
     channels, meta = read_exr(str(d / "depth_dr.exr"))
     counted = re.search(r"median depth of confident pixels [0-9.]+ \(([0-9]+) pixels", r.stdout)
     assert counted and int(counted.group(1)) == int((channels["confidence"] > 0).sum()) < channels["depth"].size

@@ -231,8 +231,10 @@ def test_a_wall_estimated_too_near_to_fail_the_resolution_check_is_not_confident
 def test_a_peak_past_the_near_end_is_beyond_the_range(tmp_path):
     """galvo_static at 96 x 72 with its start frame, searched from 0.4 m (the README's flow, scaled down): 10 wall
     pixels (2.5 m) between the text lines peaked at the near end plane, their refined vertex beyond it, and read
-    0.40 m confidently (a new user). A vertex past the end plane now flags the pixel as sharpest nearer than the
-    range (code 3), like a sharper plane beyond it does."""
+    0.40 m confidently (a new user). A vertex more than ``PAST_END`` of the way to the outer plane past the end
+    plane now flags the pixel as sharpest nearer than the range (code 3), as a sharper plane beyond it does; the
+    ghosts closer to the end plane than that stay (a card exactly at an end plane lies there: its test is in
+    tests/lightfield/test_lightfield.py)."""
     from mitsuba_eventfield.cli.main import main as cli
     from mitsuba_eventfield.images import read_exr
     size = ["-D", "width=96", "-D", "height=72"]
@@ -242,5 +244,5 @@ def test_a_peak_past_the_near_end_is_beyond_the_range(tmp_path):
                 "--start-frame", str(tmp_path / "start.exr")]) == 0
     channels, _ = read_exr(str(tmp_path / "d.exr"))
     at_end = channels["depth"] < 0.405
-    assert at_end.sum() > 10 and not (at_end & (channels["confidence"] >= 0.2)).any()    # measured 0 (was 10)
-    assert (channels["reason"][at_end] == 3).sum() >= 10
+    assert at_end.sum() > 10 and (at_end & (channels["confidence"] >= 0.2)).sum() <= 6      # measured 5 (was 10)
+    assert (channels["reason"][at_end] == 3).sum() >= 5
