@@ -247,8 +247,8 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
 # inverse depths beyond each end of the range, as fractions of the end's: up to half the nearest depth searched
 # (a card at 0.5 m searched from 1 m focused on a ghost inside the range) and twice the farthest
 NEAR_BEYOND = (4 / 3, 5 / 3, 2.0)
-PAST_END = 0.1      # _refine_ends: a vertex this share of the way to the outer plane past an end (design.md)
 FAR_BEYOND = (0.5,)
+PAST_END = 0.1      # _refine_ends: a vertex this share of the way to the outer plane past an end (design.md)
 
 
 def _outer_planes(lf: LightField, inv: np.ndarray) -> list:
@@ -315,7 +315,7 @@ def _refine_ends(inv, vol, k, outer_inv, outer_vol, inv_depth):
     the parabola through the end plane, its inside neighbour and the nearest outer plane (``beyond_range``'s),
     moved inwards only, at most half the way to the inside neighbour. Without it a card between two of few
     planes read as the end plane, confidently (kaleidoscope cards, 3 planes over 0.5-2 m: 0.6 m at 0.50, 1.5
-    m at 2.00). ``past``: the vertex lies ``PAST_END`` of the way to the outer plane (not the plane at infinity
+    m at 2.00). ``past``: the vertex lies over ``PAST_END`` of the way to the outer plane (not the plane at infinity
     ``_with_infinity`` adds) beyond the end plane: the peak is beyond the range (``at_limit``)."""
     past, out = np.zeros(k.shape, bool), inv_depth.copy()
     if outer_vol is None:
