@@ -67,9 +67,9 @@ def default_depth_range(optics: dict, nearest: float | None = None) -> tuple:
     give ``depth_range`` for nearer scenes) to 1000 (practically infinity; the search is uniform in inverse
     depth, where a galvo's view shift is affine). ``nearest``: a nearer depth a caller needs (the CLI's
     ``--near``), searched too, down to the pivot itself (before it the mirrors show nothing)."""
-    cal = optics.get("calibrated_geometry")        # a depth calibration's pivots (calibration.calibrated_optics)
-    pivot = max(float(cal["pivot_x"]), float(cal["pivot_y"])) if isinstance(cal, dict) else \
-        float(optics["mirror_distance"]) + float(optics["mirror_separation"])
+    from ..optics.galvo import GalvoGeometry
+    geometry = GalvoGeometry.from_optics(optics, 1, 1)     # the pivots (calibrated ones too); no film needed
+    pivot = max(geometry.pivot_x, geometry.pivot_y)
     near = 2.0 * pivot
     if nearest is not None and math.isfinite(nearest):
         near = min(near, max(float(nearest), pivot))
