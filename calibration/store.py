@@ -125,7 +125,7 @@ def calibrated_optics(calibration: dict, optics: dict, width: int, height: int) 
     calibration's curve with its phase as the record's ``time_offset`` (the view at capture time t is where the
     curve is at tau0 + t - t_first: ``GalvoCalibration.view_angles``); a depth calibration's pivots and angle
     gains as ``calibrated_geometry`` (``DepthCalibration.geometry``, read by ``GalvoGeometry.from_optics``);
-    ``calibrated`` lists the parts; ``width`` x ``height``: the film (the gains are per focal length in
+    ``calibrated`` lists the parts, ``commanded_scan`` keeps the record's own scan; ``width`` x ``height``: the film (the gains are per focal length in
     pixels). The caller checks the calibration against the data first (``check_optics``)."""
     from mitsuba_eventfield.optics.galvo import GalvoGeometry
     if optics.get("calibrated"):
@@ -136,6 +136,8 @@ def calibrated_optics(calibration: dict, optics: dict, width: int, height: int) 
         g = calibration["galvo"]
         # added to a record's own offset (a table keeps its shift there: optics.scan.curve_to_dict)
         out["scan"] = dict(g.curve, time_offset=float(g.curve.get("time_offset", 0.0)) + float(g.tau0 - g.t_first))
+        # what the controller was told: ``event_angles(actual=False)`` (the fitted curve is what the mirror did)
+        out["commanded_scan"] = dict(optics["scan"])
     if "depth" in kinds:
         nominal = GalvoGeometry.from_optics(optics, width, height)
         geometry = calibration["depth"].geometry(nominal)
@@ -183,9 +185,10 @@ def apply_to_lightfield(lf, calibration: dict, optics: dict):
         if "galvo" in kinds:
             ax, ay = curve_from_dict(placed["scan"], where="galvo calibration").angles(np.asarray(lf.times))
             positions = np.stack([2 * np.asarray(ax), 2 * np.asarray(ay)], axis=-1)
-        if "depth" in kinds and geometry is not None:
-            geometry = GalvoGeometry.from_optics(placed, geometry.width, geometry.height)
-            disparity = galvo_paraxial_disparity(geometry)
+        if "depth" in kinds:      # a light field without its geometry (shift-invariant) takes the paraxial model
+            placed_geometry = GalvoGeometry.from_optics(placed, lf.shape[1], lf.shape[0])
+            disparity = galvo_paraxial_disparity(placed_geometry)
+            geometry = placed_geometry if geometry is not None else None
     if "kaleidoscope" in kinds:
         views, offsets, flat = _kaleidoscope_applied(lf, calibration["kaleidoscope"])
         applied |= {"flat_field"} if flat else set()

@@ -397,13 +397,13 @@ def shifted(curve: ScanCurve, dt: float) -> ScanCurve:
 def event_angles(events, actual: bool = True):
     """Mechanical mirror angles (x, y) in radians at each event's timestamp, from the stream's metadata alone.
 
-    ``actual``: include the recorded mirror bandwidth (what the mirror did), else the commanded curve.
-    """
+    ``actual``: include the recorded mirror bandwidth (what the mirror did), else the commanded curve (of
+    calibrated optics, the scan the record held before the calibration's fit: ``commanded_scan``)."""
     optics = events.meta.get("optics", {})
     if optics.get("design") != "galvo" or "scan" not in optics:
         raise ConfigError("event_angles: the event stream's metadata describes no galvo scan "
                           "(optics.design != 'galvo')")
-    d = dict(optics["scan"])
+    d = dict(optics["scan"] if actual else optics.get("commanded_scan", optics["scan"]))
     if not actual:
         d.pop("bandwidth_hz", None), d.pop("damping", None)
     curve = curve_from_dict(d, where="event metadata")

@@ -14,6 +14,7 @@ from mitsuba_eventfield.calibration import (GalvoCalibration, apply_to_lightfiel
 from mitsuba_eventfield.cli.main import main as cli
 from mitsuba_eventfield.evaluation import truth
 from mitsuba_eventfield.images import read_exr
+from mitsuba_eventfield.lightfield.model import LightField, galvo_paraxial_disparity
 from mitsuba_eventfield.optics.galvo import GalvoGeometry, focal_length_px
 from mitsuba_eventfield.optics.scan import curve_from_dict
 
@@ -66,12 +67,27 @@ def test_calibrated_optics_place_the_views_where_the_calibration_does(cards):
     assert [getattr(geometry, k) for k in fields] == pytest.approx([getattr(want, k) for k in fields], rel=1e-12)
     assert (geometry.pivot_x, geometry.pivot_y, geometry.gain_x) == pytest.approx((0.15, 0.17, 0.98), rel=1e-6)
     assert placed["calibrated"] == ["galvo", "depth"]
+    # the events' angles: the calibration's views as what the mirror did, the record's own scan as commanded
+    stream = ef.EventStream(*(np.zeros(3, d) for d in (np.uint16, np.uint16)), np.array([0, 2500, 7000]),
+                            np.ones(3, np.int8), W, H, {"optics": placed})
+    assert np.allclose(np.stack(stream.scan_angles()), np.stack(galvo.view_angles(stream.t * 1e-6)), atol=1e-12)
+    command = {k: v for k, v in recording.meta["optics"]["scan"].items() if k not in ("bandwidth_hz", "damping")}
+    commanded = curve_from_dict(command).angles(stream.t * 1e-6)
+    assert np.allclose(np.stack(stream.scan_angles(actual=False)), np.stack(commanded), atol=1e-12)
     times = (np.arange(8) + 0.5) / 800
     frames = np.zeros((8, H, W))
     before = apply_to_lightfield(ef.from_galvo(frames, times, recording.meta["optics"]), cal, record)
     made = ef.from_galvo(frames, times, placed)
     assert np.allclose(made.positions, before.positions, atol=1e-12) and made.galvo == before.galvo
     assert made.meta["calibrated"] == ["depth", "galvo"] == before.meta["calibrated"]
+    # without its geometry (a shift-invariant galvo light field) the depth calibration is the paraxial model of
+    # the calibrated pivots and gains, not reported applied while the nominal model stays
+    bare = ef.from_galvo(frames, times, recording.meta["optics"])
+    bare = LightField(bare.views, bare.positions, bare.times, bare.disparity, "galvo", bare.meta)
+    flat = apply_to_lightfield(bare, cal, record)
+    assert flat.galvo is None and flat.meta["calibrated"] == ["depth", "galvo"]
+    assert flat.alpha(0.5) == pytest.approx(galvo_paraxial_disparity(geometry).alpha(0.5), rel=1e-12)
+    assert flat.alpha(0.5) != pytest.approx(bare.alpha(0.5), rel=1e-3)
     with pytest.raises(ef.EventFieldError, match="already calibrated"):
         calibrated_optics(cal, placed, W, H)
     with pytest.raises(ef.EventFieldError, match="already calibrated"):       # nor checked, nor fitted to
