@@ -42,6 +42,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..lightfield.model import LightField
 from ..validate import MAX_PLANES, finite, number
+from ..workers import ordered_map
 
 MOTION_LIMIT_PX = 2.0       # module docstring: content moving more than this over the views is flagged
 MOTION_MIN_VIEWS = 12       # fewer views: motion is not measured (``view_motion``)
@@ -125,8 +126,8 @@ def aligned_views(lf: LightField, depth, motion=None):
     maps = lf.alignments(depth)
     if motion is not None:
         maps = _with_motion(maps, motion_shifts(lf, motion))
-    for view, m in zip(lf.views, maps):
-        yield _warp(view.astype(np.float32), m), covered(lf.shape, m).astype(np.float32)
+    yield from ordered_map(lambda vm: (_warp(vm[0].astype(np.float32), vm[1]), covered(lf.shape, vm[1]).astype(
+        np.float32)), zip(lf.views, maps))
 
 
 class _Spectra:
@@ -339,12 +340,17 @@ def covered_mean(lf: LightField, maps, interpolation=cv2.INTER_LANCZOS4, bounds=
     their image (``covered``), how many such views, the mean over all views with reflected borders). Values
     are sampled with reflected borders all the same: Lanczos next to a view's edge would mix in the zeros of
     a constant border. ``bounds``: a [low, high] sum of the views' Lanczos bounds (``_warp``)."""
-    total = cover = every = None
-    for view, m in zip(lf.views, maps):
+    def one(view_map):            # a view's part, on a worker: nothing shared (sums are made below, in order)
+        view, m = view_map
+        own = [0.0, 0.0] if bounds is not None else None
         w = _warp(view.astype(np.float32), m, border=cv2.BORDER_REFLECT_101, interpolation=interpolation,
-                  bounds=bounds)
-        w = w.astype(np.float64)
-        c = covered(lf.shape, m).astype(np.float64)
+                  bounds=own)
+        return w.astype(np.float64), covered(lf.shape, m).astype(np.float64), own
+
+    total = cover = every = None
+    for w, c, own in ordered_map(one, zip(lf.views, maps)):
+        if own is not None:
+            bounds[0], bounds[1] = bounds[0] + own[0], bounds[1] + own[1]
         c = c[..., None] if w.ndim == 3 else c
         total, cover, every = (w * c, c, w) if total is None else (total + w * c, cover + c, every + w)
     return total / np.maximum(cover, 1.0), cover, every / len(lf.views)
