@@ -15,10 +15,17 @@ def _nearest_existing(path: str) -> str:
     return parent
 
 
+# files in an output folder in use (``output_dir_run``) that eventfield did not write: never replaced
+_KEPT: set = set()
+
+
 def check_writable(path: str, what: str = "output") -> str:
     """Fail early (before any rendering) if the file ``path`` cannot be created; return its absolute path."""
     path = os.path.abspath(path)
     parent = os.path.dirname(path)
+    if path in _KEPT:
+        raise EventFieldError(f"{what} path {path}: a file eventfield did not write (the folder's {MANIFEST} does "
+                              "not list it) is kept, not replaced: move it, or choose another output folder")
     if os.path.isdir(path):
         raise EventFieldError(f"{what} path {path}: is a directory")
     if not os.path.isdir(parent):
@@ -155,7 +162,8 @@ def output_dir_run(path: str, command: str):
     run's extra files beside the new ones (e.g. 40 frames then 24: 16 stale frames mixed in). Now: a warning when
     the folder is reused; after a successful run, the files an earlier run listed in the folder's manifest and
     this run did not rewrite are removed, and the manifest lists this run's files. Files eventfield did not write
-    are never touched (only mentioned)."""
+    are never touched (only mentioned): a run that would write one of their names stops there with a one-line
+    error (``check_writable``), which before replaced the user's file under a warning that it stayed."""
     import json
     import sys
     import time
@@ -166,6 +174,7 @@ def output_dir_run(path: str, command: str):
         with contextlib.suppress(OSError, ValueError):
             with open(manifest) as f:
                 previous = [os.path.join(path, p) for p in json.load(f).get("files", [])]
+    foreign = []
     if os.path.isdir(path) and os.listdir(path):
         foreign = [n for n in _files_below(path) if os.path.join(path, n) not in previous and n != MANIFEST]
         print(f"eventfield: warning: output folder {path} is reused: "
@@ -174,22 +183,38 @@ def output_dir_run(path: str, command: str):
               + (f"{len(foreign)} other files stay beside the new ones" if foreign else ""), file=sys.stderr)
     start = time.time() - 1.0          # file systems with coarse timestamps
     existed = os.path.isdir(path)
+    kept = {os.path.join(path, n) for n in foreign}
+    _KEPT.update(kept)
     try:
         yield path
     except BaseException:
         if not existed:                # a failed run leaves no folder it made, when nothing was written into it
             with contextlib.suppress(OSError):
                 os.rmdir(path)         # only an empty folder goes
+        elif os.path.isdir(path):      # what it did write is listed, so that the next run may replace it
+            written = _written_since(path, start, kept)
+            earlier = [rel for rel in (os.path.relpath(p, path) for p in previous)
+                       if rel not in written and os.path.exists(os.path.join(path, rel))]
+            with contextlib.suppress(OSError, EventFieldError):
+                write_json(manifest, {"command": command, "files": sorted(earlier + written)}, "output manifest")
         raise
+    finally:
+        _KEPT.difference_update(kept)
     if not os.path.isdir(path):
         return
-    written = sorted(n for n in _files_below(path) if n != MANIFEST
-                     and os.path.getmtime(os.path.join(path, n)) >= start)
+    written = _written_since(path, start, kept)
     for old in previous:
         if os.path.relpath(old, path) not in written:
             with contextlib.suppress(OSError):
                 os.remove(old)
     write_json(manifest, {"command": command, "files": written}, "output manifest")
+
+
+def _written_since(path: str, start: float, kept: set) -> list:
+    """The files below ``path`` changed since ``start``, but for the manifest and the ``kept`` ones (a user's
+    file made in the second before the run has a time within it)."""
+    return sorted(n for n in _files_below(path) if n != MANIFEST and os.path.join(path, n) not in kept
+                  and os.path.getmtime(os.path.join(path, n)) >= start)
 
 
 def _files_below(path: str) -> list:
