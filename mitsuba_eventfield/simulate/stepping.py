@@ -211,19 +211,26 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
                        min_step=min(MIN_PLACED_STEP, st.duration / floor),
                        chosen=dict(chosen, placed="by image motion", steps=len(placed) - 1,
                                    largest_px_per_step=float(np.diff(path).max()))), probe
-    period = timed.scan_period
-    periods = round(st.duration / period) if period else 0
-    if periods >= 1 and abs(st.duration / period - periods) < 1e-9 * periods:     # the scan's phase grid
-        steps = min(int(math.ceil(steps / periods)), max(1, MAX_STEPS // periods)) * periods
-    steps = min(steps, MAX_STEPS)          # the coarse-step note says so if this binds
+    steps = whole_per_period(steps, st.duration, timed.scan_period)   # the coarse-step note says if MAX_STEPS binds
     return replace(st, steps=steps, chosen=dict(chosen, steps=steps)), probe
+
+
+def whole_per_period(steps: int, duration: float, period) -> int:
+    """``steps`` rounded up to a whole number per scan period where ``duration`` is whole periods of a periodic
+    scan (the scan's phase grid: period reuse, static pixels, the views of a light field at the same phases
+    every period), at most ``MAX_STEPS``. The one rounding of the default rule and of ``--auto``."""
+    periods = round(duration / period) if period else 0
+    if periods >= 1 and abs(duration / period - periods) < 1e-9 * periods:
+        steps = min(int(math.ceil(steps / periods)), max(1, MAX_STEPS // periods)) * periods
+    return min(steps, MAX_STEPS)
 
 
 def uniform_default_steps(timed, duration: float, spp: int, integ) -> tuple:
     """(steps, why) for ``eventfield render --auto``, which states one uniform count: the default rule's image
     motion under its fine bound (``FINE_PX_PER_STEP``, 0.5 px a step everywhere: auto favours accuracy and does
     not take the 2 px a noise-limited default allows) and the pixel model's floors. The same motion and floors
-    as an unasked render (:func:`default_steps`), not a rule of its own."""
+    as an unasked render (:func:`default_steps`), not a rule of its own, and its whole number a scan period
+    (:func:`whole_per_period`; a moving scene under a scan got 302 steps over five periods)."""
     st = stepping(timed, duration, None, False, 0.5, None, None, spp, 0, "fixed", 0.0)
     speed, _ = _fastest_motion(st, timed)
     floors = _floors(st, integ.config, timed)
@@ -232,9 +239,9 @@ def uniform_default_steps(timed, duration: float, spp: int, integ) -> tuple:
         return min(steps, MAX_STEPS), {"by": "default for motion not known before rendering"
                                        if steps == UNKNOWN_MOTION_STEPS else max(floors, key=floors.get)}
     for_motion = _steps_for(speed, st.duration, FINE_PX_PER_STEP)
-    steps = max(for_motion, *floors.values())
+    steps = whole_per_period(max(for_motion, *floors.values()), st.duration, timed.scan_period)
     by = "image motion" if for_motion >= max(floors.values()) else max(floors, key=floors.get)
-    return min(steps, MAX_STEPS), {"by": by, "px_per_step": FINE_PX_PER_STEP, "largest_image_speed_px_per_s": speed}
+    return steps, {"by": by, "px_per_step": FINE_PX_PER_STEP, "largest_image_speed_px_per_s": speed}
 
 
 def _steps_for(speed: float, duration: float, px_per_step: float) -> int:
