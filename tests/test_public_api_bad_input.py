@@ -8,7 +8,7 @@ import tempfile
 
 import numpy as np
 import pytest
-from conftest import DEMO, TEST_VARIANT
+from conftest import DEMO, ROOT, TEST_VARIANT
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.lightfield.model import Disparity
@@ -53,6 +53,8 @@ CASES = {
     "render_frames times": (lambda s: ef.render_frames(s, [math.nan]), "times"),
     "render_frames spp": (lambda s: ef.render_frames(s, [0.0], spp=0), "spp"),
     "read_events": (lambda s: ef.read_events("/nonexistent/e.h5"), "no such event file"),
+    "read_events folder": (lambda s: ef.read_events(ROOT), "a folder, not an event file (image frames become "
+                                                           "events through 'eventfield convert')"),
     "write_events": (lambda s: ef.write_events("/tmp/x.foo", ef.EventStream([1], [1], [1], [1], 4, 4)), ".foo"),
     "load_scene": (lambda s: ef.load_scene("/nonexistent/s.xml"), "not found"),
     "parse_motion": (lambda s: ef.parse_motion({"objects": {"a": {"velocity": [1, 2]}}}), "velocity"),
@@ -203,11 +205,12 @@ def test_every_facade_callable_has_a_case():
 
 def test_a_range_is_closed_at_infinity_only_where_infinity_is_taken():
     """An error's range says whether inf itself is allowed: ``number`` refuses it (open end), a light field's
-    depth takes it (closed end)."""
+    depth takes it (closed end). An ideal mirror has no frequency ceiling (a real galvo's range ends at its
+    limit: tests/optics/test_scan.py)."""
     with pytest.raises(ef.ConfigError, match=r"allowed range is \(0, inf\)$"):
-        ef.make_curve("circle", frequency=0.0, amplitude=0.5)
+        ef.make_curve("circle", frequency=0.0, amplitude=0.5, galvo_model="ideal")
     with pytest.raises(ef.ConfigError, match=r"\(0, inf\)"):
-        ef.make_curve("circle", frequency=math.inf, amplitude=0.5)
+        ef.make_curve("circle", frequency=math.inf, amplitude=0.5, galvo_model="ideal")
     for call in (lambda z: LF.check_depth(z), lambda z: ef.focal_stack(LF, [z])):
         with pytest.raises(ef.ConfigError, match=r"allowed range is \(0, inf\]$"):
             call(-1.0)

@@ -94,7 +94,11 @@ class SloMoRFResult(AppResult):
         m = self.metrics
         names = {"events": "events (event-count fusion)", "events_time": "events (time fusion)",
                  "linear": "linear blend (baseline)"}
-        lines = [f"{m['interpolated_frames']} interpolated frames ({self.meta['factor']}x {self.meta['fps']:g} fps), "
+        asked = self.meta.get("duration_asked_s")
+        lines = [f"{self.meta['duration_s'] * 1e3:.3f} ms simulated" + (
+                     f" ({asked * 1e3:g} ms asked, cut to whole {self.meta['fps']:g} fps frame intervals)"
+                     if asked is not None else ""),
+                 f"{m['interpolated_frames']} interpolated frames ({self.meta['factor']}x {self.meta['fps']:g} fps), "
                  f"films {self.meta['film'][0]}x{self.meta['film'][1]}, views {self.meta['view'][0]}x"
                  f"{self.meta['view'][1]}; scored as 8-bit gamma-2.2 images of radiance clipped to [0, 1]",
                  f"{'':30s} {'frames PSNR':>11s} {'moving PSNR':>11s} {'SSIM':>7s} {'worst PSNR':>10s}"
@@ -326,7 +330,7 @@ def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, fa
         raise ConfigError(f"steps_per_frame = {steps_per_frame}: must be an integer >= 1")
     defines = dict(defines or {})
     previous = backend.mi.variant()
-    split = {}
+    split, asked = {}, duration
     try:
         timed_rgb, events, optics, times, is_key, keys, duration = _capture(
             scene_path, defines, fps, factor, duration, depths, spp, seed, steps_per_frame, progress, split)
@@ -355,6 +359,8 @@ def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, fa
             backend.set_variant(previous)
     meta = _meta(scene_path, defines, fps, factor, duration, depths, spp, seed, steps_per_frame, is_key, truth,
                  refocused["truth"].shape[2:4], events, optics, split)
+    if asked is not None and abs(asked - duration) > 1e-12:          # cut to whole frame intervals: said
+        meta["duration_asked_s"] = float(asked)
     refocused = {name: refocused[name] for name in frames}           # the order of the films, as before
     return SloMoRFResult(times, is_key, frames, depths, refocused, metrics, meta)
 

@@ -148,7 +148,8 @@ def read_events(path: str, fmt: str | None = None) -> EventStream:
     installed), RAW and DAT by faery."""
     path = file_path(path, "read_events: path")
     if not os.path.isfile(path):
-        raise EventFieldError(f"{path}: no such event file")
+        raise EventFieldError(f"{path}: a folder, not an event file (image frames become events through "
+                              "'eventfield convert')" if os.path.isdir(path) else f"{path}: no such event file")
     fmt = format_of(path, fmt)
     try:
         if fmt in ("raw", "dat") or fmt in NAMED_FORMATS:

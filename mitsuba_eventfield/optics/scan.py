@@ -28,7 +28,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import ConfigError
-from ..validate import finite, positive
+from ..validate import finite, number, positive
 from .envelope import DEFAULT_GALVO_MODEL, EnvelopeError, galvo_model
 
 DEFAULT_MAX_ANGLE_DEG = 10.0   # the mechanical travel curves had before galvo models existed (the ideal model's)
@@ -300,13 +300,13 @@ def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: floa
     if unknown:
         raise ConfigError(f"{where}: parameter {sorted(unknown)[0]!r} does not apply to a {name} scan; "
                           f"allowed: {', '.join(sorted(_ARGS[name]))}")
-    for k in _FREQ_KEYS:
-        if k in params:
-            positive(params[k], f"{where}: {k} (Hz)")
+    envelope = envelope or _envelope(galvo_model, where, max_angle_deg)
+    top = envelope.max_frequency        # the range a bad frequency names; above it the envelope's check says so
+    for k in (k for k in _FREQ_KEYS if k in params and not (isinstance(params[k], (int, float)) and params[k] > top)):
+        number(params[k], f"{where}: {k} (Hz)", 0, top if math.isfinite(top) else None, lo_open=True, strict=True)
     for k, v in params.items():
         if k not in _FREQ_KEYS and k != "axis":
             finite(v, f"{where}: {k}")
-    envelope = envelope or _envelope(galvo_model, where, max_angle_deg)
     limits = {"max_angle_deg": envelope.max_mech_deg, "galvo_model": envelope.name}
     if name == "circle":
         curve = circle(**limits, **params)

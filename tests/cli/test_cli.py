@@ -41,7 +41,7 @@ def _write(tmp_path, name, text):
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
 BAD = {
     "galvo_amplitude": (lambda d: [GALVO, "-D", "amplitude=20"], "exceeds the galvo's derated limit"),
-    "galvo_frequency": (lambda d: [GALVO, "-D", "frequency=0"], "frequency (Hz) = 0.0: allowed range is (0, inf)"),
+    "galvo_frequency": (lambda d: [GALVO, "-D", "frequency=0"], "frequency (Hz) = 0.0: allowed range is (0, 1000]"),
     "malformed_xml": (lambda d: [_write(d, "bad.xml", BROKEN_XML)], "bad.xml"),
     "unknown_plugin": (lambda d: [_write(d, "unk.xml", UNKNOWN_PLUGIN)], "hyperboloid_xyz"),
     "missing_motion_id": (lambda d: [DEMO, "--motion", _write(d, "m.motion.toml",

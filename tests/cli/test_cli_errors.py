@@ -45,6 +45,8 @@ def _cases(g, blocked):
         (["compare-designs", "-o", f"{out}/cd", "--speeds", "1,1"], "1 given more than once"),
         (["reconstruct", g, "-o", f"{out}/rc", "--fps", "0"], "--fps"),
         (["reconstruct", g, "-o", f"{out}/rc", "--fps", "1e9"], "--fps"),
+        # no frame interval within the stream (was: one frame at its end, as if asked for)
+        (["reconstruct", g, "-o", f"{out}/rc", "--fps", "0.1"], "--fps 0.1: a frame every 10000 ms, longer than"),
         (["reconstruct", g, "-o", f"{out}/rc", "--method", "highpass", "--cutoff", "-1"], "--cutoff"),
         (["refocus", g, "-o", f"{out}/r.png", "--depth", "1", "--views", "100000000"], "--views"),
         (["refocus", g, "-o", f"{out}/r.png", "--depth", "1,abc"], "--depth"),
