@@ -38,7 +38,9 @@ CASES = {
     "render_events duration": (lambda s: ef.render_events(s, -1.0, steps=4), "duration"),
     "render_events steps": (lambda s: ef.render_events(s, 0.01, steps=0), "steps"),
     "render_events spp": (lambda s: ef.render_events(s, 0.01, steps=2, spp=float("nan")), "spp"),
-    "render_events threshold": (lambda s: ef.render_events(s, 0.01, steps=2, threshold=-1), "threshold_on"),
+    # named as given (it named threshold_on, which the caller did not write)
+    "render_events threshold": (lambda s: ef.render_events(s, 0.01, steps=2, threshold=-1),
+                                "render: threshold = -1: allowed range is (0, inf)"),
     "render_events pixel": (lambda s: ef.render_events(s, 0.01, steps=2, pixel={"bogus": 1}), "bogus"),
     "render_events threshold twice": (lambda s: ef.render_events(s, 0.01, steps=2, threshold=0.3,
                                                                  pixel={"threshold_on": 0.15}), "given twice"),
@@ -53,6 +55,7 @@ CASES = {
     "render_frames times": (lambda s: ef.render_frames(s, [math.nan]), "times"),
     "render_frames spp": (lambda s: ef.render_frames(s, [0.0], spp=0), "spp"),
     "read_events": (lambda s: ef.read_events("/nonexistent/e.h5"), "no such event file"),
+    "time_window reversed": (lambda s: EVENTS.time_window(5000, 1000), "t1_us = 1000 is before t0_us = 5000"),
     "read_events folder": (lambda s: ef.read_events(ROOT), "a folder, not an event file (image frames become "
                                                            "events through 'eventfield convert')"),
     "write_events": (lambda s: ef.write_events("/tmp/x.foo", ef.EventStream([1], [1], [1], [1], 4, 4)), ".foo"),

@@ -306,7 +306,7 @@ def run_reconstruct(a) -> int:
     for k, (t, log_img) in enumerate(zip(times, frames)):
         save_image(os.path.join(a.output, f"frame_{k:04d}.png"), np.exp(log_img),
                    _out_meta(a, ev, method=a.method, time_s=float(t), domain="linear = exp(log intensity)"))
-    print(f"wrote {len(times)} frames ({a.method}) to {a.output}")
+    print(f"wrote {len(times)} frame{'s' if len(times) != 1 else ''} ({a.method}) to {a.output}")
     return 0
 
 
@@ -324,7 +324,7 @@ def run_refocus(a) -> int:
     _solver_warning(lf)
     for z, root in roots:
         save_image(root + ".png", refocus(lf, z), _out_meta(a, ev, lf, depth=z, views=len(lf.views)))
-        print(f"wrote {root}.png/.exr (refocused at {z:g}; from {_inputs(a)}{_calibrated(lf)})")
+        print(f"wrote {root}.png/.exr (refocused at {z:g} m; from {_inputs(a)}{_calibrated(lf)})")
     return 0
 
 
@@ -356,7 +356,7 @@ def run_depth(a) -> int:
     confident = (dm.confidence >= a.min_confidence) & (dm.confidence > 0)    # a failed check is never confident
     notes = dm.notes()           # why textured regions are not confident
     share = f"{int(confident.sum())} pixels, {100 * confident.mean():.3g} % of the image"
-    found = (f"median depth of confident pixels {float(np.median(dm.depth[confident])):.4g} ({share})") \
+    found = (f"median depth of confident pixels {float(np.median(dm.depth[confident])):.4g} m ({share})") \
         if confident.any() else \
         f"no pixel is confident (>= {a.min_confidence:g}): no depth found (" + \
         ("see below" if notes else "too little texture, parallax or events") + ")"

@@ -118,9 +118,13 @@ class EventStream:
         return first_out_of_order(self.t) is None
 
     def time_window(self, t0_us=None, t1_us=None) -> "EventStream":
-        """Events with t0 <= t < t1 (microseconds; None = open end). Requires sorted timestamps."""
+        """Events with t0 <= t < t1 (microseconds; None = open end; t0 = t1: none). Requires sorted timestamps;
+        a reversed window is refused (it returned no events, as if the stream had none there)."""
         t0_us, t1_us = (None if v is None else number(v, f"time_window: {name}", strict=True)
                         for name, v in (("t0_us", t0_us), ("t1_us", t1_us)))
+        if t0_us is not None and t1_us is not None and t1_us < t0_us:
+            raise ConfigError(f"time_window: t1_us = {t1_us:g} is before t0_us = {t0_us:g}: the window must have "
+                              "t0 <= t1")
         i0 = 0 if t0_us is None else int(np.searchsorted(self.t, t0_us, side="left"))
         i1 = len(self) if t1_us is None else int(np.searchsorted(self.t, t1_us, side="left"))
         s = slice(i0, i1)

@@ -287,7 +287,8 @@ def test_a_users_file_named_like_an_output_is_kept_and_the_run_stops(capture, tm
     assert cli.main(["reconstruct", capture, "-o", str(out), "--fps", "1000", "--method", "galvo"]) == 0
     err = capsys.readouterr().err
     assert "other files stay" not in err
-    assert (out / "frame_0001.png").stat().st_size > 100 and (tmp_path / "mine.png").read_text() == "a file of the user's"
+    assert (out / "frame_0001.png").stat().st_size > 100
+    assert (tmp_path / "mine.png").read_text() == "a file of the user's"
 
 
 def test_a_preview_window_outside_the_stream_is_refused(tmp_path, capsys):

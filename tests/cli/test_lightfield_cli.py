@@ -78,7 +78,7 @@ def test_reconstruct_refocus_depth_outputs(galvo_capture):
             "--views", "16", "--method", "direct", "--min-confidence", "0")
     assert r.returncode == 0 and "--method direct without --start-frame integrates" in r.stderr, (r.stdout, r.stderr)
     channels, meta = read_exr(str(d / "depth_dr.exr"))
-    counted = re.search(r"median depth of confident pixels [0-9.]+ \(([0-9]+) pixels", r.stdout)
+    counted = re.search(r"median depth of confident pixels [0-9.]+ m \(([0-9]+) pixels", r.stdout)
     assert counted and int(counted.group(1)) == int((channels["confidence"] > 0).sum()) < channels["depth"].size
     assert meta["min_confidence"] == 0
 
