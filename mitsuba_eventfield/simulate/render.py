@@ -62,10 +62,10 @@ def check_memory(width: int, height: int, spp: int, where: str = "film") -> int:
 def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off, linlog_threshold, preset=None,
                       pixel=None, seed=None):
     """The scene's eventfield integrator (or one wrapping its radiance integrator), configured for this render:
-    the scene's own pixel settings, then ``preset``, then explicit values (never an earlier render's). The
-    pixel model's seed (its mismatch and noise draws) is the render's ``seed`` unless the pixel parameters or
-    the scene's integrator name one: a sweep over seeds draws new sensor noise too (it kept pixel seed 0, and
-    98 % of a davis346 render's noise events were the same under two seeds)."""
+    the scene's own pixel settings, then ``preset``, then explicit values (never an earlier render's; a bad
+    ``threshold`` named as given, not as threshold_on). The pixel model's seed (its mismatch and noise draws) is
+    the render's ``seed`` unless the pixel parameters or the scene's integrator name one: a sweep over seeds draws
+    new sensor noise too (it kept pixel seed 0; 98 % of a davis346 render's noise events were the same)."""
     from ..plugins import pixel_model
     from ..plugins.event_integrator import integrator_class, is_event_integrator
     integ = timed.scene.integrator()
@@ -75,12 +75,10 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
         raise ConfigError(f"pixel model: pixel = {pixel!r}: must be a dict of pixel parameters (a preset's name "
                           "goes in preset=)")
     preset, pixel = pixel_model.preset_and_overrides(preset, pixel)
-    if threshold is not None:        # named as given (it was checked as threshold_on, which the caller never wrote)
-        number(threshold, "render: threshold", 0, lo_open=True, strict=True)
+    thr = threshold if threshold is None else number(threshold, "render: threshold", 0, lo_open=True, strict=True)
     overrides = {} if preset is not None else dict(integ.scene_overrides)
-    explicit = {"threshold_on": threshold_on if threshold_on is not None else threshold,
-                "threshold_off": threshold_off if threshold_off is not None else threshold,
-                "linlog_threshold": linlog_threshold}
+    explicit = {"threshold_on": threshold_on if threshold_on is not None else thr, "linlog_threshold": linlog_threshold,
+                "threshold_off": threshold_off if threshold_off is not None else thr}
     pixel_model.given_once(explicit, pixel)
     explicit.update(pixel)
     for name, v in explicit.items():
