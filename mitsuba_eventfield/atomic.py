@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
+import threading
 import uuid
 
 from .errors import EventFieldError
@@ -17,6 +19,9 @@ def _nearest_existing(path: str) -> str:
 
 # files in an output folder in use (``output_dir_run``) that eventfield did not write: never replaced
 _KEPT: set = set()
+# output folders of running applications -> {"command", "files": what the folder's manifest lists}
+_RUNS: dict = {}
+_RUNS_LOCK = threading.Lock()
 
 
 def check_writable(path: str, what: str = "output") -> str:
@@ -26,6 +31,7 @@ def check_writable(path: str, what: str = "output") -> str:
     if path in _KEPT:
         raise EventFieldError(f"{what} path {path}: a file eventfield did not write (the folder's {MANIFEST} does "
                               "not list it) is kept, not replaced: move it, or choose another output folder")
+    _claim(path)
     if os.path.isdir(path):
         raise EventFieldError(f"{what} path {path}: is a directory")
     if not os.path.isdir(parent):
@@ -164,7 +170,6 @@ def output_dir_run(path: str, command: str):
     this run did not rewrite are removed, and the manifest lists this run's files. Files eventfield did not write
     are never touched (only mentioned): a run that would write one of their names stops there with a one-line
     error (``check_writable``), which before replaced the user's file under a warning that it stayed."""
-    import json
     import sys
     import time
     path = os.path.abspath(path)
@@ -185,21 +190,23 @@ def output_dir_run(path: str, command: str):
     existed = os.path.isdir(path)
     kept = {os.path.join(path, n) for n in foreign}
     _KEPT.update(kept)
+    with _RUNS_LOCK:                   # each file it writes is listed before it is written (``_claim``)
+        _RUNS[path] = {"command": command, "files": {os.path.relpath(p, path) for p in previous}}
     try:
         yield path
     except BaseException:
-        if not existed:                # a failed run leaves no folder it made, when nothing was written into it
-            with contextlib.suppress(OSError):
-                os.rmdir(path)         # only an empty folder goes
-        elif os.path.isdir(path):      # what it did write is listed, so that the next run may replace it
-            written = _written_since(path, start, kept)
-            earlier = [rel for rel in (os.path.relpath(p, path) for p in previous)
-                       if rel not in written and os.path.exists(os.path.join(path, rel))]
-            with contextlib.suppress(OSError, EventFieldError):
-                write_json(manifest, {"command": command, "files": sorted(earlier + written)}, "output manifest")
+        if not existed and not os.path.isfile(manifest):   # a failed run leaves no folder it made, when nothing
+            with contextlib.suppress(OSError):              # was written into it: only an empty folder goes
+                os.rmdir(path)
+        if os.path.isdir(path):        # what it wrote stays listed (a writer that named no file: by its time)
+            with _RUNS_LOCK:
+                files = _RUNS[path]["files"] | set(_written_since(path, start, kept))
+            _write_manifest(path, command, files)
         raise
     finally:
         _KEPT.difference_update(kept)
+        with _RUNS_LOCK:
+            _RUNS.pop(path, None)
     if not os.path.isdir(path):
         return
     written = _written_since(path, start, kept)
@@ -210,6 +217,31 @@ def output_dir_run(path: str, command: str):
     write_json(manifest, {"command": command, "files": written}, "output manifest")
 
 
+def _claim(path: str) -> None:
+    """``path``, about to be written in a running application's output folder, listed in the folder's manifest
+    first: a run stopped after this (an error, an interrupt, a kill, a full disk) leaves its files listed, so the
+    next run replaces them instead of taking them for the user's and refusing them."""
+    with _RUNS_LOCK:
+        for folder, run in _RUNS.items():
+            if path.startswith(folder + os.sep):
+                rel = os.path.relpath(path, folder)
+                if rel != MANIFEST and rel not in run["files"]:
+                    run["files"].add(rel)
+                    _write_manifest(folder, run["command"], run["files"])
+
+
+def _write_manifest(folder: str, command: str, files) -> None:
+    """The manifest in place at once (a temporary file renamed over it); where it cannot be written, the write
+    that follows fails too and says why."""
+    tmp = os.path.join(folder, f"{MANIFEST}{PARTIAL_TAG}{os.getpid()}")
+    with contextlib.suppress(OSError):
+        with open(tmp, "w") as f:
+            json.dump({"command": command, "files": sorted(files)}, f, indent=2)
+        os.replace(tmp, os.path.join(folder, MANIFEST))
+    with contextlib.suppress(FileNotFoundError):
+        os.remove(tmp)
+
+
 def _written_since(path: str, start: float, kept: set) -> list:
     """The files below ``path`` changed since ``start``, but for the manifest and the ``kept`` ones (a user's
     file made in the second before the run has a time within it)."""
@@ -218,7 +250,9 @@ def _written_since(path: str, start: float, kept: set) -> list:
 
 
 def _files_below(path: str) -> list:
+    """The files below ``path``, relative to it, but for the manifest and its temporary copies."""
     out = []
     for root, _, names in os.walk(path):
-        out += [os.path.relpath(os.path.join(root, n), path) for n in names]
+        out += [os.path.relpath(os.path.join(root, n), path) for n in names
+                if not (root == path and n.startswith(MANIFEST))]
     return out

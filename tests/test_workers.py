@@ -2,6 +2,7 @@
 errors at their item, OpenCV on one thread while a map runs; and the refocus and depth maps that use it equal,
 bit for bit, what the calling thread alone makes."""
 import math
+import os
 import threading
 import time
 
@@ -40,10 +41,10 @@ def test_results_come_in_order_and_from_the_pool(several_cores):
 
 
 def test_look_ahead_is_bounded(several_cores):
-    """At most twice the pool's workers are started beyond what the consumer has taken: a stack of large
+    """At most the pool's workers and two more are started beyond what the consumer has taken: a stack of large
     warped views never waits whole in memory."""
     started = []
-    ahead = 2 * _pool_workers()
+    ahead = _pool_workers() + 2
 
     def note(i):
         started.append(i)
@@ -66,11 +67,28 @@ def test_an_error_surfaces_at_its_item_and_stops_the_rest(several_cores):
         for v in workers.ordered_map(fails_at_5, range(100)):
             got.append(v)
     assert got == [0, 1, 2, 3, 4]
-    assert len(ran) < 100                   # the items beyond the window never started
+    assert len(ran) <= 6 + _pool_workers() + 2      # the items beyond the window never started
+
+
+def test_a_map_inside_a_task_runs_on_that_task_s_thread(several_cores):
+    """Every worker running a task that waits on a map of its own would wait on tasks queued behind it: a
+    map from one of the pool's threads runs there instead."""
+    def inner_sum(i):
+        return sum(workers.ordered_map(lambda j: i * j, range(8)))
+    tasks = 3 * _pool_workers()
+    done = []
+    runner = threading.Thread(target=lambda: done.append(list(workers.ordered_map(inner_sum, range(tasks)))),
+                              daemon=True)
+    runner.start()
+    runner.join(timeout=60)
+    assert done == [[28 * i for i in range(tasks)]], "the nested maps did not finish within 60 s"
 
 
 def test_opencv_runs_on_one_thread_during_a_map_and_gets_its_count_back(several_cores):
+    original = cv2.getNumThreads()
+    cv2.setNumThreads(3)                     # a count that one thread is not (OpenCV's own default may be 1)
     before = cv2.getNumThreads()
+    assert before == 3
     seen = list(workers.ordered_map(lambda i: cv2.getNumThreads(), range(6)))
     assert seen == [1] * 6
     assert cv2.getNumThreads() == before
@@ -84,6 +102,15 @@ def test_opencv_runs_on_one_thread_during_a_map_and_gets_its_count_back(several_
     assert next(gen) == 0
     gen.close()
     assert cv2.getNumThreads() == before
+    running = workers.ordered_map(lambda i: i, range(10))        # a child forked while a map runs
+    assert next(running) == 0 and cv2.getNumThreads() == 1
+    child = os.fork()
+    if child == 0:
+        os._exit(0 if cv2.getNumThreads() == before else 1)
+    assert os.waitpid(child, 0)[1] == 0, "the forked child kept OpenCV on one thread"
+    running.close()
+    assert cv2.getNumThreads() == before
+    cv2.setNumThreads(original)
 
 
 def test_one_core_runs_on_the_calling_thread(monkeypatch):

@@ -14,6 +14,7 @@ import shutil
 import time
 from dataclasses import dataclass
 
+from ..atomic import atomic_output
 from ..errors import ConfigError, EventFieldError
 
 
@@ -143,7 +144,8 @@ def _copy_figure(paths: dict, key: str, doc_dir: str):
         return None
     os.makedirs(os.path.join(doc_dir, "paper"), exist_ok=True)
     target = os.path.join(doc_dir, "paper", f"{key}.png")
-    shutil.copyfile(fig, target)
+    with atomic_output(target, "paper figure") as tmp:    # whole or not at all, and never over a user's file
+        shutil.copyfile(fig, tmp)
     return os.path.relpath(target, doc_dir)
 
 

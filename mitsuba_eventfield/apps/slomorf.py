@@ -227,7 +227,8 @@ def focus_check(refocused, depth_views, depths, is_key):
 
 def _capture(scene_path, defines, fps, factor, duration, depths, spp, seed, steps_per_frame, progress, split):
     """What the rig records: kaleidoscope events (mono) and the RGB camera's keyframes. Returns (the colour
-    scene, events, optics, output times, key mask, keyframes, duration)."""
+    scene, events, optics, output times, key mask, keyframes, duration, the duration before its cut to whole
+    frame intervals)."""
     t0 = time.perf_counter()
     _variant_for(color=False)
     timed = load_scene(scene_path, **defines)
@@ -236,6 +237,7 @@ def _capture(scene_path, defines, fps, factor, duration, depths, spp, seed, step
         if duration is None:
             raise ConfigError(f"{scene_path}: duration not given and the scene has no motion file duration")
         _check(fps, factor, depths, duration)
+    asked = duration                            # the motion file's too: a cut is said (the report)
     intervals = int(math.floor(duration * fps + 1e-6))
     duration = intervals / fps
     optics = timed.sensor.optics_metadata() if hasattr(timed.sensor, "optics_metadata") else {}
@@ -252,7 +254,7 @@ def _capture(scene_path, defines, fps, factor, duration, depths, spp, seed, step
     is_key = np.arange(len(times)) % factor == 0
     keys = render_frames(timed_rgb, times[is_key], spp=spp, seed=seed, log=False, rgb=True)
     split["render_rgb_frames"] = time.perf_counter() - t1
-    return timed_rgb, events, optics, times, is_key, keys, duration
+    return timed_rgb, events, optics, times, is_key, keys, duration, asked
 
 
 def slow_motion_frames(events, keys, times, is_key, factor: int) -> dict:
@@ -330,9 +332,9 @@ def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, fa
         raise ConfigError(f"steps_per_frame = {steps_per_frame}: must be an integer >= 1")
     defines = dict(defines or {})
     previous = backend.mi.variant()
-    split, asked = {}, duration
+    split = {}
     try:
-        timed_rgb, events, optics, times, is_key, keys, duration = _capture(
+        timed_rgb, events, optics, times, is_key, keys, duration, asked = _capture(
             scene_path, defines, fps, factor, duration, depths, spp, seed, steps_per_frame, progress, split)
         t2 = time.perf_counter()
         truth = np.empty((len(times),) + keys.shape[1:], np.float32)      # for scoring only
@@ -359,7 +361,7 @@ def slomorf(scene_path: str, defines: dict | None = None, fps: float = 120.0, fa
             backend.set_variant(previous)
     meta = _meta(scene_path, defines, fps, factor, duration, depths, spp, seed, steps_per_frame, is_key, truth,
                  refocused["truth"].shape[2:4], events, optics, split)
-    if asked is not None and abs(asked - duration) > 1e-12:          # cut to whole frame intervals: said
+    if abs(asked - duration) > 1e-12:                                # cut to whole frame intervals: said
         meta["duration_asked_s"] = float(asked)
     refocused = {name: refocused[name] for name in frames}           # the order of the films, as before
     return SloMoRFResult(times, is_key, frames, depths, refocused, metrics, meta)

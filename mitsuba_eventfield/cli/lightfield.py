@@ -266,9 +266,11 @@ def _reconstruct_times(a, ev, start):
     end = t0 + ev.duration_us * 1e-6
     n = int(math.floor((end - first) * fps + 1e-9))
     if n == 0 and a.fps:         # asked for: no frame interval fits (the default falls back to the stream's end)
+        span = end - first
         raise EventFieldError(f"--fps {a.fps:g}: a frame every {1e3 / fps:.6g} ms, longer than the stream's "
-                              f"{(end - first) * 1e3:.3f} ms from {first * 1e3:.3f} ms: ask for at least "
-                              f"{1 / (end - first):.6g} fps, or give --times")
+                              f"{span * 1e3:.3f} ms from {first * 1e3:.3f} ms: " + (
+                                  f"ask for at least {1 / span:.6g} fps, or give --times" if span > 0 else
+                                  "no time is left after it for a frame"))
     return first + (np.arange(n) + 1) / fps if n else np.array([end])
 
 

@@ -291,9 +291,8 @@ def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: floa
     """Build a curve by name and check it against the envelope of ``galvo_model`` (``optics.envelope``; a
     scan the device layer refuses is refused here with the same reason). ``max_angle_deg``: narrows a real
     galvo's travel, or sets an ideal mirror's (default: the model's own). ``envelope``: a rig's own
-    ``ScanEnvelope`` instead of a named model (the device layer's, with its driver scaling). Errors name
-    ``where``, the parameter and its allowed range. The check applies to the commanded curve, before any
-    ``bandwidth_hz`` response."""
+    ``ScanEnvelope`` instead of a named model (the device layer's, with its driver scaling). Errors name ``where``,
+    the parameter and its allowed range. The check is of the commanded curve, before any ``bandwidth_hz``."""
     if name not in CURVES:
         raise ConfigError(f"{where}: unknown curve {name!r}; allowed: {', '.join(CURVES)}")
     unknown = set(params) - _ARGS[name]
@@ -302,8 +301,9 @@ def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: floa
                           f"allowed: {', '.join(sorted(_ARGS[name]))}")
     envelope = envelope or _envelope(galvo_model, where, max_angle_deg)
     top = envelope.max_frequency        # the range a bad frequency names; above it the envelope's check says so
-    for k in (k for k in _FREQ_KEYS if k in params and not (isinstance(params[k], (int, float)) and params[k] > top)):
-        number(params[k], f"{where}: {k} (Hz)", 0, top if math.isfinite(top) else None, lo_open=True, strict=True)
+    for k, f in ((k, params[k]) for k in _FREQ_KEYS if k in params):
+        if not (isinstance(f, (int, float)) and top < f < math.inf):
+            number(f, f"{where}: {k} (Hz)", 0, top if math.isfinite(top) else None, lo_open=True, strict=True)
     for k, v in params.items():
         if k not in _FREQ_KEYS and k != "axis":
             finite(v, f"{where}: {k}")

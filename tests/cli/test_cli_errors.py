@@ -350,3 +350,21 @@ def test_the_progress_bar_into_a_log_is_a_few_lines(tmp_path):
     assert 1 <= r.stderr.count("rendering:") <= 4, r.stderr.count("rendering:")
     total = re.match(r"(\d+) events", r.stdout).group(1)        # the bar's last count is the render's total
     assert r.stderr.rstrip().endswith(f", {total} events"), r.stderr[-300:]
+
+
+def test_frames_asked_for_with_no_time_left_are_one_line():
+    """--fps from a start at the stream's very end (--start-time there) or on a stream of no length: no frame
+    interval fits, and the refusal divided by the time left (a ZeroDivisionError)."""
+    import types
+
+    import mitsuba_eventfield as ef
+    from mitsuba_eventfield.cli.lightfield import _reconstruct_times
+    ev = ef.EventStream([1, 2], [1, 2], [1000, 2000], [1, -1], 8, 6, {"t_start_us": 0, "duration_us": 4000})
+    a = types.SimpleNamespace(times=None, fps=250.0, file="s.h5")
+    assert _reconstruct_times(a, ev, None).tolist() == [0.004]                 # one whole interval: one frame
+    a.fps = 100.0
+    with pytest.raises(ef.EventFieldError, match=r"--fps 100: a frame every 10 ms, longer than the stream's 4\.000 "
+                                                 r"ms from 0\.000 ms: ask for at least 250 fps, or give --times"):
+        _reconstruct_times(a, ev, None)
+    with pytest.raises(ef.EventFieldError, match="from 4.000 ms: no time is left after it for a frame"):
+        _reconstruct_times(a, ev, 0.004)

@@ -105,6 +105,8 @@ def test_bandwidth_shrinks_and_delays():
     # the range names the galvo's own ceiling (it said (0, inf) while 1000 Hz was refused as over the limit)
     (dict(name="circle", frequency=0.0), "frequency (Hz) = 0.0: allowed range is (0, 1000]"),
     (dict(name="circle", frequency=2000.0), "2000 Hz is above the galvo's 1000 Hz limit"),
+    (dict(name="raster", frequency=math.inf, lines=2), "frequency (Hz) = inf: must be a finite number in (0, 1000]"),
+    (dict(name="moore", frequency=math.inf), "frequency (Hz) = inf: must be a finite number in (0, 1000]"),
     (dict(name="circle", frequency=-5.0), "frequency (Hz) = -5.0"),
     (dict(name="circle", amplitude=12.0), "amplitude 12 deg at 250 Hz exceeds the galvo's derated limit"),
     (dict(name="circle", amplitude=12.0, galvo_model="ideal"), "exceeds the mechanical travel of +-10 deg"),

@@ -1,0 +1,70 @@
+"""An application's output folder (``atomic.output_dir_run``): a user's file in it is never replaced, and a run
+that stops early (an error, an interrupt, a kill) leaves what it wrote listed in the folder's manifest, so the
+next run replaces those files instead of refusing them as the user's."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from mitsuba_eventfield.atomic import MANIFEST, output_dir_run, write_json
+from mitsuba_eventfield.errors import EventFieldError
+
+
+def _listed(folder):
+    with open(os.path.join(folder, MANIFEST)) as f:
+        return json.load(f)["files"]
+
+
+@pytest.mark.parametrize("made_before", [False, True])
+def test_an_interrupted_run_leaves_its_files_listed_and_the_next_run_replaces_them(tmp_path, made_before):
+    out = tmp_path / "out"
+    if made_before:
+        out.mkdir()
+    with pytest.raises(KeyboardInterrupt):
+        with output_dir_run(str(out), "test"):
+            out.mkdir(exist_ok=True)                      # an application makes its folder
+            write_json(str(out / "a.json"), {"run": 1})
+            raise KeyboardInterrupt
+    assert _listed(out) == ["a.json"]
+    with output_dir_run(str(out), "test"):
+        write_json(str(out / "a.json"), {"run": 2})            # was refused as a file eventfield did not write
+    assert json.loads((out / "a.json").read_text()) == {"run": 2} and _listed(out) == ["a.json"]
+
+
+def test_a_killed_run_leaves_its_files_listed(tmp_path):
+    """Listed before it is written: a process killed outright runs no cleanup at all."""
+    out = tmp_path / "out"
+    script = ("import os, sys\nfrom mitsuba_eventfield.atomic import output_dir_run, write_json\n"
+              "with output_dir_run(sys.argv[1], 'test'):\n"
+              "    os.mkdir(sys.argv[1])\n    write_json(os.path.join(sys.argv[1], 'a.json'), {})\n    os._exit(9)\n")
+    r = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 9, r.stderr
+    assert _listed(out) == ["a.json"]
+    with output_dir_run(str(out), "test"):
+        write_json(str(out / "a.json"), {"run": 2})
+
+
+def test_a_failed_run_into_a_new_folder_that_wrote_nothing_leaves_no_folder(tmp_path):
+    out = tmp_path / "out"
+    with pytest.raises(ValueError):
+        with output_dir_run(str(out), "test"):
+            out.mkdir()
+            raise ValueError
+    assert not out.exists()
+
+
+def test_a_users_file_is_kept_and_a_later_one_of_the_runs_replaced(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mine.json").write_text("the user's")
+    with pytest.raises(EventFieldError, match="a file eventfield did not write .* is kept, not replaced"):
+        with output_dir_run(str(out), "test"):
+            write_json(str(out / "ours.json"), {})
+            write_json(str(out / "mine.json"), {})
+    assert (out / "mine.json").read_text() == "the user's" and _listed(out) == ["ours.json"]
+    assert "1 other files stay beside the new ones" in capsys.readouterr().err
+    with output_dir_run(str(out), "test"):                  # the run's own file is replaced, the user's stays
+        write_json(str(out / "ours.json"), {"run": 2})
+    assert _listed(out) == ["ours.json"] and (out / "mine.json").read_text() == "the user's"
