@@ -7,14 +7,22 @@ from ..errors import EventFieldError
 from ..validate import number_list
 
 
-def read_input(a):
+def read_input(a, needs_optics: bool = False):
     """The event file of a command, with ``--contrast`` (when given) as its contrast thresholds; a stream that has
-    none (a camera recording) and no ``--contrast`` is refused in one line."""
+    none (a camera recording) and no ``--contrast`` is refused in one line, which also names the optics where
+    the command ``needs_optics`` and the recording has none (it named one missing option a run)."""
     from ..events.io import read_events
     ev = read_events(a.file)
     if not len(ev):        # refocused, a flat image; as a depth map, no confident pixel: both written as done
         raise EventFieldError(f"{a.file}: no events: nothing to reconstruct")
-    return with_contrast(ev, getattr(a, "contrast", None), a.file)
+    try:
+        return with_contrast(ev, getattr(a, "contrast", None), a.file)
+    except EventFieldError as e:
+        if needs_optics and not ev.meta.get("optics") and not (getattr(a, "optics", None)
+                                                               or getattr(a, "calibration", None)):
+            raise EventFieldError(f"{e}; nor optics: pass --calibration (a calibration file made for its set-up) "
+                                  "or --optics FILE.json (the set-up's nominal light-field optics)") from None
+        raise
 
 
 def with_contrast(ev, contrast, where: str):

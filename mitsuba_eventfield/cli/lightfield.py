@@ -314,7 +314,7 @@ def run_reconstruct(a) -> int:
 
 def run_refocus(a) -> int:
     from ..focus.refocus import refocus
-    ev = read_input(a)
+    ev = read_input(a, needs_optics=True)
     depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
     roots = _refocus_roots(a, depths)
     lf = _lightfield(a, ev, nearest=min(depths))
@@ -334,7 +334,7 @@ def run_depth(a) -> int:
     from ..atomic import check_writable
     from ..focus.depth import MEASURES, REASON_META, depth_from_focus
     from ..images import depth_png, write_exr, write_png
-    ev = read_input(a)
+    ev = read_input(a, needs_optics=True)
     if not 0 < a.near < a.far:                    # (--planes is checked by its parser)
         raise EventFieldError(f"--near {a.near} --far {a.far}: need 0 < near < far")
     if a.measure not in MEASURES:

@@ -368,3 +368,19 @@ def test_frames_asked_for_with_no_time_left_are_one_line():
         _reconstruct_times(a, ev, None)
     with pytest.raises(ef.EventFieldError, match="from 4.000 ms: no time is left after it for a frame"):
         _reconstruct_times(a, ev, 0.004)
+
+
+def test_a_recording_without_contrast_or_optics_names_both(tmp_path, capsys):
+    """A camera recording carries neither contrast thresholds nor optics: refocus and depth name both missing
+    options in their one line (they named the contrast, then on the next run the optics)."""
+    import mitsuba_eventfield as ef
+    rec = str(tmp_path / "rec.npz")
+    ef.write_events(rec, ef.EventStream([1, 2], [1, 2], [10, 20], [1, -1], 8, 6))
+    for argv in (["refocus", rec, "-o", str(tmp_path / "r.png"), "--depth", "1"],
+                 ["depth", rec, "-o", str(tmp_path / "d.png"), "--near", "0.5", "--far", "2"]):
+        assert cli.main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert "pass --contrast ON[,OFF]" in err and "nor optics: pass --calibration" in err and "\n" not in err, err
+    assert cli.main(["refocus", rec, "-o", str(tmp_path / "r.png"), "--depth", "1", "--contrast", "0.2"]) == 2
+    assert "the recording carries no optics" in capsys.readouterr().err         # the other one, alone
+    assert not list(tmp_path.glob("*.png"))
