@@ -125,8 +125,9 @@ def calibrated_optics(calibration: dict, optics: dict, width: int, height: int) 
     calibration's curve with its phase as the record's ``time_offset`` (the view at capture time t is where the
     curve is at tau0 + t - t_first: ``GalvoCalibration.view_angles``); a depth calibration's pivots and angle
     gains as ``calibrated_geometry`` (``DepthCalibration.geometry``, read by ``GalvoGeometry.from_optics``);
-    ``calibrated`` lists the parts, ``commanded_scan`` keeps the record's own scan; ``width`` x ``height``: the film (the gains are per focal length in
-    pixels). The caller checks the calibration against the data first (``check_optics``)."""
+    ``calibrated`` lists the parts, ``commanded_scan`` keeps the record's own scan; ``width`` x ``height``: the
+    film (the gains are per focal length in pixels). The caller checks the calibration against the data first
+    (``check_optics``)."""
     from mitsuba_eventfield.optics.galvo import GalvoGeometry
     if optics.get("calibrated"):
         raise EventFieldError(f"the optics are already calibrated ({', '.join(optics['calibrated'])}): apply a "
