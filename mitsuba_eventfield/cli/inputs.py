@@ -20,8 +20,7 @@ def read_input(a, needs_optics: bool = False):
     except EventFieldError as e:
         if needs_optics and not ev.meta.get("optics") and not (getattr(a, "optics", None)
                                                                or getattr(a, "calibration", None)):
-            raise EventFieldError(f"{e}; nor optics: pass --calibration (a calibration file made for its set-up) "
-                                  "or --optics FILE.json (the set-up's nominal light-field optics)") from None
+            raise EventFieldError(f"{e}; nor optics: pass {_optics_options()}") from None
         raise
 
 
@@ -100,7 +99,11 @@ def give_optics(ev, where: str, optics_file: str | None, calibration=None, desig
     elif calibration is not None:
         ev.meta["optics"] = recording_optics(calibration, ev, where)
     else:
-        options = "--calibration (a calibration file made for its set-up) or --optics" if takes_calibration \
-            else "--optics"
-        raise EventFieldError(f"{where}: the recording carries no optics (no light-field metadata): pass {options} "
-                              f"FILE.json (the set-up's nominal {design or 'light-field'} optics)")
+        raise EventFieldError(f"{where}: the recording carries no optics (no light-field metadata): pass "
+                              f"{_optics_options(takes_calibration, design)}")
+
+
+def _optics_options(takes_calibration: bool = True, design: str | None = None) -> str:
+    """What a recording without optics is told to pass (the one wording of both refusals)."""
+    return ("--calibration (a calibration file made for its set-up) or " if takes_calibration else "") + \
+        f"--optics FILE.json (the set-up's nominal {design or 'light-field'} optics)"
