@@ -37,6 +37,7 @@
 # 437 s on the warm machine (KNOWN_LIMIT=1 TEST_LIMIT=430 TEST_WORKERS=14, timeout_s 480).
 # Twenty-second session (H200): pixel 268 s on a fresh machine (its event engine cut off at 150 s); the whole
 # suite on 14 workers to its end in 340 s on another fresh machine (KNOWN_LIMIT=1 TEST_LIMIT=430, timeout_s 500).
+# Twenty-third session (H200): pixel 264 s on a fresh machine (its event engine 165 s of it).
 # A dry run on the CPU checks the script itself: PY=.venv/bin/python OUT=/tmp/gpu_dry bash benchmarks/gpu_session.sh bench --quick
 set -uo pipefail
 cd "$(dirname "$0")/.."
