@@ -41,6 +41,22 @@ class PixelLevels:
     offset: object
 
 
+def lowpassed(integ, log_prev, log_in, intensity, dt):
+    """The log brightness a step leaves the pixel at: the staged ``log_in``, or under the photoreceptor
+    low-pass (``cutoff_hz``) that frame blended into the state ``log_prev`` by ``pixel_model.lowpass_alpha``
+    over ``dt`` (opaque Float), with the linear ``intensity`` (None: recovered from the log). One home for the
+    blend: the step's kernel and the accuracy limit's estimate of a step held for a batch
+    (``simulate.accuracy_limit``) both call it."""
+    cfg = integ.config
+    if not cfg.cutoff_hz:
+        return log_in
+    if intensity is None:
+        intensity = pixel_model.linlog_inverse(dr, log_in, integ.linlog_threshold)
+    alpha = pixel_model.lowpass_alpha(dr, intensity, dt, cfg.cutoff_hz, cfg.bright_intensity,
+                                      cfg.cutoff_min_fraction)
+    return log_prev + alpha * (log_in - log_prev)
+
+
 def advance(integ, log_prev, k_on, k_off, offset, log_in, intensity, dt, thresholds) -> tuple:
     """Every pixel through one step from state (``log_prev``, ``k_on``, ``k_off``, ``offset``) to the staged
     log brightness ``log_in`` over ``dt`` seconds (Float, opaque; None when no part of the model needs it):
@@ -49,11 +65,7 @@ def advance(integ, log_prev, k_on, k_off, offset, log_in, intensity, dt, thresho
     (:func:`step`). ``intensity`` is needed by the low-pass only. Returns the :class:`PixelLevels` and the
     thresholds counted against. Lazy: the caller evaluates."""
     cfg = integ.config
-    log_now = log_in
-    if cfg.cutoff_hz:
-        alpha = pixel_model.lowpass_alpha(dr, intensity, dt, cfg.cutoff_hz, cfg.bright_intensity,
-                                          cfg.cutoff_min_fraction)
-        log_now = log_prev + alpha * (log_in - log_prev)
+    log_now = lowpassed(integ, log_prev, log_in, intensity, dt)
     if cfg.leak_rate_hz:
         offset = offset - integ.leak_rate * integ.c_on * dt      # the reference sinks: ON events
     log_ref = pixel_model.reference_level(dr, mi.Float, integ.anchor, k_on, k_off, integ.c_on, integ.c_off)

@@ -59,6 +59,11 @@ def noise_map(timed, spp: int, seed: int, t: float, integ=None, frozen=None):
     return np.abs(logs[0] - logs[1]) / math.sqrt(2), frames[0]
 
 
+def _host(frame) -> np.ndarray:
+    """A kept frame as NumPy (a Dr.Jit Float is read back; NumPy passes)."""
+    return frame if isinstance(frame, np.ndarray) else frame.numpy()
+
+
 class AccuracyLimit:
     """Collects the frames the estimates need while the render runs; :meth:`note` writes the verdict."""
 
@@ -66,7 +71,7 @@ class AccuracyLimit:
         """``dt``: the step, or the first two steps (d1, d2) of steps placed by the image motion."""
         self.dts = tuple(dt) if isinstance(dt, (tuple, list)) else (dt, dt)
         self.spp, self.active = spp, active
-        self.frames, self.sigma, self.probed = [], None, None
+        self.frames, self.sigma, self.probed, self.other = [], None, None, None
 
     @classmethod
     def for_stepping(cls, st, sigma: np.ndarray | None = None) -> "AccuracyLimit":
@@ -90,30 +95,48 @@ class AccuracyLimit:
         if not self.active:
             return
         integ, st = loop.integ, loop.st
-        self.frames.append(integ.log_prev.numpy())
+        self.frames.append(integ.log_prev)
         if self.probed is not None:
             self.sigma = self.probed
             return
         loop.timed.set_time(t_start)
         loop.render_frame(st.seed + 1, once=True)
-        other = integ.staged.numpy()
+        self.other = integ.staged            # sigma from it at the end (:meth:`estimate`): no read-back now
         integ.staged = integ.staged_intensity = None          # not a step: nothing is committed
-        self.sigma = np.abs(self.frames[0] - other) / math.sqrt(2)
 
     @property
     def wants_frames(self) -> bool:
-        """True until the first two steps' frames are kept (:meth:`step_frame`)."""
-        return self.active and len(self.frames) < 3
+        """True from the first frame (:meth:`first_frame`; a resumed render has none, and keeps its checkpoint's
+        estimate) until the first two steps' frames are kept (:meth:`step_frame`)."""
+        return self.active and 1 <= len(self.frames) < 3
 
     def step_frame(self, log_now) -> None:
-        """Keep the log brightness (Dr.Jit Float) a step ended at, for the first two steps."""
+        """Keep the log brightness (Dr.Jit Float) a step ended at, for the first two steps. Kept on the device
+        and read at the end: a read here waited for the step's render on a GPU (a sync a step, twice a render)."""
         if self.wants_frames:
-            self.frames.append(log_now.numpy())
+            self.frames.append(log_now)
+
+    def step_held(self, integ, dt: float) -> None:
+        """:meth:`step_frame` for a step held for a batch (``step_batch``), whose pixels have not moved yet:
+        its staged frame, under a low-pass blended into the last frame kept as the batch's kernel will blend
+        it (``pixel_step.lowpassed``, over the step's ``dt`` seconds). Until 2026-11-27 a low-pass committed
+        the first two steps one at a time for this, each with its own event kernels and read-back."""
+        if not self.wants_frames:
+            return
+        from .. import backend
+        from ..plugins import pixel_step
+        mi, dr = backend.mi, backend.dr
+        end = pixel_step.lowpassed(integ, self.frames[-1], integ.staged, integ.staged_intensity,
+                                   dr.opaque(mi.Float, dt))
+        dr.eval(end)       # its own small kernel now (queued, not waited for): the frames it reads can go
+        self.step_frame(end)
 
     def estimate(self) -> dict | None:
+        if self.other is not None:           # the other seed's first frame, kept on the device until now
+            self.sigma, self.other = np.abs(_host(self.frames[0]) - _host(self.other)) / math.sqrt(2), None
         if self.sigma is None or len(self.frames) < 3:
             return None
-        l0, l1, l2 = self.frames
+        l0, l1, l2 = (_host(f) for f in self.frames)
         d1, d2 = self.dts
         slope = np.abs(l1 - l0) / d1
         active = slope > 0

@@ -256,11 +256,8 @@ class _Loop:
             p_idx, j = divmod(k, steps_per_period)
             step = st.duration / st.steps
             t0, t1, base_us = j * step, (j + 1) * step, grid_base_us + p_idx * period_us
-        # held on the device, committed with the next steps; but the accuracy limit reads the pixels' log
-        # brightness at the first two steps' ends, which under a low-pass is the pixels' state, not the frame
-        low_pass_frames = self.limit.wants_frames and self.integ.config.cutoff_hz
-        if self.batch is not None and not low_pass_frames:
-            self.limit.step_frame(self.integ.staged)     # (no low-pass: the staged frame is the step's end)
+        if self.batch is not None:                       # held on the device, committed with the next steps
+            self.limit.step_held(self.integ, t1 - t0)
             self.batch.add(t0, t1, base_us, complete_until_us=int(math.floor(t_next * 1e6)))
             return
         events = self.integ.commit_events(t0, t1, base_us)
