@@ -198,6 +198,8 @@ case "$stage" in
             tests/plugins/test_event_fill.py tests/simulate/test_determinism.py tests/simulate/test_convert.py \
             tests/simulate/test_checkpoint.py
         step pixel 90 $PY benchmarks/bench_pixel.py
+        # what the events add to the fan's render at 1280x720, kernels against host (33 s on a fresh H200)
+        step render_kernels 90 $PY benchmarks/profile_render_kernels.py $quick
         fan_to_hdf5
         main_demo
         # (240 s: on a slower host, 2026-11-27, its fan rows' host path alone ran it past 150 s)
@@ -205,7 +207,7 @@ case "$stage" in
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" "$W/tests_pixel.txt" | tail -n 40
         cat "$W/steps.txt"; grep -E "^real" "$W"/main_demo_*.txt
         grep -E "^[0-9]+ steps|^file writer" "$W/fan_render.txt"; tail -n 14 "$W/pixel.txt"
-        tail -n 20 "$W/event_engine.txt" ;;
+        grep -E "^\| (renders|events)|^The events add" "$W/render_kernels.md"; tail -n 20 "$W/event_engine.txt" ;;
     verify)
         # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
         # memory against the duration, the overlap's A/B, the converter's profile; 100 s on an H200

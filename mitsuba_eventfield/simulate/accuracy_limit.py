@@ -20,13 +20,44 @@ import math
 import numpy as np
 
 MIN_STEPS = 3
+MEDIAN_SAMPLE = 16384      # pixels of the regular sample that brackets a large image's weighted median
+MEDIAN_MARGIN = 0.05       # the bracket: the sample's weighted quantiles 0.5 -/+ this
+
+
+def _sorted_median(values, weights, below: float, half: float) -> float:
+    """The value where the cumulative weight, in ascending order of value and starting at ``below``, first
+    reaches ``half`` (the last value if rounding leaves it short)."""
+    order = np.argsort(values, kind="stable")
+    cum = below + np.cumsum(weights[order], dtype=np.float64)
+    return float(values[order][min(int(np.searchsorted(cum, half)), len(cum) - 1)])
 
 
 def event_median(values: np.ndarray, weights: np.ndarray) -> float:
-    """The weighted median of per-pixel ``values`` with each pixel counted by ``weights`` (its event rate)."""
-    order = np.argsort(values, kind="stable")
-    cum = np.cumsum(weights[order], dtype=np.float64)
-    return float(values[order][min(int(np.searchsorted(cum, 0.5 * cum[-1])), len(cum) - 1)])
+    """The weighted median of per-pixel ``values`` with each pixel counted by ``weights`` (its event rate): the
+    value, in ascending order, where the cumulative weight first reaches half the total.
+
+    Sorting every changing pixel cost 60 ms a median at 1280x720 on a GPU machine's host, at the end of every
+    render (0.15 s of the fan's 1.4 s render, two medians). A regular sample's weighted quantiles bracket the
+    median instead; only the pixels inside the bracket are sorted, after the weight below it is summed. Where
+    the bracket misses (the sample's weights unlike the image's), every pixel is sorted: the same value either
+    way (tests/simulate/test_accuracy_limit_steps.py)."""
+    values = np.asarray(values, np.float64).ravel()
+    weights = np.asarray(weights, np.float64).ravel()
+    half = 0.5 * float(weights.sum())
+    n = len(values)
+    if n > 4 * MEDIAN_SAMPLE:
+        every = slice(None, None, n // MEDIAN_SAMPLE)
+        sv, sw = values[every], weights[every]
+        order = np.argsort(sv, kind="stable")
+        cum = np.cumsum(sw[order]) / max(float(sw.sum()), 1e-300)
+        lo, hi = (sv[order][min(int(np.searchsorted(cum, q)), len(cum) - 1)]
+                  for q in (0.5 - MEDIAN_MARGIN, 0.5 + MEDIAN_MARGIN))
+        under = values < lo
+        inside = ~under & (values <= hi)
+        below = float(weights[under].sum())
+        if below < half <= below + float(weights[inside].sum()):
+            return _sorted_median(values[inside], weights[inside], below, half)
+    return _sorted_median(values, weights, 0.0, half)
 
 
 def noise_map(timed, spp: int, seed: int, t: float, integ=None, frozen=None):
