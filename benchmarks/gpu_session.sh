@@ -207,7 +207,7 @@ case "$stage" in
         grep -E " (FAILED|ERROR) |passed|failed" "$W/tests_known.txt" "$W/tests_pixel.txt" | tail -n 40
         cat "$W/steps.txt"; grep -E "^real" "$W"/main_demo_*.txt
         grep -E "^[0-9]+ steps|^file writer" "$W/fan_render.txt"; tail -n 14 "$W/pixel.txt"
-        grep -E "^\| (renders|events)|^The events add" "$W/render_kernels.md"; tail -n 20 "$W/event_engine.txt" ;;
+        grep -E "^\| (renders|events)|^With the history" "$W/render_kernels.md"; tail -n 20 "$W/event_engine.txt" ;;
     verify)
         # after a change made without a GPU: the known tests, the fan to HDF5 (the write's time), host and GPU
         # memory against the duration, the overlap's A/B, the converter's profile; 100 s on an H200

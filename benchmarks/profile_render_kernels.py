@@ -113,8 +113,10 @@ def main(quick=False):
           "|---|---|---|---|---|"]
     md += [f"| {name} | {v['wall_s']:.3f} | {v['kernels_s']:.3f} | {v['launches']} | {v['wall_no_history_s']:.3f} |"
            for name, v in r["runs"].items()]
-    md += ["", f"The events add {wall:.3f} s of wall time: {kernels:.3f} s of kernels, {wall - kernels:.3f} s "
-           "on the host (tracing, launches, reads, waiting).", "",
+    plain = e["wall_no_history_s"] - a["wall_no_history_s"]
+    md += ["", f"With the history on, the events add {wall:.3f} s of wall time: {kernels:.3f} s of kernels, "
+           f"{wall - kernels:.3f} s on the host (tracing, launches, reads, waiting). Without it they add "
+           f"{plain:.3f} s ({100 * plain / a['wall_no_history_s']:.1f} % of the renders alone).", "",
            "The kernels they add or change (launches and ms against the renders alone; negative: fewer there):", "",
            "| kernel (kind, operations, size) | launches | ms |", "|---|---|---|"]
     md += [f"| {g['kernel']} | {g['launches']} | {g['ms']:.2f} |" for g in r["added"][:20]]
