@@ -125,6 +125,7 @@ class AccuracyLimit:
         """Keep the first frame (the pixels' initial brightness) and render it again with another seed."""
         if not self.active:
             return
+        from .. import backend
         integ, st = loop.integ, loop.st
         self.frames.append(integ.log_prev)
         if self.probed is not None:
@@ -132,7 +133,8 @@ class AccuracyLimit:
             return
         loop.timed.set_time(t_start)
         loop.render_frame(st.seed + 1, once=True)
-        self.other = integ.staged            # sigma from it at the end (:meth:`estimate`): no read-back now
+        self.other = integ.staged            # sigma from it at the end (:meth:`estimate`): no read-back now,
+        backend.dr.eval(self.other)          # only queued: the rendered image it reads is released
         integ.staged = integ.staged_intensity = None          # not a step: nothing is committed
 
     @property
