@@ -20,16 +20,23 @@ import math
 import numpy as np
 
 MIN_STEPS = 3
-MEDIAN_SAMPLE = 16384      # pixels of the regular sample that brackets a large image's weighted median
-MEDIAN_MARGIN = 0.05       # the bracket: the sample's weighted quantiles 0.5 -/+ this
+MEDIAN_SAMPLE = 16384      # pixels of the random sample that brackets a large image's weighted median
+MEDIAN_MARGINS = (0.05, 0.2)   # the brackets tried: the sample's weighted quantiles 0.5 -/+ each
 
 
-def _sorted_median(values, weights, below: float, half: float) -> float:
+def _sorted_median(values, weights, below: float = 0.0, half: float | None = None) -> float:
     """The value where the cumulative weight, in ascending order of value and starting at ``below``, first
-    reaches ``half`` (the last value if rounding leaves it short)."""
+    reaches ``half`` (default: half its own total; the last value if rounding leaves it short)."""
     order = np.argsort(values, kind="stable")
     cum = below + np.cumsum(weights[order], dtype=np.float64)
+    half = 0.5 * cum[-1] if half is None else half
     return float(values[order][min(int(np.searchsorted(cum, half)), len(cum) - 1)])
+
+
+def _sample(n: int) -> np.ndarray:
+    """``MEDIAN_SAMPLE`` pixel indices drawn with a fixed seed (a regular stride followed the image's columns:
+    a value that changes with the column made the bracket miss)."""
+    return np.random.default_rng(0).integers(0, n, MEDIAN_SAMPLE)
 
 
 def event_median(values: np.ndarray, weights: np.ndarray) -> float:
@@ -37,27 +44,29 @@ def event_median(values: np.ndarray, weights: np.ndarray) -> float:
     value, in ascending order, where the cumulative weight first reaches half the total.
 
     Sorting every changing pixel cost 60 ms a median at 1280x720 on a GPU machine's host, at the end of every
-    render (0.15 s of the fan's 1.4 s render, two medians). A regular sample's weighted quantiles bracket the
-    median instead; only the pixels inside the bracket are sorted, after the weight below it is summed. Where
+    render (0.15 s of the fan's 1.4 s render, two medians). A random sample's weighted quantiles bracket the
+    median instead (``MEDIAN_MARGINS``, a wider bracket where the narrow one misses); only the pixels inside the bracket are sorted, after the weight below it is summed. Where
     the bracket misses (the sample's weights unlike the image's), every pixel is sorted: the same value either
-    way (tests/simulate/test_accuracy_limit_steps.py)."""
+    way, but where a partial sum equals half the total exactly, when the two sums' rounding may pick its
+    neighbour (tests/simulate/test_accuracy_limit_steps.py)."""
     values = np.asarray(values, np.float64).ravel()
     weights = np.asarray(weights, np.float64).ravel()
-    half = 0.5 * float(weights.sum())
     n = len(values)
     if n > 4 * MEDIAN_SAMPLE:
-        every = slice(None, None, n // MEDIAN_SAMPLE)
-        sv, sw = values[every], weights[every]
+        half = 0.5 * float(weights.sum())
+        pick = _sample(n)
+        sv, sw = values[pick], weights[pick]
         order = np.argsort(sv, kind="stable")
-        cum = np.cumsum(sw[order]) / max(float(sw.sum()), 1e-300)
-        lo, hi = (sv[order][min(int(np.searchsorted(cum, q)), len(cum) - 1)]
-                  for q in (0.5 - MEDIAN_MARGIN, 0.5 + MEDIAN_MARGIN))
-        under = values < lo
-        inside = ~under & (values <= hi)
-        below = float(weights[under].sum())
-        if below < half <= below + float(weights[inside].sum()):
-            return _sorted_median(values[inside], weights[inside], below, half)
-    return _sorted_median(values, weights, 0.0, half)
+        with np.errstate(invalid="ignore", divide="ignore"):          # an infinite weight: inf / inf
+            cum = np.cumsum(sw[order]) / float(sw.sum())
+        for margin in MEDIAN_MARGINS:      # a wider one where heavy-tailed weights moved the sample's quantiles
+            lo, hi = (sv[order][min(int(np.searchsorted(cum, q)), len(cum) - 1)] for q in (0.5 - margin, 0.5 + margin))
+            under = values < lo
+            inside = ~under & (values <= hi)
+            below = float(weights[under].sum())
+            if below < half <= below + float(weights[inside].sum()):
+                return _sorted_median(values[inside], weights[inside], below, half)
+    return _sorted_median(values, weights)
 
 
 def noise_map(timed, spp: int, seed: int, t: float, integ=None, frozen=None):
@@ -169,7 +178,8 @@ class AccuracyLimit:
             self.sigma, self.other = np.abs(_host(self.frames[0]) - _host(self.other)) / math.sqrt(2), None
         if self.sigma is None or len(self.frames) < 3:
             return None
-        l0, l1, l2 = (_host(f) for f in self.frames)
+        self.frames = [_host(f) for f in self.frames]      # read back once (a checkpoint estimates at each save)
+        l0, l1, l2 = self.frames
         d1, d2 = self.dts
         slope = np.abs(l1 - l0) / d1
         active = slope > 0
