@@ -24,8 +24,25 @@ _RUNS: dict = {}
 _RUNS_LOCK = threading.Lock()
 
 
+def check_not_input(output: str, inputs, what: str = "output") -> None:
+    """Refuse an output that is one of the ``inputs`` (paths; others ignored) under any name: the same file
+    through a symbolic or hard link too (``os.path.samefile``; comparing absolute paths let a link's target
+    be replaced by events)."""
+    for given in inputs:
+        if isinstance(given, (str, os.PathLike)) and os.path.exists(output) and os.path.exists(given):
+            try:
+                same = os.path.samefile(output, given)
+            except OSError:
+                same = False
+            if same:
+                raise EventFieldError(f"{what} path {output}: the output is the input {given}: choose another "
+                                      "file")
+
+
 def check_writable(path: str, what: str = "output") -> str:
     """Fail early (before any rendering) if the file ``path`` cannot be created; return its absolute path."""
+    if not str(path).strip():
+        raise EventFieldError(f"{what} path {str(path)!r}: empty: name a file")
     path = os.path.abspath(path)
     parent = os.path.dirname(path)
     if path in _KEPT:

@@ -33,6 +33,11 @@ _QUIET_MESSAGES = (
 _saved_appenders: list | None = None    # Mitsuba's appenders before quiet_mitsuba_log(), restored by (False)
 
 
+def mitsuba_log_is_quiet() -> bool:
+    """Whether :func:`quiet_mitsuba_log` is on in this process (a sweep's worker processes follow it)."""
+    return _saved_appenders is not None
+
+
 def quiet_mitsuba_log(enable: bool = True) -> bool:
     """Opt in to a quieter Mitsuba log: one appender printing to ``sys.stderr`` that drops the messages which
     are expected and say nothing to our users (``_QUIET_MESSAGES``: the monochrome-film note on every scene load

@@ -119,7 +119,7 @@ class PixelConfig:
     timestamp_resolution_us: float = 0.0  # > 0: timestamps floored to this clock (sensors: 1 us)
     readout_cap: float = 0.0              # events per second the readout can pass (0: unlimited)
     readout_cap_native_pixels: int = 0    # > 0: readout_cap is for a sensor of this many pixels; scaled by film
-    seed: int = 0                         # seeds the mismatch and every noise draw
+    seed: int = 0                         # seeds the mismatch and every noise draw (an integer >= 0)
     preset: str = "ideal"
 
     @property
@@ -152,6 +152,8 @@ class PixelConfig:
             if getattr(self, name) * 2 > c:
                 raise ConfigError(f"{where}: {name} = {getattr(self, name)}: with thresholds of {c} more than 4 % of "
                                  f"the thresholds would sit on their floor of C / 10; must be <= {c / 2:g}")
+        if self.seed != int(self.seed) or self.seed < 0:        # NumPy's generators take no negative seed
+            raise ConfigError(f"{where}: seed = {self.seed!r}: must be an integer >= 0")
         for name in ("shot_noise_bright_factor", "cutoff_min_fraction"):
             if not 0 < getattr(self, name) <= 1:
                 raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: must be in (0, 1]")

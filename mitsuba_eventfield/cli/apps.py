@@ -153,7 +153,8 @@ def run_highspeed(a) -> int:
     fan = os.path.basename(a.scene) == "fan.xml"
 
     def run():
-        scene_defines = pairs((highspeed.FAN_DEFAULTS["define"] if fan else []) + a.define, "-D")
+        # the fan's defaults, then the user's -D over them (one list refused a -D width that a default also set)
+        scene_defines = {**pairs(highspeed.FAN_DEFAULTS["define"] if fan else [], "-D"), **pairs(a.define, "-D")}
         planes = pairs(a.plane if a.plane is not None else (highspeed.FAN_DEFAULTS["plane"] if fan else []),
                        "--plane")
         return highspeed.refocus_planes(a.scene, planes, scene_defines, a.periods, a.views, a.start, progress=True)

@@ -34,6 +34,8 @@ def pairs(items, what: str) -> dict:
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise EventFieldError(f"{what} {item!r}: expected NAME=VALUE")
+        if out.get(key, value) != value:          # the last one won without a word
+            raise EventFieldError(f"{what} {key} given twice ({out[key]} and {value}): give it once")
         out[key] = value
     return out
 
@@ -55,6 +57,7 @@ def times_ms(text, what="--times"):
 # Every output a subcommand writes, checked in one place before any work starts (a render must not run for
 # minutes and then fail on its output path). Files: (argument, what); directories: the -o of the applications.
 OUTPUT_FILES = {"render": (("output", "event file"), ("preview", "preview")), "preview": (("output", "preview"),),
+                "convert": (("output", "event file"),),
                 "frame": (("output", "frame"),), "refocus": (("output", "refocused image"),),
                 "depth": (("output", "depth map"),), "calibrate": (("output", "calibration file"),),
                 "device": (("metadata", "metadata"),)}
@@ -68,16 +71,29 @@ OUTPUT_SUFFIXES = {("render", "preview"): (".png",), ("preview", "output"): (".p
                    ("calibrate", "output"): (".json",)}
 
 
+# outputs that may be one of the command's inputs: a calibration file is created or extended
+EXTENDED = {("calibrate", "output")}
+
+
 def check_outputs(args) -> None:
-    from ..atomic import check_output_dir, check_writable
-    for name, what in OUTPUT_FILES.get(args.command, ()):
+    """Every output path of the command (``OUTPUT_FILES``, ``OUTPUT_DIRS``) before any work: an empty one, an
+    unwritable one, a wrong kind, and a file that is one of the command's inputs (any other argument naming
+    an existing file, through a link too) are refused in one line."""
+    from ..atomic import check_not_input, check_output_dir, check_writable
+    files = OUTPUT_FILES.get(args.command, ())
+    for name, what in files:
         path = getattr(args, name, None)
-        if path:
-            check_writable(path, what)
-            suffixes = OUTPUT_SUFFIXES.get((args.command, name))
-            if suffixes and not path.lower().endswith(suffixes):
-                raise EventFieldError(f"{path}: {what} must be a {' or '.join(suffixes)} file")
+        if path is None:
+            continue
+        check_writable(path, what)
+        suffixes = OUTPUT_SUFFIXES.get((args.command, name))
+        if suffixes and not path.lower().endswith(suffixes):
+            raise EventFieldError(f"{path}: {what} must be a {' or '.join(suffixes)} file")
+        if (args.command, name) not in EXTENDED:
+            check_not_input(path, [v for k, v in vars(args).items() if k != name], what)
     if args.command in OUTPUT_DIRS:
+        if not str(args.output).strip():
+            raise EventFieldError("-o/--output: empty: name an output directory")
         check_output_dir(args.output)
 
 

@@ -214,7 +214,7 @@ def run_render(a) -> int:
         event_buffer_mb=a.event_buffer_mb, checkpoint_s=a.checkpoint_every, resume=a.resume,
         spp_changing=a.spp_changing, reuse=not a.no_reuse)
     print(summary.format())
-    if a.preview and os.path.splitext(a.output)[1].lower() != ".txt":
+    if a.preview:                # every format reads back (a .txt file too: it was skipped without a word)
         _render_preview(a)
     return 0
 
@@ -273,10 +273,16 @@ def run_preview(a) -> int:
     if (t0 is not None and t0 > end) or (t1 is not None and t1 <= start):    # an empty picture, written as a result
         raise EventFieldError(f"{a.file}: the window {'' if a.t0 is None else f'--t0 {a.t0:g} '}"
                               f"{'' if a.t1 is None else f'--t1 {a.t1:g} '}is outside the stream, which covers "
-                              f"{start / 1e3:g} to {end / 1e3:g} ms")
+                              f"{_ms(start)} to {_ms(end)} ms")
     write_preview(a.output, ev, t0, t1, scale=a.scale)
     print(f"wrote {a.output}: {len(ev.time_window(t0, t1))} events in the window")
     return 0
+
+
+def _ms(us: int) -> str:
+    """Integer microseconds as milliseconds with every digit kept (``%g`` printed 1.23457e+06 for both ends of
+    a recording at t = 1234.57 s) and no trailing zeros."""
+    return f"{us / 1e3:.3f}".rstrip("0").rstrip(".")
 
 
 def run_frame(a) -> int:

@@ -77,10 +77,18 @@ def grid(over: dict) -> list:
     for name, values in over.items():
         if not name.startswith(_PREFIXES):
             raise EventFieldError(f"sweep parameter {name!r}: must start with one of {', '.join(_PREFIXES)}")
-        if not isinstance(values, (list, tuple)) or not values:
-            raise EventFieldError(f"sweep parameter {name!r}: give a non-empty list of values")
+        if isinstance(values, (str, bytes, dict)) or not hasattr(values, "__iter__"):
+            raise EventFieldError(f"sweep parameter {name!r} = {values!r}: give a non-empty list of values (a "
+                                  "list, tuple, range or 1-D NumPy array)")
+    # np.linspace(...) and range(...) are how sweeps are written: any 1-D sequence, its NumPy numbers as Python's
+    columns = {name: [plain(v) for v in values] if getattr(values, "ndim", 1) == 1 else []
+               for name, values in over.items()}
+    for name, values in columns.items():
+        if not values:
+            raise EventFieldError(f"sweep parameter {name!r}: give a non-empty list of values (a list, tuple, "
+                                  "range or 1-D NumPy array)")
     names = list(over)
-    return [dict(zip(names, combo)) for combo in itertools.product(*(over[n] for n in names))]
+    return [dict(zip(names, combo)) for combo in itertools.product(*(columns[n] for n in names))]
 
 
 # load_scene's own keyword arguments: an ``xml.`` parameter of these names would not reach the XML
@@ -123,9 +131,14 @@ def point_key(scene: str, point: dict, inputs: str = "") -> str:
 
 
 def run_point(scene: str, point: dict, out_dir: str | None = None, keep_events: bool = False,
-              inputs: str = "") -> dict:
+              inputs: str = "", quiet: bool = False) -> dict:
     """Render one point (in whatever process this runs) and return its row: parameters, metrics, outputs.
-    ``inputs``: the scene's ``inputs_digest``, part of the point's key."""
+    ``inputs``: the scene's ``inputs_digest``, part of the point's key. ``quiet``: Mitsuba's quiet log here too
+    (the sweeping process had it: a spawned worker starts with Mitsuba's own, which printed the monochrome
+    film's warning once a point)."""
+    if quiet:
+        from ..backend import quiet_mitsuba_log
+        quiet_mitsuba_log()
     xml = {k[4:]: v for k, v in point.items() if k.startswith("xml.")}
     render = {k[7:]: v for k, v in point.items() if k.startswith("render.")}
     pixel = {k[6:]: v for k, v in point.items() if k.startswith("pixel.")}
@@ -158,6 +171,8 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
         raise EventFieldError(f"sweep: processes = {processes!r}: allowed range is whole numbers >= 1")
     points = [{k: plain(v) for k, v in dict(base or {}, **p).items()} for p in grid(over)]
     check_names(points[0])
+    for point in points:          # every point's pixel values too (a bad one failed in a worker, after spawning)
+        check_pixel(point)
     inputs = inputs_digest(scene)
     keys = [point_key(scene, p, inputs) for p in points]
     done = {}
@@ -169,17 +184,19 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
                 done[key] = row
     todo = [p for p, key in zip(points, keys) if key not in done]
     results = {}
+    from ..backend import mitsuba_log_is_quiet
+    quiet = mitsuba_log_is_quiet()                # the workers follow this process's choice
     if todo:
         if client is not None:                                  # Dask distributed
             futures = client.map(run_point, [scene] * len(todo), todo, [out_dir] * len(todo),
-                                 [keep_events] * len(todo), [inputs] * len(todo), pure=False)
+                                 [keep_events] * len(todo), [inputs] * len(todo), [quiet] * len(todo), pure=False)
             rows = client.gather(futures)
         else:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
             with ProcessPoolExecutor(max_workers=max(1, processes),
                                      mp_context=multiprocessing.get_context("spawn")) as pool:
-                futs = [pool.submit(run_point, scene, p, out_dir, keep_events, inputs) for p in todo]
+                futs = [pool.submit(run_point, scene, p, out_dir, keep_events, inputs, quiet) for p in todo]
                 if progress:
                     from ..simulate.summary import progress_bar
                     for _ in progress_bar(futs, desc="sweep", unit="point"):
@@ -202,6 +219,17 @@ def _done_row(out_dir: str, key: str, keep_events: bool) -> dict | None:
     if keep_events and not (row.get("events_path") and os.path.isfile(row["events_path"])):
         return None
     return dict(row, resumed=True)
+
+
+def check_pixel(point: dict) -> None:
+    """The point's ``pixel.`` values (with its ``render.preset``) as the pixel model checks them, refused in one
+    line naming the point's parameters."""
+    from ..plugins import pixel_model
+    pixel = {k[6:]: v for k, v in point.items() if k.startswith("pixel.")}
+    if pixel:
+        where = "sweep point " + ", ".join(f"{k}={v}" for k, v in point.items() if k.startswith("pixel."))
+        preset, overrides = pixel_model.preset_and_overrides(point.get("render.preset"), pixel, where)
+        pixel_model.pixel_config(preset or "ideal", where, **overrides)
 
 
 def check_names(point: dict) -> None:

@@ -185,6 +185,9 @@ def _read_aedat4(path):
 
 def _read_npz(path):
     with np.load(path, allow_pickle=False) as z:
+        if "frames" in z and "x" not in z:      # a frame stack ("missing entry 'timestamp'" said nothing of it)
+            raise BadFile("a frame stack ('frames'), not events: convert it first (eventfield convert "
+                          f"{os.path.basename(path)} -o EVENTS.h5)")
         if "t" in z:
             t, p = z["t"], z["p"]
         else:  # a TimeLens file written elsewhere

@@ -208,7 +208,8 @@ class Aedat4EventWriter(_PartialFile):
     def append(self, x, y, t, p, complete_until_us=None):
         x, y, t, p = self._checked(x, y, t, p)
         if len(t) and t[0] < 0:
-            raise ValueError(f"{self.path}: AEDAT4 holds timestamps >= 0 only (this chunk starts at {int(t[0])} us)")
+            raise EventFieldError(f"{self.path}: AEDAT4 holds timestamps >= 0 only (this chunk starts at "
+                                  f"{int(t[0])} us): choose .h5, .npz or .txt, or shift the times")
         need = AEDAT4_BYTES_PER_EVENT * len(t) + HEADER_BYTES
         check_space(self.path, need)
         with disk_errors(self.path, need):

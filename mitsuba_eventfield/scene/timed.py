@@ -199,6 +199,14 @@ class TimedScene:
         return d
 
 
+def _xml_value(value) -> str:
+    """An XML default's text: a whole float as an integer (``width=64.0`` from arithmetic or NumPy; Mitsuba
+    refused "64.0" for an integer parameter, and a float parameter reads "64" as well)."""
+    if isinstance(value, (float, np.floating)) and float(value).is_integer():
+        return str(int(value))
+    return str(value.item() if isinstance(value, np.generic) else value)
+
+
 def load_scene(scene, motion="auto", variant: str | None = None, color: bool = False, sampler: dict | None = None,
                **xml_params) -> TimedScene:
     """Load a Mitsuba XML scene (or wrap an ``mi.Scene``) with its motion.
@@ -222,7 +230,7 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
     motion = _resolve_motion(motion, path)     # before the scene: which shapes move decides how it is loaded
     sampler_choice, instanced, text = "the scene's own", [], None
     if path is not None:
-        xml_params = {k: str(v) for k, v in _film_override(path, xml_params).items()}
+        xml_params = {k: _xml_value(v) for k, v in _film_override(path, xml_params).items()}
         try:
             with open(path) as f:
                 original = f.read()

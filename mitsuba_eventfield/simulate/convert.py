@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import backend
 from .._version import __version__
-from ..atomic import check_writable
+from ..atomic import check_not_input, check_writable
 from ..errors import EventFieldError, raise_if_stopped
 from ..events.io import format_of
 from ..plugins import event_batch, event_fill, pixel_model, pixel_step
@@ -78,11 +78,10 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     if too_large:
         raise EventFieldError(f"{source.name}: {too_large}")
     check_span(source.name, source.span_s)
-    if output:
+    if output is not None:
         check_writable(output, "event file")
         format_of(output, fmt)
-        if isinstance(frames, (str, os.PathLike)) and os.path.abspath(output) == os.path.abspath(frames):
-            raise EventFieldError(f"{output}: the output is the input: choose another event file")
+        check_not_input(output, (frames, times), "event file")
     integ = pixel_integrator(preset, pixel, threshold)
     integ.config.check_film(source.width * source.height, f"{source.name}: pixel model")
     summary = RenderSummary(width=source.width, height=source.height, output=os.path.abspath(output) if output else None)

@@ -61,7 +61,8 @@ def read_times(times):
             return np.load(path, allow_pickle=False)
         with warnings.catch_warnings():     # an empty file: NumPy warns, and check_times says it in one line
             warnings.simplefilter("ignore", UserWarning)
-            return np.loadtxt(path, dtype=np.float64, comments="#", ndmin=1)
+            # utf-8-sig: a byte-order mark from a Windows editor is not part of the first number
+            return np.loadtxt(path, dtype=np.float64, comments="#", ndmin=1, encoding="utf-8-sig")
     except OSError as e:
         raise EventFieldError(f"{path}: cannot read the frame times ({e.strerror or type(e).__name__})") from None
     except ValueError as e:
@@ -73,7 +74,7 @@ def read_times(times):
 def _bad_line(path: str) -> str | None:
     """"line N: 'text'" of the first line of a times file that is not one number (N counted from 1 over every
     line: NumPy's own message counts rows from 0, and without the blank and comment lines)."""
-    with open(path, errors="replace") as f:
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
         for n, line in enumerate(f, 1):
             text = line.split("#", 1)[0].strip()
             try:

@@ -386,7 +386,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   t_start, px_per_step)
     width, height = timed.film_size
     check_memory(width, height, st.spp, where=f"{timed.path or 'scene'}: film")
-    if output:
+    if output is not None:                          # "" refused, not taken for "in memory"
         check_writable(output, "event file")
         format_of(output, fmt)
     integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel, st.seed)

@@ -1,0 +1,122 @@
+"""What a new user's walkthrough (2026-11-27, a researcher converting videos and sweeping at scale) found: each
+case refused in one line before any work and with its inputs kept, or now doing what the user asked."""
+import os
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield import cli
+from mitsuba_eventfield.evaluation.sweep import grid
+
+DEMO = os.path.join(ROOT, "scenes", "demo", "demo.xml")
+TINY = ["-D", "width=24", "-D", "height=18", "--duration", "0.002", "--steps", "4", "--quiet"]
+
+
+@pytest.fixture
+def ramp(tmp_path):
+    """A brightening 8x8 frame stack: 1.1 log units over 5 ms (5 events a pixel at C = 0.2)."""
+    path = tmp_path / "ramp.npz"
+    np.savez(path, frames=np.exp(np.linspace(0, 1.1, 6))[:, None, None] * np.ones((6, 8, 8), np.float32),
+             times=np.linspace(0, 0.005, 6))
+    return path
+
+
+def _refused(argv, capsys, *words):
+    assert cli.main([str(a) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and all(w in err for w in words), err
+    return err
+
+
+def test_an_output_that_is_an_input_through_a_link_is_refused_and_the_input_kept(ramp, tmp_path, capsys):
+    before = ramp.read_bytes()
+    link = tmp_path / "link.npz"
+    os.symlink(ramp, link)
+    _refused(["convert", link, "-o", ramp], capsys, "the output is the input")
+    hard = tmp_path / "hard.npz"
+    os.link(ramp, hard)
+    with pytest.raises(ef.EventFieldError, match="the output is the input"):
+        ef.events_from_frames(str(hard), output=str(ramp))
+    times = tmp_path / "times.txt"
+    times.write_text("0\n0.001\n0.002\n")
+    frames = tmp_path / "imgs"
+    frames.mkdir()
+    import cv2
+    for k in range(3):
+        cv2.imwrite(str(frames / f"f{k}.png"), np.full((8, 8), 40 * k + 20, np.uint8))
+    _refused(["convert", frames, "-o", times, "--times", times], capsys, "the output is the input")
+    assert ramp.read_bytes() == before and times.read_text() == "0\n0.001\n0.002\n"
+
+
+def test_an_empty_output_path_is_refused_before_any_work(ramp, capsys):
+    _refused(["render", DEMO, "-o", "", *TINY], capsys, "empty")
+    _refused(["convert", ramp, "-o", ""], capsys, "empty")
+    with pytest.raises(ef.EventFieldError, match="empty"):
+        ef.events_from_frames(str(ramp), output="")
+    with pytest.raises(ef.EventFieldError, match="empty"):
+        ef.render_events(ef.load_scene(DEMO, width=24, height=18), 0.002, steps=4, output=" ")
+
+
+def test_a_negative_pixel_seed_names_the_field(ramp, tmp_path, capsys):
+    _refused(["convert", ramp, "-o", tmp_path / "r.h5", "--pixel", "seed=-1"], capsys, "seed = -1", ">= 0")
+    assert not (tmp_path / "r.h5").exists()
+
+
+def test_a_define_given_twice_is_refused(tmp_path, capsys):
+    _refused(["render", DEMO, "-o", tmp_path / "a.h5", "-D", "width=32", *TINY], capsys, "-D width given twice")
+
+
+def test_negative_times_into_aedat4_are_one_line(tmp_path, capsys):
+    pytest.importorskip("dv_processing")
+    path = tmp_path / "neg.npz"
+    np.savez(path, frames=np.exp(np.linspace(0, 1, 6))[:, None, None] * np.ones((6, 8, 8), np.float32),
+             times=np.linspace(0, 0.005, 6) - 0.5)
+    # found at the first chunk (the progress bar has started): the error is the last line, with no traceback
+    assert cli.main(["convert", str(path), "-o", str(tmp_path / "neg.aedat4")]) == 2
+    err = capsys.readouterr().err
+    assert "AEDAT4 holds timestamps >= 0 only" in err.strip().splitlines()[-1] and "Traceback" not in err
+    assert not (tmp_path / "neg.aedat4").exists()
+
+
+def test_a_text_output_gets_its_preview(tmp_path):
+    assert cli.main(["render", DEMO, "-o", str(tmp_path / "e.txt"), "--preview", str(tmp_path / "p.png"), *TINY]) == 0
+    assert (tmp_path / "p.png").stat().st_size > 0
+
+
+def test_info_on_a_frame_stack_points_to_convert(ramp, capsys):
+    _refused(["info", ramp], capsys, "a frame stack", "eventfield convert")
+
+
+def test_a_times_file_with_a_byte_order_mark_is_read(ramp, tmp_path):
+    times = tmp_path / "bom.txt"
+    times.write_bytes(b"\xef\xbb\xbf" + b"\n".join(str(t).encode() for t in np.linspace(0, 0.005, 6)))
+    frames = np.load(ramp)["frames"]
+    ev = ef.events_from_frames(frames, str(times))
+    assert len(ev) == 8 * 8 * 5 and ev.t.min() > 0 and ev.t.max() <= 5000
+
+
+def test_a_whole_float_film_size_and_numpy_sweep_values_are_taken():
+    timed = ef.load_scene(DEMO, width=24.0, height=np.int64(18))
+    assert timed.film_size == (24, 18)
+    points = grid({"xml.amplitude": np.linspace(0.1, 0.2, 2), "render.spp": range(1, 3)})
+    assert points[-1] == {"xml.amplitude": 0.2, "render.spp": 2} and type(points[0]["xml.amplitude"]) is float
+    for bad in ([], "abc", np.zeros((2, 2)), 4):
+        with pytest.raises(ef.EventFieldError, match="give a non-empty list of values"):
+            grid({"render.spp": bad})
+
+
+def test_a_sweep_checks_every_points_pixel_before_spawning_and_its_workers_log_quietly(tmp_path, capfd):
+    base = {"xml.width": 24, "xml.height": 18, "render.duration": 0.002, "render.steps": 4}
+    with pytest.raises(ef.EventFieldError, match=r"sweep point pixel.refractory_s=-1.0: refractory_s = -1.0"):
+        ef.sweep(DEMO, over={"pixel.refractory_s": [0.0, -1.0]}, base=base, out_dir=str(tmp_path / "bad"))
+    assert not (tmp_path / "bad").exists() or not os.listdir(tmp_path / "bad")        # no point was run
+    was = ef.quiet_mitsuba_log()
+    try:
+        capfd.readouterr()
+        table = ef.sweep(DEMO, over={"render.spp": [1]}, base=base, processes=1)
+        # the spawned worker loaded a monochrome scene: Mitsuba's own log printed its warning there
+        assert len(table.rows) == 1 and "Monochrome" not in capfd.readouterr().err
+    finally:
+        ef.quiet_mitsuba_log(was)
