@@ -21,6 +21,7 @@ MAX_STEPS = 10_000_000         # time steps per render (each costs a render of t
 MAX_VIEWS = 4096               # views per scan period / frames per light field
 MAX_PLANES = 1000              # depth planes searched
 MAX_SPP = 65536
+MAX_THRESHOLD = 10.0           # contrast thresholds, log units (e^10: a 22,000x change for one event)
 
 
 def number(value, name: str, lo=None, hi=None, *, integer: bool = False, lo_open: bool = False,

@@ -16,6 +16,7 @@ import numpy as np
 
 from mitsuba_eventfield.errors import ConfigError   # a ValueError too: one named error for bad pixel input
 from mitsuba_eventfield.plugins.readout import READOUT_BINS_PER_MS
+from mitsuba_eventfield.validate import MAX_THRESHOLD
 
 
 def linlog(dr, intensity, linear_below: float):
@@ -138,6 +139,10 @@ class PixelConfig:
         for name in ("threshold_on", "threshold_off", "linlog_threshold", "bright_intensity"):
             if getattr(self, name) <= 0:
                 raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: must be > 0")
+        for name in ("threshold_on", "threshold_off"):       # the command line's bound, for the library too
+            if getattr(self, name) > MAX_THRESHOLD:
+                raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: allowed range is (0, {MAX_THRESHOLD:g}] "
+                                  "(log units)")
         for name in ("threshold_sigma", "threshold_jitter", "refractory_s", "leak_rate_hz", "leak_jitter",
                      "shot_noise_hz", "cutoff_hz", "timestamp_resolution_us", "readout_cap",
                      "readout_cap_native_pixels"):

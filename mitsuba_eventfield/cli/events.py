@@ -5,7 +5,7 @@ import json
 import os
 
 from ..errors import EventFieldError
-from ..validate import MAX_DURATION_S, MAX_SPP, MAX_STEPS
+from ..validate import MAX_DURATION_S, MAX_SPP, MAX_STEPS, MAX_THRESHOLD
 from .args import add_defines, defines, num, pairs, save_image, times_ms
 
 PIXEL_INTEGERS = ("seed", "readout_cap_native_pixels")
@@ -79,10 +79,7 @@ def _add_render(sub) -> None:
                         "cannot change once per period)")
     r.add_argument("--independent-seeds", action="store_true",
                    help="new seed every step (Monte-Carlo noise then fires events; for comparisons only)")
-    r.add_argument("--threshold", type=num(0, 10, lo_open=True),
-                   help="contrast threshold C for ON and OFF (default: scene's or 0.2)")
-    r.add_argument("--threshold-on", type=num(0, 10, lo_open=True), help="ON threshold (overrides --threshold)")
-    r.add_argument("--threshold-off", type=num(0, 10, lo_open=True), help="OFF threshold (overrides --threshold)")
+    _add_thresholds(r, "scene's or 0.2")
     r.add_argument("--linlog-threshold", type=num(0, 1e6, lo_open=True),
                    help="radiance below which the response is linear (1e-3)")
     _add_pixel_options(r)
@@ -128,19 +125,38 @@ def _add_convert(sub) -> None:
     clock.add_argument("--times", metavar="FILE",
                        help="the frames' times in seconds, one a line (text; '#' comments) or a .npy array: "
                             "frames at uneven times, e.g. ESIM's or rpg_vid2e's timestamps.txt")
-    c.add_argument("--threshold", type=num(0, 10, lo_open=True),
-                   help="contrast threshold C for ON and OFF (default: the preset's; 0.2 for the ideal pixel)")
+    _add_thresholds(c, "the preset's; 0.2 for the ideal pixel")
     c.add_argument("--srgb", action="store_true", help="decode gamma-encoded (sRGB) frames to linear light first")
     _add_pixel_options(c)
     c.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _add_thresholds(parser, default: str) -> None:
+    """--threshold and the per-polarity --threshold-on / --threshold-off (render and convert alike)."""
+    parser.add_argument("--threshold", type=num(0, MAX_THRESHOLD, lo_open=True),
+                        help=f"contrast threshold C for ON and OFF (default: {default})")
+    parser.add_argument("--threshold-on", type=num(0, MAX_THRESHOLD, lo_open=True),
+                        help="ON threshold (overrides --threshold)")
+    parser.add_argument("--threshold-off", type=num(0, MAX_THRESHOLD, lo_open=True),
+                        help="OFF threshold (overrides --threshold)")
 
 
 def run_convert(a) -> int:
     from ..backend import set_variant
     from ..simulate.convert import events_from_frames
     set_variant(a.variant)
-    summary = events_from_frames(a.input, a.times, fps=a.fps, preset=a.preset, pixel=pixel_overrides(a.pixel),
-                                 threshold=a.threshold, srgb=a.srgb, output=a.output, progress=not a.quiet,
+    pixel, threshold = pixel_overrides(a.pixel), a.threshold
+    if a.threshold_on is not None or a.threshold_off is not None:      # each side: its own, else --threshold
+        for name, own in (("threshold_on", a.threshold_on), ("threshold_off", a.threshold_off)):
+            value = threshold if own is None else own
+            if value is not None and name in pixel:
+                raise EventFieldError(f"--{name.replace('_', '-')} (or --threshold) and --pixel {name}= both "
+                                      "given: give one")
+            if value is not None:
+                pixel[name] = value
+        threshold = None
+    summary = events_from_frames(a.input, a.times, fps=a.fps, preset=a.preset, pixel=pixel, threshold=threshold,
+                                 srgb=a.srgb, output=a.output, progress=not a.quiet,
                                  event_buffer_mb=a.event_buffer_mb)
     print(summary.format())
     return 0

@@ -120,3 +120,20 @@ def test_a_sweep_checks_every_points_pixel_before_spawning_and_its_workers_log_q
         assert len(table.rows) == 1 and "Monochrome" not in capfd.readouterr().err
     finally:
         ef.quiet_mitsuba_log(was)
+
+
+def test_convert_takes_a_threshold_for_each_polarity(tmp_path):
+    """ON at 0.1 and OFF at 0.3 on a frame stack that brightens by 1.1 and darkens back: 11 ON events a pixel
+    (levels 0.1 .. 1.1 within rounding: at least 10) and 3 OFF (1.1 -> 0 falls through 0.8, 0.5, 0.2)."""
+    path = tmp_path / "updown.npz"
+    logs = np.r_[np.linspace(0, 1.1, 6), np.linspace(1.1, 0, 6)[1:]]
+    np.savez(path, frames=np.exp(logs)[:, None, None] * np.ones((len(logs), 4, 4), np.float32),
+             times=np.linspace(0, 0.01, len(logs)))
+    out = tmp_path / "ud.h5"
+    assert cli.main(["convert", str(path), "-o", str(out), "--threshold-on", "0.1", "--threshold-off", "0.3",
+                     "--quiet"]) == 0
+    ev = ef.read_events(str(out))
+    on, off = (np.count_nonzero(ev.p == s) / 16 for s in (1, -1))
+    assert 10 <= on <= 11 and off == 3 and ev.meta["pixel_model"]["threshold_on"] == 0.1
+    with pytest.raises(ef.EventFieldError, match="allowed range is"):
+        ef.events_from_frames(np.load(path)["frames"], np.load(path)["times"], threshold=50)
