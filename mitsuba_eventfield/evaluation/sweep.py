@@ -223,12 +223,17 @@ def _done_row(out_dir: str, key: str, keep_events: bool) -> dict | None:
 
 def check_pixel(point: dict) -> None:
     """The point's ``pixel.`` values (with its ``render.preset``) as the pixel model checks them, refused in one
-    line naming the point's parameters."""
+    line naming the point's parameters. Thresholds the point does not set come from the scene (unknown until a
+    worker loads it): the largest allowed stands in for them, so that only what no scene could make valid
+    (a spread beyond half of it) is refused here."""
     from ..plugins import pixel_model
+    from ..validate import MAX_THRESHOLD
     pixel = {k[6:]: v for k, v in point.items() if k.startswith("pixel.")}
     if pixel:
         where = "sweep point " + ", ".join(f"{k}={v}" for k, v in point.items() if k.startswith("pixel."))
         preset, overrides = pixel_model.preset_and_overrides(point.get("render.preset"), pixel, where)
+        for side in ("threshold_on", "threshold_off"):
+            overrides.setdefault(side, MAX_THRESHOLD)
         pixel_model.pixel_config(preset or "ideal", where, **overrides)
 
 
