@@ -98,7 +98,14 @@ class GalvoController:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, exc_type, exc, tb):
+        # leaving while scanning, normally or by Ctrl-C / SIGTERM (the user's "stop"): ramp down first, as
+        # ``stop`` does (the outputs switched off at full amplitude before); on any other error ``close``'s quick
+        # switch-off, and also when the ramp itself fails
+        if self.running and not self._closed and (exc_type is None
+                                                  or issubclass(exc_type, (KeyboardInterrupt, SystemExit))):
+            with contextlib.suppress(Exception):
+                self.stop()
         self.close()
 
     # ------------------------------------------------------------------ planning (no bytes sent)
@@ -260,7 +267,12 @@ class GalvoController:
                               + "; ".join(f"{c}: {m}" for c, m in errors))
 
     def stop(self, sleep=time.sleep) -> None:
-        """Ramp the amplitude down, then switch the outputs off (also when the ramp fails)."""
+        """Ramp the amplitude down, then switch the outputs off (also when the ramp fails). Ctrl-C and SIGTERM
+        wait until it is done (``ramp_time``): a second Ctrl-C cut the ramp short at full amplitude."""
+        with _signals_held():
+            self._ramp_down(sleep)
+
+    def _ramp_down(self, sleep) -> None:
         try:
             if self.sines and self.running:
                 for k in range(self.ramp_steps - 1, 0, -1):
@@ -372,6 +384,8 @@ class GalvoController:
                     "high_z": True}
             if not s.is_dc:
                 want.update(frequency=s.frequency, vpp=self._vpp(s, fraction), phase=s.phase_deg)
+                if "unit" in got:         # the amplitude's unit, where the dialect sets it: Vpp, not Vrms or dBm
+                    want["unit"] = "VPP"
             if outputs_on is not None:
                 want["output"] = outputs_on
             for name, w in want.items():

@@ -103,7 +103,8 @@ class _SourceSubsystem(Dialect):
 
     def readback(self, ch):
         src, out = f"{self.prefix}SOUR{ch}", f"{self.prefix}OUTP{ch}"
-        return {"function": (f"{src}:FUNC?", _function_name),
+        unit = {"unit": (f"{src}:VOLT:UNIT?", lambda text: text.strip().upper())} if self.sets_unit else {}
+        return {**unit, "function": (f"{src}:FUNC?", _function_name),
                 "frequency": (f"{src}:FREQ?", float), "vpp": (f"{src}:VOLT?", float),
                 "offset": (f"{src}:VOLT:OFFS?", float), "phase": (f"{src}:PHAS?", float),
                 "high_z": (f"{out}:LOAD?", _high_z),
@@ -139,6 +140,8 @@ class Keysight33500(_SourceSubsystem):
 class RigolDG(_SourceSubsystem):
     name = "rigol"
     prefix = ":"
+    # DG800/900/1000Z: :SOUR<n>:VOLT:UNIT {VPP|VRMS|DBM}; a generator left in Vrms put out 2.83x the Vpp asked
+    sets_unit = True
     phase_sync = ":SOUR1:PHAS:INIT"
 
 

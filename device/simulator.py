@@ -22,7 +22,8 @@ from .dialects import SafetyError, dialect
 LIMITS = {"frequency": (1e-6, 1e5), "vpp": (1e-3, 20.0), "offset": (-10.0, 10.0), "phase": (-360.0, 360.0)}
 MAX_PEAK_V = 10.0
 DEFAULT_CHANNEL = {"function": "SIN", "frequency": 1000.0, "vpp": 0.1, "offset": 0.0, "phase": 0.0,
-                   "high_z": False, "output": False}
+                   "high_z": False, "output": False, "unit": "VPP"}
+UNITS = ("VPP", "VRMS", "DBM")     # the amplitude units SCPI generators keep (a preset may hold another)
 IDENTITY = {"keysight": "Keysight Technologies,33522B,SIM00001,sim-2.0",
             "rigol": "Rigol Technologies,DG812,SIM00002,sim-2.0",
             "siglent": "Siglent Technologies,SDG2042X,SIM00003,sim-2.0"}
@@ -83,8 +84,11 @@ class SimulatedGenerator:
         """All settings of one command, or none of them (a refused command changes nothing)."""
         pending = {}
         for ch, key, value in changes:
-            if ch is None or key == "unit":
+            if ch is None:
                 continue
+            if key == "unit" and value not in UNITS:
+                self.error_queue.append((-224, f"Illegal parameter value; unit {value}"))
+                return
             if key in LIMITS and not LIMITS[key][0] <= value <= LIMITS[key][1]:
                 self.error_queue.append((-222, f"Data out of range; {key} {value:g}"))
                 return
@@ -103,12 +107,12 @@ class SimulatedGenerator:
 
     def _answer_scpi(self, cmd):
         p = re.escape(":" if self.dialect.name == "rigol" else "")
-        m = re.fullmatch(p + r"SOUR([12]):(FUNC|FREQ|VOLT|VOLT:OFFS|PHAS)\?", cmd)
+        m = re.fullmatch(p + r"SOUR([12]):(FUNC|FREQ|VOLT|VOLT:OFFS|PHAS|VOLT:UNIT)\?", cmd)
         if m:
             s = self.state[int(m.group(1))]
             key = {"FUNC": "function", "FREQ": "frequency", "VOLT": "vpp", "VOLT:OFFS": "offset",
-                   "PHAS": "phase"}[m.group(2)]
-            return s[key] if key == "function" else f"{s[key]:+.10E}"
+                   "PHAS": "phase", "VOLT:UNIT": "unit"}[m.group(2)]
+            return s[key] if key in ("function", "unit") else f"{s[key]:+.10E}"
         m = re.fullmatch(p + r"OUTP([12])(:LOAD)?\?", cmd)
         if m:
             s = self.state[int(m.group(1))]

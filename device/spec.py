@@ -67,9 +67,15 @@ class GalvoSpec:
         if not lo <= vpd <= hi:
             raise SafetyError(f"volts_per_deg = {vpd:g}: allowed range is {lo:g} to {hi:g} V per mechanical degree "
                               "(check the driver's jumper)")
+        model = GALVO_MODELS.get(self.model)
+        if model is None or model.volts_per_deg is None:     # "ideal": a simulated mirror with no limits
+            real = ", ".join(n for n, m in GALVO_MODELS.items() if m.volts_per_deg is not None)
+            raise SafetyError(f"model = {self.model!r}: the device layer drives a real galvo; allowed {real}")
         for name in ("max_volts", "max_mech_deg"):
-            if not finite_number(getattr(self, name), name) > 0:
-                raise SafetyError(f"{name} = {getattr(self, name)!r}: must be > 0")
+            value, most = finite_number(getattr(self, name), name), getattr(model, name)
+            if not 0 < value <= most:
+                raise SafetyError(f"{name} = {value:g}: allowed range is (0, {most:g}], the {model.name} galvo's "
+                                  "(a rig's spec may narrow its limits, never widen them)")
         pts = tuple(self.envelope)
         if not pts or any(len(p) != 2 for p in pts):
             raise SafetyError("envelope: expected ((frequency Hz, amplitude deg), ...) pairs")
@@ -78,6 +84,22 @@ class GalvoSpec:
                 raise SafetyError(f"envelope point ({f!r}, {a!r}): frequency and amplitude must be > 0")
         if any(f1 <= f0 for (f0, _), (f1, _) in zip(pts[:-1], pts[1:])):
             raise SafetyError("envelope: frequencies must increase")
+        # a copy of plain numbers: the caller's list, kept and read at every check, could change after this one
+        object.__setattr__(self, "envelope", tuple((float(f), float(a)) for f, a in pts))
+        self._within(model)
+
+    def _within(self, model) -> None:
+        """Refuse an envelope above the galvo model's anywhere: both are piecewise linear in log-log, so their
+        points together are where the difference can peak."""
+        mine = ScanEnvelope(model.name, model.max_mech_deg, self.envelope, None)
+        if mine.max_frequency > model.max_frequency:
+            raise SafetyError(f"envelope: up to {mine.max_frequency:g} Hz, above the {model.name} galvo's "
+                              f"{model.max_frequency:g} Hz (a rig's spec may narrow its limits, never widen them)")
+        for f in sorted({f for f, _ in self.envelope} | {f for f, _ in model.derating if f <= mine.max_frequency}):
+            here, most = mine.derated_amplitude_deg(f), model.derated_amplitude_deg(f)
+            if here > most * (1 + 1e-9):
+                raise SafetyError(f"envelope: {here:.4g} deg at {f:g} Hz, above the {model.name} galvo's "
+                                  f"{most:.4g} deg there (a rig's spec may narrow its limits, never widen them)")
 
     @property
     def scan_envelope(self) -> ScanEnvelope:

@@ -4,6 +4,7 @@ way out."""
 from __future__ import annotations
 
 import argparse
+import sys
 
 from ..device.spec import MAX_DURATION_S as MAX_SCAN_S
 from ..device.spec import PHASE_RANGE_DEG, VOLTS_PER_DEG_RANGE
@@ -66,10 +67,15 @@ def _scan(a, ctl, curve, duration) -> None:
     if a.metadata:
         write_json(a.metadata, ctl.metadata(curve), "metadata")
     end = time.monotonic() + duration if duration > 0 else float("inf")
-    while time.monotonic() < end:
-        time.sleep(max(0.0, min(0.2, end - time.monotonic())))
+    try:
+        while time.monotonic() < end:
+            time.sleep(max(0.0, min(0.2, end - time.monotonic())))
+    except BaseException:          # Ctrl-C or SIGTERM, the usual end of a scan without a duration
+        ctl.stop()                 # ramped down, as at the end of a duration (a second Ctrl-C waits for it)
+        print("interrupted: amplitude ramped down, outputs off", file=sys.stderr)
+        raise
     ctl.stop()
-    print("stopped: outputs off")
+    print("stopped: amplitude ramped down, outputs off")
 
 
 def run_device(a) -> int:

@@ -38,8 +38,10 @@ EXPECTED = {
                   "SOUR1:PHAS:SYNC", "OUTP1 ON", "OUTP2 ON", "SOUR1:VOLT 0.8", "SOUR2:VOLT 0.8"],
                  ["SOUR1:VOLT 0.4", "SOUR2:VOLT 0.4", "OUTP1 OFF", "OUTP2 OFF"]),
     "rigol": ([":OUTP1 OFF", ":OUTP2 OFF", "*CLS", ":OUTP1:LOAD INF", ":OUTP2:LOAD INF",
-               ":SOUR1:FUNC SIN", ":SOUR1:FREQ 250.0", ":SOUR1:VOLT 0.4", ":SOUR1:VOLT:OFFS 0.0", ":SOUR1:PHAS 90.0",
-               ":SOUR2:FUNC SIN", ":SOUR2:FREQ 250.0", ":SOUR2:VOLT 0.4", ":SOUR2:VOLT:OFFS 0.0", ":SOUR2:PHAS 0.0",
+               ":SOUR1:FUNC SIN", ":SOUR1:VOLT:UNIT VPP", ":SOUR1:FREQ 250.0", ":SOUR1:VOLT 0.4",
+               ":SOUR1:VOLT:OFFS 0.0", ":SOUR1:PHAS 90.0",
+               ":SOUR2:FUNC SIN", ":SOUR2:VOLT:UNIT VPP", ":SOUR2:FREQ 250.0", ":SOUR2:VOLT 0.4",
+               ":SOUR2:VOLT:OFFS 0.0", ":SOUR2:PHAS 0.0",
                ":SOUR1:PHAS:INIT", ":OUTP1 ON", ":OUTP2 ON", ":SOUR1:VOLT 0.8", ":SOUR2:VOLT 0.8"],
               [":SOUR1:VOLT 0.4", ":SOUR2:VOLT 0.4", ":OUTP1 OFF", ":OUTP2 OFF"]),
     "siglent": (["C1:OUTP OFF", "C2:OUTP OFF", "*CLS", "C1:OUTP LOAD,HZ", "C2:OUTP LOAD,HZ",
@@ -76,12 +78,19 @@ def test_pyvisa_sim_start_readback_stop(dialect):
 
 
 @pytest.mark.parametrize("dialect", ["keysight", "rigol"])
-def test_refused_setting_never_reaches_an_output_pyvisa_sim(dialect):
+def test_refused_setting_never_reaches_an_output_pyvisa_sim(dialect, monkeypatch):
     """The instrument refuses what our envelope (widened here on purpose) lets through: the read-back before
     "output on" catches it and the outputs stay off."""
     needs("pyvisa_sim", "device")     # simulated_visa: pyvisa with the pyvisa-sim backend
     t = simulated_visa(dialect)
-    wide = GalvoSpec(envelope=((35.0, 12.5), (1e6, 0.2)))      # lets 200 kHz through our check ...
+    # a galvo model widened for the test (a rig's spec may only narrow its model's limits) lets 200 kHz through
+    # our check ...
+    from dataclasses import replace
+
+    from mitsuba_eventfield.optics import envelope
+    monkeypatch.setitem(envelope.GALVO_MODELS, "gvs01x", replace(envelope.GALVO_MODELS["gvs01x"],
+                                                                 derating=((35.0, 12.5), (1e6, 0.2))))
+    wide = GalvoSpec(envelope=((35.0, 12.5), (1e6, 0.2)))
     c = GalvoController(t, dialect, spec=wide, ramp_steps=1, ramp_time=0)
     fast = ef.make_curve("circle", frequency=2e5, amplitude=0.1, max_angle_deg=12.5, galvo_model="ideal")
     with pytest.raises(SafetyError, match="did not confirm.*frequency"):  # ... the instrument refuses it

@@ -1,0 +1,98 @@
+"""What a rig user's walkthrough (2026-11-27) got through the device layer, each now refused or ramped: a spec
+changed after its check, a spec wider than the galvo model, a Rigol left in Vrms, a Ctrl-C that switched the
+outputs off at full amplitude. What the galvo sees is read from the simulated instrument's state after every
+write (``history``), not from the controller."""
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield.device import GalvoController, GalvoSpec, SafetyError, simulated
+
+NO_SLEEP = lambda s: None  # noqa: E731
+GVS01X = ((35.0, 12.5), (130.0, 6.25), (1000.0, 0.2))
+
+
+def _circle(freq=250.0, amplitude=0.5):
+    return ef.make_curve("circle", frequency=freq, amplitude=amplitude)
+
+
+def test_a_spec_keeps_the_envelope_it_checked():
+    envelope = [list(p) for p in GVS01X]
+    spec = GalvoSpec(envelope=envelope)
+    envelope[2][1] = float("nan")
+    envelope[1][1] = 12.5
+    envelope.append([1e5, 12.5])
+    assert spec.envelope == GVS01X and spec.max_amplitude_deg(900) < 0.25
+    fast = ef.make_curve("circle", frequency=900, amplitude=5.0, max_angle_deg=12.5, galvo_model="ideal")
+    with pytest.raises(SafetyError, match="derated limit of 0.2389 deg"):
+        GalvoController(simulated("keysight"), "keysight", spec).plan(fast)
+
+
+@pytest.mark.parametrize("kw, words", [
+    (dict(max_volts=1000), "max_volts = 1000: allowed range is (0, 10]"),
+    (dict(max_mech_deg=90), "max_mech_deg = 90: allowed range is (0, 12.5]"),
+    (dict(envelope=((1e5, 90.0),)), "up to 100000 Hz, above the gvs01x galvo's 1000 Hz"),
+    (dict(envelope=((35.0, 12.5), (500.0, 2.0), (1000.0, 0.2))), "2 deg at 500 Hz, above the gvs01x galvo's 0.644"),
+    (dict(model="ideal"), "drives a real galvo"),
+])
+def test_a_rig_spec_may_narrow_the_galvo_model_never_widen_it(kw, words):
+    with pytest.raises(SafetyError) as e:
+        GalvoSpec(**kw)
+    assert words in str(e.value) and "\n" not in str(e.value)
+    GalvoSpec(max_volts=5.0, max_mech_deg=10.0, envelope=((35.0, 10.0), (900.0, 0.2)))      # narrower: taken
+
+
+def test_a_rigol_left_in_vrms_is_set_to_vpp_and_one_that_stays_there_stays_dark():
+    g = simulated("rigol", preset={1: {"unit": "VRMS"}, 2: {"unit": "DBM"}})
+    with GalvoController(g, "rigol", GalvoSpec(), ramp_steps=2, ramp_time=0) as c:
+        c.start(_circle(), sleep=NO_SLEEP)
+        assert all(g.state[ch]["unit"] == "VPP" and g.state[ch]["output"] for ch in (1, 2))
+    stuck = simulated("rigol", preset={1: {"unit": "VRMS"}}, refuse=lambda cmd: "VOLT:UNIT" in cmd)
+    c = GalvoController(stuck, "rigol", GalvoSpec(), ramp_steps=2, ramp_time=0)
+    with pytest.raises(SafetyError, match="channel 1 unit: requested VPP, instrument reports VRMS"):
+        c.start(_circle(), sleep=NO_SLEEP)
+    assert not any(state[ch]["output"] for _, state in stuck.history for ch in (1, 2))
+    c.close()
+
+
+def _amplitudes_before_off(history, off):
+    """Channel 1's Vpp at every write up to the last write that switched it off (the first is the start's)."""
+    last = max(i for i, (cmd, _) in enumerate(history) if re.fullmatch(off, cmd))
+    vpp = [state[1]["vpp"] for _, state in history[:last + 1]]
+    return [v for i, v in enumerate(vpp) if i == 0 or v != vpp[i - 1]]       # each level once
+
+
+def test_leaving_a_scan_by_ctrl_c_ramps_the_amplitude_down_before_switching_off():
+    g = simulated("keysight")
+    with pytest.raises(KeyboardInterrupt):
+        with GalvoController(g, "keysight", GalvoSpec(), ramp_steps=4, ramp_time=0) as c:
+            c.start(_circle(), sleep=NO_SLEEP)
+            raise KeyboardInterrupt
+    vpp = _amplitudes_before_off(g.history, r"OUTP1 OFF")
+    assert vpp[-4:] == pytest.approx([0.8, 0.6, 0.4, 0.2])       # full, then three steps down, then off
+    assert not g.state[1]["output"] and not g.state[2]["output"]
+    # any other error: the quick switch-off, at whatever amplitude (something is wrong: no more commands)
+    g = simulated("keysight")
+    with pytest.raises(ValueError):
+        with GalvoController(g, "keysight", GalvoSpec(), ramp_steps=4, ramp_time=0) as c:
+            c.start(_circle(), sleep=NO_SLEEP)
+            raise ValueError("the user's own bug")
+    assert _amplitudes_before_off(g.history, r"OUTP1 OFF")[-1] == pytest.approx(0.8)
+
+
+def test_the_cli_scan_ramps_down_on_ctrl_c_and_says_so():
+    p = subprocess.Popen([sys.executable, "-m", "mitsuba_eventfield.cli", "device", "scan", "--simulate",
+                          "--dialect", "keysight", "--freq", "250", "--amplitude-deg", "0.5"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    line = ""
+    while "scanning" not in line and time.monotonic() < deadline:
+        line = p.stdout.readline()
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert "scanning" in line and "interrupted: amplitude ramped down, outputs off" in err, (line, out, err)
