@@ -114,6 +114,7 @@ class GalvoController:
         sines = sines_from_curve(curve)
         for s, axis in zip(sines, "xy"):
             self.spec.check_axis(axis, s.frequency, s.amplitude_deg, s.offset_deg, s.phase_deg)
+            self.spec.check_playable(axis, s.frequency, s.amplitude_deg, self.ramp_steps)
         self._check_commands(sines)
         return sines
 

@@ -29,6 +29,8 @@ class SafetyError(EventFieldError):
 # Longest unattended scan the CLI accepts (seconds); 0 means "until Ctrl-C / SIGTERM".
 MAX_DURATION_S = 24 * 3600.0
 _MODEL = GALVO_MODELS["gvs01x"]
+MIN_FREQUENCY_HZ = 1e-3        # a 1000 s period: slower is no scan (generators reach about 1 uHz)
+MIN_VPP = 1e-3                 # the smallest sine the supported generators play (1 mVpp into high-Z)
 
 
 def finite_number(value, what: str) -> float:
@@ -119,6 +121,19 @@ class GalvoSpec:
                    phase_deg: float = 0.0) -> None:
         """Raise SafetyError naming the limit if the sine on this axis is unsafe (amplitude 0: a DC level)."""
         _safety(self.scan_envelope.check_axis, axis, frequency, amplitude_deg, offset_deg, phase_deg)
+
+    def check_playable(self, axis: str, frequency: float, amplitude_deg: float, ramp_steps: int = 1) -> None:
+        """What a generator can play at all, for a whole request (``GalvoController.plan``; the per-command guard
+        sees channels half set up), the first of ``ramp_steps`` amplitude steps included: 1e-300 Hz or 1e-320 deg
+        passed the envelope, and the instrument then refused them with errors several lines long."""
+        if frequency < MIN_FREQUENCY_HZ:
+            raise SafetyError(f"axis {axis}: frequency {frequency:g} Hz: allowed range is {MIN_FREQUENCY_HZ:g} to "
+                              f"{self.max_frequency:g} Hz")
+        smallest = MIN_VPP / (2.0 * self.volts_per_deg) * ramp_steps
+        if 0 < amplitude_deg < smallest:
+            raise SafetyError(f"axis {axis}: amplitude {amplitude_deg:g} deg: below the generators' smallest sine "
+                              f"({MIN_VPP * 1e3:g} mVpp) at the first of {ramp_steps} ramp steps: at least "
+                              f"{smallest:.3g} deg here; 0 holds the axis still")
 
     def _check_travel(self, where: str, amplitude_deg: float, offset_deg: float) -> None:
         _safety(self.scan_envelope.check_travel, where, amplitude_deg, offset_deg)

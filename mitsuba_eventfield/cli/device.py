@@ -38,7 +38,13 @@ def add_parsers(sub) -> None:
 
 def scan_curve(a, spec):
     """The scan curve a ``device scan`` request names (validated by the scan module)."""
+    from ..errors import EventFieldError
     from ..optics.scan import make_curve
+    if a.curve != "lissajous":      # taken silently before, as if the scan were what was asked
+        given = [f for f, v in (("--freq-y", a.freq_y), ("--amplitude-y-deg", a.amplitude_y_deg)) if v is not None]
+        if given:
+            raise EventFieldError(f"{' and '.join(given)}: a lissajous scan's y axis; a {a.curve} takes --freq and "
+                                  "--amplitude-deg" + (" (and --axis)" if a.curve == "line" else ""))
     common = {"phase": a.phase} if a.curve != "lissajous" else {}
     limit = {"envelope": spec.scan_envelope, "where": "device scan"}     # the rig's own, with its driver scaling
     if a.curve == "lissajous":
@@ -62,17 +68,20 @@ def _scan(a, ctl, curve, duration) -> None:
     import time
 
     from ..atomic import write_json
-    ctl.start(curve)
-    print(f"scanning {curve.name} at {a.freq:g} Hz, {a.amplitude_deg:g} deg on {ctl.identity()}; read-back matches")
-    if a.metadata:
-        write_json(a.metadata, ctl.metadata(curve), "metadata")
-    end = time.monotonic() + duration if duration > 0 else float("inf")
     try:
+        ctl.start(curve)
+        print(f"scanning {curve.name} at {a.freq:g} Hz, {a.amplitude_deg:g} deg on {ctl.identity()}; read-back "
+              "matches", flush=True)
+        if a.metadata:
+            write_json(a.metadata, ctl.metadata(curve), "metadata")
+        end = time.monotonic() + duration if duration > 0 else float("inf")
         while time.monotonic() < end:
             time.sleep(max(0.0, min(0.2, end - time.monotonic())))
-    except BaseException:          # Ctrl-C or SIGTERM, the usual end of a scan without a duration
-        ctl.stop()                 # ramped down, as at the end of a duration (a second Ctrl-C waits for it)
-        print("interrupted: amplitude ramped down, outputs off", file=sys.stderr)
+    except BaseException as e:     # Ctrl-C or SIGTERM (the usual end of a scan without a duration), or an error
+        if ctl.running:            # ramped down as at the end of a duration (a second Ctrl-C waits for it)
+            ctl.stop()
+            if isinstance(e, (KeyboardInterrupt, SystemExit)):   # (an error says itself, in its one line)
+                print("interrupted: amplitude ramped down, outputs off", file=sys.stderr)
         raise
     ctl.stop()
     print("stopped: amplitude ramped down, outputs off")

@@ -151,7 +151,7 @@ def test_daq_rates_channels_and_buffers_are_checked():
     with pytest.raises(SafetyError, match=r"channels = 'ao0': expected two channel names"):
         DAQmxOutput(channels="ao0")
     with pytest.raises(SafetyError, match=r"needs 1e\+09 samples a channel: at most 10,000,000"):
-        DAQmxOutput(rate=100_000).waveform(ef.make_curve("circle", frequency=1e-4, amplitude=1.0))
+        DAQmxOutput(rate=1_000_000).waveform(ef.make_curve("circle", frequency=1e-3, amplitude=1.0))
     out = DAQmxOutput(rate=50_000)
     out.task = object()                                     # a scan already playing
     with pytest.raises(SafetyError, match="already playing a scan"):

@@ -96,3 +96,15 @@ def test_the_cli_scan_ramps_down_on_ctrl_c_and_says_so():
     p.send_signal(signal.SIGINT)
     out, err = p.communicate(timeout=60)
     assert "scanning" in line and "interrupted: amplitude ramped down, outputs off" in err, (line, out, err)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--freq", "1e-300", "--amplitude-deg", "0.5"], "frequency 1e-300 Hz: allowed range is 0.001 to 1000 Hz"),
+    (["--freq", "100", "--amplitude-deg", "1e-320"], "below the generators' smallest sine"),
+    (["--curve", "circle", "--freq", "100", "--freq-y", "50", "--amplitude-deg", "0.5"], "--freq-y: a lissajous"),
+])
+def test_what_no_generator_plays_and_options_a_curve_ignores_are_refused_before_a_byte(argv, words, capsys):
+    from mitsuba_eventfield import cli
+    assert cli.main(["device", "scan", "--simulate", "--dialect", "keysight", "--duration", "0.1", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err, err
