@@ -59,6 +59,16 @@ def _signals_held():
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
+def _toward_zero(v: float) -> float:
+    """``v`` rounded toward zero to 9 significant digits (the dialects send 10: a value at a limit must never be
+    rounded past it)."""
+    a = abs(v)
+    if not a > 1e-290:           # zero, or so small that its digit unit underflows (5e-324 deg: hypothesis)
+        return v
+    unit = 10.0 ** (math.floor(math.log10(a)) - 8)
+    return math.copysign(math.floor(a / unit) * unit, v)
+
+
 def sines_from_curve(curve) -> list:
     """The per-axis sines of a circle / line / Lissajous scan (``optics.envelope.axis_sines``); others refused."""
     try:
@@ -125,9 +135,7 @@ class GalvoController:
         state = {1: {}, 2: {}}
         for s in sines:
             cmds = list(self._configure(s, 1.0 / self.ramp_steps))
-            if not s.is_dc:
-                cmds += [c for k in range(2, self.ramp_steps + 1)
-                         for c in self.d.amplitude(s.channel, self._vpp(s, k / self.ramp_steps))]
+            cmds += [c for k in range(2, self.ramp_steps + 1) for c in self._ramp_step(s, k / self.ramp_steps)]
             for cmd in cmds:
                 for ch, key, value in self.d.decode(cmd):
                     if ch is not None and key not in ("unit", "high_z", "output"):
@@ -137,11 +145,18 @@ class GalvoController:
     def _vpp(self, s: AxisSine, fraction: float = 1.0) -> float:
         """Volts peak to peak, rounded down to 9 significant digits: the dialects send 10, which must never
         round a value at the limit up past it."""
-        v = 2.0 * float(s.amplitude_deg) * self.spec.volts_per_deg * fraction
-        if not v > 1e-290:           # zero, or so small that its digit unit underflows (5e-324 deg: hypothesis)
-            return v
-        unit = 10.0 ** (math.floor(math.log10(v)) - 8)
-        return math.floor(v / unit) * unit
+        return _toward_zero(2.0 * float(s.amplitude_deg) * self.spec.volts_per_deg * fraction)
+
+    def _offset(self, s: AxisSine, fraction: float = 1.0) -> float:
+        """The axis's offset in volts at ``fraction`` of the ramp, rounded toward zero as ``_vpp``."""
+        return _toward_zero(float(s.offset_deg) * self.spec.volts_per_deg * fraction)
+
+    def _ramp_step(self, s: AxisSine, fraction: float) -> list:
+        """The commands that take an axis to ``fraction`` of its amplitude and its offset: a DC offset stepped
+        on at "output on" and off at "output off" moved the mirror by the whole offset at once (until
+        2026-11-27); an axis without an offset sends no offset commands."""
+        cmds = [] if s.is_dc else list(self.d.amplitude(s.channel, self._vpp(s, fraction)))
+        return cmds + (list(self.d.offset(s.channel, self._offset(s, fraction))) if s.offset_deg else [])
 
     # ------------------------------------------------------------------ the guard: every byte passes here
     def _send(self, cmds):
@@ -206,9 +221,9 @@ class GalvoController:
 
     def _configure(self, s: AxisSine, fraction: float):
         if s.is_dc:
-            return self.d.dc(s.channel, s.offset_deg * self.spec.volts_per_deg)
-        return self.d.configure(s.channel, s.frequency, self._vpp(s, fraction),
-                                s.offset_deg * self.spec.volts_per_deg, s.phase_deg)
+            return self.d.dc(s.channel, self._offset(s, fraction))
+        return self.d.configure(s.channel, s.frequency, self._vpp(s, fraction), self._offset(s, fraction),
+                                s.phase_deg)
 
     def start(self, curve, sleep=time.sleep) -> dict:
         """Check, configure (outputs off), verify, align phases, switch on, ramp up, verify. Returns the
@@ -238,8 +253,7 @@ class GalvoController:
             for k in range(2, self.ramp_steps + 1):
                 sleep(self.ramp_time / self.ramp_steps)
                 for s in sines:
-                    if not s.is_dc:
-                        self._send(self.d.amplitude(s.channel, self._vpp(s, k / self.ramp_steps)))
+                    self._send(self._ramp_step(s, k / self.ramp_steps))
                 self._check_errors(f"ramp step {k} of {self.ramp_steps}")
             return self._verify(1.0, outputs_on=True)
         except BaseException as e:
@@ -278,8 +292,7 @@ class GalvoController:
             if self.sines and self.running:
                 for k in range(self.ramp_steps - 1, 0, -1):
                     for s in self.sines:
-                        if not s.is_dc:
-                            self._send(self.d.amplitude(s.channel, self._vpp(s, k / self.ramp_steps)))
+                        self._send(self._ramp_step(s, k / self.ramp_steps))
                     sleep(self.ramp_time / self.ramp_steps)
         finally:
             self._armed = False
@@ -381,8 +394,7 @@ class GalvoController:
         for s in self.sines or []:
             got = self.read_channel(s.channel)
             report["channels"][s.channel] = got
-            want = {"function": "DC" if s.is_dc else "SIN", "offset": s.offset_deg * self.spec.volts_per_deg,
-                    "high_z": True}
+            want = {"function": "DC" if s.is_dc else "SIN", "offset": self._offset(s, fraction), "high_z": True}
             if not s.is_dc:
                 want.update(frequency=s.frequency, vpp=self._vpp(s, fraction), phase=s.phase_deg)
                 if "unit" in got:         # the amplitude's unit, where the dialect sets it: Vpp, not Vrms or dBm

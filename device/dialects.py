@@ -92,6 +92,9 @@ class _SourceSubsystem(Dialect):
     def amplitude(self, ch, vpp):
         return [f"{self.prefix}SOUR{ch}:VOLT {_g(vpp)}"]
 
+    def offset(self, ch, volts):
+        return [f"{self.prefix}SOUR{ch}:VOLT:OFFS {_g(volts)}"]
+
     def high_z(self, ch):
         return [f"{self.prefix}OUTP{ch}:LOAD INF"]
 
@@ -174,6 +177,9 @@ class SiglentSDG(Dialect):
 
     def amplitude(self, ch, vpp):
         return [f"C{ch}:BSWV AMP,{_g(vpp)}"]
+
+    def offset(self, ch, volts):
+        return [f"C{ch}:BSWV OFST,{_g(volts)}"]
 
     def high_z(self, ch):
         return [f"C{ch}:OUTP LOAD,HZ"]

@@ -108,3 +108,18 @@ def test_what_no_generator_plays_and_options_a_curve_ignores_are_refused_before_
     assert cli.main(["device", "scan", "--simulate", "--dialect", "keysight", "--duration", "0.1", *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert words in err and "\n" not in err, err
+
+
+def test_an_offset_goes_on_and_off_in_the_ramps_steps_not_at_once():
+    from mitsuba_eventfield.optics.scan import Lissajous
+    line = Lissajous(freq_x=100.0, freq_y=100.0, amplitude_x=0.5, amplitude_y=0.0, phase_x=0.0, phase_y=0.0,
+                     offset_x=2.0, kind="line", max_angle_deg=12.5)
+    for dialect in ("keysight", "rigol", "siglent"):
+        g = simulated(dialect)
+        with GalvoController(g, dialect, GalvoSpec(), ramp_steps=4, ramp_time=0) as c:
+            c.start(line, sleep=NO_SLEEP)
+            c.stop(sleep=NO_SLEEP)
+        # channel 1's offset (1.6 V in full) at every write while its output was on: four steps up, three down
+        seen = [state[1]["offset"] for _, state in g.history if state[1]["output"]]
+        levels = [v for i, v in enumerate(seen) if i == 0 or v != seen[i - 1]]
+        assert levels == pytest.approx([0.4, 0.8, 1.2, 1.6, 1.2, 0.8, 0.4]), (dialect, levels)
