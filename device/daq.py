@@ -1,10 +1,13 @@
 """Optional: drive the galvo from an NI-DAQmx analog-output card instead of a function generator
 (``pip install nidaqmx``). The card plays one period of the scan curve's sampled voltages, regenerated
-continuously; the curve is checked against the same envelope as for generators, before the card is touched.
+continuously, faded in from rest before and out to rest after (``DAQmxOutput.ramp``); the curve is checked
+against the same envelope as for generators, before the card is touched.
 Untested on hardware here (neither the package nor a card is available): the tests check the calls it makes
 against a stand-in module.
 """
 from __future__ import annotations
+
+import contextlib
 
 import numpy as np
 
@@ -13,6 +16,8 @@ from .spec import GalvoSpec, SafetyError, finite_number
 
 MAX_RATE = 10e6                # samples per second and channel: beyond any analog-output card
 MAX_SAMPLES = 10_000_000       # per channel, one period: a 1e-4 Hz circle asked for 7.45 GiB
+MIN_SAMPLES = 100              # per period: 16 (the first limit) played a 1 kHz circle as a 16-step staircase
+RAMP_TIME_S = 0.5              # the amplitude (and offset) ramped in and out over this, as the generators do
 
 
 class DAQmxOutput:
@@ -41,8 +46,9 @@ class DAQmxOutput:
             # the card regenerates the buffer: a partial period would make the mirror jump at every wrap
             raise SafetyError(f"{self.rate:g} samples/s give {period * self.rate:.4g} samples per "
                               f"{period * 1e3:g} ms period: must be a whole number (e.g. {n / period:.6g} samples/s)")
-        if n < 16:
-            raise SafetyError(f"{self.rate:g} samples/s give only {n} samples per {period * 1e3:g} ms period (need 16)")
+        if n < MIN_SAMPLES:
+            raise SafetyError(f"{self.rate:g} samples/s give only {n} samples per {period * 1e3:g} ms period (need "
+                              f"{MIN_SAMPLES}: a coarser one is a staircase the mirror follows)")
         t = np.arange(n) / self.rate
         ax, ay = curve.angles(t)
         volts = np.degrees(np.stack([ax, ay])) * self.spec.volts_per_deg
@@ -50,43 +56,72 @@ class DAQmxOutput:
             raise SafetyError(f"the waveform reaches {np.abs(volts).max():.3g} V, beyond +-{self.spec.max_volts:g} V")
         return volts
 
+    def ramp(self, volts: np.ndarray, first: int = 0, down: bool = False) -> np.ndarray:
+        """(2, M) volts: whole periods of ``volts`` from its sample ``first`` on, times an envelope rising from
+        0 (or falling to 0, ``down``) over ``RAMP_TIME_S``: the scan faded in from rest, or out to rest from
+        where the card stopped. Until 2026-11-27 the card started on the curve's first sample (9.6 V from rest
+        for a 12 deg circle) and stopped by holding its last one, then jumped to 0 V."""
+        n = volts.shape[1]
+        periods = max(1, int(np.ceil(RAMP_TIME_S * self.rate / n)))
+        played = np.roll(volts, -first, axis=1)
+        envelope = np.linspace(0.0, 1.0, periods * n + 1)[1:]           # reaches 1 at the last sample
+        return np.tile(played, periods) * (envelope[::-1] - envelope[0] if down else envelope)
+
+    def _play(self, nidaqmx, volts, continuous: bool):
+        """A task playing ``volts``: regenerated for ever (``continuous``) or once, then released."""
+        from nidaqmx.constants import AcquisitionType
+        task = nidaqmx.Task()
+        try:
+            for ch in self.channels:
+                task.ao_channels.add_ao_voltage_chan(f"{self.device}/{ch}", min_val=-self.spec.max_volts,
+                                                     max_val=self.spec.max_volts)
+            task.timing.cfg_samp_clk_timing(self.rate, samps_per_chan=volts.shape[1], sample_mode=(
+                AcquisitionType.CONTINUOUS if continuous else AcquisitionType.FINITE))
+            task.write(volts, auto_start=False)
+            task.start()
+            if not continuous:
+                task.wait_until_done(timeout=10.0 + volts.shape[1] / self.rate)
+        except BaseException:
+            task.close()
+            raise
+        if not continuous:
+            task.close()
+        return task
+
     def start(self, curve) -> None:
         if self.task is not None:      # a second task on the same card would leave the first one running
             raise SafetyError("the card is already playing a scan: stop() it first")
         volts = self.waveform(curve)
         try:
             import nidaqmx
-            from nidaqmx.constants import AcquisitionType
+            import nidaqmx.constants  # noqa: F401
         except ImportError:
             raise SafetyError("NI-DAQmx output needs the nidaqmx package (pip install nidaqmx) and NI's driver") from None
-        task = nidaqmx.Task()
-        try:
-            for ch in self.channels:
-                task.ao_channels.add_ao_voltage_chan(f"{self.device}/{ch}", min_val=-self.spec.max_volts,
-                                                     max_val=self.spec.max_volts)
-            task.timing.cfg_samp_clk_timing(self.rate, sample_mode=AcquisitionType.CONTINUOUS,
-                                            samps_per_chan=volts.shape[1])
-            task.write(volts, auto_start=False)
-            task.start()
-        except BaseException:
-            task.close()
-            raise
-        self.task = task
+        self._play(nidaqmx, self.ramp(volts), continuous=False)     # faded in; the card holds its last sample
+        self.task, self.volts = self._play(nidaqmx, volts, continuous=True), volts
 
     def stop(self) -> None:
-        """Stop, drive both outputs to 0 V, release the card."""
+        """Stop, fade out to 0 V from where the card stopped (``ramp``), release the card; where the fade
+        fails (the card gone), drive both outputs to 0 V at once."""
         if self.task is None:
             return
+        import nidaqmx
+        faded = False
         try:
             self.task.stop()
+            generated = int(self.task.out_stream.total_samp_per_chan_generated)
             self.task.close()
-        finally:
             self.task = None
-            try:
-                import nidaqmx
-                with nidaqmx.Task() as zero:
-                    for ch in self.channels:
-                        zero.ao_channels.add_ao_voltage_chan(f"{self.device}/{ch}")
-                    zero.write([0.0, 0.0], auto_start=True)
-            except Exception:  # noqa: BLE001  (best effort when the card is gone)
-                pass
+            self._play(nidaqmx, self.ramp(self.volts, generated % self.volts.shape[1], down=True), continuous=False)
+            faded = True
+        finally:
+            if self.task is not None:
+                with contextlib.suppress(Exception):
+                    self.task.close()
+            self.task = None
+            if not faded:
+                with contextlib.suppress(Exception):     # best effort when the card is gone
+                    with nidaqmx.Task() as zero:
+                        for ch in self.channels:
+                            zero.ao_channels.add_ao_voltage_chan(f"{self.device}/{ch}")
+                        zero.write([0.0, 0.0], auto_start=True)

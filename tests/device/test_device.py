@@ -165,13 +165,18 @@ def test_daqmx_output_calls_with_a_stand_in_module(monkeypatch):
     class Task:
         def __init__(self):
             self.ao_channels = types.SimpleNamespace(add_ao_voltage_chan=lambda name, **kw: calls.append(("chan", name)))
-            self.timing = types.SimpleNamespace(cfg_samp_clk_timing=lambda rate, **kw: calls.append(("rate", rate)))
+            self.timing = types.SimpleNamespace(
+                cfg_samp_clk_timing=lambda rate, **kw: calls.append(("rate", rate, kw.get("sample_mode"))))
+            self.out_stream = types.SimpleNamespace(total_samp_per_chan_generated=1037)   # stopped mid-period
 
         def write(self, data, auto_start=False):
             calls.append(("write", np.asarray(data)))
 
         def start(self):
             calls.append(("start",))
+
+        def wait_until_done(self, timeout):
+            calls.append(("done",))
 
         def stop(self):
             calls.append(("stop",))
@@ -187,16 +192,24 @@ def test_daqmx_output_calls_with_a_stand_in_module(monkeypatch):
 
     fake = types.ModuleType("nidaqmx")
     fake.Task = Task
-    fake.constants = types.SimpleNamespace(AcquisitionType=types.SimpleNamespace(CONTINUOUS="continuous"))
+    fake.constants = types.SimpleNamespace(AcquisitionType=types.SimpleNamespace(CONTINUOUS="continuous",
+                                                                                  FINITE="finite"))
+    fake.constants.__path__ = []
     monkeypatch.setitem(sys.modules, "nidaqmx", fake)
     monkeypatch.setitem(sys.modules, "nidaqmx.constants", fake.constants)
     out = DAQmxOutput(rate=50_000)
     out.start(CIRCLE)
-    volts = [c[1] for c in calls if c[0] == "write"][0]
+    fade_in, volts = [c[1] for c in calls if c[0] == "write"]
     assert volts.shape == (2, 200) and np.isclose(np.abs(volts).max(), 0.5 * 0.8, rtol=1e-3)   # 0.5 deg x 0.8 V/deg
-    assert ("chan", "Dev1/ao0") in calls and ("rate", 50_000.0) in calls and calls[-1] == ("start",)
+    assert ("chan", "Dev1/ao0") in calls and ("rate", 50_000.0, "continuous") in calls and calls[-1] == ("start",)
+    # faded in from rest over whole periods (0.5 s: 125 of them), played once before the regenerated period, and
+    # ending on the sample before the period's first (no step at the hand-over)
+    assert fade_in.shape == (2, 125 * 200) and np.abs(fade_in[:, 0]).max() < 1e-4 and ("rate", 50_000.0, "finite") in calls
+    assert np.allclose(fade_in[:, -1], volts[:, -1]) and np.abs(np.diff(fade_in, axis=1)).max() < 0.02
     out.stop()
-    assert [c for c in calls if c[0] == "write"][-1][1].tolist() == [0.0, 0.0]
+    fade_out = [c[1] for c in calls if c[0] == "write"][-1]
+    # from the sample after the last one played (1037 generated: 1037 % 200 = 37), down to 0 V
+    assert np.allclose(fade_out[:, 0], volts[:, 37], rtol=1e-4) and fade_out[:, -1].tolist() == [0.0, 0.0]
     with pytest.raises(SafetyError):
         DAQmxOutput().waveform(ef.make_curve("raster", frequency=100, lines=4))
 
