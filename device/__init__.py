@@ -4,7 +4,8 @@ A function generator (SCPI over PyVISA: Keysight 33500, Rigol DG, Siglent SDG di
 galvo with the SAME scan curve the simulation renders (``mitsuba_eventfield.scan``). Every request is checked
 against the galvo's envelope before a byte is sent; outputs go off on any error, Ctrl-C and exit.
 """
-from .controller import AxisSine, GalvoController, sines_from_curve, tag_events  # noqa: F401
+from .capture import tag_events  # noqa: F401
+from .controller import AxisSine, GalvoController, sines_from_curve  # noqa: F401
 from .dialects import DIALECTS, dialect  # noqa: F401
 from .simulator import SimulatedGenerator  # noqa: F401
 from .spec import GalvoSpec, SafetyError  # noqa: F401

@@ -32,7 +32,7 @@ import time
 
 from mitsuba_eventfield.optics.envelope import AxisSine, EnvelopeError, axis_sines  # noqa: F401  (AxisSine: API)
 
-from .dialects import Dialect, dialect
+from .dialects import Dialect, dialect, toward_zero
 from .spec import GalvoSpec, SafetyError, finite_number
 
 
@@ -57,16 +57,6 @@ def _signals_held():
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
-
-
-def _toward_zero(v: float) -> float:
-    """``v`` rounded toward zero to 9 significant digits (the dialects send 10: a value at a limit must never be
-    rounded past it)."""
-    a = abs(v)
-    if not a > 1e-290:           # zero, or so small that its digit unit underflows (5e-324 deg: hypothesis)
-        return v
-    unit = 10.0 ** (math.floor(math.log10(a)) - 8)
-    return math.copysign(math.floor(a / unit) * unit, v)
 
 
 def sines_from_curve(curve) -> list:
@@ -145,11 +135,11 @@ class GalvoController:
     def _vpp(self, s: AxisSine, fraction: float = 1.0) -> float:
         """Volts peak to peak, rounded down to 9 significant digits: the dialects send 10, which must never
         round a value at the limit up past it."""
-        return _toward_zero(2.0 * float(s.amplitude_deg) * self.spec.volts_per_deg * fraction)
+        return toward_zero(2.0 * float(s.amplitude_deg) * self.spec.volts_per_deg * fraction)
 
     def _offset(self, s: AxisSine, fraction: float = 1.0) -> float:
         """The axis's offset in volts at ``fraction`` of the ramp, rounded toward zero as ``_vpp``."""
-        return _toward_zero(float(s.offset_deg) * self.spec.volts_per_deg * fraction)
+        return toward_zero(float(s.offset_deg) * self.spec.volts_per_deg * fraction)
 
     def _ramp_step(self, s: AxisSine, fraction: float) -> list:
         """The commands that take an axis to ``fraction`` of its amplitude and its offset: a DC offset stepped
@@ -419,13 +409,3 @@ class GalvoController:
         from mitsuba_eventfield.optics.scan import curve_to_dict
         return {"instrument": self.identity(), "dialect": self.d.name, "galvo": self.spec.as_dict(),
                 "scan": curve_to_dict(curve), "read_back": self.read_back()}
-
-
-def tag_events(events, device_metadata: dict, **optics):
-    """Give a captured event stream the description a simulated one carries: ``meta["device"]`` (instrument,
-    read-back, galvo spec) and ``meta["optics"]`` with design "galvo" and the driven scan curve, so
-    ``events.scan_angles()``, light fields and calibration work on it exactly as on simulated data.
-    ``optics``: what is known of the camera side (fov_x_deg, mirror_distance, mirror_separation, ...)."""
-    events.meta["device"] = device_metadata
-    events.meta["optics"] = dict({"design": "galvo", "scan": device_metadata["scan"]}, **optics)
-    return events

@@ -10,6 +10,7 @@ Siglent SDG1000X/2000X; check them against your instrument's manual before first
 """
 from __future__ import annotations
 
+import math
 import re
 
 from .spec import SafetyError
@@ -49,6 +50,16 @@ def _function_name(text: str) -> str:
     t = text.strip().upper()
     return "SIN" if t.startswith("SIN") else t
 
+
+
+def toward_zero(v: float) -> float:
+    """``v`` rounded toward zero to 9 significant digits (the dialects send 10: a value at a limit must never be
+    rounded past it)."""
+    a = abs(v)
+    if not a > 1e-290:           # zero, or so small that its digit unit underflows (5e-324 deg: hypothesis)
+        return v
+    unit = 10.0 ** (math.floor(math.log10(a)) - 8)
+    return math.copysign(math.floor(a / unit) * unit, v)
 
 class Dialect:
     name = "generic"
