@@ -51,7 +51,6 @@ def _function_name(text: str) -> str:
     return "SIN" if t.startswith("SIN") else t
 
 
-
 def toward_zero(v: float) -> float:
     """``v`` rounded toward zero to 9 significant digits (the dialects send 10: a value at a limit must never be
     rounded past it)."""
@@ -60,6 +59,7 @@ def toward_zero(v: float) -> float:
         return v
     unit = 10.0 ** (math.floor(math.log10(a)) - 8)
     return math.copysign(math.floor(a / unit) * unit, v)
+
 
 class Dialect:
     name = "generic"
