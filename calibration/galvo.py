@@ -105,6 +105,8 @@ class GalvoCalibration:
     frames_used: int = 0
     patches: list = field(default_factory=list)
     optics: dict = field(default_factory=dict)   # what it was made for (optics.optics_record), set when saved
+    # the capture it was fitted on (``capture_of``): a free-running galvo's phase holds for that capture only
+    capture: dict = field(default_factory=dict)
 
     def __post_init__(self):
         """Fields checked as they are read back (a calibration file is edited by hand): tau0 = "abc" failed
@@ -159,6 +161,26 @@ class GalvoCalibration:
 
     def as_dict(self) -> dict:
         return {"kind": "galvo", **asdict(self), "quality": self.quality}
+
+
+def capture_of(events) -> dict:
+    """What tells one capture from another: its event count and its first and last events' times (us)."""
+    n = len(events)
+    return {"events": int(n), "t_first_us": int(events.t[0]) if n else 0, "t_last_us": int(events.t[-1]) if n else 0}
+
+
+def check_capture(calibration: GalvoCalibration, events, where: str = "galvo calibration") -> None:
+    """Warn (one line) when a galvo calibration is applied to a capture other than the one it was fitted on:
+    without a sync the galvo's phase at the camera's t = 0 differs from capture to capture (a phase fitted on
+    one and applied to another read a 0.5 m card at 0.58 m, silently). A camera that clocks the galvo keeps it:
+    hence a warning, not a refusal. Files from before 2026-11-27 name no capture: nothing to check."""
+    import warnings
+    fitted = calibration.capture
+    if fitted and fitted != capture_of(events):
+        warnings.warn(f"{where}: its phase was fitted on another capture ({fitted['events']} events, "
+                      f"{fitted['t_first_us']} to {fitted['t_last_us']} us): a free-running galvo's phase holds "
+                      "for that capture only; calibrate this one, unless the galvo is clocked by the camera",
+                      stacklevel=3)
 
 
 def _model(params, curve: ScanCurve, dt):
@@ -243,15 +265,17 @@ def _initial_guess(residuals, curve: ScanCurve, sel_t, obs):
             scales.append(float(solution[0]))
             offsets.append(solution[1:])
         sx, sy = scales
-        if sx <= 0 or sy <= 0:       # a circle fits (tau + T/2, -S) as well: the physical scales are positive
-            continue
+        if sx <= 1e-9 or sy <= 1e-9:     # a circle fits (tau + T/2, -S) as well: the physical scales are positive
+            continue                     # (and above the fit's bound: below it SciPy's error leaked out)
         offsets = np.stack(offsets, axis=-1)
         cost = float(np.sum(residuals(np.concatenate([[tau, sx, sy], offsets.ravel()])) ** 2))
         if best is None or cost < best[0]:
             best = (cost, tau, sx, sy, offsets)
     if best is None:
-        raise CalibrationError("no phase gives positive curve scales: the displacements do not follow the scan curve "
-                               "(wrong curve, or the patch does not move with the scan)")
+        moved = float(np.max(np.ptp(o_all, axis=0))) if len(o_all) else 0.0
+        raise CalibrationError(f"no phase gives positive curve scales: the patches move by at most {moved:.3g} px "
+                               "and not along the scan curve (a static scene or one without the scan, too few "
+                               "events, a wrong curve, or a patch that does not move with the scan)")
     return best[1:]
 
 

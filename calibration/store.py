@@ -154,9 +154,13 @@ def calibrated_events(events, calibration: dict, optics: dict):
     ``optics_record`` of ``events``, against which the calibration is checked first. Other designs are returned
     as they are (their calibration acts on the light field: ``apply_to_lightfield``)."""
     from mitsuba_eventfield.events.stream import EventStream
+
+    from .galvo import check_capture
     kinds = check_optics(calibration, optics)
     if optics.get("design") != "galvo" or not set(kinds) & {"galvo", "depth"}:
         return events
+    if "galvo" in kinds:
+        check_capture(calibration["galvo"], events)
     meta = dict(events.meta, optics=calibrated_optics(calibration, events.meta["optics"], events.width,
                                                       events.height))
     return EventStream(events.x, events.y, events.t, events.p, events.width, events.height, meta)

@@ -69,9 +69,13 @@ def _galvo(a) -> None:
         if len(xy) != 2 or xy[0] >= ev.width or xy[1] >= ev.height:
             raise EventFieldError(f"--patch {p!r}: expected X,Y inside the {ev.width}x{ev.height} frame")
         patches.append(tuple(xy))
-    frames, times, curve = galvo_frames(ev, a.period, a.views, start_log(a.start_frame, ev))
-    optics = cal.optics_record(ev.meta["optics"], ev.width, ev.height, where=a.file)
-    result = cal.fit_galvo(frames, times, curve, patches, scale_limit=cal.galvo_scale_limit(optics))
+    try:            # every refusal names the recording (the fit's own knew none)
+        frames, times, curve = galvo_frames(ev, a.period, a.views, start_log(a.start_frame, ev))
+        optics = cal.optics_record(ev.meta["optics"], ev.width, ev.height, where=a.file)
+        result = cal.fit_galvo(frames, times, curve, patches, scale_limit=cal.galvo_scale_limit(optics))
+    except EventFieldError as e:
+        raise EventFieldError(e if str(e).startswith(a.file) else f"{a.file}: {e}") from None
+    result.capture = cal.capture_of(ev)
     cal.save_calibration(a.output, optics, galvo=result)
     print(f"galvo: phase {result.phase_deg:.2f} +- {result.std['phase_deg']:.2f} deg at the first frame "
           f"({result.clock_phase_deg:.2f} deg at t = 0), curve radius "

@@ -230,3 +230,35 @@ def test_kaleidoscope_calibration_refuses_a_galvo_frame(tmp_path, capsys):
     part = json.loads(out.read_text())["kaleidoscope"]
     assert part["n"] == 3 and part["optics"] == {"design": "kaleidoscope", "width": 120, "height": 120, "n": 3}
     assert part["quality"]["min_view_consistency"] > 0.8 and part["quality"]["samples"] == 9
+
+
+def test_patches_that_do_not_move_are_refused_in_words_not_scipys():
+    """A static recording (or one of too few events) tracks no displacement: the fit's initial scale was below
+    its own bound, and SciPy's "Initial guess is outside of provided bounds" was the whole message."""
+    curve = ef.make_curve("circle", frequency=FREQ, amplitude=0.5)
+    times = np.arange(16) / 16 / FREQ
+    still = PatchTrack((30, 20), np.zeros((16, 2)) + 1e-12 * np.arange(32).reshape(16, 2), np.ones(16))
+    with pytest.raises(CalibrationError, match=r"the patches move by at most 3e-11 px and not along the scan"):
+        fit_tracks([still], times, curve)
+
+
+def test_a_galvo_calibration_warns_when_applied_to_another_capture(galvo_stream):
+    """A free-running galvo's phase holds for the capture it was fitted on; the file names that capture."""
+    import warnings
+
+    from mitsuba_eventfield.calibration import GalvoCalibration
+    from mitsuba_eventfield.calibration.galvo import capture_of, check_capture
+    from mitsuba_eventfield.optics.scan import curve_to_dict
+    events = ef.read_events(galvo_stream[0])
+    fitted = GalvoCalibration(curve=curve_to_dict(ef.make_curve("circle", frequency=FREQ, amplitude=0.5)),
+                              t_first=0.0, tau0=0.0, phase_deg=0.0, scale_px_per_rad=(100.0, 100.0),
+                              capture=capture_of(events))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_capture(fitted, events)                                   # its own capture: no word
+        fitted.capture = {}
+        check_capture(fitted, events)                                   # a file from before: nothing to check
+        fitted.capture = capture_of(events)
+    later = events.time_window(int(events.t[0]) + 1000, None)
+    with pytest.warns(UserWarning, match=r"fitted on another capture \(\d+ events, .* holds for that capture only"):
+        check_capture(fitted, later)
