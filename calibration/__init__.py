@@ -10,7 +10,7 @@
 """
 from .depth import DepthCalibration, fit_depth  # noqa: F401
 from .galvo import (CalibrationError, GalvoCalibration, PatchTrack, capture_of, fit_galvo, fit_tracks,
-                    galvo_scale_limit, track_patch, track_point)
+                    galvo_scale_limit, scale_note, track_patch, track_point)
 from .led import fit_led, fit_point_track, track_led  # noqa: F401,E402
 from .kaleidoscope import KaleidoscopeCalibration, find_tiles, flat_field, known_tiles, register  # noqa: F401,E402
 from .optics import check_optics, kaleidoscope_record, optics_difference, optics_record, same_optics

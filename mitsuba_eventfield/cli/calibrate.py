@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 
@@ -76,6 +77,9 @@ def _galvo(a) -> None:
     except EventFieldError as e:
         raise EventFieldError(e if str(e).startswith(a.file) else f"{a.file}: {e}") from None
     result.capture = cal.capture_of(ev)
+    note = cal.scale_note(result, optics)
+    if note:
+        print(f"eventfield: warning: {a.file}: {note}", file=sys.stderr)
     cal.save_calibration(a.output, optics, galvo=result)
     print(f"galvo: phase {result.phase_deg:.2f} +- {result.std['phase_deg']:.2f} deg at the first frame "
           f"({result.clock_phase_deg:.2f} deg at t = 0), curve radius "

@@ -262,3 +262,17 @@ def test_a_galvo_calibration_warns_when_applied_to_another_capture(galvo_stream)
     later = events.time_window(int(events.t[0]) + 1000, None)
     with pytest.warns(UserWarning, match=r"fitted on another capture \(\d+ events, .* holds for that capture only"):
         check_capture(fitted, later)
+
+
+def test_a_curve_larger_than_the_optics_show_is_noted(galvo_stream):
+    """The recorded amplitude 1.6 deg where the mirror moved 2: the fitted scale is 1.25x 2 f (a driver's gain);
+    the note says so, and says that only the phase is applied."""
+    from mitsuba_eventfield.calibration import GalvoCalibration, scale_note
+    from mitsuba_eventfield.optics.scan import curve_to_dict
+    record = galvo_stream[1]
+    f2 = 2 * galvo_optics.focal_length_px(record["width"], record["fov_x_deg"])
+    made = dict(curve=curve_to_dict(ef.make_curve("circle", frequency=FREQ, amplitude=0.5)), t_first=0.0, tau0=0.0,
+                phase_deg=0.0)
+    assert scale_note(GalvoCalibration(**made, scale_px_per_rad=(0.9 * f2, 0.9 * f2)), record) is None
+    note = scale_note(GalvoCalibration(**made, scale_px_per_rad=(1.25 * f2, 1.24 * f2)), record)
+    assert "1.25x the largest these optics show" in note and "its scale is not" in note
