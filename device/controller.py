@@ -112,8 +112,9 @@ class GalvoController:
     def plan(self, curve) -> list:
         """Check a curve against the envelope and return its per-axis sines (raises SafetyError; sends nothing)."""
         sines = sines_from_curve(curve)
-        for s, axis in zip(sines, "xy"):
+        for s, axis in zip(sines, "xy"):      # the envelope first, on both axes (its reason is the simulator's)
             self.spec.check_axis(axis, s.frequency, s.amplitude_deg, s.offset_deg, s.phase_deg)
+        for s, axis in zip(sines, "xy"):
             self.spec.check_playable(axis, s.frequency, s.amplitude_deg, self.ramp_steps)
         self._check_commands(sines)
         return sines

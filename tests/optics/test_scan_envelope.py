@@ -66,8 +66,12 @@ def test_the_simulator_refuses_what_the_device_refuses_with_the_same_reason(requ
     kind, params = request
     simulated = _simulator(kind, params, volts_per_deg)
     driven = _device(kind, params, 0.8 if volts_per_deg is None else volts_per_deg)
-    assert (simulated is None) == (driven is None), (kind, params, volts_per_deg, simulated, driven)
-    if driven is not None:
+    # the one envelope gives both the same verdict; the device alone also refuses what no generator plays
+    # (device.spec.check_playable: a sine under 1 mVpp at the first ramp step), which a simulated mirror shows
+    generator_only = driven is not None and "smallest sine" in driven
+    assert (simulated is None) == (driven is None or generator_only), (kind, params, volts_per_deg, simulated,
+                                                                       driven)
+    if driven is not None and not generator_only:
         assert simulated == f"sensor 'galvo': {driven}"
 
 
