@@ -124,6 +124,11 @@ class GalvoCalibration:
         self.scale_px_per_rad = tuple(positive(v, "galvo calibration: scale_px_per_rad") for v in scale)
         if not isinstance(self.curve, dict):
             raise ConfigError(f"galvo calibration: curve = {self.curve!r}: expected a scan curve record")
+        keys = ("events", "t_first_us", "t_last_us")
+        if self.capture != {} and not (isinstance(self.capture, dict) and set(self.capture) == set(keys) and all(
+                isinstance(self.capture[k], int) and not isinstance(self.capture[k], bool) for k in keys)):
+            raise ConfigError(f"galvo calibration: capture = {self.capture!r}: expected {{}} or the integers "
+                              f"{', '.join(keys)} (re-run eventfield calibrate)")
         curve = curve_to_dict(curve_from_dict(self.curve, where="galvo calibration: curve"))
         scan = self.optics.get("scan") if isinstance(self.optics, dict) else None
         if isinstance(scan, dict) and not _same(curve, curve_to_dict(curve_from_dict(scan, where="optics.scan"))):

@@ -33,6 +33,7 @@ import time
 from mitsuba_eventfield.optics.envelope import AxisSine, EnvelopeError, axis_sines  # noqa: F401  (AxisSine: API)
 
 from .dialects import Dialect, dialect, toward_zero
+from .signals import signals_held
 from .spec import GalvoSpec, SafetyError, finite_number
 
 
@@ -42,21 +43,6 @@ OFF_BY_HAND = "switch the generator's outputs off by hand"
 
 def _one_line(e: BaseException) -> str:
     return " ".join(str(e).split()) or type(e).__name__
-
-
-@contextlib.contextmanager
-def _signals_held():
-    """SIGINT and SIGTERM held back (pending, delivered at the end) in the main thread while the outputs are
-    being switched off; elsewhere, or where the platform has no signal masks, nothing changes."""
-    held = (signal.SIGINT, signal.SIGTERM)
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    before = signal.pthread_sigmask(signal.SIG_BLOCK, held)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
 def sines_from_curve(curve) -> list:
@@ -88,6 +74,7 @@ class GalvoController:
         self.ramp_steps, self.ramp_time, self.tol = ramp_steps, ramp_time, readback_tolerance
         self.sines = None
         self.running = False           # True from the first "output on" until the outputs are confirmed off
+        self._level = 0                # the ramp step reached (of ramp_steps): a stop ramps down from below it
         self._armed = False            # settings confirmed by the instrument: "output on" may be sent
         self._commanded = {1: {}, 2: {}}
         self._closed = False
@@ -101,12 +88,14 @@ class GalvoController:
     def __exit__(self, exc_type, exc, tb):
         # leaving while scanning, normally or by Ctrl-C / SIGTERM (the user's "stop"): ramp down first, as
         # ``stop`` does (the outputs switched off at full amplitude before); on any other error ``close``'s quick
-        # switch-off, and also when the ramp itself fails
-        if self.running and not self._closed and (exc_type is None
-                                                  or issubclass(exc_type, (KeyboardInterrupt, SystemExit))):
-            with contextlib.suppress(Exception):
-                self.stop()
-        self.close()
+        # switch-off, and also when the ramp itself fails or is interrupted (``close`` runs whatever happens)
+        try:
+            if self.running and not self._closed and (exc_type is None
+                                                      or issubclass(exc_type, (KeyboardInterrupt, SystemExit))):
+                with contextlib.suppress(Exception):
+                    self.stop()
+        finally:
+            self.close()
 
     # ------------------------------------------------------------------ planning (no bytes sent)
     def plan(self, curve) -> list:
@@ -161,6 +150,8 @@ class GalvoController:
             raise SafetyError(f"refusing {cmd!r}: the controller is closed")
         pending = {ch: dict(state) for ch, state in self._commanded.items()}
         for ch, key, value in self.d.decode(cmd):
+            if key == "unit" and value != "VPP":        # the amplitudes sent are Vpp: any other unit scales them
+                raise SafetyError(f"refusing {cmd!r}: amplitudes are sent in Vpp")
             if ch is None or key in ("unit", "high_z"):
                 continue
             pending[ch][key] = value
@@ -238,13 +229,14 @@ class GalvoController:
             self._check_errors("aligning the phases")
             self._armed = True
             self._hold_sigterm()
-            self.running = True
+            self.running, self._level = True, 1
             for s in sines:
                 self._send(self.d.output(s.channel, True))
             for k in range(2, self.ramp_steps + 1):
                 sleep(self.ramp_time / self.ramp_steps)
                 for s in sines:
                     self._send(self._ramp_step(s, k / self.ramp_steps))
+                self._level = k                 # the step every axis has reached: a ramp down starts below it
                 self._check_errors(f"ramp step {k} of {self.ramp_steps}")
             return self._verify(1.0, outputs_on=True)
         except BaseException as e:
@@ -275,13 +267,13 @@ class GalvoController:
     def stop(self, sleep=time.sleep) -> None:
         """Ramp the amplitude down, then switch the outputs off (also when the ramp fails). Ctrl-C and SIGTERM
         wait until it is done (``ramp_time``): a second Ctrl-C cut the ramp short at full amplitude."""
-        with _signals_held():
+        with signals_held():
             self._ramp_down(sleep)
 
     def _ramp_down(self, sleep) -> None:
         try:
-            if self.sines and self.running:
-                for k in range(self.ramp_steps - 1, 0, -1):
+            if self.sines and self.running:      # from below the step reached (a full scan: ramp_steps)
+                for k in range(min(self._level, self.ramp_steps) - 1, 0, -1):
                     for s in self.sines:
                         self._send(self._ramp_step(s, k / self.ramp_steps))
                     sleep(self.ramp_time / self.ramp_steps)
@@ -297,7 +289,7 @@ class GalvoController:
         Ctrl-C and SIGTERM wait until it is done (a second Ctrl-C during the switch-off left both outputs on).
         Returns whether the outputs were confirmed off; if not, ``running`` stays set so ``close`` tries again."""
         self._armed = False
-        with _signals_held():
+        with signals_held():
             for ch in (1, 2):
                 for _ in range(2):
                     try:

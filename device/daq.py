@@ -97,8 +97,16 @@ class DAQmxOutput:
             import nidaqmx.constants  # noqa: F401
         except ImportError:
             raise SafetyError("NI-DAQmx output needs the nidaqmx package (pip install nidaqmx) and NI's driver") from None
-        self._play(nidaqmx, self.ramp(volts), continuous=False)     # faded in; the card holds its last sample
-        self.task, self.volts = self._play(nidaqmx, volts, continuous=True), volts
+        faded_in = False
+        try:
+            self._play(nidaqmx, self.ramp(volts), continuous=False)     # faded in; the card holds its last sample
+            faded_in = True
+            self.task, self.volts = self._play(nidaqmx, volts, continuous=True), volts
+        except BaseException:
+            # the card holds the fade-in's last sample (up to full deflection) or wherever it was cut: back to
+            # rest before the error leaves (a failed start left a 12 deg circle held at 9.6 V, a review found)
+            self._rest(nidaqmx, volts if faded_in else None, 0)
+            raise
 
     def stop(self) -> None:
         """Stop, fade out to 0 V from where the card stopped (``ramp``), release the card; where the fade
@@ -106,22 +114,30 @@ class DAQmxOutput:
         if self.task is None:
             return
         import nidaqmx
-        faded = False
+        volts, first = None, 0
         try:
             self.task.stop()
-            generated = int(self.task.out_stream.total_samp_per_chan_generated)
-            self.task.close()
-            self.task = None
-            self._play(nidaqmx, self.ramp(self.volts, generated % self.volts.shape[1], down=True), continuous=False)
-            faded = True
+            volts, first = self.volts, int(self.task.out_stream.total_samp_per_chan_generated) % self.volts.shape[1]
         finally:
-            if self.task is not None:
-                with contextlib.suppress(Exception):
-                    self.task.close()
+            with contextlib.suppress(Exception):
+                self.task.close()
             self.task = None
-            if not faded:
-                with contextlib.suppress(Exception):     # best effort when the card is gone
-                    with nidaqmx.Task() as zero:
-                        for ch in self.channels:
-                            zero.ao_channels.add_ao_voltage_chan(f"{self.device}/{ch}")
-                        zero.write([0.0, 0.0], auto_start=True)
+            self._rest(nidaqmx, volts, first)
+
+    def _rest(self, nidaqmx, volts, first: int) -> None:
+        """Both outputs back to 0 V: faded out from ``volts``'s sample ``first`` (the one after the sample the
+        card holds), or at once where there is nothing to fade from or the fade fails. Ctrl-C and SIGTERM wait
+        for it (``signals.signals_held``)."""
+        from .signals import signals_held
+        with signals_held():
+            if volts is not None:
+                try:
+                    self._play(nidaqmx, self.ramp(volts, first, down=True), continuous=False)
+                    return
+                except Exception:  # noqa: BLE001  (the card gone: the direct way below)
+                    pass
+            with contextlib.suppress(Exception):     # best effort when the card is gone
+                with nidaqmx.Task() as zero:
+                    for ch in self.channels:
+                        zero.ao_channels.add_ao_voltage_chan(f"{self.device}/{ch}")
+                    zero.write([0.0, 0.0], auto_start=True)

@@ -129,8 +129,10 @@ class GalvoSpec:
         if frequency < MIN_FREQUENCY_HZ:
             raise SafetyError(f"axis {axis}: frequency {frequency:g} Hz: allowed range is {MIN_FREQUENCY_HZ:g} to "
                               f"{self.max_frequency:g} Hz")
+        from .dialects import toward_zero
         smallest = MIN_VPP / (2.0 * self.volts_per_deg) * ramp_steps
-        if 0 < amplitude_deg < smallest:
+        # as sent: the first step's Vpp rounded toward zero (at exactly the minimum it became 0.00099999999)
+        if 0 < amplitude_deg and toward_zero(2.0 * amplitude_deg * self.volts_per_deg / ramp_steps) < MIN_VPP:
             raise SafetyError(f"axis {axis}: amplitude {amplitude_deg:g} deg: below the generators' smallest sine "
                               f"({MIN_VPP * 1e3:g} mVpp) at the first of {ramp_steps} ramp steps: at least "
                               f"{smallest:.3g} deg here; 0 holds the axis still")

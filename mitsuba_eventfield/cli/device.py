@@ -68,8 +68,8 @@ def _scan(a, ctl, curve, duration) -> None:
     import time
 
     from ..atomic import write_json
+    ctl.start(curve)               # a failed start has switched the outputs off itself (no ramp to undo)
     try:
-        ctl.start(curve)
         print(f"scanning {curve.name} at {a.freq:g} Hz, {a.amplitude_deg:g} deg on {ctl.identity()}; read-back "
               "matches", flush=True)
         if a.metadata:

@@ -242,6 +242,12 @@ def test_patches_that_do_not_move_are_refused_in_words_not_scipys():
         fit_tracks([still], times, curve)
 
 
+def made_from(calibration) -> dict:
+    """A GalvoCalibration's own fields (its as_dict adds kind and quality)."""
+    import dataclasses
+    return {f.name: getattr(calibration, f.name) for f in dataclasses.fields(calibration)}
+
+
 def test_a_galvo_calibration_warns_when_applied_to_another_capture(galvo_stream):
     """A free-running galvo's phase holds for the capture it was fitted on; the file names that capture."""
     import warnings
@@ -259,6 +265,9 @@ def test_a_galvo_calibration_warns_when_applied_to_another_capture(galvo_stream)
         fitted.capture = {}
         check_capture(fitted, events)                                   # a file from before: nothing to check
         fitted.capture = capture_of(events)
+    for bad in ({"events": 3}, "abc", {"events": 1.5, "t_first_us": 0, "t_last_us": 1}):     # hand-edited files
+        with pytest.raises(ef.ConfigError, match="galvo calibration: capture = "):
+            GalvoCalibration(**dict(made_from(fitted), capture=bad))
     later = events.time_window(int(events.t[0]) + 1000, None)
     with pytest.warns(UserWarning, match=r"fitted on another capture \(\d+ events, .* holds for that capture only"):
         check_capture(fitted, later)

@@ -123,3 +123,107 @@ def test_an_offset_goes_on_and_off_in_the_ramps_steps_not_at_once():
         seen = [state[1]["offset"] for _, state in g.history if state[1]["output"]]
         levels = [v for i, v in enumerate(seen) if i == 0 or v != seen[i - 1]]
         assert levels == pytest.approx([0.4, 0.8, 1.2, 1.6, 1.2, 0.8, 0.4]), (dialect, levels)
+
+
+def test_a_second_ctrl_c_during_the_ramp_down_waits_for_it():
+    """Held by Python-level handlers: a process mask left BLAS's threads to take the signal, and Python still
+    raised it in the main thread, switching channel 1 off at 75 % of its amplitude (a review)."""
+    g = simulated("keysight")
+    c = GalvoController(g, "keysight", GalvoSpec(), ramp_steps=4, ramp_time=0)
+    c.start(_circle(), sleep=NO_SLEEP)
+    with pytest.raises(KeyboardInterrupt):
+        c.stop(sleep=lambda s: signal.raise_signal(signal.SIGINT))     # Ctrl-C at every ramp step
+    assert _amplitudes_before_off(g.history, r"OUTP1 OFF")[-4:] == pytest.approx([0.8, 0.6, 0.4, 0.2])
+    assert not g.state[1]["output"] and not g.state[2]["output"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    c.close()
+
+
+def test_leaving_the_block_closes_even_when_the_ramp_down_is_interrupted():
+    g = simulated("keysight")
+    with pytest.raises(KeyboardInterrupt):
+        with GalvoController(g, "keysight", GalvoSpec(), ramp_steps=4, ramp_time=0) as c:
+            c.start(_circle(), sleep=NO_SLEEP)
+
+            def cut(sleep=None):
+                raise KeyboardInterrupt
+            c.stop = cut
+    assert c._closed and not g.state[1]["output"] and not g.state[2]["output"]
+
+
+def test_a_stop_ramps_down_from_the_step_the_start_reached():
+    """A start that failed at ramp step 3 of 4 and could not confirm the outputs off leaves them at step 2: a
+    later stop ramped down from step 3 (4.5x the amplitude there, in a review's case), now from below step 2."""
+    failing = {"SOUR1:VOLT 0.6"}
+
+    def link(cmd):                  # step 3 fails, and from then on every "off" too
+        if cmd in failing:
+            failing.update({"OUTP1 OFF", "OUTP2 OFF"})
+            return ConnectionError("link lost")
+        return None
+    g = simulated("keysight", raise_on=link)
+    c = GalvoController(g, "keysight", GalvoSpec(), ramp_steps=4, ramp_time=0)
+    with pytest.raises(SafetyError, match="could not be confirmed off"):
+        c.start(_circle(), sleep=NO_SLEEP)
+    before = len(g.history)
+    with pytest.raises(Exception):
+        c.stop(sleep=NO_SLEEP)
+    sent = [cmd for cmd, _ in g.history[before:] if re.fullmatch(r"SOUR[12]:VOLT [0-9.]+", cmd)]
+    assert sent == ["SOUR1:VOLT 0.2", "SOUR2:VOLT 0.2"], sent
+    failing.clear()
+    c.close()
+    assert not g.state[1]["output"] and not g.state[2]["output"]
+
+
+def test_a_daq_start_that_fails_after_the_fade_in_fades_back_to_rest(monkeypatch):
+    import types
+
+    import numpy as np
+
+    from mitsuba_eventfield.device.daq import DAQmxOutput
+    writes, modes = [], []
+
+    class Task:
+        def __init__(self):
+            self.mode = None
+            self.ao_channels = types.SimpleNamespace(add_ao_voltage_chan=lambda name, **kw: None)
+            self.timing = types.SimpleNamespace(cfg_samp_clk_timing=lambda rate, **kw: setattr(
+                self, "mode", kw.get("sample_mode")))
+
+        def write(self, data, auto_start=False):
+            writes.append(np.asarray(data))
+
+        def start(self):
+            modes.append(self.mode)
+            if self.mode == "continuous":
+                raise RuntimeError("DAQmx error -200479: the task could not start")
+
+        def wait_until_done(self, timeout):
+            pass
+
+        def stop(self):
+            pass
+
+        def close(self):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *a):
+            pass
+    fake = types.ModuleType("nidaqmx")
+    fake.Task = Task
+    fake.constants = types.SimpleNamespace(AcquisitionType=types.SimpleNamespace(CONTINUOUS="continuous",
+                                                                                  FINITE="finite"))
+    monkeypatch.setitem(sys.modules, "nidaqmx", fake)
+    monkeypatch.setitem(sys.modules, "nidaqmx.constants", fake.constants)
+    out = DAQmxOutput(rate=50_000)
+    with pytest.raises(RuntimeError, match="could not start"):
+        out.start(_circle())
+    period = out.waveform(_circle())
+    fade_in, _, fade_out = writes
+    assert modes == ["finite", "continuous", "finite"] and out.task is None
+    # back from the held sample (the period's last) by the next one, down to 0 V
+    assert np.allclose(fade_in[:, -1], period[:, -1]) and np.allclose(fade_out[:, 0], period[:, 0], rtol=1e-4)
+    assert fade_out[:, -1].tolist() == [0.0, 0.0]
