@@ -75,6 +75,12 @@ OUTPUT_SUFFIXES = {("render", "preview"): (".png",), ("preview", "output"): (".p
 EXTENDED = {("calibrate", "output")}
 
 
+def _path_like(value) -> bool:
+    """An argument that can name an input file: a word with an extension or a directory in it (a choice such as
+    ``--curve line`` or the command's own name is not one: ``--metadata line`` was refused as that input)."""
+    return isinstance(value, str) and ("." in os.path.basename(value) or os.sep in value)
+
+
 def check_outputs(args) -> None:
     """Every output path of the command (``OUTPUT_FILES``, ``OUTPUT_DIRS``) before any work: an empty one, an
     unwritable one, a wrong kind, and a file that is one of the command's inputs (any other argument naming
@@ -90,7 +96,7 @@ def check_outputs(args) -> None:
         if suffixes and not path.lower().endswith(suffixes):
             raise EventFieldError(f"{path}: {what} must be a {' or '.join(suffixes)} file")
         if (args.command, name) not in EXTENDED:
-            check_not_input(path, [v for k, v in vars(args).items() if k != name], what)
+            check_not_input(path, [v for k, v in vars(args).items() if k != name and _path_like(v)], what)
     if args.command in OUTPUT_DIRS:
         if not str(args.output).strip():
             raise EventFieldError("-o/--output: empty: name an output directory")

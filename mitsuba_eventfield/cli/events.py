@@ -149,11 +149,11 @@ def run_convert(a) -> int:
     if a.threshold_on is not None or a.threshold_off is not None:      # each side: its own, else --threshold
         for name, own in (("threshold_on", a.threshold_on), ("threshold_off", a.threshold_off)):
             value = threshold if own is None else own
-            if value is not None and name in pixel:
+            if value is not None and pixel.get(name) not in (None, value):
                 raise EventFieldError(f"--{name.replace('_', '-')} (or --threshold) and --pixel {name}= both "
                                       "given: give one")
             if value is not None:
-                pixel[name] = value
+                pixel[name] = value              # (the same value twice is taken, as render takes it)
         threshold = None
     summary = events_from_frames(a.input, a.times, fps=a.fps, preset=a.preset, pixel=pixel, threshold=threshold,
                                  srgb=a.srgb, output=a.output, progress=not a.quiet,
@@ -239,7 +239,8 @@ def _render_preview(a) -> None:
     from ..events.io import read_events
     from ..events.preview import write_preview
     ev = read_events(a.output)
-    end = int(ev.meta.get("t_start_us", 0)) + ev.duration_us
+    # (a .txt file keeps no t_start_us: its duration alone ended the window one first-event time early)
+    end = max(int(ev.meta.get("t_start_us", 0)) + ev.duration_us, int(ev.t[-1]) if len(ev) else 0)
     t0 = max(int(ev.meta.get("t_start_us", 0)), end - int(round(a.preview_window * 1e3)))
     write_preview(a.preview, ev, t0, end + 1, scale=2 if max(ev.width, ev.height) < 400 else 1)
     print(f"wrote {os.path.abspath(a.preview)} (events of {(end - t0) / 1e3:g} ms up to the end)")

@@ -77,7 +77,7 @@ def grid(over: dict) -> list:
     for name, values in over.items():
         if not name.startswith(_PREFIXES):
             raise EventFieldError(f"sweep parameter {name!r}: must start with one of {', '.join(_PREFIXES)}")
-        if isinstance(values, (str, bytes, dict)) or not hasattr(values, "__iter__"):
+        if isinstance(values, (str, bytes, dict, set, frozenset)) or not hasattr(values, "__iter__"):
             raise EventFieldError(f"sweep parameter {name!r} = {values!r}: give a non-empty list of values (a "
                                   "list, tuple, range or 1-D NumPy array)")
     # np.linspace(...) and range(...) are how sweeps are written: any 1-D sequence, its NumPy numbers as Python's
@@ -233,7 +233,8 @@ def check_pixel(point: dict) -> None:
         where = "sweep point " + ", ".join(f"{k}={v}" for k, v in point.items() if k.startswith("pixel."))
         preset, overrides = pixel_model.preset_and_overrides(point.get("render.preset"), pixel, where)
         for side in ("threshold_on", "threshold_off"):
-            overrides.setdefault(side, MAX_THRESHOLD)
+            if overrides.get(side) is None:          # None, as absent: the scene's
+                overrides[side] = MAX_THRESHOLD
         pixel_model.pixel_config(preset or "ideal", where, **overrides)
 
 

@@ -21,7 +21,7 @@ from ..atomic import check_not_input, check_writable
 from ..errors import EventFieldError, raise_if_stopped
 from ..events.io import format_of
 from ..plugins import event_batch, event_fill, pixel_model, pixel_step
-from ..validate import positive
+from ..validate import MAX_THRESHOLD, number, positive
 from .device_stream import check_on_device
 from .frame_sources import (FrameSource, check_span, from_array, from_device, is_device_array, open_frames,
                             read_times)
@@ -37,7 +37,7 @@ def pixel_integrator(preset: str | None = None, pixel: dict | None = None, thres
     it (checked before the plugin is built)."""
     preset, overrides = pixel_model.preset_and_overrides(preset, pixel)
     if threshold is not None:
-        threshold = positive(threshold, "threshold")
+        threshold = number(threshold, "threshold", 0, MAX_THRESHOLD, lo_open=True, strict=True)
         pixel_model.given_once({"threshold_on": threshold, "threshold_off": threshold}, overrides)
         overrides.setdefault("threshold_on", threshold)
         overrides.setdefault("threshold_off", threshold)

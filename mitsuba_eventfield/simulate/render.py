@@ -20,7 +20,7 @@ from ..errors import ConfigError, EventFieldError, raise_if_stopped
 from ..events.io import format_of
 from ..plugins.event_fill import film_limit_error
 from ..scene.timed import TimedScene, load_scene
-from ..validate import available_memory, number
+from ..validate import MAX_THRESHOLD, available_memory, number
 from .periodic import period_blocks, phase_grid, reuse_plan
 from . import sample_allocation, static_pixels, step_batch
 from .frames import FrameRenderer, frozen_render, render_frames  # noqa: F401  (render_frames: re-exported)
@@ -75,7 +75,8 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
         raise ConfigError(f"pixel model: pixel = {pixel!r}: must be a dict of pixel parameters (a preset's name "
                           "goes in preset=)")
     preset, pixel = pixel_model.preset_and_overrides(preset, pixel)
-    thr = threshold if threshold is None else number(threshold, "render: threshold", 0, lo_open=True, strict=True)
+    thr = threshold if threshold is None else number(threshold, "render: threshold", 0, MAX_THRESHOLD, lo_open=True,
+                                                           strict=True)
     overrides = {} if preset is not None else dict(integ.scene_overrides)
     explicit = {"threshold_on": threshold_on if threshold_on is not None else thr, "linlog_threshold": linlog_threshold,
                 "threshold_off": threshold_off if threshold_off is not None else thr}

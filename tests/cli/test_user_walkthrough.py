@@ -80,9 +80,20 @@ def test_negative_times_into_aedat4_are_one_line(tmp_path, capsys):
     assert not (tmp_path / "neg.aedat4").exists()
 
 
-def test_a_text_output_gets_its_preview(tmp_path):
+def test_a_text_output_gets_its_preview_up_to_its_last_event(tmp_path, capsys):
     assert cli.main(["render", DEMO, "-o", str(tmp_path / "e.txt"), "--preview", str(tmp_path / "p.png"), *TINY]) == 0
     assert (tmp_path / "p.png").stat().st_size > 0
+    last = int(ef.read_events(str(tmp_path / "e.txt")).t[-1])     # a .txt keeps no start: the window ends here
+    assert f"(events of {last / 1e3:g} ms up to the end)" in capsys.readouterr().out
+
+
+def test_an_output_named_like_an_option_value_is_not_taken_for_an_input(tmp_path, monkeypatch):
+    """`--metadata line` with `--curve line`: the second run found a file named "line" and refused it as the
+    curve's "input" (a review)."""
+    monkeypatch.chdir(tmp_path)
+    argv = ["device", "scan", "--simulate", "--dialect", "rigol", "--freq", "10", "--amplitude-deg", "1",
+            "--curve", "line", "--duration", "0.05", "--metadata", "line"]
+    assert cli.main(argv) == 0 and cli.main(argv) == 0
 
 
 def test_info_on_a_frame_stack_points_to_convert(ramp, capsys):
@@ -102,13 +113,15 @@ def test_a_whole_float_film_size_and_numpy_sweep_values_are_taken():
     assert timed.film_size == (24, 18)
     points = grid({"xml.amplitude": np.linspace(0.1, 0.2, 2), "render.spp": range(1, 3)})
     assert points[-1] == {"xml.amplitude": 0.2, "render.spp": 2} and type(points[0]["xml.amplitude"]) is float
-    for bad in ([], "abc", np.zeros((2, 2)), 4):
+    for bad in ([], "abc", np.zeros((2, 2)), 4, {1, 2}):          # a set: no order for the table's rows
         with pytest.raises(ef.EventFieldError, match="give a non-empty list of values"):
             grid({"render.spp": bad})
 
 
 def test_a_sweep_checks_every_points_pixel_before_spawning_and_its_workers_log_quietly(tmp_path, capfd):
     base = {"xml.width": 24, "xml.height": 18, "render.duration": 0.002, "render.steps": 4}
+    from mitsuba_eventfield.evaluation.sweep import check_pixel
+    check_pixel({"pixel.threshold_on": None, "pixel.threshold_sigma": 0.3})   # None: the scene's, maybe C = 1
     with pytest.raises(ef.EventFieldError, match=r"sweep point pixel.refractory_s=-1.0: refractory_s = -1.0"):
         ef.sweep(DEMO, over={"pixel.refractory_s": [0.0, -1.0]}, base=base, out_dir=str(tmp_path / "bad"))
     assert not (tmp_path / "bad").exists() or not os.listdir(tmp_path / "bad")        # no point was run
@@ -135,5 +148,8 @@ def test_convert_takes_a_threshold_for_each_polarity(tmp_path):
     ev = ef.read_events(str(out))
     on, off = (np.count_nonzero(ev.p == s) / 16 for s in (1, -1))
     assert 10 <= on <= 11 and off == 3 and ev.meta["pixel_model"]["threshold_on"] == 0.1
-    with pytest.raises(ef.EventFieldError, match="allowed range is"):
+    with pytest.raises(ef.EventFieldError, match=r"threshold = 50: allowed range is \(0, 10\]"):   # as given
         ef.events_from_frames(np.load(path)["frames"], np.load(path)["times"], threshold=50)
+    # the same value twice is taken, as render takes it
+    assert cli.main(["convert", str(path), "-o", str(tmp_path / "same.h5"), "--threshold-on", "0.1", "--pixel",
+                     "threshold_on=0.1", "--quiet"]) == 0
