@@ -40,7 +40,7 @@ CASES = {
     "render_events spp": (lambda s: ef.render_events(s, 0.01, steps=2, spp=float("nan")), "spp"),
     # named as given (it named threshold_on, which the caller did not write)
     "render_events threshold": (lambda s: ef.render_events(s, 0.01, steps=2, threshold=-1),
-                                "render: threshold = -1: allowed range is (0, inf)"),
+                                "render: threshold = -1: allowed range is (0, 10]"),
     "render_events pixel": (lambda s: ef.render_events(s, 0.01, steps=2, pixel={"bogus": 1}), "bogus"),
     "render_events threshold twice": (lambda s: ef.render_events(s, 0.01, steps=2, threshold=0.3,
                                                                  pixel={"threshold_on": 0.15}), "given twice"),
