@@ -234,6 +234,14 @@ def preset_and_overrides(preset: str | None, pixel: dict | None, where: str = "p
     return (preset if preset is not None else named), values
 
 
+def explicit_thresholds(threshold, threshold_on, threshold_off) -> dict:
+    """The ON and OFF thresholds a caller names: each its own where given, else the common ``threshold``
+    (None where neither is given). One rule for ``render_events`` and ``events_from_frames``, and so for both
+    commands' --threshold / --threshold-on / --threshold-off."""
+    return {"threshold_on": threshold if threshold_on is None else threshold_on,
+            "threshold_off": threshold if threshold_off is None else threshold_off}
+
+
 def given_once(arguments: dict, pixel: dict, where: str = "pixel model") -> None:
     """Refuse a parameter given both as its own argument (``arguments``: name -> value or None, e.g. a
     render's ``threshold``) and in the ``pixel`` dict with another value: one would win silently while the

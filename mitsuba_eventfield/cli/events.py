@@ -145,17 +145,8 @@ def run_convert(a) -> int:
     from ..backend import set_variant
     from ..simulate.convert import events_from_frames
     set_variant(a.variant)
-    pixel, threshold = pixel_overrides(a.pixel), a.threshold
-    if a.threshold_on is not None or a.threshold_off is not None:      # each side: its own, else --threshold
-        for name, own in (("threshold_on", a.threshold_on), ("threshold_off", a.threshold_off)):
-            value = threshold if own is None else own
-            if value is not None and pixel.get(name) not in (None, value):
-                raise EventFieldError(f"--{name.replace('_', '-')} (or --threshold) and --pixel {name}= both "
-                                      "given: give one")
-            if value is not None:
-                pixel[name] = value              # (the same value twice is taken, as render takes it)
-        threshold = None
-    summary = events_from_frames(a.input, a.times, fps=a.fps, preset=a.preset, pixel=pixel, threshold=threshold,
+    summary = events_from_frames(a.input, a.times, fps=a.fps, preset=a.preset, pixel=pixel_overrides(a.pixel),
+                                 threshold=a.threshold, threshold_on=a.threshold_on, threshold_off=a.threshold_off,
                                  srgb=a.srgb, output=a.output, progress=not a.quiet,
                                  event_buffer_mb=a.event_buffer_mb)
     print(summary.format())

@@ -31,16 +31,19 @@ from .summary import RenderSummary
 mi, dr = backend.mi, backend.dr
 
 
-def pixel_integrator(preset: str | None = None, pixel: dict | None = None, threshold: float | None = None):
+def pixel_integrator(preset: str | None = None, pixel: dict | None = None, threshold: float | None = None,
+                     threshold_on: float | None = None, threshold_off: float | None = None):
     """An ``eventfield`` integrator with this pixel model, for feeding frames (no scene needed): ``preset``
-    (None: the one ``pixel`` names, else "ideal"). A bad preset or parameter is one ``EventFieldError`` naming
-    it (checked before the plugin is built)."""
+    (None: the one ``pixel`` names, else "ideal"); ``threshold_on`` / ``threshold_off`` override ``threshold``
+    (``pixel_model.explicit_thresholds``). A bad preset or parameter is one ``EventFieldError`` naming it
+    (checked before the plugin is built)."""
     preset, overrides = pixel_model.preset_and_overrides(preset, pixel)
-    if threshold is not None:
-        threshold = number(threshold, "threshold", 0, MAX_THRESHOLD, lo_open=True, strict=True)
-        pixel_model.given_once({"threshold_on": threshold, "threshold_off": threshold}, overrides)
-        overrides.setdefault("threshold_on", threshold)
-        overrides.setdefault("threshold_off", threshold)
+    thr = None if threshold is None else number(threshold, "threshold", 0, MAX_THRESHOLD, lo_open=True, strict=True)
+    explicit = pixel_model.explicit_thresholds(thr, threshold_on, threshold_off)
+    pixel_model.given_once(explicit, overrides)
+    for name, value in explicit.items():
+        if value is not None:
+            overrides.setdefault(name, value)
     config = pixel_model.pixel_config(preset or "ideal", "pixel model", **overrides)   # ConfigError if bad
     integ = mi.load_dict({"type": "eventfield"})
     integ.configure(config)
@@ -48,7 +51,8 @@ def pixel_integrator(preset: str | None = None, pixel: dict | None = None, thres
 
 
 def events_from_frames(frames, times=None, *, fps: float | None = None, preset: str | None = None,
-                       pixel: dict | None = None, threshold: float | None = None, srgb: bool = False,
+                       pixel: dict | None = None, threshold: float | None = None,
+                       threshold_on: float | None = None, threshold_off: float | None = None, srgb: bool = False,
                        output: str | None = None, fmt: str | None = None, progress: bool = False,
                        event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, meta: dict | None = None,
                        frames_per_kernel: int | None = None, on_device: bool = False):
@@ -59,8 +63,9 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     float stack already on the device (a Dr.Jit tensor, or PyTorch / CuPy through DLPack) stays there
     (``frame_sources.from_device``; with ``on_device`` nothing crosses to the host at all). ``times``:
     seconds per frame (an array, or a timestamps file: ``.npy`` or text, one time a line), or ``fps`` (not
-    both; an ``.npz`` with its own times takes neither). ``preset`` / ``pixel`` / ``threshold``: the pixel
-    model, as for :func:`render_events`. ``srgb=True`` decodes gamma-encoded frames to linear light first.
+    both; an ``.npz`` with its own times takes neither). ``preset`` / ``pixel`` / ``threshold`` /
+    ``threshold_on`` / ``threshold_off``: the pixel model, as for :func:`render_events`. ``srgb=True`` decodes
+    gamma-encoded frames to linear light first.
     ``frames_per_kernel``: frames the pixel model takes per kernel where it can (``event_batch``; the events
     are the same, only the speed changes); None picks by film size and backend.
 
@@ -82,7 +87,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
         check_writable(output, "event file")
         format_of(output, fmt)
         check_not_input(output, (frames, times), "event file")
-    integ = pixel_integrator(preset, pixel, threshold)
+    integ = pixel_integrator(preset, pixel, threshold, threshold_on, threshold_off)
     integ.config.check_film(source.width * source.height, f"{source.name}: pixel model")
     summary = RenderSummary(width=source.width, height=source.height, output=os.path.abspath(output) if output else None)
     meta = {"package": "mitsuba-eventfield", "package_version": __version__, "variant": mi.variant(),

@@ -78,8 +78,8 @@ def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off,
     thr = threshold if threshold is None else number(threshold, "render: threshold", 0, MAX_THRESHOLD, lo_open=True,
                                                            strict=True)
     overrides = {} if preset is not None else dict(integ.scene_overrides)
-    explicit = {"threshold_on": threshold_on if threshold_on is not None else thr, "linlog_threshold": linlog_threshold,
-                "threshold_off": threshold_off if threshold_off is not None else thr}
+    explicit = dict(pixel_model.explicit_thresholds(thr, threshold_on, threshold_off),
+                    linlog_threshold=linlog_threshold)
     pixel_model.given_once(explicit, pixel)
     explicit.update(pixel)
     for name, v in explicit.items():
