@@ -42,7 +42,22 @@ FORMATS = {".h5": "h5", ".hdf5": "h5", ".npz": "npz", ".txt": "txt", ".aedat4": 
 NAMED_FORMATS = set(EVT_VERSIONS)
 
 
-def format_of(path: str, fmt: str | None = None) -> str:
+# formats whose timestamps are unsigned: a stream starting before 0 s cannot be written to them
+UNSIGNED_TIME_FORMATS = {"aedat4", *RECORDING_FORMATS.values(), *NAMED_FORMATS}
+
+
+def format_of(path: str, fmt: str | None = None, t_first_s: float | None = None) -> str:
+    """The event format of ``path`` (its extension, or ``fmt`` where given and consistent with it). With
+    ``t_first_s``, the first instant the events may have (a render's start, a conversion's first frame): a
+    format that holds no negative time is refused before any work, not after the events are made."""
+    fmt = _format_of(path, fmt)
+    if t_first_s is not None and t_first_s < 0 and fmt in UNSIGNED_TIME_FORMATS:
+        raise EventFieldError(f"{path}: {fmt} files hold timestamps >= 0 only (the events start at "
+                              f"{t_first_s:.6g} s): choose .h5, .npz or .txt, or shift the times")
+    return fmt
+
+
+def _format_of(path: str, fmt: str | None) -> str:
     if fmt:
         if fmt not in set(FORMATS.values()) | NAMED_FORMATS:
             allowed = sorted(set(FORMATS.values()) | NAMED_FORMATS)

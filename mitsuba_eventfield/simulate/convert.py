@@ -85,7 +85,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     check_span(source.name, source.span_s)
     if output is not None:
         check_writable(output, "event file")
-        format_of(output, fmt)
+        format_of(output, fmt, t_first_s=source.start_s)
         check_not_input(output, (frames, times), "event file")
     integ = pixel_integrator(preset, pixel, threshold, threshold_on, threshold_off)
     integ.config.check_film(source.width * source.height, f"{source.name}: pixel model")

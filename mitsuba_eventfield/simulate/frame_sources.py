@@ -43,6 +43,7 @@ class FrameSource:
     block: object = None
     times: object = None    # the frames' times in seconds where known before reading them (with ``block``)
     span_s: float | None = None     # last frame's time minus the first's, where known before reading them
+    start_s: float | None = None    # the first frame's time, where known before reading it
 
 
 def srgb_to_linear(v: np.ndarray) -> np.ndarray:
@@ -95,7 +96,7 @@ def from_array(frames, times=None, fps=None, srgb=False, where="frames") -> Fram
         for i in range(a.shape[0]):
             yield float(t[i]), intensity(a[i], srgb, where=f"{where}[{i}]")
     return FrameSource(where, a.shape[2], a.shape[1], a.shape[0], frames_iter, {"kind": "array"},
-                       span_s=float(t[-1] - t[0]))
+                       span_s=float(t[-1] - t[0]), start_s=float(t[0]))
 
 
 def is_device_array(frames) -> bool:
@@ -143,7 +144,7 @@ def from_device(frames, times=None, fps=None, srgb=False, where="frames") -> Fra
         for i in range(shape[0]):
             yield float(t[i]), block(i, 1)
     return FrameSource(where, shape[2], shape[1], shape[0], frames_iter, {"kind": "device array"}, device=True,
-                       block=block, times=t, span_s=float(t[-1] - t[0]))
+                       block=block, times=t, span_s=float(t[-1] - t[0]), start_s=float(t[0]))
 
 
 def from_npz(path: str, fps=None, srgb=False, times=None) -> FrameSource:
@@ -222,7 +223,8 @@ def from_folder(path: str, fps=None, srgb=False, times=None) -> FrameSource:
             yield time_of(i), img
     return FrameSource(path, w, h, len(names), frames_iter,
                        {"kind": "image folder", "path": os.path.abspath(path), "fps": fps,
-                        "times": "given" if times is not None else "from the frame rate"}, span_s=span)
+                        "times": "given" if times is not None else "from the frame rate"}, span_s=span,
+                       start_s=time_of(0))
 
 
 # containers whose frame count OpenCV reads from the file (FFmpeg's nb_frames): a video that ends before it is
@@ -311,7 +313,7 @@ def from_video(path: str, fps=None, srgb=False, times=None) -> FrameSource:
     return FrameSource(path, w, h, count, frames_iter, {"kind": "video", "path": os.path.abspath(path),
                                                          "fps": float(rate) if times is None else None,
                                                          "times": "given" if times is not None else "from the frame rate"},
-                       span_s=span)
+                       span_s=span, start_s=time_of(0))
 
 
 def open_frames(path: str, fps=None, srgb=False, times=None) -> FrameSource:

@@ -389,7 +389,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     check_memory(width, height, st.spp, where=f"{timed.path or 'scene'}: film")
     if output is not None:                          # "" refused, not taken for "in memory"
         check_writable(output, "event file")
-        format_of(output, fmt)
+        format_of(output, fmt, t_first_s=st.t_start)
     integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel, st.seed)
     st, noise, allocation, frozen = _steps_and_samples(timed, st, integ, spp_changing)
     summary = _new_summary(timed, st, output)

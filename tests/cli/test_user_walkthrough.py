@@ -68,15 +68,36 @@ def test_a_define_given_twice_is_refused(tmp_path, capsys):
     _refused(["render", DEMO, "-o", tmp_path / "a.h5", "-D", "width=32", *TINY], capsys, "-D width given twice")
 
 
-def test_negative_times_into_aedat4_are_one_line(tmp_path, capsys):
-    pytest.importorskip("dv_processing")
+def test_negative_times_into_aedat4_are_refused_before_any_work(tmp_path, capsys, monkeypatch):
     path = tmp_path / "neg.npz"
     np.savez(path, frames=np.exp(np.linspace(0, 1, 6))[:, None, None] * np.ones((6, 8, 8), np.float32),
              times=np.linspace(0, 0.005, 6) - 0.5)
-    # found at the first chunk (the progress bar has started): the error is the last line, with no traceback
-    assert cli.main(["convert", str(path), "-o", str(tmp_path / "neg.aedat4")]) == 2
-    err = capsys.readouterr().err
-    assert "AEDAT4 holds timestamps >= 0 only" in err.strip().splitlines()[-1] and "Traceback" not in err
+    from mitsuba_eventfield.simulate import convert
+    monkeypatch.setattr(convert, "_feed", lambda *a: pytest.fail("frames converted before the refusal"))
+    for out in ("neg.aedat4", "neg.raw"):
+        assert cli.main(["convert", str(path), "-o", str(tmp_path / out)]) == 2
+        err = capsys.readouterr().err
+        assert err.strip().splitlines() == [f"eventfield: error: {tmp_path / out}: {out.split('.')[1]} files hold "
+                                            "timestamps >= 0 only (the events start at -0.5 s): choose .h5, .npz "
+                                            "or .txt, or shift the times"], err
+        assert not (tmp_path / out).exists()
+
+
+def test_a_render_starting_before_zero_is_refused_for_aedat4_before_rendering(tmp_path):
+    with pytest.raises(ef.EventFieldError, match=r"aedat4 files hold timestamps >= 0 only \(the events start at "
+                                                 r"-0.001 s\)"):
+        ef.render_events(DEMO, 0.002, steps=2, t_start=-0.001, output=str(tmp_path / "e.aedat4"),
+                         pixel={"threshold": 0.2})
+    assert not (tmp_path / "e.aedat4").exists()
+
+
+def test_a_source_whose_times_are_known_late_is_still_refused_whole(tmp_path):
+    pytest.importorskip("dv_processing")
+    from mitsuba_eventfield.simulate.frame_sources import FrameSource
+    frames = [np.full((8, 8), v, np.float32) for v in np.exp(np.linspace(0, 1, 6))]
+    src = FrameSource("gen", 8, 8, None, lambda: zip(np.linspace(-0.5, -0.495, 6), frames), {"kind": "generator"})
+    with pytest.raises(ef.EventFieldError, match="AEDAT4 holds timestamps >= 0 only"):
+        ef.events_from_frames(src, output=str(tmp_path / "neg.aedat4"))
     assert not (tmp_path / "neg.aedat4").exists()
 
 
