@@ -8,7 +8,7 @@
 * ``nominal``: the optics of data that carries none (a nominal optics file; a recording's from its calibration);
 * ``store``: save / load calibration files (JSON) and apply them to light fields.
 """
-from .depth import DepthCalibration, fit_depth  # noqa: F401
+from .depth import DepthCalibration, fit_depth, fit_depth_from_tracks  # noqa: F401
 from .galvo import (CalibrationError, GalvoCalibration, PatchTrack, capture_of, fit_galvo, fit_tracks,
                     galvo_scale_limit, scale_note, track_patch, track_point)
 from .led import fit_led, fit_point_track, track_led  # noqa: F401,E402

@@ -5,10 +5,14 @@ A point source (LED) at known depths z_i gives the scan curve's scale S_i (pixel
 quantity, the scale (px/rad), where the measurement noise is uniform; depth residuals are reported too, but
 they are dominated by the far points, where dS/dz ~ pivot / z^2 is smallest:
 
-* ``inverse`` (what the mirror geometry predicts, ``optics.galvo``): an on-axis point at depth z moves by
-  2 f g (1 - pivot / z) pixels per mechanical radian, so S = p + q / z with p = 2 f g (g: the mirror's angle
-  gain, 1 when it turns as commanded) and pivot = -q / p. It is used everywhere: ``geometry`` turns it into the
-  exact two-mirror geometry (pivots and gains per axis) that refocus and depth from focus map views with.
+* ``inverse`` (what the mirror geometry predicts, ``optics.galvo.GalvoGeometry.scan_scale``): a point at
+  depth z seen at field position t moves by 2 f g (k - pivot / z) pixels per mechanical radian, k = 1 + t^2
+  (1 on the axis), so S = p k + q / z with p = 2 f g (g: the mirror's angle gain, 1 when it turns as
+  commanded) and pivot = -q / p; (p, q) are the on-axis model (k = 1). Each capture's k comes from where its
+  LED's track is centred (``fit_depth_from_tracks``): fitted as if on the axis, an LED at 0.9 of the half width
+  (fov 40 deg) read the gain 8.5 % high and the pivot 8 % short. It is used everywhere: ``geometry`` turns it
+  into the exact two-mirror geometry (pivots and gains per axis) that refocus and depth from focus map views
+  with.
 * ``linear`` (the paper's): z = c0 + c1 * S. Size is linear in 1/z, not in z, so this model cannot follow the
   physics; it is kept for comparison, and using it (``depth(..., model="linear")``) warns with the depth range
   outside which it is more than 5 % off the inverse fit.
@@ -29,7 +33,7 @@ LINEAR_MODEL_TOLERANCE = 0.05     # relative depth error at which the linear mod
 class DepthCalibration:
     depths: list               # calibration depths (scene units)
     scales: list               # fitted curve scale at each depth (px per mechanical radian, x axis)
-    inverse: tuple             # (p, q): S = p + q / z
+    inverse: tuple             # (p, q): S = p k + q / z (k: the capture's field factor, 1 on the axis)
     linear: tuple              # (c0, c1): z = c0 + c1 * S
     inverse_y: tuple | None    # (p, q) fitted on the y scales, when given (the y mirror pivots further away)
     rms_inverse: float         # residual RMS of each model in scale (px/rad): the comparison
@@ -39,6 +43,7 @@ class DepthCalibration:
     best: str                  # model with the smaller scale residual
     std: dict = field(default_factory=dict)      # standard errors: p, q, pivot (and p_y, q_y, pivot_y)
     optics: dict = field(default_factory=dict)   # what it was made for (optics.optics_record), set when saved
+    field_factors: list | None = None   # per capture (k_x, k_y) where its LED was (None: all on the axis)
 
     @property
     def quality(self) -> dict:
@@ -53,8 +58,9 @@ class DepthCalibration:
         return -q / p
 
     def depth(self, scale, model: str = "inverse"):
-        """Depth of a curve scale S (px per rad): the inverse (physical) model, or the paper's ``linear`` one,
-        which warns where it breaks (``linear_valid_range``)."""
+        """Depth of an on-axis curve scale S (px per rad): the inverse (physical) model, or the paper's
+        ``linear`` one (fitted to the scales as measured, wherever the LED was), which warns where it breaks
+        (``linear_valid_range``)."""
         s = np.asarray(scale, dtype=np.float64)
         if model == "linear":
             lo, hi = self.linear_valid_range()
@@ -92,9 +98,10 @@ class DepthCalibration:
         return {"kind": "depth", **asdict(self), "quality": self.quality}
 
 
-def _fit_inverse(z, s, axis: str) -> tuple:
-    """S = p + q / z by least squares; (p, q, standard errors of p, q and pivot = -q / p)."""
-    A = np.c_[np.ones_like(z), 1 / z]
+def _fit_inverse(z, s, axis: str, k=None) -> tuple:
+    """S = p k + q / z by least squares (``k``: each capture's field factor, default 1); (p, q, standard errors
+    of p, q and pivot = -q / p)."""
+    A = np.c_[np.ones_like(z) if k is None else k, 1 / z]
     (p, q), *_ = np.linalg.lstsq(A, s, rcond=None)
     r = A @ (p, q) - s
     cov = np.linalg.inv(A.T @ A) * float(r @ r) / max(len(z) - 2, 1)
@@ -137,36 +144,51 @@ def _check_pinned(p: float, q: float, std: dict, rms: float, axis: str) -> None:
                                f"{rms:.3g} px/rad): check that each capture is given its own depth")
 
 
-def fit_depth(depths, scales, scales_y=None) -> DepthCalibration:
+def fit_depth_from_tracks(depths, fits, geometry) -> DepthCalibration:
+    """``fit_depth`` of LED captures: each ``fits`` entry a ``GalvoCalibration`` of one capture
+    (``led.fit_led``: its scales and its track's centre, ``patches[0]``), ``geometry`` the captures' nominal
+    ``GalvoGeometry`` (its film and focal length give each centre's field factors)."""
+    factors = [geometry.field_factors(*fit.patches[0]) for fit in fits]
+    return fit_depth(depths, [fit.scale_px_per_rad[0] for fit in fits], [fit.scale_px_per_rad[1] for fit in fits],
+                     field_factors=factors)
+
+
+def fit_depth(depths, scales, scales_y=None, field_factors=None) -> DepthCalibration:
     """Fit both models to (depth, curve scale along x) pairs, and the inverse model to the y scales when given.
-    Refuses (CalibrationError, with the reason) fewer than 3 distinct depths, non-finite or non-positive input,
-    fits the geometry cannot produce (``_check_inverse``; the linear model's depth falling with scale) and fits
-    that do not pin the pivot (``MAX_PIVOT_REL_STD``: depth labels swapped)."""
+    ``field_factors``: each capture's (k_x, k_y) (``GalvoGeometry.field_factors`` where its LED was; None: every LED
+    on the axis). Refuses (CalibrationError, with the reason) fewer than 3 distinct depths, non-finite or
+    non-positive input, fits the geometry cannot produce (``_check_inverse``; the linear model's depth falling
+    with scale) and fits that do not pin the pivot (``MAX_PIVOT_REL_STD``: depth labels swapped)."""
     z = np.asarray(depths, dtype=np.float64)
     s = np.asarray(scales, dtype=np.float64)
     if len(z) != len(s) or len(np.unique(z)) < 3:
         raise CalibrationError(f"depth calibration needs at least 3 distinct depths (got {len(np.unique(z))})")
     if not (np.all(np.isfinite(z)) and np.all(z > 0)) or not np.all(np.isfinite(s)):
         raise CalibrationError("depths must be finite and > 0, and scales finite")
-    p, q, std = _fit_inverse(z, s, "")
+    k = np.ones((len(z), 2)) if field_factors is None else np.asarray(field_factors, dtype=np.float64)
+    if k.shape != (len(z), 2) or not (np.all(np.isfinite(k)) and np.all(k >= 1)):
+        raise CalibrationError(f"field_factors: shape {k.shape} for {len(z)} depths; need one (k_x, k_y) >= 1 "
+                               "per depth")
+    p, q, std = _fit_inverse(z, s, "", k[:, 0])
     _check_inverse(p, q, z, "x")
     c0, c1 = np.linalg.lstsq(np.c_[np.ones_like(s), s], z, rcond=None)[0]
     if not c1 > 0:
         raise CalibrationError(f"the linear model z = {c0:.4g} + {c1:.4g} S has depth falling with scale "
                                "(inverted): the scales do not grow with depth")
     rms = lambda e: float(np.sqrt(np.mean(e ** 2)))  # noqa: E731
-    rms_inv, rms_lin = rms(p + q / z - s), rms((z - c0) / c1 - s)
+    rms_inv, rms_lin = rms(p * k[:, 0] + q / z - s), rms((z - c0) / c1 - s)
     _check_pinned(p, q, std, rms_inv, "x")
     with np.errstate(divide="ignore", invalid="ignore"):
-        depth_inv, depth_lin = rms(q / (s - p) - z), rms(c0 + c1 * s - z)
+        depth_inv, depth_lin = rms(q / (s - p * k[:, 0]) - z), rms(c0 + c1 * s - z)
     inverse_y = None
     if scales_y is not None:
         if len(scales_y) != len(z) or not np.all(np.isfinite(scales_y)):
             raise CalibrationError(f"scales_y: {len(scales_y)} values for {len(z)} depths; need one finite scale "
                                    "per depth")
-        py, qy, std_y = _fit_inverse(z, np.asarray(scales_y, dtype=np.float64), "_y")
+        py, qy, std_y = _fit_inverse(z, np.asarray(scales_y, dtype=np.float64), "_y", k[:, 1])
         _check_inverse(py, qy, z, "y")
-        _check_pinned(py, qy, std_y, rms(py + qy / z - np.asarray(scales_y, dtype=np.float64)), "y")
+        _check_pinned(py, qy, std_y, rms(py * k[:, 1] + qy / z - np.asarray(scales_y, dtype=np.float64)), "y")
         inverse_y, std = (py, qy), {**std, **std_y}
     return DepthCalibration(z.tolist(), s.tolist(), (p, q), (float(c0), float(c1)), inverse_y, rms_inv, rms_lin,
-                            depth_inv, depth_lin, "inverse" if rms_inv <= rms_lin else "linear", std)
+                            depth_inv, depth_lin, "inverse" if rms_inv <= rms_lin else "linear", std,
+                            field_factors=None if field_factors is None else k.tolist())

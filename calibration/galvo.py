@@ -224,17 +224,22 @@ def galvo_scale_limit(optics: dict, margin: float = 1.25) -> float:
 
 
 def scale_note(result: GalvoCalibration, optics: dict, tolerance: float = 0.05) -> str | None:
-    """A line for a fit whose curve is larger than these optics can show at any depth (2 f, the scale at
-    infinity; nearer patches show less): the scan's recorded amplitude is likely smaller than what the mirror
-    did (a driver's gain), and the fitted scale, which the light fields do not use (the phase is what a galvo
-    calibration applies), says by how much. None when the fit is within ``tolerance`` of that bound."""
-    most = 2 * focal_length_px(optics["width"], optics["fov_x_deg"])
-    ratio = max(result.scale_px_per_rad) / most
+    """A line for a fit whose curve is larger than these optics can show at any depth where its patches are
+    (``GalvoGeometry.scan_scale`` at infinity, the largest; nearer patches show less; off the axis the keystone
+    adds t^2): the scan's recorded amplitude is likely smaller than what the mirror did (a driver's gain), and
+    the fitted scale, which the light fields do not use (the phase is what a galvo calibration applies), says
+    by how much. None when the fit is within ``tolerance`` of that bound."""
+    from mitsuba_eventfield.optics.galvo import GalvoGeometry
+    nominal = GalvoGeometry(optics["width"], optics["height"], focal_length_px(optics["width"], optics["fov_x_deg"]),
+                            0.0, 0.0)
+    most = np.max([nominal.scan_scale(math.inf, *patch) for patch in result.patches or [(None, None)]], axis=0)
+    ratio = float(np.max(np.asarray(result.scale_px_per_rad) / most))
     if ratio <= 1 + tolerance:
         return None
-    return (f"the fitted curve is {ratio:.2f}x the largest these optics show ({most:.0f} px/rad, 2 f): the "
-            f"scan moved the mirror about {ratio:.2f}x the recorded amplitude (check the driver's gain, "
-            "volts per degree); the calibration's phase is applied, its scale is not")
+    return (f"the fitted curve is {ratio:.2f}x the largest these optics show where its patches are "
+            f"({most.max():.0f} px/rad, at infinity): the scan moved the mirror about {ratio:.2f}x the recorded "
+            "amplitude (check the driver's gain, volts per degree); the calibration's phase is applied, its scale "
+            "is not")
 
 
 def fit_galvo(frames, times, curve: ScanCurve, patches, half: int = 12, search: int = 16,

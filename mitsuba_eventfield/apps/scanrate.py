@@ -86,7 +86,8 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
     of events each; the LED's track from the events alone (``calibration.fit_led``, no start frame) gives the
     curve scale at each depth, and ``calibration.fit_depth`` the disparity model. Returns {"depth": DepthCalibration} for ``run``, made for
     the optics of ``scene_path`` (its ``optics`` record), which ``run`` checks against the scene it is used on."""
-    from ..calibration import fit_depth, fit_led, galvo_scale_limit, optics_record
+    from ..calibration import fit_depth_from_tracks, fit_led, galvo_scale_limit, optics_record
+    from ..optics.galvo import GalvoGeometry
     from ..optics.scan import curve_from_dict
     target = load_scene(scene_path, **(defines or {}))
     optics = target.sensor.optics_metadata()
@@ -99,17 +100,15 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
     curve = curve_from_dict(scan)
     record = optics_record(optics, w, h, where=scene_path)
     limit = galvo_scale_limit(record)
-    scales, scales_y = [], []
+    fits = []
     for z in depths:
         led = load_scene(bundled_scene(LED_SCENE), width=w, height=h, depth=float(z), radius=0.006 * float(z),
                             fov=optics["fov_x_deg"], mirror_distance=optics["mirror_distance"],
                             mirror_separation=optics["mirror_separation"], frequency=scan["frequency"],
                             amplitude=scan["amplitude"], phase=scan["phase"])
         events = render_events(led, curve.period, steps=4 * views, progress=progress)
-        fit = fit_led(events, samples=views, scale_limit=limit)      # the LED's track from its events alone
-        scales.append(fit.scale_px_per_rad[0])
-        scales_y.append(fit.scale_px_per_rad[1])
-    depth = fit_depth(list(depths), scales, scales_y)
+        fits.append(fit_led(events, samples=views, scale_limit=limit))   # the LED's track from its events alone
+    depth = fit_depth_from_tracks(list(depths), fits, GalvoGeometry.from_optics(record, w, h))
     depth.optics = record
     return {"depth": depth}
 

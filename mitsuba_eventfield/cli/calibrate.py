@@ -89,7 +89,8 @@ def _galvo(a) -> None:
 
 def _depth(a) -> None:
     from .. import calibration as cal
-    depths, scales, scales_y, records = [], [], [], {}
+    from ..optics.galvo import GalvoGeometry
+    depths, fits, records = [], [], {}
     for item in a.captures:
         path, _, depth = item.rpartition(":")
         try:
@@ -108,10 +109,10 @@ def _depth(a) -> None:
         except EventFieldError as e:
             raise EventFieldError(f"{path}: {e}") from None
         depths.append(depth)
-        scales.append(fit.scale_px_per_rad[0])
-        scales_y.append(fit.scale_px_per_rad[1])
+        fits.append(fit)
     optics = cal.same_optics(records)          # one set-up for all the captures
-    result = cal.fit_depth(depths, scales, scales_y)
+    result = cal.fit_depth_from_tracks(depths, fits, GalvoGeometry.from_optics(optics, optics["width"],
+                                                                               optics["height"]))
     cal.save_calibration(a.output, optics, depth=result)
     print(f"depth: inverse model rms {result.rms_inverse:.3f} px/rad (pivot {result.pivot:.4g}), linear "
           f"model rms {result.rms_linear:.3f} px/rad; best: {result.best} -> {a.output}")

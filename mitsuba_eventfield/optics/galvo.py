@@ -196,6 +196,25 @@ class GalvoGeometry:
         return np.stack([q[:, 0] / q[:, 2] - px, q[:, 1] / q[:, 2] - py], axis=1)
 
     # ---------------------------------------------------------- first order
+    def field_factors(self, x=None, y=None) -> tuple:
+        """(1 + t_x^2, 1 + t_y^2) at reference pixel (x, y) (default: the image centre), t the pixel's normalised
+        field position (pixels from the centre over the focal length): what a scan's first-order image motion
+        there gains over the axis, per axis (``scan_scale``)."""
+        tx = (self.width / 2 - (self.width / 2 if x is None else float(x))) / self.focal_px
+        ty = (self.height / 2 - (self.height / 2 if y is None else float(y))) / self.focal_px
+        return 1.0 + tx * tx, 1.0 + ty * ty
+
+    def scan_scale(self, depth: float = math.inf, x=None, y=None) -> tuple:
+        """(S_x, S_y): pixels a point at ``depth`` seen at reference pixel (x, y) moves per mechanical radian of
+        each mirror, to first order in the angle: S = 2 f g (k - pivot / z), k = ``field_factors``. A mirror
+        turning the ray by phi moves the point's slope X / Z by phi ((Z - pivot) / Z + (X / Z)^2): the
+        keystone's t^2 adds to the on-axis 1 - pivot / z, it does not multiply it. The scale an LED track
+        measures (``calibration.led``) and the one a depth calibration inverts (``calibration.depth``)."""
+        kx, ky = self.field_factors(x, y)
+        inv_z = 0.0 if math.isinf(depth) else 1.0 / float(depth)
+        return (2 * self.focal_px * self.gain_x * (kx - self.pivot_x * inv_z),
+                2 * self.focal_px * self.gain_y * (ky - self.pivot_y * inv_z))
+
     def paraxial_disparity(self):
         """((alpha_x at infinity, alpha_y at infinity), (per inverse depth x, y)): on-axis image displacement
         per unit of *optical* angle, alpha(z) = at_infinity + per_inverse_depth / z = f g (1 - pivot / z)."""

@@ -193,6 +193,40 @@ def test_depth_calibration_keeps_each_axis_pivot(tmp_path):
         fit_depth(z, 2 * f * (1 - 0.10 / z), scales_y=[1.0, 2.0])
 
 
+def _ray_traced_scales(point, d1, s, f, width, height, delta=1e-6):
+    """Pixels per mechanical radian of each mirror for a camera-frame point, by ray geometry alone
+    (``project_point``, not the homographies): central differences of its image position."""
+    def at(tx, ty):
+        return np.array(galvo_optics.project_point(np, point, tx, ty, d1, s, f, width, height))
+    sx = (at(delta, 0.0) - at(-delta, 0.0))[0] / (2 * delta)
+    sy = (at(0.0, delta) - at(0.0, -delta))[1] / (2 * delta)
+    return abs(sx), abs(sy), at(0.0, 0.0)
+
+
+def test_scan_scale_off_axis_is_the_ray_traced_one_and_the_depth_fit_uses_it():
+    """An LED off the axis moves by 2 f (k - pivot / z) per radian, k = 1 + t^2 (``GalvoGeometry.scan_scale``):
+    fitted as if on the axis (k = 1) its gain came out (1 + t^2) high and its pivot as much short."""
+    f = galvo_optics.focal_length_px(W, 40.0)
+    d1, sep = 0.1, 0.01
+    geometry = galvo_optics.GalvoGeometry(W, H, f, d1, d1 + sep)
+    z = np.array([0.4, 0.7, 1.0, 1.6, 2.5])
+    sx, sy, pixels = [], [], []
+    for depth in z:                                 # the LED on one off-axis ray: t = (0.3, -0.2) at every depth
+        a, b, centre = _ray_traced_scales((0.3 * depth, -0.2 * depth, depth), d1, sep, f, W, H)
+        assert geometry.scan_scale(depth, *centre) == pytest.approx((a, b), rel=1e-6)
+        sx, sy, pixels = sx + [a], sy + [b], pixels + [centre]
+    assert geometry.field_factors(*pixels[0]) == pytest.approx((1.09, 1.04))
+    factors = [geometry.field_factors(*c) for c in pixels]
+    for gain in (1.0, 0.97):                        # a mirror turning 3 % less than commanded
+        fitted = fit_depth(z, gain * np.array(sx), gain * np.array(sy), field_factors=factors).geometry(geometry)
+        assert (fitted.pivot_x, fitted.pivot_y) == pytest.approx((d1, d1 + sep), rel=1e-6)
+        assert (fitted.gain_x, fitted.gain_y) == pytest.approx((gain, gain), rel=1e-6)
+    on_axis = fit_depth(z, sx, sy).geometry(geometry)           # what the fit did before: 9 % and 4 % off
+    assert on_axis.gain_x == pytest.approx(1.09, rel=1e-3) and on_axis.pivot_x == pytest.approx(d1 / 1.09, rel=1e-3)
+    with pytest.raises(CalibrationError, match=r"field_factors: shape \(2, 2\) for 5 depths"):
+        fit_depth(z, sx, sy, field_factors=factors[:2])
+
+
 def test_calibration_file_round_trip_and_use_in_refocus(tmp_path):
     """Galvo + depth calibration saved, loaded and applied: a light field whose metadata optics are wrong
     (mirror distance off by 2x) gets back the right depth from depth from focus."""

@@ -285,3 +285,8 @@ def test_a_curve_larger_than_the_optics_show_is_noted(galvo_stream):
     assert scale_note(GalvoCalibration(**made, scale_px_per_rad=(0.9 * f2, 0.9 * f2)), record) is None
     note = scale_note(GalvoCalibration(**made, scale_px_per_rad=(1.25 * f2, 1.24 * f2)), record)
     assert "1.25x the largest these optics show" in note and "its scale is not" in note
+    # patches near the film's edge show more (the keystone, 1 + t^2): 1.06x the on-axis bound is no driver's gain
+    edge = dict(made, patches=[[2.0, record["height"] / 2]])
+    k = galvo_optics.GalvoGeometry(record["width"], record["height"], f2 / 2, 0.0, 0.0).field_factors(2.0)[0]
+    assert k > 1.1 and scale_note(GalvoCalibration(**edge, scale_px_per_rad=(1.06 * f2, f2)), record) is None
+    assert "1.25x" in scale_note(GalvoCalibration(**edge, scale_px_per_rad=(1.25 * k * f2, f2)), record)

@@ -29,14 +29,18 @@ FREQ = 250.0                                # led.xml's scan frequency (Hz): one
 PIVOT_TOL, GAIN_TOL, AMPLITUDE_TOL = 0.08, 0.04, 0.025
 
 
-@pytest.mark.parametrize("width,height,amplitude,steps", [
-    (173, 130, 0.5, 64),            # README's captures: scan radius 3.1-3.9 px, LED image radius 0.9-3.6 px
-    (96, 72, 2.0, 32),              # a coarser film, a wider scan (radius 6.9-8.6 px), half the time steps
+@pytest.mark.parametrize("width,height,amplitude,steps,ray", [
+    (173, 130, 0.5, 64, (0, 0)),    # README's captures: scan radius 3.1-3.9 px, LED image radius 0.9-3.6 px
+    (96, 72, 2.0, 32, (0, 0)),      # a coarser film, a wider scan (radius 6.9-8.6 px), half the time steps
+    # the LED off the axis (33 and 20 px from the centre): fitted as if on it, the gains read 6 % and 2 % high
+    (96, 72, 2.0, 32, (0.25, 0.15)),
 ])
-def test_depth_calibration_from_led_events_recovers_the_galvo(tmp_path, capsys, width, height, amplitude, steps):
+def test_depth_calibration_from_led_events_recovers_the_galvo(tmp_path, capsys, width, height, amplitude, steps,
+                                                              ray):
     captures = []
     for z in DEPTHS:
-        scene = ef.load_scene(LED, width=width, height=height, depth=z, amplitude=amplitude, mirror_distance=PIVOT)
+        scene = ef.load_scene(LED, width=width, height=height, depth=z, amplitude=amplitude, mirror_distance=PIVOT,
+                              led_x=ray[0] * z, led_y=ray[1] * z)
         path = str(tmp_path / f"led_{z}.h5")
         ef.write_events(path, ef.render_events(scene, 1 / FREQ, steps=steps))
         captures.append(f"{path}:{z}")
@@ -52,7 +56,7 @@ def test_depth_calibration_from_led_events_recovers_the_galvo(tmp_path, capsys, 
     radius = [np.ptp(g.image_shift(a * np.cos(theta), a * np.sin(theta), UNSEEN), axis=0) / 2
               for g in (rendered, fitted)]
     with capsys.disabled():
-        print(f"\n[LED depth calibration {width}x{height}, {amplitude} deg, events only] pivots "
+        print(f"\n[LED depth calibration {width}x{height}, {amplitude} deg, LED ray {ray}, events only] pivots "
               f"{fitted.pivot_x * 100:.2f}, {fitted.pivot_y * 100:.2f} cm (rendered {PIVOT * 100:g}, "
               f"{(PIVOT + SEPARATION) * 100:g}); gains {fitted.gain_x:.4f}, {fitted.gain_y:.4f}; scan radius at "
               f"{UNSEEN} m {radius[1][0]:.3f} x {radius[1][1]:.3f} px (exact {radius[0][0]:.3f} x {radius[0][1]:.3f})")
