@@ -130,12 +130,13 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
     final, ends, fired, head = count(view.arrays(), state, frames, t_d, dts, step_last)
     # one read: every step's last slot (the chunk's total is the last), then what the tallies need
     read = head.numpy().astype(np.int64)
+    pixel_model.check_event_count(float(read[-1]), times[0], times[-1], n_pix)   # before the 32-bit ends are trusted
     step_ends = read[:steps]
     _set_state(integ, final)
     stats = {}
     total = int(step_ends[-1])
     if cfg.refractory_s or cfg.shot_noise_hz:
-        crossings, noise_hits, noise_kept = (int(v) for v in read[steps:])
+        crossings, noise_hits, noise_kept = (int(v) for v in read[steps:steps + 3])
         stats = dict(refractory_dropped=crossings + noise_hits - total, noise_events=noise_kept)
         integ.refractory_dropped += stats["refractory_dropped"]
         integ.noise_events += noise_kept
@@ -155,7 +156,8 @@ def _count_pass(view: "PixelView", shape: tuple):
     length), frozen (:func:`_frozen`). ``ends``: each (step, pixel) lane's slot end (its kept crossings, then
     its noise event: one lane a pixel; a second lane a pixel for noise, until 2026-11-26, cost twice the scan
     and a scatter more a step, 0.1 ms a step of the demo's every-effect pixel); ``head``: every step's last
-    slot end, then with a refractory period or shot noise the chunk's crossings and noise hits before any was dropped, and its kept noise events. The first two are
+    slot end, then with a refractory period or shot noise the chunk's crossings and noise hits before any was dropped, and its kept noise events; last, the chunk's events summed without
+    wrapping (``event_fill.approximate_sum``). The first two are
     differences of the pixels' own counters (k_on + k_off, noise_k) over the chunk, which the loop carries
     anyway; the kept noise events are the hits where nothing drops them, else one tally carried through the
     loop (four per-pixel tallies before, as fast)."""
@@ -182,6 +184,7 @@ def _count_pass(view: "PixelView", shape: tuple):
                 hits = _counted(final["noise_k"]) - _counted(state["noise_k"]) if cfg.shot_noise_hz else mi.UInt32(0)
                 head += [_counted(final["k_on"] + final["k_off"]) - _counted(state["k_on"] + state["k_off"]), hits,
                          dr.sum(kept_noise[0]) if tally else hits]
+            head.append(event_fill.approximate_sum(counts))         # the last: the chunk's events, unwrapped
             return final, ends, fired, event_fill.concat_arrays(head, mi.UInt32)
         return count_pass
     return _frozen("count", view, shape, make)

@@ -282,7 +282,7 @@ class _EventIntegratorMethods:
             return self.limiter.filter_device(events, [events.count], t0, t1, self.config.timestamp_resolution_us)
         x, y, ts, p = self.commit(t0, t1)
         t_us = np.rint(ts * 1e6).astype(np.int64) + base_us
-        order = event_fill.time_order(t_us, int(math.floor(t0 * 1e6)) + base_us)
+        order = pixel_model.time_order(t_us, int(math.floor(t0 * 1e6)) + base_us)
         return event_fill.HostEvents(*self.readout(x[order], y[order], t_us[order], p[order]))
 
     def commit_device(self, t0: float, t1: float, base_us: int = 0):

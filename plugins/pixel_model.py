@@ -64,6 +64,25 @@ def reference_level(dr, Float, anchor, k_on, k_off, c_on, c_off):
     return anchor + dr.select(c_on == c_off, symmetric, general)
 
 
+# bytes an event holds while it is made (device slots, sort keys and order, the sorted copy, the result) and
+# the most events one chunk may index (its slot ends are 32-bit)
+BYTES_PER_EVENT_MADE, MAX_CHUNK_EVENTS = 48, (1 << 31) - 1
+
+
+def check_event_count(count: float, t0: float, t1: float, pixels: int) -> None:
+    """Refuse, in one line, a step (or chunk of steps) from ``t0`` to ``t1`` s whose ``count`` events (the sum of
+    its crossing counts, before any is made) no memory holds: a threshold far below any sensor's (1e-6 asked
+    for 4 G events in one step of a 64x48 film and crashed on a 32-bit size; 1e-9 exhausted the memory)."""
+    from mitsuba_eventfield.errors import EventFieldError
+    from mitsuba_eventfield.validate import available_memory
+    most = min(MAX_CHUNK_EVENTS, available_memory() // BYTES_PER_EVENT_MADE)
+    if count > most:
+        many = f"at least {count:.3g}" if count >= 4e9 else f"{count:.3g}"     # (a device sum is capped at 4e9)
+        raise EventFieldError(f"{many} events from {t0:.6g} s to {t1:.6g} s on {pixels} pixels ({count / pixels:.3g} "
+                              f"a pixel): more than memory holds ({most:.3g}); raise the contrast threshold (events "
+                              "a pixel grow as 1 / threshold) or take shorter steps")
+
+
 def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: float, t1: float):
     """Events of the pixels that fired during (t0, t1].
 
@@ -75,6 +94,7 @@ def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: floa
     counts = np.abs(n)
     if len(n) == 0:
         return np.empty(0, np.int64), np.empty(0, np.float64), np.empty(0, np.int8)
+    check_event_count(float(counts.sum()), t0, t1, len(n))
     pixel = np.asarray(pixel, dtype=np.int64)
     lp, ln, ref = (np.asarray(a, dtype=np.float64) for a in (log_prev, log_now, log_ref))
     step = np.where(n > 0, np.asarray(c_on, dtype=np.float64), np.asarray(c_off, dtype=np.float64))
@@ -91,6 +111,16 @@ def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: floa
         frac = (ref + sign * k * step - lp) * inv_rise
     frac = np.clip(np.nan_to_num(frac, nan=1.0), 0.0, 1.0)
     return pixel, t0 + frac * (t1 - t0), sign.astype(np.int8)
+
+
+def time_order(t_us: np.ndarray, step_start_us: int) -> np.ndarray:
+    """Stable time order of one step's events on the host. Offsets within a step usually fit 16 bits, where
+    NumPy's stable sort is a radix sort (about 8x faster than comparison sorting here)."""
+    offset = t_us - step_start_us
+    if len(offset) and offset.min() >= 0 and offset.max() < 2**16:
+        return np.argsort(offset.astype(np.uint16), kind="stable")
+    return np.argsort(t_us, kind="stable")
+
 
 
 # ======================================================================================== pixel realism

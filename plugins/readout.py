@@ -139,7 +139,7 @@ class ReadoutLimiter:
         counts0 = counts + dr.select(dr.arange(mi.UInt32, bins) == 0, carry_d, 0)
         head = event_fill._read([dr.max(counts0), first_d, last_rel_d, dr.gather(mi.UInt32, counts0, last_rel_d)],
                                 mi.Int64)
-        most, first, last_rel, last_count = head
+        most, first, last_rel, last_count = head[:4]
         if last_rel >= bins:
             raise ValueError(f"readout: events span {last_rel + 1} bins, more than their steps ({t0} s, {t1} s) "
                              f"allow ({bins})")

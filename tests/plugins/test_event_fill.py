@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield.plugins.event_fill import time_order
+from mitsuba_eventfield.plugins.pixel_model import time_order
 
 W, H = 40, 30
 
