@@ -48,9 +48,8 @@ def nominal_optics(path: str, width: int, height: int, design: str | None = "gal
 
 
 def _galvo_nominal(path: str, optics: dict) -> dict:
-    from mitsuba_eventfield.optics.galvo import OPTICS_RECORD_KEYS
+    from mitsuba_eventfield.optics.galvo import OPTICS_RECORD_KEYS, checked_optics
     from mitsuba_eventfield.optics.scan import curve_from_dict
-    from mitsuba_eventfield.validate import positive
     missing = [k for k in LIGHTFIELD_FIELDS["galvo"] if k not in optics]
     if missing:
         raise EventFieldError(f"{path}: galvo optics without {', '.join(missing)}")
@@ -59,8 +58,8 @@ def _galvo_nominal(path: str, optics: dict) -> dict:
         raise EventFieldError(f"{path}: {', '.join(unknown)}: not a field of galvo optics (allowed: "
                               f"{', '.join(OPTICS_RECORD_KEYS)})")
     try:
-        for key in ("fov_x_deg", "mirror_distance", "mirror_separation"):
-            optics[key] = positive(optics[key], f"{path}: {key}")
+        keys = ("fov_x_deg", "mirror_distance", "mirror_separation")
+        optics.update(zip(keys, checked_optics(*(optics[k] for k in keys), path)))
         if not isinstance(optics["scan"], dict):
             raise EventFieldError(f"{path}: scan = {optics['scan']!r}: expected a scan curve record")
         curve_from_dict(optics["scan"], where=f"{path}: scan")

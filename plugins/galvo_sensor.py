@@ -90,12 +90,11 @@ class _GalvoSensorMethods:
         self.mirror_distance = float(props.get("mirror_distance", 0.03))
         self.mirror_separation = float(props.get("mirror_separation", 0.01))
         self.far_clip = float(props.get("far_clip", 1e4))
+        galvo_optics.checked_optics(self.fov_x, self.mirror_distance, self.mirror_separation, "sensor 'galvo'",
+                                    error=ValueError)
         for name, v, ok, allowed in (
-                ("fov", self.fov_x, 0 < self.fov_x < 180, "0 < fov < 180 degrees"),
                 ("aperture_radius", self.aperture_radius, self.aperture_radius >= 0, ">= 0 (0: pinhole)"),
                 ("focus_distance", self.focus_distance, self.focus_distance > 0, "> 0"),
-                ("mirror_distance", self.mirror_distance, self.mirror_distance >= 0, ">= 0"),
-                ("mirror_separation", self.mirror_separation, self.mirror_separation >= 0, ">= 0"),
                 ("far_clip", self.far_clip, self.far_clip > 0, "> 0")):
             if not (math.isfinite(v) and ok):
                 raise ValueError(f"sensor 'galvo': {name} = {v!r} is out of range; allowed: {allowed}")

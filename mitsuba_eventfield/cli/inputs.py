@@ -4,7 +4,7 @@ that carries none."""
 from __future__ import annotations
 
 from ..errors import EventFieldError
-from ..validate import number_list
+from ..validate import MAX_THRESHOLD, number_list
 
 
 def read_input(a, needs_optics: bool = False):
@@ -28,7 +28,7 @@ def with_contrast(ev, contrast, where: str):
     """``ev`` with ``--contrast`` (when given) as its contrast thresholds; a stream that has none (a camera
     recording) and no ``--contrast`` is refused in one line."""
     if contrast:
-        c = number_list(contrast, "--contrast", lo=0, lo_open=True)
+        c = number_list(contrast, "--contrast", lo=0, hi=MAX_THRESHOLD, lo_open=True)    # a render's threshold range
         if len(c) not in (1, 2):
             raise EventFieldError(f"--contrast {contrast!r}: expected ON or ON,OFF")
         ev.meta["pixel_model"] = dict(ev.meta.get("pixel_model") or {}, threshold_on=c[0], threshold_off=c[-1])

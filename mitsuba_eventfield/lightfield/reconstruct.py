@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..events.stream import EventStream
+from ..validate import MAX_THRESHOLD, number
 
 _METHODS = {}
 
@@ -44,7 +45,9 @@ def thresholds(events: EventStream, c_on=None, c_off=None):
     c_off = c_off if c_off is not None else pm.get("threshold_off")
     if c_on is None or c_off is None:
         raise ValueError("contrast thresholds unknown: the stream has no pixel_model metadata; pass c_on/c_off")
-    return float(c_on), float(c_off)
+    # the render's own range: a 0 (a damaged file) divided every level by zero, a negative one inverted them
+    return tuple(number(c, f"contrast threshold {name}", 0, MAX_THRESHOLD, lo_open=True)
+                 for name, c in (("c_on", c_on), ("c_off", c_off)))
 
 
 def _signed_weights(events, c_on, c_off):

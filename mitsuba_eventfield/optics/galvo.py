@@ -40,9 +40,23 @@ VIEWS_PER_PERIOD = 32
 # ``meta["optics"]``, a nominal optics file for a camera recording)
 OPTICS_RECORD_KEYS = ("design", "scan", "fov_x_deg", "aperture_radius", "focus_distance", "mirror_distance",
                       "mirror_separation", "angle_convention")
-from dataclasses import dataclass
+# the widest horizontal field of view a galvo's pinhole may have (its focal length falls to 0 at 180 deg)
+MAX_FOV_DEG = 179.0
+from dataclasses import dataclass  # noqa: E402
 
-import numpy as np
+import numpy as np  # noqa: E402
+
+from ..errors import ConfigError  # noqa: E402
+from ..validate import number  # noqa: E402
+
+
+def checked_optics(fov_x_deg, mirror_distance, mirror_separation, where: str, error=ConfigError) -> tuple:
+    """The galvo's three geometric parameters, each checked against its one range (the ``galvo`` sensor plugin,
+    nominal optics files): fov in (0, ``MAX_FOV_DEG``] degrees, pivot distance and mirror separation >= 0 scene
+    units (0 separation: both mirrors at one pivot). ``error`` names ``where`` and the field."""
+    return (number(fov_x_deg, f"{where}: fov_x_deg", 0, MAX_FOV_DEG, lo_open=True, strict=True, error=error),
+            number(mirror_distance, f"{where}: mirror_distance", 0, strict=True, error=error),
+            number(mirror_separation, f"{where}: mirror_separation", 0, strict=True, error=error))
 
 
 # ------------------------------------------------------------------ ray optics (NumPy or Dr.Jit through ``xp``)

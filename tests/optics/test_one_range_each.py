@@ -1,0 +1,50 @@
+"""A parameter checked in several places has one range (optics.galvo.checked_optics, validate.MAX_THRESHOLD):
+a nominal optics file took fov 200 deg (a negative focal length) and refused a mirror separation of 0, which
+the sensor renders; --contrast took any positive number and a stream's own thresholds were not checked at all
+(0 divided the reconstruction's levels by zero)."""
+import json
+import os
+
+import pytest
+from conftest import ROOT
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield import cli
+from mitsuba_eventfield.calibration.nominal import nominal_optics
+from mitsuba_eventfield.lightfield.reconstruct import thresholds
+
+GALVO = os.path.join(ROOT, "scenes", "led_depth", "led.xml")   # declares fov and both mirror distances
+SCAN = {"curve": "circle", "frequency": 250.0, "amplitude": 0.5, "phase": 0.0}
+
+
+def _nominal(tmp_path, **fields):
+    path = tmp_path / "optics.json"
+    path.write_text(json.dumps({"design": "galvo", "fov_x_deg": 40.0, "mirror_distance": 0.1,
+                                "mirror_separation": 0.01, "scan": SCAN, **fields}))
+    return str(path)
+
+
+def test_galvo_optics_have_one_range_in_the_sensor_and_in_a_nominal_file(tmp_path):
+    # both mirrors at one pivot: the sensor renders it, and a nominal file now takes it too
+    assert nominal_optics(_nominal(tmp_path, mirror_separation=0.0), 64, 48)["mirror_separation"] == 0.0
+    ef.load_scene(GALVO, width=16, height=12, mirror_separation=0.0)
+    with pytest.raises(ef.EventFieldError, match=r"optics.json: fov_x_deg = 200(\.0)?: allowed range is \(0, 179\]"):
+        nominal_optics(_nominal(tmp_path, fov_x_deg=200.0), 64, 48)
+    with pytest.raises(Exception, match=r"sensor 'galvo': fov_x_deg = 179\.5: allowed range is \(0, 179\]"):
+        ef.load_scene(GALVO, width=16, height=12, fov=179.5)
+    with pytest.raises(ef.EventFieldError, match=r"mirror_distance = -0\.1: allowed range is \[0, inf\)"):
+        nominal_optics(_nominal(tmp_path, mirror_distance=-0.1), 64, 48)
+
+
+def test_contrast_thresholds_have_the_renders_range_wherever_they_come_from(tmp_path, capsys):
+    stream = ef.EventStream([1, 2], [1, 2], [10, 20], [1, -1], 8, 6,
+                            meta={"pixel_model": {"threshold_on": 0.0, "threshold_off": 0.2}})
+    with pytest.raises(ef.EventFieldError, match=r"contrast threshold c_on = 0\.0: allowed range is \(0, 10\]"):
+        thresholds(stream)
+    assert thresholds(stream, c_on=0.3) == (0.3, 0.2)
+    with pytest.raises(ef.EventFieldError, match=r"c_off = 11: allowed range is \(0, 10\]"):
+        thresholds(stream, 0.2, 11)
+    path = str(tmp_path / "e.h5")
+    ef.write_events(path, stream)
+    assert cli.main(["reconstruct", path, "-o", str(tmp_path / "r.npz"), "--contrast", "11"]) == 2
+    assert "--contrast" in capsys.readouterr().err and not (tmp_path / "r.npz").exists()
