@@ -28,7 +28,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import ConfigError
-from ..validate import finite, number, positive
+from ..validate import finite, number
 from .envelope import DEFAULT_GALVO_MODEL, EnvelopeError, galvo_model
 
 DEFAULT_MAX_ANGLE_DEG = 10.0   # the mechanical travel curves had before galvo models existed (the ideal model's)
@@ -163,11 +163,14 @@ class Lissajous(ScanCurve):
 
     @cached_property         # the curve is frozen; the rationals cost ~10 us, and a render asks every step
     def period(self) -> float | None:
-        fx, fy = (Fraction(f).limit_denominator(10_000) for f in (self.freq_x, self.freq_y))
+        fx, fy = self.freq_x, self.freq_y
         if self.amplitude_x == 0:
             fx = fy
         if self.amplitude_y == 0:
             fy = fx
+        if fx == fy:              # one frequency (a circle, a line): its period, whatever the number (1e-5 Hz was
+            return 1.0 / fx       # aperiodic here: no fraction with a denominator under 10,000 came near it)
+        fx, fy = (Fraction(f).limit_denominator(10_000) for f in (fx, fy))
         if abs(float(fx) - self.freq_x) > 1e-9 * self.freq_x or abs(float(fy) - self.freq_y) > 1e-9 * self.freq_y:
             return None
         # gcd of two rationals: gcd(numerators) / lcm(denominators)
@@ -285,6 +288,11 @@ _ARGS = {
 _FREQ_KEYS = ("frequency", "freq_x", "freq_y")
 
 
+def _whole(params: dict, names: tuple, where: str) -> dict:
+    """``params`` with its counts (``names``) as ints; a fraction is refused (``lines=2.5`` became 2 lines)."""
+    return {k: int(number(v, f"{where}: {k}", 1, integer=True)) if k in names else v for k, v in params.items()}
+
+
 def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: float = 0.0,
                damping: float = 0.7, where: str = "scan", galvo_model: str = DEFAULT_GALVO_MODEL,
                envelope=None, **params) -> ScanCurve:
@@ -321,15 +329,13 @@ def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: floa
                           amplitude_y=a if axis == "y" else 0.0, phase_x=ph, phase_y=ph, kind="line")
     elif name == "raster":
         from .tabulated import raster
-        curve = raster(**limits, **{k: (int(v) if k in ("lines", "samples_per_line") else v)
-                                    for k, v in params.items()})
+        curve = raster(**limits, **_whole(params, ("lines", "samples_per_line"), where))
     else:
         from .tabulated import moore
-        curve = moore(**limits, **{k: (int(v) if k in ("order", "samples_per_segment") else v)
-                                   for k, v in params.items()})
+        curve = moore(**limits, **_whole(params, ("order", "samples_per_segment"), where))
     curve.validate(where, envelope)              # the commanded scan is what the galvo must be able to drive
-    if bandwidth_hz:
-        positive(bandwidth_hz, f"{where}: bandwidth (Hz)")
+    if bandwidth_hz:              # 0: the default, an ideal mirror
+        number(bandwidth_hz, f"{where}: bandwidth (Hz; 0: an ideal mirror)", 0, strict=True)
         if not (math.isfinite(damping) and damping > 0):
             raise ConfigError(f"{where}: damping = {damping!r}: must be a finite number > 0")
         curve = curve.with_bandwidth(bandwidth_hz, damping)

@@ -149,3 +149,21 @@ def test_phase_time_is_exact_one_period_apart():
         assert c.phase_time(k * dt) == c.phase_time((k + 20) * dt)
         assert 0.0 <= c.phase_time(k * dt) < c.period
     assert c.phase_time(0.2) == 0.0 and c.phase_time(50 * c.period) == 0.0
+
+
+def test_a_one_frequency_curve_has_its_period_at_any_frequency_and_counts_are_whole():
+    """A circle or line repeats every 1 / f whatever f is (1e-5 Hz and 123.4567891 Hz had no period: no fraction
+    with a denominator under 10,000 came near them, so their scenes counted as aperiodic); a raster's lines and
+    a Moore curve's order are counts (lines = 2.5 made 2 lines); a bandwidth is 0 (an ideal mirror) or > 0."""
+    for f in (1e-5, 123.4567891, 250.0):
+        assert ef.make_curve("circle", frequency=f, amplitude=0.5).period == pytest.approx(1 / f, rel=1e-12)
+        assert ef.make_curve("line", frequency=f, amplitude=0.5).period == pytest.approx(1 / f, rel=1e-12)
+    assert ef.make_curve("lissajous", freq_x=100, freq_y=150, amplitude_x=0.5, amplitude_y=0.5).period == \
+        pytest.approx(0.02)
+    with pytest.raises(ef.EventFieldError, match=r"scan: lines = 2\.5: must be a whole number \[1, inf\)"):
+        ef.make_curve("raster", frequency=100, amplitude_x=0.2, amplitude_y=0.2, lines=2.5)
+    assert ef.make_curve("raster", frequency=100, amplitude_x=0.2, amplitude_y=0.2, lines=3.0).period == \
+        pytest.approx(0.03)
+    with pytest.raises(ef.EventFieldError, match=r"bandwidth \(Hz; 0: an ideal mirror\) = -1: allowed range is "
+                                                 r"\[0, inf\)"):
+        ef.make_curve("circle", frequency=100, amplitude=0.5, bandwidth_hz=-1)
