@@ -43,11 +43,16 @@ def _bench_scenes(a, bench) -> list:
         if a.define or a.duration is not None or a.refocus_depth is not None:
             raise EventFieldError("-D, --duration and --refocus-depth apply to one scene (eventfield bench SCENE); "
                                   "the suite's scenes have their own")
-        return bench.pick_scenes(a.scenes.split(",") if a.scenes else None)
-    if a.scenes:
+        return bench.pick_scenes(a.scenes.split(",") if a.scenes is not None else None)
+    if a.scenes is not None:
         raise EventFieldError("give one scene file or --scenes, not both")
     from ..scene import load_scene
     probe = load_scene(a.scene, **defines(a))          # a bad scene file fails here, in one line
+    sensor = probe.sensor
+    design = sensor.optics_metadata().get("design") if hasattr(sensor, "optics_metadata") else None
+    if a.refocus_depth is not None and design != "galvo":      # it was ignored: the refocus is a galvo's
+        raise EventFieldError(f"{a.scene}: --refocus-depth scores a galvo's refocus; this scene's sensor is "
+                              f"{design or 'a conventional camera'}")
     duration = a.duration or (probe.motion.duration if probe.motion and probe.motion.duration else None)
     if duration is None:
         raise EventFieldError(f"{a.scene}: no duration (pass --duration, or set `duration` in its motion file)")
@@ -59,7 +64,7 @@ def run_bench(a) -> int:
     from ..evaluation import bench, bench_chart
     ensure_variant()
     specs = _bench_scenes(a, bench)
-    settings = bench.pick_settings(a.settings.split(",") if a.settings else None)
+    settings = bench.pick_settings(a.settings.split(",") if a.settings is not None else None)   # "": none named
     seeds = bench.SEEDS if a.seeds is None else tuple(range(1, a.seeds + 1))
     rows = bench.run(specs, settings, seeds)
     import mitsuba as mi

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..backend import ensure_variant, set_variant
-from ..errors import ConfigError
+from ..errors import ConfigError, EventFieldError
 from ..scene.bundled import bundled_scene
 from ..simulate.auto import load_with_sampler, plan
 from ..simulate.image_motion import largest_px_per_step
@@ -184,6 +184,10 @@ class _Scorer:
         ev, self.reference_wall = _render(path, spec, cfg, seed=0)
         log(f"  reference ({label(cfg, spec.steps)}): {len(ev)} events, {self.reference_wall:.1f} s")
         self.reference, self.counts = ev, _pixel_counts(ev)
+        if not self.counts.sum():      # every setting's count error would be its own count over 1 (an "error" of 244)
+            raise EventFieldError(f"{spec.path}: its reference render ({label(cfg, spec.steps)}) has no events in "
+                                  f"{spec.duration:g} s: nothing changes for the event count to be scored against "
+                                  "(a longer --duration, or a scene that moves)")
         self.refocus_ref = self.depth_truth = None
         galvo = ev.meta.get("optics", {}).get("design") == "galvo"
         if spec.refocus_depth is not None and galvo:

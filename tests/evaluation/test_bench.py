@@ -13,6 +13,7 @@ from mitsuba_eventfield.errors import ConfigError
 from mitsuba_eventfield.evaluation import bench, bench_chart
 
 FAN = os.path.join(ROOT, "scenes", "fan", "fan.xml")
+KALEIDOSCOPE = os.path.join(ROOT, "scenes", "moving_grid", "kaleidoscope.xml")
 
 
 def test_pareto_front():
@@ -82,6 +83,13 @@ def test_one_galvo_scene_from_the_command_line(tmp_path, capsys):
     (["--scenes", "analytic,moon"], "bench scenes moon"),
     (["--scenes", "analytic", "-D", "width=8"], "apply to one scene"),
     ([FAN, "--scenes", "fan"], "not both"),
+    (["--settings", ""], "bench settings (none)"),            # an empty list ran all 19 settings
+    (["--scenes", ""], "bench scenes (none)"),
+    ([KALEIDOSCOPE, "-D", "views_px=12", "--refocus-depth", "1"], "--refocus-depth scores a galvo's refocus; this "
+                                                                   "scene's sensor is kaleidoscope"),   # was ignored
+    # a still reference: every count error was the setting's own event count over 1
+    ([KALEIDOSCOPE, "-D", "views_px=12", "--duration", "0.001", "--settings", "default", "--seeds", "1"],
+     "has no events in 0.001 s: nothing changes for the event count to be scored against"),
 ])
 def test_bad_arguments_are_refused_in_one_line(args, message, tmp_path, capsys):
     assert cli(["bench", "-o", str(tmp_path / "b")] + args) == 2
