@@ -295,6 +295,9 @@ def sweep(scene: str | None = None, frequencies=FREQUENCIES, planes: dict | None
     fan = scene is None
     scene = bundled_scene(SCENE) if fan else scene
     defines = {**({"width": 160, "height": 120} if fan else {}), **(defines or {})}
+    if "frequency" in defines:       # each run sets it: a define would be dropped (-D frequency=300 ran 250 Hz)
+        raise ConfigError(f"defines: frequency = {defines['frequency']!r}: the sweep sets the scan frequency of each "
+                          "run; give the frequencies to sweep (--frequencies) instead")
     planes = PLANES if planes is None and fan else planes
     freqs, periods, planes = _check(frequencies, duration, views, cap_scale, start, region_tolerance, planes or {},
                                     spp, margin)

@@ -81,6 +81,7 @@ def test_outputs_figure_and_paper_rows(result, tmp_path):
     ({"start": "e2vid"}, "allowed"),
     ({"cap_scale": 0}, "cap_scale"),
     ({"planes": {"fan": 0.6, "nothing": 40.0}}, "no part of"),
+    ({"defines": {"width": 32, "height": 24, "frequency": 300}}, "the sweep sets the scan frequency"),   # was dropped
 ])
 def test_bad_arguments_are_refused_before_rendering(kwargs, message):
     with pytest.raises(ValueError, match=message):
