@@ -90,27 +90,21 @@ def led_start_level(changes, low, high, c_on: float, c_off: float):
     return start, footprint
 
 
-def _linlog_inverse(level, linear_below: float):
-    """Linear brightness of a lin-log level (``pixel_model.linlog_np`` inverted)."""
-    knee = math.log(linear_below)
-    return np.where(level >= knee, np.exp(np.maximum(level, knee)), linear_below * (1 + level - knee))
-
-
 def track_led(events, times, t_start: float, period: float, c_on=None, c_off=None) -> np.ndarray:
     """Centroid (x, y; continuous pixels) of the LED's linear brightness above the background at each of
     ``times`` (s) within the scan period from ``t_start``, from the events alone: (K, 2)."""
     from mitsuba_eventfield.lightfield.reconstruct import direct, thresholds
-    from mitsuba_eventfield.plugins.pixel_model import linlog_np
+    from mitsuba_eventfield.plugins.pixel_model import linlog_inverse_np, linlog_np, stream_linlog_threshold
     times = np.asarray(times, dtype=np.float64)
     if len(times) == 0 or times.min() < t_start or times.max() > t_start + period:
         raise CalibrationError("the track's times must lie in the scan period they are measured over")
     c_on, c_off = thresholds(events, c_on, c_off)
-    linear_below = float(events.meta.get("pixel_model", {}).get("linlog_threshold", 1e-3))
+    linear_below = stream_linlog_threshold(events.meta)
     changes = direct(events, times, None, t_start, c_on, c_off)
     start, footprint = led_start_level(changes, *_level_extremes(events, t_start, t_start + period, c_on, c_off),
                                        c_on, c_off)
     levels = float(linlog_np(0.0, linear_below)) + start + changes      # the background's level + G
-    light = np.where(footprint, np.maximum(_linlog_inverse(levels, linear_below), 0.0), 0.0)   # background: 0
+    light = np.where(footprint, np.maximum(linlog_inverse_np(levels, linear_below), 0.0), 0.0)   # background: 0
     total = light.sum(axis=(1, 2))
     if not np.all(total > 0):
         raise CalibrationError("an instant of the period shows no LED: it left the view")

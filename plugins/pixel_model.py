@@ -43,6 +43,25 @@ def linlog_np(intensity, linear_below: float):
     return np.where(i >= il, np.log(np.maximum(i, il)), math.log(il) + (i - il) / il)
 
 
+def linlog_inverse_np(level, linear_below: float):
+    """NumPy twin of :func:`linlog_inverse`: radiance of lin-log levels (a reconstruction's, on a start frame
+    taken through :func:`linlog_np`); below the knee plain ``exp`` is not the inverse (a level of zero radiance
+    came back 0.37 of the knee's radiance high)."""
+    level = np.asarray(level, dtype=np.float64)
+    il = float(linear_below)
+    knee = math.log(il)
+    return np.where(level >= knee, np.exp(np.maximum(level, knee)), il * (1.0 + level - knee))
+
+
+DEFAULT_LINLOG_THRESHOLD = 1e-3      # radiance below which the response is linear (``PixelConfig``'s default)
+
+
+def stream_linlog_threshold(meta: dict) -> float:
+    """The lin-log knee of the pixel that made a stream (its metadata), the default one for a stream without it
+    (a camera recording)."""
+    return float((meta.get("pixel_model") or {}).get("linlog_threshold", DEFAULT_LINLOG_THRESHOLD))
+
+
 def count_crossings(dr, Int, log_now, log_ref, c_on, c_off):
     """Signed number of threshold crossings per pixel: n > 0 means n ON events (L rose by n*c_on from the
     reference), n < 0 means |n| OFF events."""
@@ -146,7 +165,7 @@ class PixelConfig:
     cutoff_hz: float = 0.0                # photoreceptor 3 dB cutoff at bright_intensity (0: no low-pass)
     cutoff_min_fraction: float = 0.01     # dim pixels: cutoff never below this fraction of cutoff_hz
     bright_intensity: float = 1.0         # radiance treated as "bright" by the low-pass and shot noise
-    linlog_threshold: float = 1e-3        # radiance below which the response is linear
+    linlog_threshold: float = DEFAULT_LINLOG_THRESHOLD   # radiance below which the response is linear
     timestamp_resolution_us: float = 0.0  # > 0: timestamps floored to this clock (sensors: 1 us)
     readout_cap: float = 0.0              # events per second the readout can pass (0: unlimited)
     readout_cap_native_pixels: int = 0    # > 0: readout_cap is for a sensor of this many pixels; scaled by film

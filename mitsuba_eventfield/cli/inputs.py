@@ -51,14 +51,14 @@ def luminance_channel(path):
 
 def start_log(path, events):
     """Log intensity (as the pixel sees it) of a linear EXR frame, checked against the stream's size."""
-    from ..plugins.pixel_model import linlog_np
+    from ..plugins.pixel_model import linlog_np, stream_linlog_threshold
     if path is None:
         return None
     img = luminance_channel(path)
     if img.shape != (events.height, events.width):
         raise EventFieldError(f"{path}: needs a Y (or R) channel of {events.width}x{events.height}, got "
                               f"{img.shape[::-1]}")
-    return linlog_np(img, events.meta.get("pixel_model", {}).get("linlog_threshold", 1e-3))
+    return linlog_np(img, stream_linlog_threshold(events.meta))
 
 
 def galvo_frames(ev, period, views, start_frame_log=None):

@@ -49,8 +49,10 @@ def _depth_from_views(events, t_start, log_start, views, depth_range, planes):
     from .depth import depth_from_focus
     from ..lightfield.model import from_galvo, galvo_view_times
     from ..lightfield.reconstruct import direct
+    from ..plugins.pixel_model import stream_linlog_threshold
     times = galvo_view_times(events.meta["optics"], t_start, views)
-    lf = from_galvo(direct(events, times, log_start, t_start), times, events.meta["optics"])
+    lf = from_galvo(direct(events, times, log_start, t_start), times, events.meta["optics"],
+                    linear_below=stream_linlog_threshold(events.meta))
     dm = depth_from_focus(lf, depth_range[0], depth_range[1], planes, measure="variance")
     inv = 1.0 / dm.depth
     # the views are mapped at each pixel's depth: a depth beyond the optics' resolution still aligns them (to
@@ -84,6 +86,7 @@ def reconstruct_periods(events: EventStream, views: int = VIEWS_PER_PERIOD, peri
     each pixel's depth (default ``default_depth_range``)."""
     from ..lightfield.model import from_galvo, galvo_period_starts, galvo_view_times
     from ..lightfield.reconstruct import direct
+    from ..plugins.pixel_model import stream_linlog_threshold
     optics = events.meta.get("optics", {})
     geometry_and_angles(events, [])
     depth_range = default_depth_range(optics) if depth_range is None else tuple(map(float, depth_range))
@@ -105,5 +108,5 @@ def reconstruct_periods(events: EventStream, views: int = VIEWS_PER_PERIOD, peri
         prev = PeriodReconstruction(p, t_s, log_s, depth, conf, float(np.mean(weights < 1)))
         times = galvo_view_times(optics, t_s, views)
         lf = from_galvo(direct(events, times, log_s, t_s, c_on, c_off), times, optics,
-                        {"period_index": p, "inputs": "events only"})
+                        {"period_index": p, "inputs": "events only"}, linear_below=stream_linlog_threshold(events.meta))
         yield lf, prev

@@ -187,8 +187,12 @@ def _floats(values, name: str) -> np.ndarray:
         raise ConfigError(f"{name}: expected a numeric array, got {type(values).__name__}") from None
 
 
-def _exp(log_frames, name: str = "from_galvo: log_frames"):
-    return np.exp(_floats(log_frames, name))
+def _exp(log_frames, name: str = "from_galvo: log_frames", linear_below: float | None = None):
+    """Linear frames of log ones: ``exp``, or the pixel's lin-log inverse where the levels are lin-log
+    (``linear_below``: its knee; a reconstruction from events on a start frame through ``linlog_np``)."""
+    from ..plugins.pixel_model import linlog_inverse_np
+    frames = _floats(log_frames, name)
+    return np.exp(frames) if linear_below is None else linlog_inverse_np(frames, linear_below)
 
 
 def galvo_geometry(optics: dict, width: int, height: int) -> GalvoGeometry:
@@ -201,10 +205,13 @@ def galvo_paraxial_disparity(geometry: GalvoGeometry) -> Disparity:
     return Disparity(*geometry.paraxial_disparity())
 
 
-def from_galvo(log_frames, times, optics: dict, meta: dict | None = None) -> LightField:
+def from_galvo(log_frames, times, optics: dict, meta: dict | None = None,
+               linear_below: float | None = None) -> LightField:
     """A light field from galvo frames (log intensity, e.g. reconstructed) at known times: each frame is the view
-    at the scan position (optical angles) of its time."""
-    frames, times = _exp(log_frames), array(times, "from_galvo: times", 1)
+    at the scan position (optical angles) of its time. ``linear_below``: the frames are the lin-log levels of a
+    pixel with this knee (``pixel_model.stream_linlog_threshold`` of the events they were reconstructed from),
+    else plain log."""
+    frames, times = _exp(log_frames, linear_below=linear_below), array(times, "from_galvo: times", 1)
     if frames.ndim not in (3, 4) or len(times) != len(frames):
         raise ConfigError(f"from_galvo: log_frames of shape {frames.shape} and {len(times)} times: expected "
                           "(K, H, W) or (K, H, W, C) frames, one time per frame")
@@ -285,12 +292,14 @@ def galvo_lightfields(events, views: int = VIEWS_PER_PERIOD, method: str = "dire
 
 
 def _galvo_lightfields(events, optics, starts, views, method, method_kw):
+    from ..plugins.pixel_model import stream_linlog_threshold
     wanted = list(starts)
     all_times = np.concatenate([galvo_view_times(optics, starts[p], views) for p in wanted])
     frames = reconstruct.reconstruct(events, all_times, method, **method_kw)
     for i, p in enumerate(wanted):
         sl = slice(i * views, (i + 1) * views)
-        yield from_galvo(frames[sl], all_times[sl], optics, {"period_index": p})
+        yield from_galvo(frames[sl], all_times[sl], optics, {"period_index": p},
+                         linear_below=stream_linlog_threshold(events.meta))
 
 
 LEVELS = ("frame", "events")

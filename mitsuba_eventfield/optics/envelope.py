@@ -27,6 +27,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from .. import validate
 from ..errors import ConfigError
 
@@ -185,3 +187,10 @@ def galvo_model(name: str, where: str = "scan", max_angle_deg: float | None = No
     if model.name == "ideal" or limit < model.max_mech_deg:
         return replace(model, max_mech_deg=limit)
     return model
+
+
+def second_order_response(freq_hz, natural_hz: float, damping: float):
+    """Complex frequency response of a unity-gain second-order system (mirror + servo) at ``freq_hz``."""
+    w = 2.0 * math.pi * np.asarray(freq_hz, dtype=np.float64)
+    wn = 2.0 * math.pi * natural_hz
+    return wn ** 2 / (wn ** 2 - w ** 2 + 2j * damping * wn * w)

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..validate import finite, number
-from .envelope import DEFAULT_GALVO_MODEL, EnvelopeError, galvo_model
+from .envelope import DEFAULT_GALVO_MODEL, EnvelopeError, galvo_model, second_order_response
 
 DEFAULT_MAX_ANGLE_DEG = 10.0   # the mechanical travel curves had before galvo models existed (the ideal model's)
 TWO_PI = 2.0 * math.pi
@@ -45,13 +45,6 @@ def _xp(t):
 
 def _frac(xp, v):
     return v - xp.floor(v)
-
-
-def second_order_response(freq_hz, natural_hz: float, damping: float):
-    """Complex frequency response of a unity-gain second-order system (mirror + servo) at ``freq_hz``."""
-    w = TWO_PI * np.asarray(freq_hz, dtype=np.float64)
-    wn = TWO_PI * natural_hz
-    return wn ** 2 / (wn ** 2 - w ** 2 + 2j * damping * wn * w)
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mitsuba_eventfield as ef
-from mitsuba_eventfield.optics import scan, tabulated
+from mitsuba_eventfield.optics import envelope, scan, tabulated
 
 CURVES = {
     "circle": dict(frequency=250.0, amplitude=2.0, phase=30.0),
@@ -91,7 +91,7 @@ def test_bandwidth_shrinks_and_delays():
     # (at zeta 0.7 the gain peaks slightly above 1 at low f / fn)
     slow = scan.make_curve("circle", frequency=250.0, amplitude=2.0, bandwidth_hz=2500.0, damping=1.0)
     fast = scan.make_curve("circle", frequency=250.0, amplitude=2.0, bandwidth_hz=500.0, damping=1.0)
-    h = scan.second_order_response(250.0, 500.0, 1.0)
+    h = envelope.second_order_response(250.0, 500.0, 1.0)
     assert abs(h) == pytest.approx(1 / (1 + 0.5 ** 2))                 # |H| = 1 / (1 + (f/fn)^2) at zeta 1
     assert fast.amplitude_x == pytest.approx(2.0 * abs(h))
     assert fast.amplitude_x < slow.amplitude_x < cmd.amplitude_x

@@ -1,5 +1,6 @@
 """The ideal pixel's pure functions on hand-computed cases."""
 import numpy as np
+import pytest
 
 import mitsuba_eventfield  # noqa: F401  (configures Dr.Jit)
 from mitsuba_eventfield.plugins import pixel_model as pm
@@ -70,3 +71,25 @@ def test_device_crossing_times_equal_the_host_twins_to_the_bit():
                           mi.Float64(t0), mi.Float64(t1))
     assert len(t_host) == counts.sum() > 10_000
     assert np.array_equal(t_dev.numpy(), t_host)
+
+
+def test_the_linlog_inverse_has_one_numpy_twin_that_light_fields_use():
+    """A lin-log level below the knee is not exp's: a reconstruction's dark view (zero radiance) came back as
+    0.37 of the knee's radiance through a light field's plain exp."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from mitsuba_eventfield.lightfield.model import from_galvo
+    from mitsuba_eventfield.plugins.pixel_model import linlog_inverse, linlog_inverse_np, linlog_np
+    knee = 1e-3
+    radiance = np.array([0.0, 1e-5, 5e-4, 1e-3, 0.02, 3.0])
+    levels = linlog_np(radiance, knee)
+    assert linlog_inverse_np(levels, knee) == pytest.approx(radiance, abs=1e-15, rel=1e-12)
+    assert linlog_inverse_np(levels, knee) == pytest.approx(
+        np.asarray(linlog_inverse(dr, mi.Float(levels.astype(np.float32)), knee)), rel=1e-5, abs=1e-9)
+    optics = {"design": "galvo", "fov_x_deg": 40.0, "mirror_distance": 0.1, "mirror_separation": 0.01,
+              "scan": {"curve": "circle", "frequency": 250.0, "amplitude": 0.5, "phase": 0.0}}
+    views = np.broadcast_to(radiance, (2, 4, 6))
+    lf = from_galvo(linlog_np(views, knee), [0.0, 0.002], optics, linear_below=knee)
+    assert lf.views == pytest.approx(views, abs=1e-15, rel=1e-12)
+    assert from_galvo(linlog_np(views, knee), [0.0, 0.002], optics).views[0, 0, 0] == pytest.approx(knee / np.e)
