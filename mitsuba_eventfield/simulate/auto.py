@@ -40,6 +40,7 @@ from ..errors import ConfigError
 from ..scene.timed import load_scene
 from .accuracy_limit import AccuracyLimit, noise_map
 from .render import render_frames
+from .stepping import whole_number, whole_per_period
 
 NOISE_SHARE = 0.6          # of a requested timing accuracy, the part Monte-Carlo noise may take
 PROBES = (1, 4, 16)        # a timing request probes each sampler's noise at these multiples of probe_spp
@@ -224,11 +225,10 @@ def _reuse(timed, duration, steps, reasons) -> int:
     elif period is None:
         reasons["reuse"] = "static scene, aperiodic scan: every step is rendered"
     else:
-        n_periods = duration / period
-        if abs(n_periods - round(n_periods)) <= 1e-6 * max(n_periods, 1) and round(n_periods) >= 1:
-            n = int(round(n_periods))
-            per_period = math.ceil(steps / n)              # whole steps per period, so one period can be reused
-            steps = per_period * n
+        n = whole_number(duration / period)
+        if n:
+            steps = whole_per_period(steps, duration, period)     # whole steps per period: one period is reused
+            per_period = steps // n
             reasons["steps"] += f"; rounded up to {per_period} per scan period ({steps} in all) for reuse"
             reasons["reuse"] = (f"static scene: one scan period ({per_period} steps) is rendered and reused for the "
                                 f"other {n - 1}")

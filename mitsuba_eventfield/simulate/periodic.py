@@ -7,6 +7,7 @@ import numpy as np
 
 from ..scene.timed import TimedScene
 from ..validate import available_memory
+from .stepping import is_whole, whole_number
 
 
 def period_blocks(steps_events):
@@ -27,8 +28,7 @@ def phase_grid(timed: TimedScene, duration: float, steps: int, t_start: float):
     if not period:
         return None
     k_float, period_us, base_us = period / (duration / steps), period * 1e6, t_start * 1e6
-    whole = lambda v: abs(v - round(v)) <= 1e-6 * max(1.0, abs(v))  # noqa: E731
-    if round(k_float) < 1 or not (whole(k_float) and whole(period_us) and whole(base_us)):
+    if not (whole_number(k_float) and is_whole(period_us) and is_whole(base_us)):
         return None
     return int(round(k_float)), int(round(period_us)), int(round(base_us))
 
@@ -48,9 +48,8 @@ def reuse_plan(timed: TimedScene, duration: float, steps: int, width: int, heigh
     if period == 0.0:
         k = 1
     else:
-        k_float = period / (duration / steps)
-        k = int(round(k_float))
-        if k < 1 or abs(k_float - k) > 1e-6 * k_float:
+        k = whole_number(period / (duration / steps))
+        if not k:
             notes.append(f"static scene, but the step ({duration / steps * 1e6:.4g} us) does not divide the scan "
                          f"period ({period * 1e6:.4g} us): every step rendered")
             return None

@@ -45,6 +45,7 @@ import numpy as np
 from .. import backend
 from ..validate import available_memory
 from .sample_allocation import render_pixels
+from .stepping import whole_number
 
 mi, dr = backend.mi, backend.dr
 
@@ -259,9 +260,8 @@ def plan(timed, st, integ, notes: list) -> StaticPixels | None:
     if st.steps is None or st.seed_mode != "fixed" or timed.is_static or not timed.scan_period \
             or "scan" not in getattr(timed.sensor, "optics_metadata", dict)():
         return None
-    per_period = timed.scan_period / (st.duration / st.steps)
-    k = int(round(per_period))     # whole steps per period: step i and i + k see the same scan phase
-    if k < 1 or abs(per_period - k) > 1e-6 * k or st.steps < 2 * k:
+    k = whole_number(timed.scan_period / (st.duration / st.steps))   # step i and i + k see the same scan phase
+    if not k or st.steps < 2 * k:
         return None                                   # steps off the scan's phase grid, or under two periods
     if st.steps < MIN_PERIODS * k:
         notes.append(f"static pixels not reused: {st.steps / k:g} scan periods are too few to pay for the masks "

@@ -215,12 +215,26 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     return replace(st, steps=steps, chosen=dict(chosen, steps=steps)), probe
 
 
+WHOLE_REL = 1e-6      # a ratio of times within this share of a whole number is that number (float round-off)
+
+
+def is_whole(value: float) -> bool:
+    """``value`` within ``WHOLE_REL`` of a whole number (relative; absolute below 1)."""
+    return abs(value - round(value)) <= WHOLE_REL * max(1.0, abs(value))
+
+
+def whole_number(value: float) -> int:
+    """The whole number >= 1 that ``value`` is (``is_whole``), else 0: the scan periods a duration holds, the
+    steps a period holds. The one test of the scan's phase grid (period reuse, static pixels, ``--auto``)."""
+    return int(round(value)) if round(value) >= 1 and is_whole(value) else 0
+
+
 def whole_per_period(steps: int, duration: float, period) -> int:
     """``steps`` rounded up to a whole number per scan period where ``duration`` is whole periods of a periodic
     scan (the scan's phase grid: period reuse, static pixels, the views of a light field at the same phases
     every period), at most ``MAX_STEPS``. The one rounding of the default rule and of ``--auto``."""
-    periods = round(duration / period) if period else 0
-    if periods >= 1 and abs(duration / period - periods) < 1e-9 * periods:
+    periods = whole_number(duration / period) if period else 0
+    if periods:
         steps = min(int(math.ceil(steps / periods)), max(1, MAX_STEPS // periods)) * periods
     return min(steps, MAX_STEPS)
 

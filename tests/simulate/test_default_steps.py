@@ -254,3 +254,20 @@ def test_the_noise_bound_is_recorded_when_the_light_field_views_decide(capsys):
                for n in ev.meta["render"]["notes"])            # what set the steps, as stepping.chosen.by says
     _warn_coarse_steps("gs.h5", ev)
     assert capsys.readouterr().err == ""
+
+
+def test_one_phase_grid_test_and_one_rounding_for_every_caller():
+    """``stepping.whole_number`` is the one test of "a whole number of periods / steps" and ``whole_per_period``
+    the one rounding: --auto's reuse rounded on its own, with a looser tolerance and no MAX_STEPS cap."""
+    from types import SimpleNamespace
+
+    from mitsuba_eventfield.simulate import auto
+    from mitsuba_eventfield.simulate.stepping import MAX_STEPS, is_whole, whole_number, whole_per_period
+    assert whole_number(0.02 / 0.004) == 5 and whole_number(4.9999999) == 5 and whole_number(4.9) == 0
+    assert whole_number(0.4) == 0 and is_whole(0.0) and is_whole(-3.0000000001) and not is_whole(2.5)
+    assert whole_per_period(10, 0.02, 0.004) == 10 and whole_per_period(11, 0.02, 0.004) == 15
+    assert whole_per_period(11, 0.021, 0.004) == 11                              # not whole periods: as asked
+    static = SimpleNamespace(is_static=True, scan_period=0.004)
+    reasons = {"steps": "x"}
+    assert auto._reuse(static, 0.02, 11, reasons) == 15 and "3 per scan period (15 in all)" in reasons["steps"]
+    assert auto._reuse(static, 0.02, 10 * MAX_STEPS, {"steps": ""}) <= MAX_STEPS    # uncapped before
