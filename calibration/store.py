@@ -188,8 +188,8 @@ def apply_to_lightfield(lf, calibration: dict, optics: dict):
     if lf.kind == "galvo" and set(kinds) & {"galvo", "depth"}:
         placed = calibrated_optics(calibration, optics, optics["width"], optics["height"])
         if "galvo" in kinds:
-            ax, ay = curve_from_dict(placed["scan"], where="galvo calibration").angles(np.asarray(lf.times))
-            positions = np.stack([2 * np.asarray(ax), 2 * np.asarray(ay)], axis=-1)
+            curve = curve_from_dict(placed["scan"], where="galvo calibration")
+            positions = np.stack(curve.optical_angles(np.asarray(lf.times, np.float64)), axis=-1)
         if "depth" in kinds:      # a light field without its geometry (shift-invariant) takes the paraxial model
             placed_geometry = GalvoGeometry.from_optics(placed, lf.shape[1], lf.shape[0])
             disparity = galvo_paraxial_disparity(placed_geometry)

@@ -84,7 +84,7 @@ class _GalvoSensorMethods:
         size = self.film().size()
         self.aspect = size.x / size.y
         self.fov_x = float(mi.parse_fov(props, self.aspect))
-        self.tan_half = math.tan(math.radians(self.fov_x) / 2)
+        self.tan_half = galvo_optics.tan_half_fov(self.fov_x)
         self.aperture_radius = float(props.get("aperture_radius", 0.0))
         self.focus_distance = float(props.get("focus_distance", 1.0))
         self.mirror_distance = float(props.get("mirror_distance", 0.03))

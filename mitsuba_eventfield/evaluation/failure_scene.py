@@ -10,8 +10,6 @@ its depth.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .. import backend
@@ -85,7 +83,7 @@ def exact_scales(optics: dict, pixel, depth: float, t_first: float, width: int =
     d1, sep = optics["mirror_distance"], optics["mirror_separation"]
     a0x, a0y = curve.angles(np.float64(t_first))
     u, v = pixel[0] / width, pixel[1] / height
-    d = galvo_optics.pinhole_direction(np, u, v, math.tan(math.radians(optics["fov_x_deg"]) / 2), width / height)
+    d = galvo_optics.pinhole_direction(np, u, v, galvo_optics.tan_half_fov(optics["fov_x_deg"]), width / height)
     o, d = galvo_optics.galvo_transform(np, (0.0, 0.0, 0.0), d, float(a0x), float(a0y), d1, sep)
     t = (depth - o[2]) / d[2]
     point = (o[0] + t * d[0], o[1] + t * d[1], depth)

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..events.stream import EventStream
-from ..optics.galvo import VIEWS_PER_PERIOD, GalvoGeometry, scan_image_path_px
+from ..optics.galvo import OPTICAL_PER_MECHANICAL, VIEWS_PER_PERIOD, GalvoGeometry, scan_image_path_px
 from ..optics.scan import curve_from_dict, scan_period
 from ..validate import MAX_VIEWS, array, finite, instance, number
 
@@ -132,7 +132,8 @@ class LightField:
             out = np.tile(np.eye(3), (len(self.views), 1, 1))
             out[:, :2, 2] = self.shifts(depth)
             return out
-        return np.stack([self.galvo.array_homography(0.5 * px, 0.5 * py, depth) for px, py in self.positions])
+        mech = self.positions / OPTICAL_PER_MECHANICAL          # the views' optical angles back to the mirrors'
+        return np.stack([self.galvo.array_homography(px, py, depth) for px, py in mech])
 
     def depth_range(self) -> tuple:
         """(nearest, farthest) depths this light field can be refocused at (scene units; inf: no far limit):
@@ -216,13 +217,12 @@ def from_galvo(log_frames, times, optics: dict, meta: dict | None = None,
         raise ConfigError(f"from_galvo: log_frames of shape {frames.shape} and {len(times)} times: expected "
                           "(K, H, W) or (K, H, W, C) frames, one time per frame")
     curve = curve_from_dict(_galvo_scan(optics, "from_galvo"), where="event metadata")
-    ax, ay = curve.angles(times)
     geometry = galvo_geometry(optics, frames.shape[2], frames.shape[1])
     meta = dict(meta or {})
     if optics.get("calibrated"):          # optics a calibration placed (calibration.calibrated_optics)
         meta.setdefault("calibrated", sorted(optics["calibrated"]))
-    return LightField(frames, np.stack([2 * ax, 2 * ay], axis=-1), times, galvo_paraxial_disparity(geometry),
-                      "galvo", meta, geometry)
+    return LightField(frames, np.stack(curve.optical_angles(times), axis=-1), times,
+                      galvo_paraxial_disparity(geometry), "galvo", meta, geometry)
 
 
 def galvo_steps_per_period(optics: dict, width: int, height: int | None = None, px_per_step: float = 1.0) -> int:

@@ -40,6 +40,9 @@ VIEWS_PER_PERIOD = 32
 # ``meta["optics"]``, a nominal optics file for a camera recording)
 OPTICS_RECORD_KEYS = ("design", "scan", "fov_x_deg", "aperture_radius", "focus_distance", "mirror_distance",
                       "mirror_separation", "angle_convention")
+# a mirror turned by a mechanical angle turns the reflected ray by twice it: a view's optical angle (its
+# position in a light field) per mechanical radian of the scan curve
+OPTICAL_PER_MECHANICAL = 2.0
 # the widest horizontal field of view a galvo's pinhole may have (its focal length falls to 0 at 180 deg)
 MAX_FOV_DEG = 179.0
 from dataclasses import dataclass  # noqa: E402
@@ -60,9 +63,14 @@ def checked_optics(fov_x_deg, mirror_distance, mirror_separation, where: str, er
 
 
 # ------------------------------------------------------------------ ray optics (NumPy or Dr.Jit through ``xp``)
+def tan_half_fov(fov_x_deg: float) -> float:
+    """tan(fov / 2) of a horizontal field of view in degrees: half the film's width over the focal length."""
+    return math.tan(math.radians(fov_x_deg) / 2)
+
+
 def focal_length_px(width: int, fov_x_deg: float) -> float:
     """Focal length in pixels of a pinhole ``width`` pixels wide with a horizontal field of view in degrees."""
-    return width / 2 / math.tan(math.radians(fov_x_deg) / 2)
+    return width / 2 / tan_half_fov(fov_x_deg)
 
 
 def pinhole_direction(xp, u, v, tan_half_fov_x, aspect):

@@ -30,6 +30,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..validate import finite, number
 from .envelope import DEFAULT_GALVO_MODEL, EnvelopeError, galvo_model, second_order_response
+from .galvo import OPTICAL_PER_MECHANICAL
 
 DEFAULT_MAX_ANGLE_DEG = 10.0   # the mechanical travel curves had before galvo models existed (the ideal model's)
 TWO_PI = 2.0 * math.pi
@@ -69,9 +70,9 @@ class ScanCurve:
         raise NotImplementedError
 
     def optical_angles(self, t):
-        """Beam deflection = twice the mechanical angle."""
+        """Beam deflection (``galvo.OPTICAL_PER_MECHANICAL`` x mechanical): a view's light-field position."""
         ax, ay = self.angles(t)
-        return 2 * ax, 2 * ay
+        return OPTICAL_PER_MECHANICAL * ax, OPTICAL_PER_MECHANICAL * ay
 
     def peak_angle_deg(self) -> float:
         t = np.linspace(0.0, self.period or 1.0, 4097)

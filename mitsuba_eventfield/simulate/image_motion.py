@@ -17,6 +17,7 @@ import sys
 import numpy as np
 
 from ..errors import EventFieldError
+from ..optics.galvo import focal_length_px
 from ..scene.timed import TimedScene
 from ..validate import MAX_STEPS
 
@@ -55,7 +56,7 @@ def _cameras(timed: TimedScene) -> list | None:
         fov = float(timed.params[keys[0]][0]) if keys else None
     if fov is None:
         return None
-    return [(world_to_cam, timed.film_size[0] / (2 * math.tan(math.radians(float(fov)) / 2)))]
+    return [(world_to_cam, focal_length_px(timed.film_size[0], float(fov)))]
 
 
 def object_displacements(timed: TimedScene, times) -> np.ndarray | None:
