@@ -200,17 +200,15 @@ class KaleidoscopeCalibration:
 
 
 def _unflipped(frame, n, tw, th):
-    half = (n - 1) // 2
+    """(i, j, tile, flip_x, flip_y, the tile's pixels unflipped) of every view (``kaleido_optics.tiles``)."""
+    from mitsuba_eventfield.plugins.kaleido_optics import tiles
     out = []
-    for row in range(n):
-        for col in range(n):
-            i, j = col - half, row - half
-            t = frame[row * th:(row + 1) * th, col * tw:(col + 1) * tw]
-            if i % 2:
-                t = t[:, ::-1]
-            if j % 2:
-                t = t[::-1]
-            out.append((i, j, [col * tw, row * th, tw, th], bool(i % 2), bool(j % 2), np.ascontiguousarray(t)))
+    for v in tiles(n, n * tw, n * th):
+        x0, y0 = v["tile"][:2]
+        t = frame[y0:y0 + th, x0:x0 + tw]
+        t = t[:, ::-1] if v["flip_x"] else t
+        t = t[::-1] if v["flip_y"] else t
+        out.append((v["i"], v["j"], v["tile"], v["flip_x"], v["flip_y"], np.ascontiguousarray(t)))
     return out
 
 

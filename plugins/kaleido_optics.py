@@ -40,6 +40,24 @@ SETUP_PARAMETERS = {"kaleidoscope": ("focal_length", "focus_distance", "aperture
                                   "views")}
 
 
+def tiles(n: int, film_w: int, film_h: int) -> list:
+    """The n x n views of a kaleidoscope on a ``film_w`` x ``film_h`` film, row by row: index (i, j) from the
+    centre (-(n - 1) / 2 .. (n - 1) / 2), film tile [x0, y0, w, h] (equal tiles), and whether the view is
+    mirrored along x / y (an odd number of reflections off the tube's walls: odd i, odd j). The one layout of
+    the sensor's views (``kaleidoscope_sensor.view_layout``), a calibration's tiles and the views of a frame.
+    Indices are whole for odd n (a kaleidoscope's always is) and halves for an even microlens count, as the ray
+    mapping (``microlens_mapping``) has them: a whole-number half put an even count's sub-apertures half a cell
+    off (views = 2: 0 and -7.3 mm where the rays pass at +-4.2)."""
+    tw, th, half = film_w // n, film_h // n, (n - 1) / 2
+    out = []
+    for row in range(n):
+        for col in range(n):
+            i, j = (int(c) if c == int(c) else c for c in (col - half, row - half))
+            out.append({"i": i, "j": j, "tile": [col * tw, row * th, tw, th], "flip_x": bool(i % 2),
+                        "flip_y": bool(j % 2)})
+    return out
+
+
 def kaleido_geometry(tube_width, tube_height, tube_length, relay_distance, focal_length, focus_distance,
                      aperture_radius, relay_aperture, where="sensor 'kaleidoscope'"):
     """Derived constants and checks; raises ValueError naming the parameter and what would be allowed."""

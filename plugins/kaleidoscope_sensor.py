@@ -102,30 +102,23 @@ class _KaleidoscopeSensorMethods:
 
     # ------------------------------------------------------------ metadata
     def view_layout(self) -> list:
-        """Per view: index (i, j), film tile (x0, y0, w, h), flips, sub-aperture centre on the main lens."""
-        n, tw, th = self.n, self.film_w // self.n, self.film_h // self.n
-        # centred indices: whole numbers for odd n (a kaleidoscope's always is), halves for an even microlens
-        # count, as the ray mapping (kaleido_optics.microlens_mapping) has them; a whole-number half put an
-        # even count's sub-apertures half a cell off (views = 2: 0 and -7.3 mm where the rays pass at +-4.2)
-        half = (n - 1) / 2
-        views = []
-        for row in range(n):
-            for col in range(n):
-                i, j = (c - half for c in (col, row))
-                i, j = (int(c) if c == int(c) else c for c in (i, j))
-                if self.layout == "kaleidoscope":
-                    scale = self.geo["lens_to_entrance"] / (self.relay_distance + self.tube_length)
-                    ax, ay = kaleido_optics.subaperture(i, j, 0.0, 0.0, self.tube_width, self.tube_height, scale, np)
-                    views.append({"i": i, "j": j, "tile": [col * tw, row * th, tw, th], 
-                                  "flip_x": bool(i % 2), "flip_y": bool(j % 2), "subaperture": [float(ax), float(ay)]})
-                else:
-                    pitch = 2 * self.aperture / n
-                    # the lenslet inverts: the pixel right of centre sees the main lens's -x side; the
-                    # view's position is the centroid of its square cell clipped by the round aperture
-                    views.append({"i": i, "j": j, "pixel_offset": [col, row], "stride": n,
-                                  "subaperture": _clipped_cell_centroid(-i * pitch, -j * pitch, pitch,
-                                                                        self.aperture),
-                                  "cell_centre": [-i * pitch, -j * pitch]})
+        """Per view: index (i, j), film tile (x0, y0, w, h), flips, sub-aperture centre on the main lens
+        (``kaleido_optics.tiles``: the indices, tiles and flips)."""
+        n, views = self.n, []
+        for k, cell in enumerate(kaleido_optics.tiles(n, self.film_w, self.film_h)):
+            row, col = divmod(k, n)
+            i, j = cell["i"], cell["j"]
+            if self.layout == "kaleidoscope":
+                scale = self.geo["lens_to_entrance"] / (self.relay_distance + self.tube_length)
+                ax, ay = kaleido_optics.subaperture(i, j, 0.0, 0.0, self.tube_width, self.tube_height, scale, np)
+                views.append({**cell, "subaperture": [float(ax), float(ay)]})
+            else:
+                pitch = 2 * self.aperture / n
+                # the lenslet inverts: the pixel right of centre sees the main lens's -x side; the
+                # view's position is the centroid of its square cell clipped by the round aperture
+                views.append({"i": i, "j": j, "pixel_offset": [col, row], "stride": n,
+                              "subaperture": _clipped_cell_centroid(-i * pitch, -j * pitch, pitch, self.aperture),
+                              "cell_centre": [-i * pitch, -j * pitch]})
         return views
 
     def optics_metadata(self) -> dict:
