@@ -171,7 +171,7 @@ def fit_led(events, period_index: int = 0, samples: int = 24, scale_limit: float
     """The scan phase and curve scales of an LED capture (a galvo event stream) from its events alone: the
     LED's track at ``samples`` instants of scan period ``period_index`` (``track_led``), fitted to the curve of
     the stream's metadata (``fit_point_track``; ``scale_limit``: ``galvo.galvo_scale_limit`` of its optics)."""
-    from mitsuba_eventfield.lightfield.model import galvo_period_starts
+    from mitsuba_eventfield.lightfield.model import galvo_period_starts, galvo_view_times
     from mitsuba_eventfield.optics.scan import curve_from_dict
     optics = events.meta.get("optics") or {}
     if optics.get("design") != "galvo":
@@ -182,6 +182,6 @@ def fit_led(events, period_index: int = 0, samples: int = 24, scale_limit: float
         t0 = galvo_period_starts(events, [period_index])[period_index]
     except ValueError as e:
         raise CalibrationError(str(e)) from None
-    times = t0 + (np.arange(samples) + 0.5) * curve.period / samples
+    times = galvo_view_times(optics, t0, samples)           # the instants a galvo light field's views are at
     centres = track_led(events, times, t0, curve.period)
     return fit_point_track(centres, times, curve, scale_limit=scale_limit, **limits)

@@ -53,6 +53,12 @@ def linlog_inverse_np(level, linear_below: float):
     return np.where(level >= knee, np.exp(np.maximum(level, knee)), il * (1.0 + level - knee))
 
 
+def film_readout_cap(cap: float, native_pixels, n_pix: int) -> float:
+    """A readout cap (events/s) on a film of ``n_pix`` pixels: scaled by film / native pixels where the sensor's
+    native pixel count is given (truthy), so a small film saturates like the whole sensor; else as it is."""
+    return cap * (n_pix / native_pixels if native_pixels else 1)
+
+
 DEFAULT_LINLOG_THRESHOLD = 1e-3      # radiance below which the response is linear (``PixelConfig``'s default)
 
 
@@ -220,10 +226,8 @@ class PixelConfig:
         return asdict(self)
 
     def readout_cap_for(self, n_pix: int) -> float:
-        """The readout cap (events/s) of a film of ``n_pix`` pixels: scaled by film / native pixels when
-        ``readout_cap_native_pixels`` is given, so a small film saturates like the whole sensor."""
-        native = self.readout_cap_native_pixels
-        return self.readout_cap * (n_pix / native if native else 1)
+        """The readout cap (events/s) of a film of ``n_pix`` pixels (:func:`film_readout_cap`)."""
+        return film_readout_cap(self.readout_cap, self.readout_cap_native_pixels, n_pix)
 
     def check_film(self, n_pix: int, where: str = "pixel model") -> None:
         """Refuse a readout cap that, scaled to a film of ``n_pix`` pixels, falls below what the limiter can

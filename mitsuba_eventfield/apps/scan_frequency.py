@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, EventFieldError
-from ..plugins.pixel_model import PRESETS
+from ..plugins.pixel_model import PRESETS, film_readout_cap
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events
 from ..validate import number
@@ -73,7 +73,7 @@ def readout_pixel(cap_scale: float = 1.0) -> dict:
 
 def film_cap(pixel: dict, width: int, height: int) -> float:
     """Events per second that ``pixel``'s readout cap passes on a width x height film."""
-    return pixel["readout_cap"] * width * height / pixel["readout_cap_native_pixels"]
+    return film_readout_cap(pixel["readout_cap"], pixel.get("readout_cap_native_pixels"), width * height)
 
 
 def offered_rates(events, duration: float) -> dict:
