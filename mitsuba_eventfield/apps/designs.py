@@ -85,16 +85,9 @@ def _regions(masks: dict, moving_ids) -> dict:
             "moving": np.logical_or.reduce([none] + [m for s, m in masks.items() if s in moving_ids])}
 
 
-def gain_aligned(estimate, reference) -> np.ndarray:
-    """``estimate`` times the one gain that events leave open: the median ratio to ``reference`` over the image."""
-    est, ref = np.asarray(estimate, np.float64), np.asarray(reference, np.float64)
-    both = (est > 0) & (ref > 0)
-    return est * (float(np.exp(np.median(np.log(ref[both] / est[both])))) if both.any() else 1.0)
-
-
 def region_scores(estimate, reference, regions: dict) -> dict:
     """{region: {"psnr_db", "correlation"}} after one gain (module docstring); NaN for an empty region."""
-    from ..evaluation.quality import psnr, white_level
+    from ..evaluation.quality import gain_aligned, psnr, white_level
     est, ref = gain_aligned(estimate, reference), np.asarray(reference, np.float64)
     white = white_level(ref)
     out = {}

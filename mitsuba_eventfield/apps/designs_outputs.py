@@ -88,7 +88,7 @@ def compare_figure(r, path: str) -> str:
     """Per speed (columns): each design's refocused image and its reference, cropped to the cards (one grey
     scale: the galvo references' white level; estimates times their one gain), then the refocus scores and the
     event rates against speed."""
-    from .designs import gain_aligned
+    from ..evaluation.quality import gain_aligned
     plt = _pyplot()
     rows = [("kaleidoscope_reference", "kaleidoscope\nrendered (instant)"),
             ("kaleidoscope", "kaleidoscope\nfrom events"), ("galvo_reference", "galvo centre view\n(instant)"),
@@ -186,7 +186,7 @@ def write_compare(r, out_dir: str) -> dict:
     """The figure, per speed the refocused images (EXR, linear; PNG, one grey scale) and metrics.json."""
     from ..atomic import write_json
     from ..images import write_exr, write_png
-    from .designs import gain_aligned
+    from ..evaluation.quality import gain_aligned
     os.makedirs(out_dir, exist_ok=True)
     paths = {"exr": [], "png": []}
     white = max(float(np.percentile(im["galvo_reference"], 99.9)) for im in r.images)

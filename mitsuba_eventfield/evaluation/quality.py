@@ -21,6 +21,15 @@ def fit_gain(estimate: np.ndarray, truth: np.ndarray) -> float:
     return float(np.exp(np.median(np.log(t[ok]) - np.log(e[ok]))))
 
 
+def gain_aligned(estimate, reference) -> np.ndarray:
+    """``estimate`` times :func:`fit_gain` to ``reference`` (as it is where no pixel is positive in both)."""
+    est = np.asarray(estimate, np.float64)
+    try:
+        return est * fit_gain(est, reference)
+    except ValueError:
+        return est
+
+
 def white_level(truth: np.ndarray) -> float:
     level = float(np.percentile(np.asarray(truth, np.float64), 99.9))
     if not level > 0:
