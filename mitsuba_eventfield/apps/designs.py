@@ -110,9 +110,8 @@ def _append(store: dict, scores: dict) -> None:
 
 def _check(film, speeds, periods, views, spp, depth):
     if film is not None:
-        film = number(film, "film", 30, 4096, integer=True, strict=True)
-        if film % 3:
-            raise ConfigError(f"film = {film}: must be a multiple of 3 (the kaleidoscope's 3 x 3 views)")
+        # a multiple of the kaleidoscope's n views a side, which its sensor checks (_load_pair): a fixed 3 here
+        film = number(film, "film", 30, 4096, integer=True, strict=True)   # refused a 5 x 5 scene's films
     speeds = tuple(number(s, "speeds", 0, 64, lo_open=True, strict=True) for s in speeds)
     if not speeds:
         raise ConfigError("speeds: give at least one speed factor (> 0)")
@@ -268,7 +267,7 @@ def compare(galvo_scene: str | None = None, kaleidoscope_scene: str | None = Non
             periods: int = 2, views: int = 16, film: int | None = None, spp: int = 4, depth: float | None = None,
             progress: bool = False) -> DesignComparison:
     """Both designs on one scene pair at each speed factor (module docstring); ``film``: both films' size
-    (square, a multiple of 3; default: the scenes' own), ``depth``: the refocus plane (default: the
+    (square, a multiple of the kaleidoscope's n; default: the scenes' own), ``depth``: the refocus plane (default: the
     kaleidoscope's focus distance, where scenes/designs puts its cards)."""
     film, speeds, periods, views, spp, depth = _check(film, speeds, periods, views, spp, depth)
     default_g, default_k = default_scenes()

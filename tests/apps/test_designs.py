@@ -129,9 +129,24 @@ def test_scaled_motion_is_the_same_path_sooner(tmp_path):
     ({"film": 32}, "multiple of 3"), ({"speeds": (1, -2)}, "speeds"), ({"periods": 0}, "periods"),
     ({"galvo_scene": KALEIDOSCOPE}, "needs a galvo sensor"), ({"views": 2}, "views")])
 def test_bad_arguments_fail_before_rendering(kwargs, field):
-    with pytest.raises(ConfigError) as err:
+    with pytest.raises(EventFieldError) as err:        # the film's multiple is the kaleidoscope sensor's own check
         designs.compare(**kwargs)
     assert field in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_film_follows_the_kaleidoscopes_own_view_count(tmp_path):
+    """A 5 x 5 kaleidoscope (a tube twice as long) takes a 50 px film, which a fixed "multiple of 3" refused, and
+    refuses 48 in its sensor's words."""
+    import shutil
+    folder = os.path.dirname(KALEIDOSCOPE)
+    for name in os.listdir(folder):
+        shutil.copy(os.path.join(folder, name), tmp_path / name)
+    five = tmp_path / "kaleidoscope.xml"
+    five.write_text(five.read_text().replace('name="tube_length" value="0.06"', 'name="tube_length" value="0.12"'))
+    g, k = designs._load_pair(GALVO, str(five), 50)
+    assert k.sensor.optics_metadata()["n"] == 5 and k.film_size == (50, 50)
+    with pytest.raises(EventFieldError, match="not a multiple of 5 views"):
+        designs._load_pair(GALVO, str(five), 48)
 
 
 def test_cli_bad_values_are_one_line(tmp_path, capsys):
