@@ -67,6 +67,12 @@ def compare_report(r) -> str:
         lines.append(f"  {sp:4g}x {e['kaleidoscope'] / 1e6:8.3f} {e['galvo'] / 1e6:8.3f} "
                      f"{e['galvo'] / max(e['kaleidoscope'], 1e-9):7.1f}x {st['kaleidoscope']:10.1f} "
                      f"{st['galvo']:10.1f}")
+    par = m.get("galvo_parallax_px")
+    if par:
+        lines.append(f"galvo parallax: a point at half / twice {m['depth']:g} m moves {par['0.5x']:.3g} / "
+                     f"{par['2x']:.3g} px against the refocus plane over a scan" +
+                     ("; under 0.5 px its refocus cannot tell depths apart: these rows score image recovery under "
+                      "motion, not depth" if max(par.values()) < 0.5 else ""))
     lines.append(time_split_line(m["time_split_s"]))
     return "\n".join(lines)
 
