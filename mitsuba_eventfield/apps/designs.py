@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
+from ..optics.galvo import scan_parallax_px
 from ..scene import bundled_scene, load_scene
 from ..scene.coverage import shape_masks, unseen
 from ..simulate.render import render_events, render_frames
@@ -297,21 +298,9 @@ def compare(galvo_scene: str | None = None, kaleidoscope_scene: str | None = Non
             "moving_ids": sorted(moving_ids), "arguments": arguments, "inputs": "events only for both designs; the "
             "rendered views and frames are for scoring (and the galvo's design-limit row) only",
             "galvo_optics": g.sensor.optics_metadata(), "kaleidoscope_optics": k.sensor.optics_metadata(),
-            "galvo_parallax_px": galvo_parallax(g.sensor.optics_metadata(), *g.film_size, depth), "time_split_s": split}
+            "galvo_parallax_px": scan_parallax_px(g.sensor.optics_metadata(), *g.film_size, depth), "time_split_s": split}
     return DesignComparison(tuple(speeds), per_speed, images, meta)
 
-
-def galvo_parallax(optics: dict, width: int, height: int, depth: float) -> dict:
-    """How far the galvo's views move a point at half and at twice ``depth`` against one at ``depth`` over a
-    scan period (the largest such shift at the image centre, pixels): what its refocus has to separate depths
-    with. The bundled designs galvo (0.1 deg at a 3 cm pivot) moves them 0.03 px: there its refocus is the
-    image, and the comparison scores image recovery under motion, not depth (the report says so)."""
-    from ..optics.galvo import GalvoGeometry
-    from ..optics.scan import curve_from_dict, scan_period
-    geometry = GalvoGeometry.from_optics(optics, width, height)
-    ax, ay = curve_from_dict(optics["scan"]).angles(np.linspace(0.0, scan_period(optics["scan"]), 257))
-    at = {z: geometry.image_shift(ax, ay, z) for z in (depth / 2, depth, 2 * depth)}
-    return {f"{z / depth:g}x": float(np.hypot(*(at[z] - at[depth]).T).max()) for z in (depth / 2, 2 * depth)}
 
 
 # ------------------------------------------------------------------------------------------ grid experiment

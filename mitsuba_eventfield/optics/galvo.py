@@ -258,3 +258,14 @@ def scan_image_path_px(optics: dict, width: int, height: int) -> float:
         length = max(length, float(np.hypot(*np.diff(shifts, axis=0).T).sum()))
     return length
 
+
+def scan_parallax_px(optics: dict, width: int, height: int, depth: float) -> dict:
+    """How far a galvo's views move a point at half and at twice ``depth`` against one at ``depth`` over a scan
+    period (the largest such shift at the image centre, pixels; keys "0.5x", "2x"): what refocusing at ``depth``
+    separates depths with. The bundled designs galvo (0.1 deg at 3-4 cm pivots) moves them 0.088 / 0.044 px at
+    144 px: there its refocus is the image (``apps.designs`` says so)."""
+    from .scan import curve_from_dict, scan_period
+    geometry = GalvoGeometry.from_optics(optics, width, height)
+    ax, ay = curve_from_dict(optics["scan"]).angles(np.linspace(0.0, scan_period(optics["scan"]), 257))
+    at = {z: geometry.image_shift(ax, ay, z) for z in (depth / 2, depth, 2 * depth)}
+    return {f"{z / depth:g}x": float(np.hypot(*(at[z] - at[depth]).T).max()) for z in (depth / 2, 2 * depth)}

@@ -192,7 +192,8 @@ def test_the_report_says_what_the_galvos_refocus_can_separate():
     optics = load_scene(GALVO).sensor.optics_metadata()
     f, theta = focal_length_px(144, optics["fov_x_deg"]), math.radians(optics["scan"]["amplitude"])
     pivot_y = optics["mirror_distance"] + optics["mirror_separation"]
-    par = designs.galvo_parallax(optics, 144, 144, 1.0)
+    from mitsuba_eventfield.optics.galvo import scan_parallax_px
+    par = scan_parallax_px(optics, 144, 144, 1.0)
     assert par["0.5x"] == pytest.approx(2 * f * theta * pivot_y * (2 - 1), rel=0.02)
     assert par["2x"] == pytest.approx(2 * f * theta * pivot_y * (1 - 0.5), rel=0.02)
     from mitsuba_eventfield.apps.designs_outputs import compare_report
