@@ -51,6 +51,14 @@ def number(value, name: str, lo=None, hi=None, *, integer: bool = False, lo_open
     return v
 
 
+def flag(value, name: str, error=ConfigError) -> bool:
+    """True or False (NumPy's too); anything else refused in one line naming ``name`` ("maybe" read as true)."""
+    import numpy as np
+    if not isinstance(value, (bool, np.bool_)):
+        raise error(f"{name} = {value!r}: must be True or False")
+    return bool(value)
+
+
 def finite(value, name: str, error=ConfigError) -> float:
     """A real, finite number (not text, bool, NaN or inf)."""
     return number(value, name, strict=True, error=error)

@@ -87,6 +87,9 @@ def grid(over: dict) -> list:
         if not values:
             raise EventFieldError(f"sweep parameter {name!r}: give a non-empty list of values (a list, tuple, "
                                   "range or 1-D NumPy array)")
+        twice = [v for i, v in enumerate(values) if v in values[:i]]
+        if twice:                # (4 and 4.0 too) the same render twice, one row each
+            raise EventFieldError(f"sweep parameter {name!r}: {twice[0]!r} given more than once; give each value once")
     names = list(over)
     return [dict(zip(names, combo)) for combo in itertools.product(*(columns[n] for n in names))]
 
@@ -143,11 +146,13 @@ def run_point(scene: str, point: dict, out_dir: str | None = None, keep_events: 
     render = {k[7:]: v for k, v in point.items() if k.startswith("render.")}
     pixel = {k[6:]: v for k, v in point.items() if k.startswith("pixel.")}
     t0 = time.perf_counter()
-    timed = load_scene(scene, **xml)
     key = point_key(scene, point, inputs)
     out = os.path.join(out_dir, f"point-{key}.h5") if (out_dir and keep_events) else None
     duration = render.pop("duration", None)
-    result = render_events(timed, duration, pixel=pixel or None, output=out, **render)
+    try:
+        result = render_events(load_scene(scene, **xml), duration, pixel=pixel or None, output=out, **render)
+    except EventFieldError as e:     # which point: an xml.* or render.* refusal named only its value
+        raise EventFieldError(f"sweep point {', '.join(f'{k}={v}' for k, v in point.items())}: {e}") from None
     r = result.meta["render"] if hasattr(result, "meta") else result.as_dict()
     row = dict(point, key=key, events=r["events"], rate_ev_s=r["rate_ev_per_s"],
                on_fraction=r["on"] / r["events"] if r["events"] else 0.0, dropped_readout=r["dropped_readout"],
@@ -169,6 +174,11 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
         raise EventFieldError(f"sweep: base = {base!r}: give a dict whose keys start with {', '.join(_PREFIXES)}")
     if isinstance(processes, bool) or not isinstance(processes, int) or processes < 1:
         raise EventFieldError(f"sweep: processes = {processes!r}: allowed range is whole numbers >= 1")
+    if client is not None and not all(callable(getattr(client, m, None)) for m in ("map", "gather")):
+        raise EventFieldError(f"sweep: client = {client!r}: expected a dask.distributed Client (None: local processes)")
+    both = sorted(set(base or {}) & set(over if isinstance(over, dict) else {}))
+    if both:                     # over's values replaced base's without a word
+        raise EventFieldError(f"sweep: {', '.join(both)} in both over and base: sweep it or fix it, not both")
     points = [{k: plain(v) for k, v in dict(base or {}, **p).items()} for p in grid(over)]
     check_names(points[0])
     for point in points:          # every point's pixel values too (a bad one failed in a worker, after spawning)
@@ -200,11 +210,22 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
                 if progress:
                     from ..simulate.summary import progress_bar
                     for _ in progress_bar(futs, desc="sweep", unit="point"):
-                        _.result()
-                rows = [f.result() for f in futs]
+                        _.exception()
+                rows = [f.result() for f in futs if f.exception() is None]
+                failed = [(p, f.exception()) for p, f in zip(todo, futs) if f.exception() is not None]
+                if failed:       # every other point ran (and is kept in out_dir): one line for the first refusal
+                    raise _failed_points(failed, len(todo), out_dir)
         results = {r["key"]: dict(r, resumed=False) for r in rows}
     results.update(done)
     return SweepTable([results[key] for key in keys])
+
+
+def _failed_points(failed: list, total: int, out_dir) -> EventFieldError:
+    """One line for a sweep whose points ``failed`` ((point, exception), of ``total``): the first point's
+    parameters and why, and where the others are (a resumed sweep renders only what is missing)."""
+    kept = f"; the other {total - len(failed)} are kept in {out_dir} (run again to resume)" if out_dir else ""
+    message = " ".join(str(failed[0][1]).split()) or type(failed[0][1]).__name__    # run_point names its point
+    return EventFieldError(f"{message} ({len(failed)} of {total} points failed{kept})")
 
 
 def _done_row(out_dir: str, key: str, keep_events: bool) -> dict | None:

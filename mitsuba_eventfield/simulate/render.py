@@ -20,7 +20,7 @@ from ..errors import ConfigError, EventFieldError, raise_if_stopped
 from ..events.io import format_of
 from ..plugins.event_fill import film_limit_error
 from ..scene.timed import TimedScene, load_scene
-from ..validate import MAX_THRESHOLD, available_memory, number
+from ..validate import MAX_THRESHOLD, available_memory, flag, instance, number
 from .periodic import period_blocks, phase_grid, reuse_plan
 from . import sample_allocation, static_pixels, step_batch
 from .frames import FrameRenderer, frozen_render, render_frames  # noqa: F401  (render_frames: re-exported)
@@ -365,10 +365,9 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     Returns an :class:`EventStream` when ``output`` is None (``on_device``: a :class:`DeviceEventStream`, the
     events left on the device); otherwise streams to ``output`` (by extension: HDF5, npz, text, AEDAT4 in
     chunks, RAW, DAT at the end) and returns a :class:`RenderSummary` (``meta["render"]``).
-    ``reuse``: a static scene under a periodic view renders one period and feeds its frames again; a moving
-    one renders the pixels no moving object can change once per period (``static_pixels.py``); False: every
-    pixel at every step.
-    ``steps``: uniform steps; default: as many as the known image motion needs (``stepping.default_steps``).
+    ``reuse``: a static scene under a periodic view renders one period and feeds its frames again; a moving one
+    renders the pixels no moving object can change once per period (``static_pixels.py``); False: every pixel
+    at every step. ``steps``: uniform steps; default: as many as the known image motion needs (``stepping``).
     ``adaptive``: False (``steps`` uniform steps), True, "motion" or "log-change" (``stepping``: by the known
     image motion, at most ``px_per_step`` pixels per step, or by the per-pixel log change). ``preset``
     ("ideal", "davis346", "prophesee_gen4") and ``pixel`` (PixelConfig fields, e.g. ``{"refractory_s": 1e-4,
@@ -382,6 +381,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     this many samples per step, the others ``spp`` (``sample_allocation.py``).
     """
     check_on_device(on_device, output)
+    reuse, extra_meta = flag(reuse, "render_events: reuse"), instance(extra_meta or {}, dict, "extra_meta")
     timed = load_scene(scene)
     st = stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_step, spp, seed, seed_mode,
                   t_start, px_per_step)

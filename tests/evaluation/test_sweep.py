@@ -96,3 +96,24 @@ def test_bad_sweep_parameters():
         ef.sweep(GALVO, {"render.stepz": [8]})
     with pytest.raises(ef.EventFieldError, match="takes no 'output'"):
         ef.sweep(GALVO, {"render.output": ["x.h5"]})
+
+
+def test_a_sweep_refuses_what_it_would_run_twice_or_drop_and_names_a_failing_point(tmp_path):
+    """A value given twice rendered twice (4 and 4.0 too); a name in both over and base lost base's value
+    silently; client="local" failed on an attribute; one bad point lost the whole table, its error naming only
+    the value. Now: refused before any worker; a failing point is named, the others run and are kept."""
+    with pytest.raises(ef.EventFieldError, match=r"'render.spp': 4.0 given more than once"):
+        ef.sweep(GALVO, {"render.spp": [4, 4.0]}, base=BASE)
+    with pytest.raises(ef.EventFieldError, match=r"render.steps in both over and base"):
+        ef.sweep(GALVO, {"render.steps": [8]}, base=BASE)
+    with pytest.raises(ef.EventFieldError, match=r"client = 'local': expected a dask.distributed Client"):
+        ef.sweep(GALVO, {"render.spp": [4]}, base=BASE, client="local")
+    with pytest.raises(ef.EventFieldError, match=r"sweep point .*render.seed_mode=nope: seed_mode = 'nope': allowed "
+                                                 r"values are .* \(1 of 2 points failed; the other 1 are kept in "):
+        ef.sweep(GALVO, {"render.seed_mode": ["fixed", "nope"]}, base=BASE, out_dir=str(tmp_path))
+    kept = [n for n in os.listdir(tmp_path) if n.endswith(".json")]
+    assert len(kept) == 1
+    again = ef.sweep(GALVO, {"render.seed_mode": ["fixed"]}, base=BASE, out_dir=str(tmp_path))
+    assert [r["resumed"] for r in again.rows] == [True]
+    with pytest.raises(ef.EventFieldError, match=r"render_events: reuse = 'maybe': must be True or False"):
+        ef.render_events(GALVO, 0.004, steps=2, reuse="maybe")
