@@ -196,7 +196,8 @@ def output_dir_run(path: str, command: str):
     if os.path.isdir(path) and os.listdir(path):
         foreign = [n for n in _files_below(path) if os.path.join(path, n) not in previous and n != MANIFEST]
         print(f"eventfield: warning: output folder {path} is reused: "
-              + (f"{len(previous)} files of an earlier run are replaced or removed" if previous else "")
+              + (f"{len(previous)} files of an earlier run are replaced or removed if this run succeeds"
+                 if previous else "")
               + ("; " if previous and foreign else "")
               + (f"{len(foreign)} other files stay beside the new ones" if foreign else ""), file=sys.stderr)
     start = time.time() - 1.0          # file systems with coarse timestamps

@@ -83,3 +83,18 @@ def test_a_users_file_is_kept_and_a_later_one_of_the_runs_replaced(tmp_path, cap
     with output_dir_run(str(out), "test"):                  # the run's own file is replaced, the user's stays
         write_json(str(out / "ours.json"), {"run": 2})
     assert _listed(out) == ["ours.json"] and (out / "mine.json").read_text() == "the user's"
+
+
+def test_a_reused_folder_is_announced_as_replaced_only_if_the_run_succeeds(tmp_path, capsys):
+    """The warning said an earlier run's files "are replaced or removed" before a run that then failed and
+    replaced nothing: it says "if this run succeeds", and a failed run leaves them as they were."""
+    out = tmp_path / "out"
+    with output_dir_run(str(out), "test"):
+        out.mkdir(exist_ok=True)
+        write_json(str(out / "a.json"), {"run": 1})
+    capsys.readouterr()
+    with pytest.raises(EventFieldError):
+        with output_dir_run(str(out), "test"):
+            raise EventFieldError("a bad argument")
+    assert "1 files of an earlier run are replaced or removed if this run succeeds" in capsys.readouterr().err
+    assert json.loads((out / "a.json").read_text()) == {"run": 1} and _listed(out) == ["a.json"]
