@@ -268,7 +268,7 @@ def _flag_motion(lf: LightField, depth, on_motion: str) -> None:
     if not m["motion_px"] > MOTION_LIMIT_PX:
         return
     vx, vy = m["velocity_px_s"]
-    msg = (f"refocus at {depth:g}: content moves {m['motion_px']:.1f} px while the views are taken (more than "
+    msg = (f"refocus at {depth:g} m: content moves {m['motion_px']:.1f} px while the views are taken (more than "
            f"{MOTION_LIMIT_PX:g} px; {m['moving_share']:.0%} of the textured image): it is smeared by as much; "
            f"refocus(..., motion=({vx:.0f}, {vy:.0f})) follows it (pixels per second)")
     if on_motion == "raise":
