@@ -111,7 +111,7 @@ def _score(scene, depth) -> tuple:
 
 def _preview_window(events):
     """The first eighth of the scan period: over a whole period every pixel comes back, so net counts cancel."""
-    t0 = int(events.meta.get("t_start_us", 0))
+    t0 = events.start_us
     return t0, t0 + max(1, events.duration_us // 8)
 
 

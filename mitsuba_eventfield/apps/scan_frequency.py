@@ -80,7 +80,7 @@ def offered_rates(events, duration: float) -> dict:
     """Mean event rate the pixels offer to the readout (kept + dropped) and the busiest 1 ms (kept events:
     give the stream rendered without a cap for the offered peak)."""
     dropped = int(events.meta["render"].get("dropped_readout", 0))
-    ms = np.bincount((np.asarray(events.t, np.int64) - events.meta.get("t_start_us", 0)) // 1000)
+    ms = np.bincount((np.asarray(events.t, np.int64) - events.start_us) // 1000)
     whole = ms[:max(1, int(math.floor(duration * 1e3 + 1e-9)))]
     total = len(events) + dropped
     return {"offered_ev_s": total / duration, "peak_1ms_ev_s": float(whole.max()) * 1e3 if len(whole) else 0.0,

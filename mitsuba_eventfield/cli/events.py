@@ -231,8 +231,8 @@ def _render_preview(a) -> None:
     from ..events.preview import write_preview
     ev = read_events(a.output)
     # (a .txt file keeps no t_start_us: its duration alone ended the window one first-event time early)
-    end = max(int(ev.meta.get("t_start_us", 0)) + ev.duration_us, int(ev.t[-1]) if len(ev) else 0)
-    t0 = max(int(ev.meta.get("t_start_us", 0)), end - int(round(a.preview_window * 1e3)))
+    end = max(ev.start_us + ev.duration_us, int(ev.t[-1]) if len(ev) else 0)
+    t0 = max(ev.start_us, end - int(round(a.preview_window * 1e3)))
     write_preview(a.preview, ev, t0, end + 1, scale=2 if max(ev.width, ev.height) < 400 else 1)
     print(f"wrote {os.path.abspath(a.preview)} (events of {(end - t0) / 1e3:g} ms up to the end)")
 
@@ -276,7 +276,7 @@ def run_preview(a) -> int:
     if t0 is not None and t1 is not None and t1 <= t0:       # [t0, t1): empty when t1 = t0
         raise EventFieldError(f"--t0 {a.t0:g} --t1 {a.t1:g}: the window [t0, t1) holds no time (ms): t1 must be "
                               "after t0")
-    start = int(ev.meta.get("t_start_us", ev.t[0] if len(ev) else 0))
+    start = ev.start_us
     end = start + int(ev.duration_us)
     if (t0 is not None and t0 > end) or (t1 is not None and t1 <= start):    # an empty picture, written as a result
         raise EventFieldError(f"{a.file}: the window {'' if a.t0 is None else f'--t0 {a.t0:g} '}"

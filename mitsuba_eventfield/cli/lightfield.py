@@ -212,8 +212,8 @@ def _design_options(a, ev) -> tuple:
 def _check_times(a, ev, times, option: str) -> None:
     """Times (seconds) inside the stream, increasing: past its end a reconstruction keeps decaying its
     high-pass filter on no data, and was written as a result."""
-    t0 = ev.meta.get("t_start_us", 0) * 1e-6
-    t1 = t0 + ev.duration_us * 1e-6
+    t0 = ev.start_s
+    t1 = ev.end_s
     for t in times:
         if not t0 <= t <= t1 + 1e-9:
             raise EventFieldError(f"{a.file}: {option} {t * 1e3:.3f} ms: the stream covers {t0 * 1e3:.3f} to "
@@ -251,7 +251,7 @@ def _start_time(a, ev):
 def _reconstruct_times(a, ev, start):
     """The frames' times (seconds): ``--times``, else ``--fps`` frames from the start frame's time ``start``
     (None: the stream's start)."""
-    t0 = ev.meta.get("t_start_us", 0) * 1e-6
+    t0 = ev.start_s
     if a.times:
         times = np.array(times_ms(a.times)) * 1e-3
         _check_times(a, ev, times, "--times")
@@ -263,7 +263,7 @@ def _reconstruct_times(a, ev, start):
     first = t0 if start is None else start
     # whole frame intervals within the stream (rounding the count up put a frame past its end: a recording's
     # 9.889 ms at 400 fps read 4 frames, the last 0.111 ms after its last event); at least the stream's end
-    end = t0 + ev.duration_us * 1e-6
+    end = ev.end_s
     n = int(math.floor((end - first) * fps + 1e-9))
     if n == 0 and a.fps:         # asked for: no frame interval fits (the default falls back to the stream's end)
         span = end - first
@@ -288,7 +288,7 @@ def _method_arguments(a, ev, t_frame) -> dict:
         start = start_log(a.start_frame, ev)
         if start is None:
             raise EventFieldError("--method complementary needs --start-frame (a frame to anchor to)")
-        t0 = ev.meta.get("t_start_us", 0) * 1e-6
+        t0 = ev.start_s
         kw.update(frames=start[None], frame_times=[t0 if t_frame is None else t_frame])
     return kw
 

@@ -114,6 +114,26 @@ class EventStream:
         return int(self.t[-1] - self.t[0]) if len(self) else 0
 
     @property
+    def start_us(self) -> int:
+        """Start of the stream in microseconds: the metadata's ``t_start_us``, else its first event's time (the
+        origin ``duration_us`` counts from; 0 without events). The one reading of it: callers took 0 where the
+        metadata had none, so a camera recording starting at 5 s ended at its span, not at its last event."""
+        recorded = self.meta.get("t_start_us")
+        if isinstance(recorded, (int, float, np.integer, np.floating)) and np.isfinite(recorded):
+            return int(recorded)
+        return int(self.t[0]) if len(self) else 0
+
+    @property
+    def start_s(self) -> float:
+        """``start_us`` in seconds."""
+        return self.start_us * 1e-6
+
+    @property
+    def end_s(self) -> float:
+        """End of the stream in seconds: ``start_us`` + ``duration_us``."""
+        return self.start_s + self.duration_us * 1e-6
+
+    @property
     def is_sorted(self) -> bool:
         return first_out_of_order(self.t) is None
 

@@ -253,7 +253,7 @@ def galvo_period_starts(events, periods=None) -> dict:
     """{period index: start time in seconds} for the whole scan periods of a galvo stream (all, or the indices
     ``periods``, each checked against the stream)."""
     period = scan_period(_galvo_scan(events.meta.get("optics", {}), "scan periods"))
-    t0 = events.meta.get("t_start_us", 0) * 1e-6
+    t0 = events.start_s
     # whole periods only; the stream's duration is rounded to the microsecond, so two periods of 150 Hz
     # (13,333.3 us) are 13,333 us long and must still count as two
     # A camera recording has no recorded duration: its span runs from its first event to its last, short of
@@ -340,7 +340,7 @@ def from_events(events, period: int = 0, views: int = VIEWS_PER_PERIOD, time: fl
     """
     optics = events.meta.get("optics", {})
     design = optics.get("design")
-    t0 = events.meta.get("t_start_us", 0) * 1e-6
+    t0 = events.start_s
     method = default_method(design, log_start is not None) if method is None else method
     kw = dict(method_kw)
     if method == "direct":
@@ -355,7 +355,7 @@ def from_events(events, period: int = 0, views: int = VIEWS_PER_PERIOD, time: fl
     if design == "galvo":
         return next(galvo_lightfields(events, views, method, periods=[period], **kw))
     if design in ("kaleidoscope", "microlens"):
-        t1 = t0 + events.duration_us * 1e-6
+        t1 = events.end_s
         t = t1 if time is None else finite(time, "from_events: time")
         if not t0 <= t <= t1 + 1e-9:     # past the end a reconstruction runs on no data (a high-pass decays)
             raise ConfigError(f"from_events: time = {t:g} s: the stream covers {t0:g} to {t1:g} s")

@@ -71,7 +71,7 @@ def direct(events: EventStream, times, log_start=None, t_start: float | None = N
     c_on, c_off = thresholds(events, c_on, c_off)
     h, w = events.height, events.width
     start = np.zeros((h, w)) if log_start is None else np.asarray(log_start, dtype=np.float64).reshape(h, w)
-    t0 = events.meta.get("t_start_us", 0) * 1e-6 if t_start is None else t_start
+    t0 = events.start_s if t_start is None else t_start
     t_us = np.rint(np.concatenate([[t0], times]) * 1e6).astype(np.int64)
     # an event at exactly t belongs to the frame at t (the ideal pixel fired by then), so a start image given
     # for ``t_start`` holds the events at t_start (a galvo period's prior, chained integration). From the
@@ -96,7 +96,7 @@ def _filtered(events, times, cutoff_hz, c_on, c_off, frames=None, frame_times=No
     alpha = 2 * math.pi * cutoff_hz
     pix, wts = _pixel_index(events), _signed_weights(events, c_on, c_off)
     t_ev = events.t * 1e-6
-    t0 = events.meta.get("t_start_us", 0) * 1e-6
+    t0 = events.start_s
     if frames is not None:
         frame_times = np.asarray(frame_times, dtype=np.float64)
         frames = np.asarray(frames, dtype=np.float64).reshape(len(frame_times), h * w)
@@ -153,7 +153,7 @@ def galvo_start_image(events: EventStream, t_start: float, samples: int = 16, de
 def galvo(events: EventStream, times, t_start: float | None = None, samples: int = 16, depth: float = math.inf,
           c_on=None, c_off=None):
     """Static-scene galvo reconstruction: solve the start image, then integrate events onto it."""
-    t0 = events.meta.get("t_start_us", 0) * 1e-6 if t_start is None else t_start
+    t0 = events.start_s if t_start is None else t_start
     start = galvo_start_image(events, t0, samples, depth, c_on=c_on, c_off=c_off)
     return direct(events, times, start, t0, c_on, c_off)
 

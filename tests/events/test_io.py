@@ -154,3 +154,26 @@ def test_render_streams_every_chunked_format(tmp_path, demo_small, ext, monkeypa
     # a chunk per batch of steps (step_batch: up to 64 steps at 48x36)
     assert len(kept) >= 4 and max(kept) == 0 and summary.writer_busy_s > 0
     assert ef.read_events(path).equals(mem) and os.listdir(tmp_path) == [f"d{ext}"]
+
+
+def test_a_streams_start_and_end_have_one_reading():
+    """``start_us`` / ``start_s`` / ``end_s``: the metadata's start, else the first event (the origin the
+    duration falls back to). Ten callers took 0 where the metadata had none: a camera recording starting at
+    5 s then ended at its span (0.002 s), not at its last event."""
+    recording = ef.EventStream([1, 2, 3], [1, 1, 1], [5_000_000, 5_001_000, 5_002_000], [1, -1, 1], 4, 4)
+    assert recording.start_us == 5_000_000 and recording.start_s == 5.0 and recording.end_s == pytest.approx(5.002)
+    rendered = ef.EventStream([1], [1], [700], [1], 4, 4, meta={"t_start_us": 0, "duration_us": 1000})
+    assert rendered.start_us == 0 and rendered.end_s == pytest.approx(0.001)
+    assert ef.EventStream.empty(4, 4).start_us == 0
+    # a consumer: reconstruct --fps puts its frames over the recording (from 0 s to its span before: blank)
+    import tempfile
+
+    from mitsuba_eventfield import cli
+    from mitsuba_eventfield.images import read_exr
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "rec.txt")                      # a text file keeps no t_start_us
+        ef.write_events(path, recording)
+        assert cli.main(["reconstruct", path, "--fps", "1000", "--contrast", "0.2", "-o", os.path.join(d, "f")]) == 0
+        frame, meta = read_exr(os.path.join(d, "f", "frame_0001.exr"))
+        assert meta["time_s"] == pytest.approx(5.002)
+        assert frame["Y"][1, 1:4] == pytest.approx(np.exp([0.2, -0.2, 0.2]), rel=1e-3)
