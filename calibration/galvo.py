@@ -21,6 +21,7 @@ import numpy as np
 
 from mitsuba_eventfield.errors import ConfigError, EventFieldError
 from mitsuba_eventfield.focus.measures import parabola_offset
+from mitsuba_eventfield.focus.tracking import MIN_MATCH_SCORE   # a match below it is not trusted
 from mitsuba_eventfield.optics.galvo import focal_length_px
 from mitsuba_eventfield.optics.scan import ScanCurve
 
@@ -30,7 +31,6 @@ class CalibrationError(EventFieldError):
 
 
 MIN_PATCH_STD = 0.02            # log-intensity spread below which a patch is textureless
-MIN_MATCH_SCORE = 0.6           # normalised correlation below which a match is not trusted
 # Fewer matched frames than this share of those given: refused. Noise then decides which frames are fitted and
 # the fit's standard errors understate its error: in evaluation.failure's noise sweep (a card at 0.5 m, 96 x 72,
 # 24 frames from events) fits on 4-9 matched frames were off by 3-13 % in scale while claiming 1-3 %; with half

@@ -125,7 +125,7 @@ class GalvoController:
     def _vpp(self, s: AxisSine, fraction: float = 1.0) -> float:
         """Volts peak to peak, rounded down to 9 significant digits: the dialects send 10, which must never
         round a value at the limit up past it."""
-        return toward_zero(2.0 * float(s.amplitude_deg) * self.spec.volts_per_deg * fraction)
+        return toward_zero(self.spec.vpp(float(s.amplitude_deg)) * fraction)
 
     def _offset(self, s: AxisSine, fraction: float = 1.0) -> float:
         """The axis's offset in volts at ``fraction`` of the ramp, rounded toward zero as ``_vpp``."""

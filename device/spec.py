@@ -122,6 +122,15 @@ class GalvoSpec:
         """Raise SafetyError naming the limit if the sine on this axis is unsafe (amplitude 0: a DC level)."""
         _safety(self.scan_envelope.check_axis, axis, frequency, amplitude_deg, offset_deg, phase_deg)
 
+    def vpp(self, amplitude_deg: float) -> float:
+        """Volts peak to peak of a sine of ``amplitude_deg`` mechanical degrees through this driver: the one
+        conversion the guard, the planner and the dialects share (2 x amplitude x volts per degree)."""
+        return 2.0 * amplitude_deg * self.volts_per_deg
+
+    def amplitude_deg(self, vpp: float) -> float:
+        """The mechanical amplitude in degrees of a sine of ``vpp`` volts peak to peak (``vpp`` inverted)."""
+        return vpp / (2.0 * self.volts_per_deg)
+
     def check_playable(self, axis: str, frequency: float, amplitude_deg: float, ramp_steps: int = 1) -> None:
         """What a generator can play at all, for a whole request (``GalvoController.plan``; the per-command guard
         sees channels half set up), the first of ``ramp_steps`` amplitude steps included: 1e-300 Hz or 1e-320 deg
@@ -130,9 +139,9 @@ class GalvoSpec:
             raise SafetyError(f"axis {axis}: frequency {frequency:g} Hz: allowed range is {MIN_FREQUENCY_HZ:g} to "
                               f"{self.max_frequency:g} Hz")
         from .dialects import toward_zero
-        smallest = MIN_VPP / (2.0 * self.volts_per_deg) * ramp_steps
+        smallest = self.amplitude_deg(MIN_VPP) * ramp_steps
         # as sent: the first step's Vpp rounded toward zero (at exactly the minimum it became 0.00099999999)
-        if 0 < amplitude_deg and toward_zero(2.0 * amplitude_deg * self.volts_per_deg / ramp_steps) < MIN_VPP:
+        if 0 < amplitude_deg and toward_zero(self.vpp(amplitude_deg) / ramp_steps) < MIN_VPP:
             raise SafetyError(f"axis {axis}: amplitude {amplitude_deg:g} deg: below the generators' smallest sine "
                               f"({MIN_VPP * 1e3:g} mVpp) at the first of {ramp_steps} ramp steps: at least "
                               f"{smallest:.3g} deg here; 0 holds the axis still")
@@ -150,7 +159,7 @@ class GalvoSpec:
             return
         if function != "SIN":
             raise SafetyError(f"{where}: function {function!r} is not a sine or DC level")
-        amplitude_deg = finite_number(vpp, f"{where}: Vpp") / (2.0 * self.volts_per_deg)
+        amplitude_deg = self.amplitude_deg(finite_number(vpp, f"{where}: Vpp"))
         self.check_axis(str(channel), finite_number(frequency, f"{where}: frequency"), amplitude_deg, offset_deg)
 
     def as_dict(self) -> dict:

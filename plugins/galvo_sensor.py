@@ -53,7 +53,8 @@ def curve_from_props(props) -> tuple:
     must fit the envelope of the named galvo model (``optics.envelope``), exactly as the device layer checks."""
     from dataclasses import replace
 
-    from mitsuba_eventfield.optics.envelope import VOLTS_PER_DEG_RANGE, galvo_model
+    from mitsuba_eventfield.optics.envelope import (DEFAULT_DAMPING, DEFAULT_GALVO_MODEL, VOLTS_PER_DEG_RANGE,
+                                                    galvo_model)
     from mitsuba_eventfield.optics.scan import curve_to_dict, make_curve
     from mitsuba_eventfield.validate import number
     name = props.get("curve", "circle")
@@ -62,14 +63,14 @@ def curve_from_props(props) -> tuple:
     if "axis" in props:
         params["axis"] = props.get("axis")
     where = "sensor 'galvo'"
-    envelope = galvo_model(props.get("galvo_model", "gvs01x"), where,
+    envelope = galvo_model(props.get("galvo_model", DEFAULT_GALVO_MODEL), where,
                            float(props.get("max_angle")) if "max_angle" in props else None)
     if "volts_per_deg" in props:         # the rig's driver scaling, as `eventfield device --volts-per-deg`
         envelope = replace(envelope, volts_per_deg=number(props.get("volts_per_deg"), f"{where}: volts_per_deg",
                                                           *VOLTS_PER_DEG_RANGE))
     limits = {"envelope": envelope, "where": where}
     bandwidth = float(props.get("bandwidth", 0.0))
-    damping = float(props.get("damping", 0.7))
+    damping = float(props.get("damping", DEFAULT_DAMPING))
     commanded = make_curve(name, **limits, **params)
     moving = make_curve(name, bandwidth_hz=bandwidth, damping=damping, **limits, **params) if bandwidth else commanded
     return moving, curve_to_dict(commanded, bandwidth, damping)

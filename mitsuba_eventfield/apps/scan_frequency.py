@@ -51,7 +51,7 @@ from ..errors import ConfigError, EventFieldError
 from ..plugins.pixel_model import PRESETS, film_readout_cap
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events
-from ..validate import number
+from ..validate import MAX_SPP, MAX_VIEWS, number
 from .result import AppResult, time_split_line
 
 SCENE = "fan/fan.xml"                                    # bundled (scene.bundled_scene)
@@ -210,10 +210,10 @@ def _check(frequencies, duration, views, cap_scale, start, region_tolerance, pla
             raise ConfigError(f"frequency {f:g} Hz: duration {duration * 1e3:g} ms is not a whole number of its scan "
                              f"periods ({n:.3g}); choose frequencies that are multiples of {1 / duration:g} Hz")
         periods.append(int(round(n)))
-    number(views, "views", 2, 4096, integer=True, strict=True)
+    number(views, "views", 2, MAX_VIEWS, integer=True, strict=True)
     number(cap_scale, "cap_scale", 0, 1e6, lo_open=True, strict=True)
     number(region_tolerance, "region_tolerance", 0, 0.99, lo_open=True, strict=True)
-    number(spp, "spp", 1, 65536, integer=True, strict=True)
+    number(spp, "spp", 1, MAX_SPP, integer=True, strict=True)
     number(margin, "margin", 0, 1000, integer=True, strict=True)
     if start not in START_METHODS:
         raise ConfigError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")

@@ -16,9 +16,9 @@ from .refocus import _depth_list, check_lightfield, focal_stack, refocus
 
 # track_focus: a focus curve over the depths whose peak stands less than this share above its lowest value
 # cannot tell depth (a textureless region: every refocused image alike); a match below this normalised
-# correlation is no match (calibration.galvo's MIN_MATCH_SCORE)
+# correlation is no match (here and in calibration.galvo: the one threshold of a trusted match)
 MIN_FOCUS_CONTRAST = 0.05
-MIN_FOLLOW_SCORE = 0.6
+MIN_MATCH_SCORE = 0.6
 
 
 class TrackingWarning(UserWarning):
@@ -40,7 +40,7 @@ def _follow(template: np.ndarray, image: np.ndarray, roi, search: float = 1.0):
         return roi                       # a flat template matches anywhere: stay where it was
     score = cv2.matchTemplate(window.astype(np.float32), template.astype(np.float32), cv2.TM_CCOEFF_NORMED)
     _, best, _, (bx, by) = cv2.minMaxLoc(score)
-    if not best >= MIN_FOLLOW_SCORE:     # no match worth the name: stay where it was
+    if not best >= MIN_MATCH_SCORE:     # no match worth the name: stay where it was
         return roi
     return (sx0 + bx, sy0 + by, sx0 + bx + rw, sy0 + by + rh)
 

@@ -33,6 +33,8 @@ from .. import validate
 from ..errors import ConfigError
 
 PHASE_RANGE_DEG = (-360.0, 360.0)
+IDEAL_TRAVEL_DEG = 10.0        # the limitless "ideal" mirror's mechanical travel (the curves' before galvo models)
+DEFAULT_DAMPING = 0.7          # a mirror's second-order response (``second_order_response``) when none is given
 # Drivers scale 0.5-1.0 V per mechanical degree; anything outside this bracket is a typo (or a unit mix-up of
 # optical vs mechanical degrees or mV) that would scale every voltage we send by the same mistake.
 VOLTS_PER_DEG_RANGE = (0.1, 2.0)
@@ -167,7 +169,7 @@ class ScanEnvelope:
 
 GALVO_MODELS = {
     "gvs01x": ScanEnvelope(),
-    "ideal": ScanEnvelope("ideal", 10.0, (), None),
+    "ideal": ScanEnvelope("ideal", IDEAL_TRAVEL_DEG, (), None),
 }
 DEFAULT_GALVO_MODEL = "gvs01x"
 

@@ -29,10 +29,11 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..validate import finite, number
-from .envelope import DEFAULT_GALVO_MODEL, EnvelopeError, galvo_model, second_order_response
+from .envelope import (DEFAULT_DAMPING, DEFAULT_GALVO_MODEL, IDEAL_TRAVEL_DEG, EnvelopeError, galvo_model,
+                       second_order_response)
 from .galvo import OPTICAL_PER_MECHANICAL
 
-DEFAULT_MAX_ANGLE_DEG = 10.0   # the mechanical travel curves had before galvo models existed (the ideal model's)
+DEFAULT_MAX_ANGLE_DEG = IDEAL_TRAVEL_DEG   # the mechanical travel curves had before galvo models existed
 TWO_PI = 2.0 * math.pi
 
 
@@ -162,8 +163,8 @@ class Lissajous(ScanCurve):
             fx = fy
         if self.amplitude_y == 0:
             fy = fx
-        if fx == fy:              # one frequency (a circle, a line): its period, whatever the number (1e-5 Hz was
-            return 1.0 / fx       # aperiodic here: no fraction with a denominator under 10,000 came near it)
+        if fx == fy:              # one frequency (a circle, a line): 1 / f at any f (1e-5 Hz had no period here)
+            return 1.0 / fx
         fx, fy = (Fraction(f).limit_denominator(10_000) for f in (fx, fy))
         if abs(float(fx) - self.freq_x) > 1e-9 * self.freq_x or abs(float(fy) - self.freq_y) > 1e-9 * self.freq_y:
             return None
@@ -185,7 +186,7 @@ class Lissajous(ScanCurve):
     def peak_angle_deg(self) -> float:
         return max(abs(self.offset_x) + abs(self.amplitude_x), abs(self.offset_y) + abs(self.amplitude_y))
 
-    def with_bandwidth(self, natural_hz: float, damping: float = 0.7) -> "Lissajous":
+    def with_bandwidth(self, natural_hz: float, damping: float = DEFAULT_DAMPING) -> "Lissajous":
         """Steady-state response of second-order mirrors: each axis scaled by |H(f)| and delayed by arg H(f)."""
         hx, hy = second_order_response(self.freq_x, natural_hz, damping), second_order_response(self.freq_y, natural_hz, damping)
         return replace(self, amplitude_x=self.amplitude_x * abs(hx), amplitude_y=self.amplitude_y * abs(hy),
@@ -262,7 +263,7 @@ class TabulatedCurve(ScanCurve):
     def to_dict(self) -> dict:
         return dict(self.source, max_angle_deg=self.max_angle_deg, galvo_model=self.galvo_model)
 
-    def with_bandwidth(self, natural_hz: float, damping: float = 0.7) -> "TabulatedCurve":
+    def with_bandwidth(self, natural_hz: float, damping: float = DEFAULT_DAMPING) -> "TabulatedCurve":
         n = len(self._table[0])
         freqs = np.fft.rfftfreq(n, d=self.period_s / n)
         h = second_order_response(freqs, natural_hz, damping)
@@ -288,7 +289,7 @@ def _whole(params: dict, names: tuple, where: str) -> dict:
 
 
 def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: float = 0.0,
-               damping: float = 0.7, where: str = "scan", galvo_model: str = DEFAULT_GALVO_MODEL,
+               damping: float = DEFAULT_DAMPING, where: str = "scan", galvo_model: str = DEFAULT_GALVO_MODEL,
                envelope=None, **params) -> ScanCurve:
     """Build a curve by name and check it against the envelope of ``galvo_model`` (``optics.envelope``; a
     scan the device layer refuses is refused here with the same reason). ``max_angle_deg``: narrows a real
@@ -348,7 +349,7 @@ def _envelope(name, where, max_angle_deg):
     return galvo_model(name, where, max_angle_deg)
 
 
-def curve_to_dict(curve: ScanCurve, bandwidth_hz: float = 0.0, damping: float = 0.7) -> dict:
+def curve_to_dict(curve: ScanCurve, bandwidth_hz: float = 0.0, damping: float = DEFAULT_DAMPING) -> dict:
     """A description from which :func:`curve_from_dict` rebuilds the same curve (stored in event metadata)."""
     if isinstance(curve, TabulatedCurve):
         d = dict(curve.source, **({"time_offset": curve.time_shift} if curve.time_shift else {}))
@@ -381,7 +382,7 @@ def curve_from_dict(d: dict, where: str = "scan") -> ScanCurve:
     d = dict(d)
     name, shift = d.pop("curve", None), finite(d.pop("time_offset", 0.0), f"{where}: time_offset")
     curve = make_curve(name, max_angle_deg=d.pop("max_angle_deg", DEFAULT_MAX_ANGLE_DEG),
-                       bandwidth_hz=d.pop("bandwidth_hz", 0.0), damping=d.pop("damping", 0.7), where=where,
+                       bandwidth_hz=d.pop("bandwidth_hz", 0.0), damping=d.pop("damping", DEFAULT_DAMPING), where=where,
                        galvo_model=d.pop("galvo_model", "ideal"), **d)
     return shifted(curve, shift) if shift else curve
 
@@ -396,7 +397,6 @@ def shifted(curve: ScanCurve, dt: float) -> ScanCurve:
 
 def event_angles(events, actual: bool = True):
     """Mechanical mirror angles (x, y) in radians at each event's timestamp, from the stream's metadata alone.
-
     ``actual``: include the recorded mirror bandwidth (what the mirror did), else the commanded curve (of
     calibrated optics, the scan the record held before the calibration's fit: ``commanded_scan``)."""
     optics = events.meta.get("optics", {})
