@@ -252,11 +252,16 @@ def scan_image_path_px(optics: dict, width: int, height: int) -> float:
     from .scan import curve_from_dict, scan_period
     geometry = GalvoGeometry.from_optics(optics, width, height)
     ax, ay = curve_from_dict(optics["scan"]).angles(np.linspace(0.0, scan_period(optics["scan"]), 2049))
-    length = 0.0
-    for x, y in ((width / 2, height / 2), (0.0, 0.0), (width, 0.0), (0.0, height), (width, height)):
-        shifts = geometry.image_shift(ax, ay, math.inf, x, y)
-        length = max(length, float(np.hypot(*np.diff(shifts, axis=0).T).sum()))
-    return length
+    return float(field_step_shifts(geometry, ax, ay).sum(axis=1).max())
+
+
+def field_step_shifts(geometry: GalvoGeometry, ax, ay) -> np.ndarray:
+    """(5, len(ax) - 1): how far the image moves between consecutive mirror angles (ax, ay; mechanical rad) at
+    the image centre and each corner, at infinity: where a two-mirror scan's exact shift is largest. The one
+    probe of the scan's image motion (``scan_image_path_px``, ``simulate.image_motion.scan_displacements``)."""
+    w, h = geometry.width, geometry.height
+    return np.stack([np.hypot(*np.diff(geometry.image_shift(ax, ay, math.inf, x, y), axis=0).T)
+                     for x, y in ((w / 2, h / 2), (0.0, 0.0), (w, 0.0), (0.0, h), (w, h))])
 
 
 def scan_parallax_px(optics: dict, width: int, height: int, depth: float) -> dict:

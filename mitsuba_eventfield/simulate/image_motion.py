@@ -105,17 +105,12 @@ def scan_displacements(timed: TimedScene, times) -> np.ndarray | None:
     period, sensor = timed.scan_period, timed.sensor
     if not period or not hasattr(sensor, "optics_metadata"):
         return None
-    from ..optics.galvo import GalvoGeometry
+    from ..optics.galvo import GalvoGeometry, field_step_shifts
     from ..optics.scan import curve_from_dict
     optics = sensor.optics_metadata()
-    width, height = timed.film_size
-    geometry = GalvoGeometry.from_optics(optics, width, height)
+    geometry = GalvoGeometry.from_optics(optics, *timed.film_size)
     ax, ay = curve_from_dict(optics["scan"]).angles(np.asarray(times, np.float64))
-    worst = np.zeros(len(times) - 1)
-    for x, y in ((width / 2, height / 2), (0.0, 0.0), (width, 0.0), (0.0, height), (width, height)):
-        shifts = geometry.image_shift(ax, ay, math.inf, x, y)
-        worst = np.maximum(worst, np.hypot(*np.diff(shifts, axis=0).T))
-    return worst
+    return field_step_shifts(geometry, ax, ay).max(axis=0)
 
 
 def image_displacements(timed: TimedScene, times) -> np.ndarray | None:
