@@ -43,6 +43,7 @@ from ..errors import ConfigError
 from ..lightfield.model import LightField
 from ..validate import MAX_PLANES, finite, number
 from ..workers import ordered_map
+from .measures import log_gradient
 
 MOTION_LIMIT_PX = 2.0       # module docstring: content moving more than this over the views is flagged
 MOTION_MIN_VIEWS = 12       # fewer views: motion is not measured (``view_motion``)
@@ -239,7 +240,7 @@ def view_motion(lf: LightField, depth: float = math.inf, tile: int = 8) -> dict:
         cover &= covered(lf.shape, maps[i])
     flows, reliable = _flow_logs(logs, cover)
     flow = np.concatenate(flows, axis=-1)                                    # (H, W, 4): 0 -> 1, 0 -> K-1
-    textured = cover & (np.hypot(*np.gradient(logs[0])) > TEXTURE_GRADIENT)
+    textured = cover & (log_gradient(logs[0]) > TEXTURE_GRADIENT)     # the texture measure of depth from focus
     used = textured & reliable
     h, w = textured.shape
     blocks = [np.median(flow[y:y + tile, x:x + tile][used[y:y + tile, x:x + tile]], axis=0)
