@@ -79,9 +79,11 @@ class DepthCalibration:
         """(nearest, farthest) depth over which the linear model stays within LINEAR_MODEL_TOLERANCE of the
         inverse fit, searched from a tenth of the nearest to ten times the farthest calibration depth."""
         p, q = self.inverse
+        # the linear model was fitted to the scales as measured, where the LEDs were: the inverse model there
+        k = float(np.mean(np.asarray(self.field_factors)[:, 0])) if self.field_factors else 1.0
         z = np.geomspace(min(self.depths) / 10, max(self.depths) * 10, 4000)
         z = z[z > -q / p * 1.01]                                    # in front of the pivot only
-        ok = np.abs(self.linear[0] + self.linear[1] * (p + q / z) - z) <= LINEAR_MODEL_TOLERANCE * z
+        ok = np.abs(self.linear[0] + self.linear[1] * (p * k + q / z) - z) <= LINEAR_MODEL_TOLERANCE * z
         inside = z[ok]
         return (float(inside.min()), float(inside.max())) if inside.size else (float("nan"), float("nan"))
 

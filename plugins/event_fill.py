@@ -234,9 +234,10 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
     kept, hit = sel.kept, sel.hit
     if refractory is not None or hit is not None:   # one kernel for the plan; lazy, every use would redo it
         dr.eval(*[v for v in (kept, sel.first, sel.stride, hit, sel.noise_t, sel.last_emit) if v is not None])
-    # one lane a pixel: its kept crossings, then its noise event (inclusive scan: slot ends)
-    ends = dr.prefix_reduce(dr.ReduceOp.Add, kept + mi.UInt32(hit) if hit is not None else kept, exclusive=False)
-    totals = [dr.gather(mi.UInt32, ends, n_pix - 1), dr.sum(mi.UInt32(dr.abs(n))), approximate_sum(dr.abs(n))] + \
+    # one lane a pixel: its kept crossings, then its noise event (inclusive scan: slot ends); the guard counts these
+    kept_events = kept + mi.UInt32(hit) if hit is not None else kept
+    ends = dr.prefix_reduce(dr.ReduceOp.Add, kept_events, exclusive=False)
+    totals = [dr.gather(mi.UInt32, ends, n_pix - 1), dr.sum(mi.UInt32(dr.abs(n))), approximate_sum(kept_events)] + \
         ([dr.sum(mi.UInt32(hit)), dr.sum(mi.UInt32(noise[0]))] if hit is not None else [])
     if refractory is not None:
         refractory.last_emit = sel.last_emit

@@ -92,7 +92,7 @@ class _GalvoSensorMethods:
         self.mirror_separation = float(props.get("mirror_separation", 0.01))
         self.far_clip = float(props.get("far_clip", 1e4))
         galvo_optics.checked_optics(self.fov_x, self.mirror_distance, self.mirror_separation, "sensor 'galvo'",
-                                    error=ValueError)
+                                    error=ValueError, names=("fov", "mirror_distance", "mirror_separation"))
         for name, v, ok, allowed in (
                 ("aperture_radius", self.aperture_radius, self.aperture_radius >= 0, ">= 0 (0: pinhole)"),
                 ("focus_distance", self.focus_distance, self.focus_distance > 0, "> 0"),

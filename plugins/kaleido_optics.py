@@ -53,8 +53,9 @@ def tiles(n: int, film_w: int, film_h: int) -> list:
     for row in range(n):
         for col in range(n):
             i, j = (int(c) if c == int(c) else c for c in (col - half, row - half))
-            out.append({"i": i, "j": j, "tile": [col * tw, row * th, tw, th], "flip_x": bool(i % 2),
-                        "flip_y": bool(j % 2)})
+            # mirrored where an odd number of walls reflect it; an even (microlens) count's half indices never are
+            out.append({"i": i, "j": j, "tile": [col * tw, row * th, tw, th],
+                        "flip_x": isinstance(i, int) and i % 2 == 1, "flip_y": isinstance(j, int) and j % 2 == 1})
     return out
 
 

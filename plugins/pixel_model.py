@@ -68,12 +68,18 @@ def stream_linlog_threshold(meta: dict) -> float:
     return float((meta.get("pixel_model") or {}).get("linlog_threshold", DEFAULT_LINLOG_THRESHOLD))
 
 
+# crossings a pixel may count in one step: far above any real step's (a log range of ~100 over the smallest
+# threshold), and below 2^31, so the Int32 count cannot wrap (1e10 became INT_MIN, a negative count that the
+# event-count guard then had to catch by accident: ``check_event_count`` refuses such a step)
+MAX_CROSSINGS = float(1 << 30)
+
+
 def count_crossings(dr, Int, log_now, log_ref, c_on, c_off):
     """Signed number of threshold crossings per pixel: n > 0 means n ON events (L rose by n*c_on from the
-    reference), n < 0 means |n| OFF events."""
+    reference), n < 0 means |n| OFF events; at most ``MAX_CROSSINGS`` either way."""
     rise = log_now - log_ref
-    n_on = dr.maximum(dr.floor(rise / c_on), 0.0)
-    n_off = dr.maximum(dr.floor(-rise / c_off), 0.0)
+    n_on = dr.minimum(dr.maximum(dr.floor(rise / c_on), 0.0), MAX_CROSSINGS)
+    n_off = dr.minimum(dr.maximum(dr.floor(-rise / c_off), 0.0), MAX_CROSSINGS)
     return Int(n_on) - Int(n_off)
 
 
@@ -89,21 +95,26 @@ def reference_level(dr, Float, anchor, k_on, k_off, c_on, c_off):
     return anchor + dr.select(c_on == c_off, symmetric, general)
 
 
-# bytes an event holds while it is made (device slots, sort keys and order, the sorted copy, the result) and
-# the most events one chunk may index (its slot ends are 32-bit)
-BYTES_PER_EVENT_MADE, MAX_CHUNK_EVENTS = 48, (1 << 31) - 1
+# bytes an event holds while it is made, measured (2026-11-27, a review): on the device ~43 (slots, sort keys
+# and order, the sorted copy, the result), on the host's NumPy path ~89 (the expanded crossings' float64 and
+# int64 columns); and the most events one chunk may index (its slot ends are 32-bit)
+BYTES_PER_EVENT_MADE = {"device": 48, "host": 96}
+MAX_CHUNK_EVENTS = (1 << 31) - 1
+MEMORY_SHARE = 0.5       # of the memory available, what one step's events may take (the rest: everything else)
 
 
-def check_event_count(count: float, t0: float, t1: float, pixels: int) -> None:
+def check_event_count(count: float, t0: float, t1: float, pixels: int, path: str = "device") -> None:
     """Refuse, in one line, a step (or chunk of steps) from ``t0`` to ``t1`` s whose ``count`` events (the sum of
-    its crossing counts, before any is made) no memory holds: a threshold far below any sensor's (1e-6 asked
+    its kept crossing counts, before any is made; ``path``: "device" or "host", what an event costs there) would
+    take more than ``MEMORY_SHARE`` of the memory available: a threshold far below any sensor's (1e-6 asked
     for 4 G events in one step of a 64x48 film and crashed on a 32-bit size; 1e-9 exhausted the memory)."""
     from mitsuba_eventfield.errors import EventFieldError
     from mitsuba_eventfield.validate import available_memory
-    most = min(MAX_CHUNK_EVENTS, available_memory() // BYTES_PER_EVENT_MADE)
+    most = min(MAX_CHUNK_EVENTS, int(MEMORY_SHARE * available_memory()) // BYTES_PER_EVENT_MADE[path])
     if count > most:
-        many = f"at least {count:.3g}" if count >= 4e9 else f"{count:.3g}"     # (a device sum is capped at 4e9)
-        raise EventFieldError(f"{many} events from {t0:.6g} s to {t1:.6g} s on {pixels} pixels ({count / pixels:.3g} "
+        many = f"at least {count:.3g}" if path == "device" and count >= 4e9 else f"{count:.3g}"   # (capped there)
+        on = f"{pixels} firing pixels" if path == "host" else f"{pixels} pixels"
+        raise EventFieldError(f"{many} events from {t0:.6g} s to {t1:.6g} s on {on} ({count / pixels:.3g} "
                               f"a pixel): more than memory holds ({most:.3g}); raise the contrast threshold (events "
                               "a pixel grow as 1 / threshold) or take shorter steps")
 
@@ -119,7 +130,7 @@ def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: floa
     counts = np.abs(n)
     if len(n) == 0:
         return np.empty(0, np.int64), np.empty(0, np.float64), np.empty(0, np.int8)
-    check_event_count(float(counts.sum()), t0, t1, len(n))
+    check_event_count(float(counts.sum()), t0, t1, len(n), "host")     # (the firing pixels' count)
     pixel = np.asarray(pixel, dtype=np.int64)
     lp, ln, ref = (np.asarray(a, dtype=np.float64) for a in (log_prev, log_now, log_ref))
     step = np.where(n > 0, np.asarray(c_on, dtype=np.float64), np.asarray(c_off, dtype=np.float64))

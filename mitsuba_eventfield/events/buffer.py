@@ -33,6 +33,7 @@ RESERVE_SHARE = 0.5        # of the available memory, reserved (not touched) for
 MIN_RESERVE = 1 << 16
 SPLIT_COPY_MIN = 1 << 17   # events in a chunk before its copy is split: a smaller one is not worth a hand-off
 COPY_THREADS = 4           # at most, the calling thread included (bounded by the usable cores)
+MEMORY_LEFT = 256 << 20    # bytes an in-memory result leaves the system when it takes a chunk
 
 _pool = None
 _pool_lock = threading.Lock()
@@ -106,8 +107,15 @@ class EventBuffer:
         return len(self._cols[0])
 
     def append(self, x, y, t, p) -> None:
-        """Copy one chunk's columns in after the events already held."""
+        """Copy one chunk's columns in after the events already held; refused in one line where the memory left
+        cannot take them (a render into memory grew until the system killed it: a file streams them instead)."""
         end = self.count + len(t)
+        if len(t) * BYTES_PER_EVENT > available_memory() - MEMORY_LEFT:
+            from ..errors import EventFieldError
+            held = self.count * BYTES_PER_EVENT / 2**30
+            raise EventFieldError(f"events in memory: {self.count} held ({held:.2f} GiB) and no memory left for "
+                                  f"{len(t)} more: write them to a file (an output path, -o events.h5), which "
+                                  "streams them")
         if end > self.capacity:
             grown = max(end, 2 * self.capacity)
             for col in self._cols:         # the buffer owns its columns and has handed out no view of them

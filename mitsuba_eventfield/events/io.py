@@ -94,8 +94,7 @@ def write_events(path: str, events: EventStream, fmt: str | None = None) -> str:
             w.append(events.x[s], events.y[s], events.t[s], events.p[s])
         # the recorded span ends at t_start_us + duration_us (a duration, not an end time: a stream starting at
         # 5 ms had its index stop 5 ms early)
-        start = meta.get("t_start_us")
-        start = int(start) if isinstance(start, (int, np.integer)) else (int(events.t[0]) if len(events) else 0)
+        start = events.start_us
         w.close(end_us=max(start + events.duration_us, int(events.t[-1]) if len(events) else start))
     return os.path.abspath(path)
 

@@ -193,7 +193,8 @@ def _exp(log_frames, name: str = "from_galvo: log_frames", linear_below: float |
     (``linear_below``: its knee; a reconstruction from events on a start frame through ``linlog_np``)."""
     from ..plugins.pixel_model import linlog_inverse_np
     frames = _floats(log_frames, name)
-    return np.exp(frames) if linear_below is None else linlog_inverse_np(frames, linear_below)
+    # (a level below the pixel's response to no light, e.g. after a noise OFF event, is no radiance: 0)
+    return np.exp(frames) if linear_below is None else np.maximum(linlog_inverse_np(frames, linear_below), 0.0)
 
 
 def galvo_geometry(optics: dict, width: int, height: int) -> GalvoGeometry:

@@ -22,8 +22,9 @@ transform (the inverse mirror rotations), so a plane at depth z maps from the re
 what a pinhole camera in the camera's place sees) to any view by a 3 x 3 homography (``GalvoGeometry.homography``).
 Refocusing at depth z warps every view onto the reference with its homography: exact across the whole field,
 where one constant shift per view is right only on the optical axis. To first order a point at depth z moves by
-2 f theta (1 - pivot / z) pixels on axis, and by (1 + t^2) times that at normalised field position t along the
-same axis (``paraxial_disparity`` keeps the on-axis part, for step-size estimates and ``alpha`` refocus).
+2 f theta (1 - pivot / z) pixels on axis, and by 2 f theta (1 + t^2 - pivot / z) at normalised field position t
+along the same axis (``GalvoGeometry.scan_scale``; ``paraxial_disparity`` keeps the on-axis part, for step-size
+estimates and ``alpha`` refocus).
 """
 from __future__ import annotations
 
@@ -43,8 +44,8 @@ OPTICS_RECORD_KEYS = ("design", "scan", "fov_x_deg", "aperture_radius", "focus_d
 # a mirror turned by a mechanical angle turns the reflected ray by twice it: a view's optical angle (its
 # position in a light field) per mechanical radian of the scan curve
 OPTICAL_PER_MECHANICAL = 2.0
-# the widest horizontal field of view a galvo's pinhole may have (its focal length falls to 0 at 180 deg)
-MAX_FOV_DEG = 179.0
+# a galvo's pinhole's horizontal field of view is below this (its focal length falls to 0 at 180 deg)
+MAX_FOV_DEG = 180.0
 from dataclasses import dataclass  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -53,13 +54,17 @@ from ..errors import ConfigError  # noqa: E402
 from ..validate import number  # noqa: E402
 
 
-def checked_optics(fov_x_deg, mirror_distance, mirror_separation, where: str, error=ConfigError) -> tuple:
+def checked_optics(fov_x_deg, mirror_distance, mirror_separation, where: str, error=ConfigError,
+                   names=("fov_x_deg", "mirror_distance", "mirror_separation")) -> tuple:
     """The galvo's three geometric parameters, each checked against its one range (the ``galvo`` sensor plugin,
-    nominal optics files): fov in (0, ``MAX_FOV_DEG``] degrees, pivot distance and mirror separation >= 0 scene
-    units (0 separation: both mirrors at one pivot). ``error`` names ``where`` and the field."""
-    return (number(fov_x_deg, f"{where}: fov_x_deg", 0, MAX_FOV_DEG, lo_open=True, strict=True, error=error),
-            number(mirror_distance, f"{where}: mirror_distance", 0, strict=True, error=error),
-            number(mirror_separation, f"{where}: mirror_separation", 0, strict=True, error=error))
+    nominal optics files): fov in (0, ``MAX_FOV_DEG``) degrees, pivot distance and mirror separation >= 0 scene
+    units (0 separation: both mirrors at one pivot). ``error`` names ``where`` and the field as ``names`` has
+    it (the sensor's XML calls the first ``fov``)."""
+    fov = number(fov_x_deg, f"{where}: {names[0]}", 0, lo_open=True, strict=True, error=error)
+    if fov >= MAX_FOV_DEG:
+        raise error(f"{where}: {names[0]} = {fov_x_deg!r}: allowed range is (0, {MAX_FOV_DEG:g}) degrees")
+    return (fov, number(mirror_distance, f"{where}: {names[1]}", 0, strict=True, error=error),
+            number(mirror_separation, f"{where}: {names[2]}", 0, strict=True, error=error))
 
 
 # ------------------------------------------------------------------ ray optics (NumPy or Dr.Jit through ``xp``)

@@ -221,6 +221,10 @@ def test_scan_scale_off_axis_is_the_ray_traced_one_and_the_depth_fit_uses_it():
         fitted = fit_depth(z, gain * np.array(sx), gain * np.array(sy), field_factors=factors).geometry(geometry)
         assert (fitted.pivot_x, fitted.pivot_y) == pytest.approx((d1, d1 + sep), rel=1e-6)
         assert (fitted.gain_x, fitted.gain_y) == pytest.approx((gain, gain), rel=1e-6)
+    # the paper's linear model, fitted to the scales as measured, is judged against the inverse model where the
+    # LEDs were (against the on-axis one its valid range came out empty: nan to nan)
+    lo, hi = fit_depth(z, sx, sy, field_factors=factors).linear_valid_range()
+    assert lo < 0.7 < hi and (lo, hi) == pytest.approx(fit_depth(z, sx, sy).linear_valid_range(), rel=0.05)
     on_axis = fit_depth(z, sx, sy).geometry(geometry)           # what the fit did before: 9 % and 4 % off
     assert on_axis.gain_x == pytest.approx(1.09, rel=1e-3) and on_axis.pivot_x == pytest.approx(d1 / 1.09, rel=1e-3)
     with pytest.raises(CalibrationError, match=r"field_factors: shape \(2, 2\) for 5 depths"):

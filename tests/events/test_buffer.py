@@ -90,3 +90,22 @@ def test_strided_chunk_columns_copied_in_parts(monkeypatch):
     np.testing.assert_array_equal(x, np.arange(1000) & 0xFFFF)
     np.testing.assert_array_equal(y, np.arange(1000) % 7)
     np.testing.assert_array_equal(t, np.arange(1000))
+
+
+def test_a_chunk_the_memory_left_cannot_take_is_refused_in_one_line(monkeypatch):
+    """A render into memory grew until the system killed the process (a review: OOM at 24 GB): a chunk that
+    the memory left (less ``MEMORY_LEFT``) cannot take is refused, naming what is held and what to do."""
+    from mitsuba_eventfield.errors import EventFieldError
+    from mitsuba_eventfield.events import buffer
+    buf = buffer.EventBuffer(capacity=16)
+    chunk = (np.zeros(1000, np.uint16), np.zeros(1000, np.uint16), np.arange(1000, dtype=np.int64),
+             np.ones(1000, np.int8))
+    buf.append(*chunk)
+    monkeypatch.setattr(buffer, "available_memory", lambda: buffer.MEMORY_LEFT + 999 * buffer.BYTES_PER_EVENT)
+    with pytest.raises(EventFieldError, match=r"events in memory: 1000 held \(0.00 GiB\) and no memory left for "
+                                              r"1000 more: write them to a file"):
+        buf.append(*chunk)
+    assert len(buf) == 1000
+    monkeypatch.setattr(buffer, "available_memory", lambda: buffer.MEMORY_LEFT + 1000 * buffer.BYTES_PER_EVENT)
+    buf.append(*chunk)
+    assert len(buf) == 2000

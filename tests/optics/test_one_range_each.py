@@ -28,10 +28,13 @@ def test_galvo_optics_have_one_range_in_the_sensor_and_in_a_nominal_file(tmp_pat
     # both mirrors at one pivot: the sensor renders it, and a nominal file now takes it too
     assert nominal_optics(_nominal(tmp_path, mirror_separation=0.0), 64, 48)["mirror_separation"] == 0.0
     ef.load_scene(GALVO, width=16, height=12, mirror_separation=0.0)
-    with pytest.raises(ef.EventFieldError, match=r"optics.json: fov_x_deg = 200(\.0)?: allowed range is \(0, 179\]"):
+    with pytest.raises(ef.EventFieldError, match=r"optics.json: fov_x_deg = 200(\.0)?: allowed range is \(0, 180\) "
+                                                 r"degrees"):
         nominal_optics(_nominal(tmp_path, fov_x_deg=200.0), 64, 48)
-    with pytest.raises(Exception, match=r"sensor 'galvo': fov_x_deg = 179\.5: allowed range is \(0, 179\]"):
-        ef.load_scene(GALVO, width=16, height=12, fov=179.5)
+    ef.load_scene(GALVO, width=16, height=12, fov=179.5)           # (Mitsuba itself refuses 180 and above)
+    from mitsuba_eventfield.optics.galvo import checked_optics
+    with pytest.raises(ValueError, match=r"sensor 'galvo': fov = 180\.0: allowed range is \(0, 180\) degrees"):
+        checked_optics(180.0, 0.1, 0.0, "sensor 'galvo'", ValueError, ("fov", "mirror_distance", "mirror_separation"))
     with pytest.raises(ef.EventFieldError, match=r"mirror_distance = -0\.1: allowed range is \[0, inf\)"):
         nominal_optics(_nominal(tmp_path, mirror_distance=-0.1), 64, 48)
 
