@@ -99,6 +99,9 @@ def compare(scene_path: str, defines: dict | None = None, depth: float = math.in
     timed, period = load_static_scan(scene_path, defines)
     t0 = time.perf_counter()
     events = render_events(timed, period, steps=steps_per_period, spp=spp, progress=progress)
+    if not len(events):      # the events' image would be the start frame alone, scored as if recovered
+        raise ConfigError(f"{scene_path}: no events in its scan period ({steps_per_period} steps): nothing to recover "
+                          "the image from (more steps per period, or a scene with texture)")
     t1 = time.perf_counter()
     linlog = events.meta["pixel_model"]["linlog_threshold"]
     truth_lin = render_frames(timed, [0.0], spp=spp, log=False)[0]

@@ -196,6 +196,9 @@ def lightfield(scene_path: str | None = None, defines: dict | None = None, depth
     t0 = time.perf_counter()
     events = render_events(timed, period, steps=steps, spp=spp, seed=seed, preset=preset, pixel=pixel,
                            progress=progress)
+    if not len(events):      # (as hdr's: a light field of start frames, scored as if recovered)
+        raise ConfigError(f"{scene_path}: no events in its scan period ({steps} steps): nothing to recover the "
+                          "views from")
     t1 = time.perf_counter()
     times = galvo_view_times(optics, 0.0, views)
     rendered = render_frames(timed, np.r_[0.0, times], spp=spp, seed=seed, log=False)   # noise-free

@@ -21,6 +21,7 @@ the focus measure (tenengrad) of a plane's own region is higher when refocused o
 from __future__ import annotations
 
 import math
+import re
 import time
 from dataclasses import dataclass, field
 
@@ -87,11 +88,20 @@ class PlaneRefocus(AppResult):
         return planes_figure(self, path)
 
 
+# a plane's name names its output files (NAME.exr, NAME_p000.png): a path ("../x") wrote outside the output
+# folder, and "conventional" overwrote the conventional frame's EXR
+PLANE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
+RESERVED_PLANE_NAMES = ("conventional", "highspeed", "metrics")
+
+
 def _check_planes(planes: dict) -> dict:
     if not planes:
-        raise ValueError("planes: give at least one name=depth")
+        raise ValueError("planes (--plane NAME=DEPTH): give at least one name=depth")
     out = {}
     for name, z in planes.items():
+        if not PLANE_NAME.fullmatch(str(name)) or str(name) in RESERVED_PLANE_NAMES:
+            raise ValueError(f"plane {name!r}: a name of letters, digits, '_' and '-' (up to 64, names its output "
+                             f"files), not {', '.join(RESERVED_PLANE_NAMES)}")
         try:
             z = float(z)
         except (TypeError, ValueError):

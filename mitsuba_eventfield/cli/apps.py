@@ -32,9 +32,8 @@ def add_parsers(sub) -> None:
     hd.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=4)
     hd.add_argument("--lightfield", action="store_true", help="the light field of one scan period with the scene's "
                     "event pixel, refocused at --depths, against 8-bit exposures of the same views")
-    hd.add_argument("--depths", default="0.6,1.5", help="with --lightfield: refocus depths (default: hdr_depth's "
-                                                        "card and wall)")
-    hd.add_argument("--views", type=num(2, MAX_VIEWS, integer=True), default=32,
+    hd.add_argument("--depths", help="with --lightfield: refocus depths (default: hdr_depth's card and wall, 0.6,1.5)")
+    hd.add_argument("--views", type=num(2, MAX_VIEWS, integer=True),
                     help="with --lightfield: views per scan period (default 32)")
     _add_galvo_apps(sub)
     sm = sub.add_parser("slomorf", help="slow-motion refocus: kaleidoscope events + 120 fps RGB frames, scored")
@@ -136,11 +135,14 @@ def run_demo(a) -> int:
 def run_hdr(a) -> int:
     from ..apps import hdr
     if a.lightfield:
-        depths = number_list(a.depths, "--depths", lo=0, lo_open=True)
-        return _application(lambda: hdr.lightfield(a.scene, defines(a), depths, a.views, a.depth, a.steps,
+        depths = number_list(a.depths or "0.6,1.5", "--depths", lo=0, lo_open=True)
+        return _application(lambda: hdr.lightfield(a.scene, defines(a), depths, a.views or 32, a.depth, a.steps,
                                                     spp=a.spp, progress=True),
                             a.output,
                             lambda p: f"{p['figure']}, {len(p['exr'])} refocused EXRs (log) and {p['metrics']}")
+    if a.depths is not None or a.views is not None:      # they were ignored
+        raise EventFieldError("--depths and --views apply to the light field (--lightfield); hdr alone refocuses "
+                              "nothing")
     scene = a.scene or bundled_scene("hdr_leds/hdr_leds.xml")
     depth = 1.45 if a.depth is None else a.depth
     return _application(lambda: hdr.compare(scene, defines(a), depth, a.steps or 64, spp=a.spp, progress=True),

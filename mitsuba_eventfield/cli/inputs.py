@@ -27,12 +27,16 @@ def read_input(a, needs_optics: bool = False):
 def with_contrast(ev, contrast, where: str):
     """``ev`` with ``--contrast`` (when given) as its contrast thresholds; a stream that has none (a camera
     recording) and no ``--contrast`` is refused in one line."""
+    pm = ev.meta.get("pixel_model") or {}
     if contrast:
         c = number_list(contrast, "--contrast", lo=0, hi=MAX_THRESHOLD, lo_open=True)    # a render's threshold range
         if len(c) not in (1, 2):
             raise EventFieldError(f"--contrast {contrast!r}: expected ON or ON,OFF")
-        ev.meta["pixel_model"] = dict(ev.meta.get("pixel_model") or {}, threshold_on=c[0], threshold_off=c[-1])
-    pm = ev.meta.get("pixel_model") or {}
+        if pm.get("threshold_on") is not None and pm.get("threshold_off") is not None:   # (as --optics is)
+            raise EventFieldError(f"--contrast {contrast}: {where} carries its own contrast thresholds (ON "
+                                  f"{pm['threshold_on']:g}, OFF {pm['threshold_off']:g}); --contrast is for a "
+                                  "recording without them")
+        ev.meta["pixel_model"] = pm = dict(pm, threshold_on=c[0], threshold_off=c[-1])
     if pm.get("threshold_on") is None or pm.get("threshold_off") is None:
         raise EventFieldError(f"{where}: the recording carries no contrast thresholds (pixel-model metadata): pass "
                               "--contrast ON[,OFF], log intensity per event (e.g. 0.2)")

@@ -58,8 +58,8 @@ def add_parsers(sub) -> None:
                          "default: the stream's start); the events up to it are in the frame, frames come after it")
     rc.add_argument("--contrast", help=CONTRAST_HELP)
     rc.add_argument("--optics", help=OPTICS_HELP + " (--method galvo)")
-    rc.add_argument("--cutoff", type=num(0, 1e6, lo_open=True), default=5.0,
-                    help="filter cutoff in Hz (highpass, complementary)")
+    rc.add_argument("--cutoff", type=num(0, 1e6, lo_open=True),
+                    help="filter cutoff in Hz (highpass, complementary; default 5)")
 
     rf = sub.add_parser("refocus", parents=[lf_args], help="refocus the light field at one or more depths")
     rf.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside; _<depth> suffix for several)")
@@ -279,11 +279,14 @@ def _method_arguments(a, ev, t_frame) -> dict:
     if a.start_frame and a.method not in ("direct", "complementary"):    # it was taken, ignored and recorded
         raise EventFieldError(f"--method {a.method} reconstructs from the events alone: --start-frame is used by the "
                               "direct and complementary methods")
+    if a.cutoff is not None and a.method not in ("highpass", "complementary"):      # it was taken and ignored
+        raise EventFieldError(f"--cutoff: --method {a.method} filters nothing; the cutoff is the highpass and "
+                              "complementary methods'")
     if a.method == "direct":             # from the stream's start (its first microsecond's events count) or the frame's
         return {"log_start": start_log(a.start_frame, ev), "t_start": t_frame}
     if a.method not in ("highpass", "complementary"):
         return {}
-    kw = {"cutoff_hz": a.cutoff}
+    kw = {"cutoff_hz": 5.0 if a.cutoff is None else a.cutoff}
     if a.method == "complementary":
         start = start_log(a.start_frame, ev)
         if start is None:

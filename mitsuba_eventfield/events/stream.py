@@ -138,8 +138,9 @@ class EventStream:
         return first_out_of_order(self.t) is None
 
     def time_window(self, t0_us=None, t1_us=None) -> "EventStream":
-        """Events with t0 <= t < t1 (microseconds; None = open end; t0 = t1: none). Requires sorted timestamps;
-        a reversed window is refused (it returned no events, as if the stream had none there)."""
+        """Events with t0 <= t < t1 (microseconds; None = open end; t0 = t1: none), with the window (within the
+        stream's span) as their ``t_start_us`` / ``duration_us``. Requires sorted timestamps; a reversed window
+        is refused (it returned no events, as if the stream had none there)."""
         t0_us, t1_us = (None if v is None else number(v, f"time_window: {name}", strict=True)
                         for name, v in (("t0_us", t0_us), ("t1_us", t1_us)))
         if t0_us is not None and t1_us is not None and t1_us < t0_us:
@@ -148,7 +149,13 @@ class EventStream:
         i0 = 0 if t0_us is None else int(np.searchsorted(self.t, t0_us, side="left"))
         i1 = len(self) if t1_us is None else int(np.searchsorted(self.t, t1_us, side="left"))
         s = slice(i0, i1)
-        return EventStream(self.x[s], self.y[s], self.t[s], self.p[s], self.width, self.height, dict(self.meta))
+        meta = dict(self.meta)
+        if t0_us is not None or t1_us is not None:     # the window's own span: a cut kept the whole stream's
+            start, end = self.start_us, self.start_us + self.duration_us   # (its rate and periods read from it)
+            lo = start if t0_us is None else min(max(start, int(np.ceil(t0_us))), end)
+            hi = end if t1_us is None else max(min(end, int(np.ceil(t1_us))), lo)
+            meta.update(t_start_us=lo, duration_us=hi - lo)
+        return EventStream(self.x[s], self.y[s], self.t[s], self.p[s], self.width, self.height, meta)
 
     def counts(self, polarity: int | None = None) -> np.ndarray:
         """(height, width) number of events per pixel, of one polarity or of both."""

@@ -241,7 +241,10 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
                 text = rewritten or text
             scene = mi.load_file(path, **xml_params) if text is None else \
                 sampler_module.load_text(mi, text, path, xml_params)
-        except (OSError, UnicodeDecodeError) as e:
+        except UnicodeDecodeError as e:   # (it has no strerror: reading it crashed the error message)
+            raise EventFieldError(f"{path}: cannot read the scene: not UTF-8 text (byte {e.start}); save it as "
+                                  "UTF-8") from None
+        except OSError as e:
             raise EventFieldError(f"{path}: cannot read the scene ({e.strerror or type(e).__name__})") from None
         except Exception as e:  # Mitsuba reports XML/plugin errors as RuntimeError with a long trace
             raise EventFieldError(f"{path}: {_load_error(e, path, original, text, xml_params)}") from None

@@ -176,8 +176,8 @@ def test_a_one_period_recording_counts_one_period():
     recording = ef.EventStream(np.zeros(len(t)), np.zeros(len(t)), t, np.ones(len(t)), 4, 4,
                                {"optics": optics, "t_start_us": 3})
     assert galvo_period_starts(recording) == {0: 3e-6}
-    short = recording.time_window(0, 3000)
-    with pytest.raises(ef.ConfigError, match=r"the stream spans 2\.996 ms, less than one whole scan period of 4 ms"):
+    short = recording.time_window(0, 3000)          # the window's own span: 3 us to 3000 us
+    with pytest.raises(ef.ConfigError, match=r"the stream spans 2\.997 ms, less than one whole scan period of 4 ms"):
         galvo_period_starts(short)
     rendered = ef.EventStream(np.zeros(len(t)), np.zeros(len(t)), t, np.ones(len(t)), 4, 4,
                               {"optics": optics, "t_start_us": 0, "duration_us": 3996})

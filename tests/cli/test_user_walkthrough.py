@@ -104,8 +104,8 @@ def test_a_source_whose_times_are_known_late_is_still_refused_whole(tmp_path):
 def test_a_text_output_gets_its_preview_up_to_its_last_event(tmp_path, capsys):
     assert cli.main(["render", DEMO, "-o", str(tmp_path / "e.txt"), "--preview", str(tmp_path / "p.png"), *TINY]) == 0
     assert (tmp_path / "p.png").stat().st_size > 0
-    last = int(ef.read_events(str(tmp_path / "e.txt")).t[-1])     # a .txt keeps no start: the window ends here
-    assert f"(events of {last / 1e3:g} ms up to the end)" in capsys.readouterr().out
+    ev = ef.read_events(str(tmp_path / "e.txt"))       # a .txt keeps no start: its events span it (start_us)
+    assert f"(events of {(int(ev.t[-1]) - int(ev.t[0])) / 1e3:g} ms up to the end)" in capsys.readouterr().out
 
 
 def test_an_output_named_like_an_option_value_is_not_taken_for_an_input(tmp_path, monkeypatch):

@@ -1,0 +1,68 @@
+"""What an applications user's walkthrough found (2026-11-27), each refused or fixed in one place."""
+import os
+
+import pytest
+from conftest import ROOT
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield import cli
+
+FAN = os.path.join(ROOT, "scenes", "fan", "fan.xml")
+
+
+def _refused(argv, capsys, *words):
+    assert cli.main([str(a) for a in argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err and all(w in err[-1] for w in words) and not any("Traceback" in line for line in err), err
+    return err[-1]
+
+
+def test_a_scene_that_is_not_utf8_is_one_line(tmp_path, capsys):
+    """A UnicodeDecodeError has no strerror: reading it crashed the error message (exit 3) in every command."""
+    scene = tmp_path / "latin.xml"
+    scene.write_bytes(b'<?xml version="1.0" encoding="ISO-8859-1"?>\n<scene version="3.0.0"><!-- 90\xb0 --></scene>\n')
+    _refused(["render", scene, "-o", tmp_path / "e.h5", "--duration", "0.001", "--steps", "2"], capsys,
+             "latin.xml: cannot read the scene: not UTF-8 text", "save it as UTF-8")
+
+
+@pytest.mark.parametrize("plane", ["../escaped=0.6", "conventional=0.6", "a/b=0.6"])
+def test_a_highspeed_plane_name_must_be_a_plain_file_name(tmp_path, capsys, plane):
+    """A plane names its files: '../escaped' wrote outside the output folder, 'conventional' overwrote the
+    conventional frame's EXR, 'a/b' failed after the whole render."""
+    _refused(["highspeed", FAN, "--plane", plane, "-o", tmp_path / "hs"], capsys, "a name of letters, digits")
+    assert not (tmp_path / "hs").exists() and not (tmp_path / "escaped.exr").exists()
+
+
+def test_a_time_window_has_its_own_span():
+    """A 1.5 ms cut of a 4 ms stream kept the 4 ms duration: `info` quoted a rate 2.7x low and refocus took the
+    cut for a whole scan period."""
+    ev = ef.EventStream([1, 2, 3], [1, 1, 1], [100, 1200, 3000], [1, -1, 1], 4, 4,
+                        {"t_start_us": 0, "duration_us": 4000})
+    cut = ev.time_window(0, 1500)
+    assert (cut.start_us, cut.duration_us, len(cut)) == (0, 1500, 2)
+    late = ev.time_window(1000, None)
+    assert (late.start_us, late.duration_us) == (1000, 3000)
+    beyond = ev.time_window(3500, 9000)                     # clipped to the stream's span
+    assert (beyond.start_us, beyond.duration_us, len(beyond)) == (3500, 500, 0)
+    assert ev.time_window().meta["duration_us"] == 4000    # no window: the stream as it is
+
+
+def test_options_that_were_ignored_are_refused(tmp_path, capsys):
+    _refused(["hdr", "--depths", "0.5", "-o", tmp_path / "h"], capsys, "--depths and --views apply to the light field")
+    events = ef.EventStream([1, 2], [1, 1], [100, 200], [1, -1], 4, 4,
+                            {"pixel_model": {"threshold_on": 0.2, "threshold_off": 0.2}})
+    path = tmp_path / "e.h5"
+    ef.write_events(str(path), events)
+    _refused(["reconstruct", path, "--cutoff", "3", "-o", tmp_path / "r"], capsys,
+             "--cutoff: --method direct filters nothing")
+    # --contrast is for a recording without thresholds; on a file with them it replaced them silently
+    _refused(["reconstruct", path, "--contrast", "0.5", "-o", tmp_path / "r"], capsys,
+             "carries its own contrast thresholds (ON 0.2, OFF 0.2)")
+    assert not (tmp_path / "r").exists() and not (tmp_path / "h").exists()
+
+
+def test_hdr_refuses_a_period_without_events(tmp_path, capsys):
+    """One step a period made 0 events, and hdr wrote and scored the start frame as the events' image."""
+    _refused(["hdr", "-D", "width=32", "-D", "height=24", "--steps", "1", "-o", tmp_path / "h"], capsys,
+             "no events in its scan period (1 steps): nothing to recover the image from")
+    assert not os.path.exists(tmp_path / "h" / "metrics.json")
