@@ -197,15 +197,27 @@ def _read_aedat4(path):
     return read_aedat4_faery(path)
 
 
+def polarity_of(values) -> np.ndarray:
+    """+1 / -1 polarities from a file's column: -1/+1, or 0/1 (0: OFF, as E2VID text files and many tools write
+    them); anything else refused (the text reader took 2 and 5 as ON; the npz reader refused the 0/1 that text
+    files hold)."""
+    v = np.asarray(values)
+    found = np.unique(v) if v.size else v
+    if not (set(found.tolist()) <= {-1, 1} or set(found.tolist()) <= {0, 1}):
+        odd = ", ".join(f"{x:g}" for x in found[:5])
+        raise BadFile(f"polarity values {odd}: expected -1 / +1 or 0 / 1 (0: OFF)")
+    return np.where(v > 0, 1, -1).astype(np.int8)
+
+
 def _read_npz(path):
     with np.load(path, allow_pickle=False) as z:
         if "frames" in z and "x" not in z:      # a frame stack ("missing entry 'timestamp'" said nothing of it)
             raise BadFile("a frame stack ('frames'), not events: convert it first (eventfield convert "
                           f"{os.path.basename(path)} -o EVENTS.h5)")
         if "t" in z:
-            t, p = z["t"], z["p"]
+            t, p = z["t"], polarity_of(z["p"])
         else:  # a TimeLens file written elsewhere
-            t, p = np.rint(z["timestamp"]).astype(np.int64), np.where(z["polarity"] > 0, 1, -1)
+            t, p = np.rint(z["timestamp"]).astype(np.int64), polarity_of(z["polarity"])
         meta = json.loads(str(z["meta_json"])) if "meta_json" in z else {}
         if not isinstance(meta, dict):
             raise BadFile(f"meta_json holds a JSON {type(meta).__name__}, not an object")
@@ -217,8 +229,8 @@ def _read_npz(path):
 def _read_txt(path):
     with open(path) as f:
         size = f.readline().split()
-    if len(size) != 2 or not (size[0].isdigit() and size[1].isdigit()):
-        raise BadFile(f"not an E2VID text event file: the first line must be 'width height', got "
+    if len(size) != 2 or not (size[0].isdigit() and size[1].isdigit()) or min(int(size[0]), int(size[1])) < 1:
+        raise BadFile(f"not an E2VID text event file: the first line must be 'width height' (each >= 1), got "
                        f"{' '.join(size)[:40]!r}")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)   # "input contained no data": a stream without events
@@ -227,6 +239,6 @@ def _read_txt(path):
     if rows.shape[1] != 4:
         raise BadFile(f"truncated or malformed: expected 4 columns 't x y p' per line, got {rows.shape[1]}")
     t = np.rint(rows[:, 0] * 1e6)          # as floats: EventStream refuses NaN, inf and out-of-range times
-    return EventStream(rows[:, 1], rows[:, 2], t, np.where(rows[:, 3] > 0, 1, -1), int(size[0]), int(size[1]), {})
+    return EventStream(rows[:, 1], rows[:, 2], t, polarity_of(rows[:, 3]), int(size[0]), int(size[1]), {})
 
 

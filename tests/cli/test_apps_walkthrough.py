@@ -66,3 +66,21 @@ def test_hdr_refuses_a_period_without_events(tmp_path, capsys):
     _refused(["hdr", "-D", "width=32", "-D", "height=24", "--steps", "1", "-o", tmp_path / "h"], capsys,
              "no events in its scan period (1 steps): nothing to recover the image from")
     assert not os.path.exists(tmp_path / "h" / "metrics.json")
+
+
+def test_foreign_polarities_have_one_reading(tmp_path):
+    """A text file's polarity 2 or 5 was read as ON, and a 0x0 sensor taken; an npz's 0/1 (what text files hold)
+    was refused as 'polarity must be +1 or -1'. One rule: -1/+1 or 0/1, anything else named."""
+    text = tmp_path / "e.txt"
+    text.write_text("4 4\n0.000001 1 1 0\n0.000002 2 1 1\n")
+    assert ef.read_events(str(text)).p.tolist() == [-1, 1]
+    text.write_text("4 4\n0.000001 1 1 2\n0.000002 2 1 5\n")
+    with pytest.raises(ef.EventFieldError, match=r"e.txt: .*polarity values 2, 5: expected -1 / \+1 or 0 / 1"):
+        ef.read_events(str(text))
+    text.write_text("0 0\n")
+    with pytest.raises(ef.EventFieldError, match=r"'width height' \(each >= 1\)"):
+        ef.read_events(str(text))
+    import numpy as np
+    npz = tmp_path / "e.npz"
+    np.savez(npz, x=np.array([1, 2]), y=np.array([1, 1]), t=np.array([1, 2]), p=np.array([0, 1]), width=4, height=4)
+    assert ef.read_events(str(npz)).p.tolist() == [-1, 1]
