@@ -396,13 +396,18 @@ def read_h5(path):
             raise EventFieldError(f"{path}: no /events group (not a DSEC-layout event file)")
         ev = f["events"]
         t = ev["t"][()].astype(np.int64) + int(f["t_offset"][()]) if "t_offset" in f else ev["t"][()]
-        p = np.where(ev["p"][()] > 0, 1, -1).astype(np.int8)
+        from .io import polarity_of
+        p = polarity_of(ev["p"][()])
         meta, w, h = {}, None, None
         if "eventfield" in f:
             g = f["eventfield"]
             meta = json.loads(g.attrs["meta_json"])
             w, h = int(g.attrs["width"]), int(g.attrs["height"])
         x, y = ev["x"][()], ev["y"][()]
-        if w is None:  # a foreign DSEC file: size from the data
+        if w is None:  # a foreign DSEC file keeps no sensor size: the data's, said (a crop read as the sensor)
             w, h = (int(x.max()) + 1, int(y.max()) + 1) if len(x) else (0, 0)
+            import warnings
+            warnings.warn(f"{path}: no sensor size in the file (a DSEC-layout file without /eventfield): taken as "
+                          f"{w}x{h} from its largest coordinates; light fields need the sensor's own", stacklevel=2)
+            meta["sensor_size"] = "from the largest coordinates"
         return EventStream(x, y, t, p, w, h, meta)

@@ -84,3 +84,20 @@ def test_foreign_polarities_have_one_reading(tmp_path):
     npz = tmp_path / "e.npz"
     np.savez(npz, x=np.array([1, 2]), y=np.array([1, 1]), t=np.array([1, 2]), p=np.array([0, 1]), width=4, height=4)
     assert ef.read_events(str(npz)).p.tolist() == [-1, 1]
+
+
+def test_a_foreign_dsec_file_says_its_sensor_size_is_a_guess(tmp_path):
+    """A DSEC-layout file without /eventfield keeps no sensor size: the largest coordinates gave 3x3 for two
+    events and a crop's size for a cropped recording, silently; now said, and its 0/1 polarity read as -1/+1."""
+    import h5py
+    import numpy as np
+    path = tmp_path / "dsec.h5"
+    with h5py.File(path, "w") as f:
+        g = f.create_group("events")
+        for name, values, dtype in (("x", [1, 59], np.uint16), ("y", [2, 47], np.uint16), ("t", [5, 9], np.int64),
+                                    ("p", [0, 1], np.uint8)):
+            g.create_dataset(name, data=np.array(values, dtype))
+    with pytest.warns(UserWarning, match=r"no sensor size in the file .* taken as 60x48 from its largest coordinates"):
+        ev = ef.read_events(str(path))
+    assert (ev.width, ev.height, ev.p.tolist()) == (60, 48, [-1, 1])
+    assert ev.meta["sensor_size"] == "from the largest coordinates"
