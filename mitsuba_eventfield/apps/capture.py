@@ -103,7 +103,8 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     if periods is None:
         duration = timed.motion.duration if timed.motion is not None else None
         if not duration:
-            raise ValueError(f"{scene_path}: no duration in its motion file: give periods")
+            has = "no duration in its motion file" if timed.motion is not None else "no motion file (with a duration)"
+            raise ValueError(f"{scene_path}: {has}: give the scan periods to capture (--periods, periods=)")
         periods = max(1, int(math.floor(duration / period + 1e-9)))
     _check_positive("periods", periods, integer=True)
     optics = timed.sensor.optics_metadata()

@@ -101,3 +101,10 @@ def test_a_foreign_dsec_file_says_its_sensor_size_is_a_guess(tmp_path):
         ev = ef.read_events(str(path))
     assert (ev.width, ev.height, ev.p.tolist()) == (60, 48, [-1, 1])
     assert ev.meta["sensor_size"] == "from the largest coordinates"
+
+
+def test_a_capture_without_a_duration_names_the_option(tmp_path, capsys):
+    """It said "no duration in its motion file: give periods" of a scene with no motion file at all."""
+    _refused(["highspeed", os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"), "--plane", "card=0.5",
+              "-D", "width=32", "-D", "height=24", "-o", tmp_path / "hs"], capsys,
+             "galvo_static.xml: no motion file (with a duration): give the scan periods to capture (--periods")
