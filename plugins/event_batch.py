@@ -156,8 +156,9 @@ def _count_pass(view: "PixelView", shape: tuple):
     length), frozen (:func:`_frozen`). ``ends``: each (step, pixel) lane's slot end (its kept crossings, then
     its noise event: one lane a pixel; a second lane a pixel for noise, until 2026-11-26, cost twice the scan
     and a scatter more a step, 0.1 ms a step of the demo's every-effect pixel); ``head``: every step's last
-    slot end, then with a refractory period or shot noise the chunk's crossings and noise hits before any was dropped, and its kept noise events; last, the chunk's events summed without
-    wrapping (``event_fill.approximate_sum``). The first two are
+    slot end, then with a refractory period or shot noise the chunk's crossings and noise hits before any was
+    dropped, and its kept noise events; last, the chunk's events summed without wrapping
+    (``event_fill.approximate_sum``). The first two are
     differences of the pixels' own counters (k_on + k_off, noise_k) over the chunk, which the loop carries
     anyway; the kept noise events are the hits where nothing drops them, else one tally carried through the
     loop (four per-pixel tallies before, as fast)."""

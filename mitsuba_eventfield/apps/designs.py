@@ -298,7 +298,8 @@ def compare(galvo_scene: str | None = None, kaleidoscope_scene: str | None = Non
             "moving_ids": sorted(moving_ids), "arguments": arguments, "inputs": "events only for both designs; the "
             "rendered views and frames are for scoring (and the galvo's design-limit row) only",
             "galvo_optics": g.sensor.optics_metadata(), "kaleidoscope_optics": k.sensor.optics_metadata(),
-            "galvo_parallax_px": scan_parallax_px(g.sensor.optics_metadata(), *g.film_size, depth), "time_split_s": split}
+            "galvo_parallax_px": scan_parallax_px(g.sensor.optics_metadata(), *g.film_size, depth),
+            "time_split_s": split}
     return DesignComparison(tuple(speeds), per_speed, images, meta)
 
 

@@ -261,7 +261,8 @@ def _score_periods(cap, capped_lfs, planes, tolerance, margin, t_show) -> tuple:
         inner = np.zeros(z.shape, bool)
         inner[margin:z.shape[0] - margin, margin:z.shape[1] - margin] = True
         periods.append({"instant": centre_frame(cap.timed, mids[k], log=False, spp=TRUTH_SPP),
-                        "regions": {n: inner & np.isfinite(z) & (np.abs(z / d - 1) < tolerance) for n, d in planes.items()},
+                        "regions": {n: inner & np.isfinite(z) & (np.abs(z / d - 1) < tolerance)
+                                    for n, d in planes.items()},
                         "refocused": {n: {s: refocus(l, d) for s, l in sources.items()} for n, d in planes.items()}})
     gains = {}
     if cap.lightfields and cap.lightfields[0].meta.get("inputs") == INPUTS["events"]:
@@ -273,7 +274,8 @@ def _score_periods(cap, capped_lfs, planes, tolerance, margin, t_show) -> tuple:
         scores = {}
         for name in planes:
             refocused = {s: img * gains.get(s, 1.0) for s, img in p["refocused"][name].items()}
-            scores[name] = {s: _scores(img, p["instant"], p["regions"][name], refocused) for s, img in refocused.items()}
+            scores[name] = {s: _scores(img, p["instant"], p["regions"][name], refocused)
+                            for s, img in refocused.items()}
             if k == pick and name == first:
                 shown = {"t_s": mids[k], "instant": p["instant"], "region": p["regions"][name], **refocused}
         per_period.append(scores)

@@ -13,7 +13,8 @@ def _common(parser, name: str, output: str) -> None:
     parser.add_argument("--galvo", help=f"galvo scene (default: the bundled scenes/{name}/galvo.xml)")
     parser.add_argument("--kaleidoscope", help=f"kaleidoscope scene (default: scenes/{name}/kaleidoscope.xml)")
     parser.add_argument("--film", type=num(30, 4096, integer=True),
-                        help="film width and height of both sensors, a multiple of the kaleidoscope's n views a side (default: the scenes' own)")
+                        help="film width and height of both sensors, a multiple of the kaleidoscope's n views a "
+                             "side (default: the scenes' own)")
     parser.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=4, help="samples per pixel (default 4)")
 
 
