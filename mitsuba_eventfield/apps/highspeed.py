@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import EventFieldError
+from ..scene import load_scene
 from .capture import START_METHODS, Capture, _check_positive, capture  # noqa: F401  (the shared capture stage)
 from .highspeed_outputs import planes_figure, track_figure, write_planes, write_track  # noqa: F401  (outputs)
 from .result import AppResult, time_split_line
@@ -135,10 +136,14 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
     overall gain, which scoring fits once per capture (``quality.fit_gain``) and the report states."""
     from ..evaluation.quality import fit_gain
     from ..evaluation.quality import scores as quality_scores
-    from ..evaluation.truth import centre_frame, textured, truth_depth
+    from ..evaluation.truth import centre_frame, check_planes_seen, textured, truth_depth
     from ..focus.measures import focus_measure
     from ..focus.refocus import refocus
     planes = _check_planes(planes)
+    timed = load_scene(scene_path, **(defines or {}))        # every plane seen somewhere, before the render
+    span = periods * timed.scan_period if periods and timed.scan_period else \
+        (timed.motion.duration if timed.motion is not None and timed.motion.duration else 0.0)
+    check_planes_seen(timed, planes, np.unique([0.0, span / 2, span]), region_tolerance, scene_path)
     cap = capture(scene_path, defines, periods, views, start, spp=spp, progress=progress)
     t0 = time.perf_counter()
     refocused = {n: np.stack([refocus(lf, z) for lf in cap.lightfields]) for n, z in planes.items()}

@@ -305,7 +305,7 @@ def sweep(scene: str | None = None, frequencies=FREQUENCIES, planes: dict | None
     ``planes`` ({name: depth}; default for the fan: fan 0.6, wall 1.5) and scored (module docstring).
     ``scene``: a galvo scene whose scan frequency is its ``frequency`` XML default (default: the bundled fan at
     160 x 120); ``defines``: its other XML defaults."""
-    from ..evaluation.truth import truth_depth
+    from ..evaluation.truth import check_planes_seen
     from .capture import capture, lightfields, reuse_for
     fan = scene is None
     scene = bundled_scene(SCENE) if fan else scene
@@ -317,11 +317,7 @@ def sweep(scene: str | None = None, frequencies=FREQUENCIES, planes: dict | None
     freqs, periods, planes = _check(frequencies, duration, views, cap_scale, start, region_tolerance, planes or {},
                                     spp, margin)
     timed = _scene(scene, defines, freqs[0])                    # before any rendering: the scene and its planes
-    z = truth_depth(timed, duration / 2)
-    for name, depth in planes.items():
-        if np.count_nonzero(np.abs(z / depth - 1) < region_tolerance) < 16:
-            raise ConfigError(f"plane {name!r} at {depth:g}: no part of {scene} lies within {region_tolerance:g} "
-                             f"(relative) of that depth at {duration * 500:g} ms (Mitsuba's depth)")
+    check_planes_seen(timed, planes, duration / 2, region_tolerance, scene)
     width, height = timed.film_size
     pixel = readout_pixel(cap_scale) if readout_cap else None
     rows, crops, seconds = [], [], {"render_events": 0.0, "views_from_events": 0.0, "ground_truth_views": 0.0,

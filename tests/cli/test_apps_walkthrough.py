@@ -108,3 +108,11 @@ def test_a_capture_without_a_duration_names_the_option(tmp_path, capsys):
     _refused(["highspeed", os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"), "--plane", "card=0.5",
               "-D", "width=32", "-D", "height=24", "-o", tmp_path / "hs"], capsys,
              "galvo_static.xml: no motion file (with a duration): give the scan periods to capture (--periods")
+
+
+def test_a_highspeed_plane_where_nothing_lies_is_refused_before_the_render(tmp_path, capsys):
+    """--plane fan=0.05 rendered the whole capture and then scored NaN; the planes are checked against Mitsuba's
+    depth first (the one check scan-frequency used: evaluation.truth.check_planes_seen)."""
+    _refused(["highspeed", FAN, "-D", "width=48", "-D", "height=36", "--plane", "fan=0.05", "-o", tmp_path / "hs"],
+             capsys, "plane 'fan' at 0.05: no part of", "lies within 0.15 (relative) of that depth")
+    assert not (tmp_path / "hs").exists()
