@@ -80,6 +80,8 @@ from ..errors import ConfigError
 from ..lightfield.model import LightField
 from .measures import (IMAGE_MEASURES, focus_measure,  # noqa: F401  (focus_measure, refine_peak: re-exported)
                        check_window, log_gradient, one_sided_texture, parabola_offset, parabola_vertex, refine_peak)
+from .parallax import (DEPTH_TOLERANCE, RESOLUTION_GRID_PX, check_plane_step,  # noqa: F401  (re-exported)
+                       depth_resolution_px)
 from .refocus import aligned_views, check_lightfield, depth_planes, refocus
 
 MEASURES = IMAGE_MEASURES + ("variance",)
@@ -87,7 +89,6 @@ MIN_EVIDENCE = 0.3          # module docstring: views that change less than this
 MIN_CHANGES = 2.0           # module docstring: level changes along the views per pixel, mean over the window
 OWN_TEXTURE_SHARE = 0.2     # module docstring: a pixel's own texture against the image's 90th percentile ...
 OWN_TEXTURE_FLOOR = 5e-3    # ... or this log spread, the larger (a mostly plain image's percentile is rounding)
-DEPTH_TOLERANCE = 0.1       # module docstring: a confident depth is told from one this share farther ...
 RESOLVABLE_PX = 0.05        # ... by its views moving at least this far (RMS over the views, pixels) ...
 PLATEAU = 0.9               # ... at the farthest depth whose focus is within 10 % of the curve's contrast of its peak
 NOTE_SHARE = 0.02           # DepthMap.notes: a reason is reported where it holds for this share of the image
@@ -210,6 +211,7 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
         raise ConfigError(f"depth_from_focus: unknown focus measure {measure!r}; allowed: {', '.join(MEASURES)}")
     window = check_window(window, "depth_from_focus")
     zs = depth_planes(near, far, planes)
+    check_plane_step(lf, zs)
     inv = 1.0 / zs
     textures = []
     vol = _volume(lf, zs, measure, window, textures)           # (D, H, W)
@@ -379,9 +381,6 @@ def own_texture(textures: list, k: np.ndarray) -> np.ndarray:
     return own / max(float(np.percentile(own, 90)), OWN_TEXTURE_FLOOR)   # a mostly plain image's is ~1e-8
 
 
-RESOLUTION_GRID_PX = 8      # the view motion varies slowly over the image: computed every 8 pixels, interpolated
-
-
 def indistinct_depth(vol: np.ndarray, k: np.ndarray, planes: np.ndarray) -> np.ndarray:
     """(H, W): the farthest depth searched that each pixel's focus curve does not tell from its sharpest plane
     ``k``: planes from ``k`` outwards (farther) while the focus stays within ``1 - PLATEAU`` of the curve's
@@ -397,24 +396,3 @@ def indistinct_depth(vol: np.ndarray, k: np.ndarray, planes: np.ndarray) -> np.n
             break
         end[going] = k[going] + j
     return planes[end]
-
-
-def depth_resolution_px(lf: LightField, depth: np.ndarray, near: float, far: float,
-                        tolerance: float = DEPTH_TOLERANCE) -> np.ndarray:
-    """(H, W): how far (RMS over the views, about their mean, pixels) a point at each pixel's ``depth`` moves in
-    the views when its depth grows by ``tolerance`` of itself: what the light field gives to tell the two depths
-    apart. The views' displacement is close to affine in inverse depth, so its slope is taken between ``near``
-    and ``far`` (the range searched), on a grid of pixel centres that ``cv2.resize`` interpolates."""
-    h, w = lf.shape
-    gh, gw = max(2, -(-h // RESOLUTION_GRID_PX)), max(2, -(-w // RESOLUTION_GRID_PX))
-    gx, gy = np.meshgrid((np.arange(gw) + 0.5) * w / gw - 0.5, (np.arange(gh) + 0.5) * h / gh - 0.5)
-    points = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])           # (3, N): cv2.resize's centres
-
-    def displacement(z):
-        p = lf.alignments(float(z)) @ points                                   # (K, 3, N)
-        d = p[:, :2] / p[:, 2:3] - points[:2]
-        return d - d.mean(axis=0)
-    slope = (displacement(near) - displacement(far)) / (1.0 / near - 1.0 / far)    # px per unit inverse depth
-    rms = np.sqrt(np.mean(np.sum(slope ** 2, axis=1), axis=0)).reshape(gh, gw).astype(np.float32)
-    per_inverse_depth = cv2.resize(rms, (w, h), interpolation=cv2.INTER_LINEAR)
-    return per_inverse_depth * tolerance / ((1.0 + tolerance) * np.maximum(depth, 1e-12))

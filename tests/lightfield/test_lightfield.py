@@ -138,6 +138,26 @@ def test_depth_from_focus_against_mitsuba_depth(kaleido_lf, measure, capsys):
     assert dm.confidence[BLANK_REGION].mean() < 0.2 < dm.confidence[FAR_REGION].mean()
 
 
+def test_planes_too_far_apart_for_the_views_motion_are_said(kaleido_lf):
+    """Adjacent planes that move the views by more than 2 px undersample the focus curve (--planes 2 put a card
+    at --near exactly, confidently): a DepthPlanesWarning with the count that keeps a step at 1 px; the
+    step is the views' largest motion per unit inverse depth (the light field's own alignments) times the
+    planes' spacing."""
+    import warnings
+
+    from mitsuba_eventfield.focus.parallax import DepthPlanesWarning, check_plane_step
+    from mitsuba_eventfield.focus.refocus import depth_planes
+    lf, _ = kaleido_lf
+    with pytest.warns(DepthPlanesWarning, match=r"depth planes: 3 from 0.5 to 2 move the views by up to .* planes "
+                                                r"keep it at 1 px"):
+        ef.depth_from_focus(lf, 0.5, 2.0, 3, "variance")
+    step3, step32 = (check_plane_step(lf, depth_planes(0.5, 2.0, n)) for n in (3, 32))
+    assert step3 == pytest.approx(step32 * 31 / 2, rel=1e-6)           # uniform in inverse depth: linear in spacing
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DepthPlanesWarning)
+        ef.depth_from_focus(lf, 0.5, 2.0, 32, "variance")
+
+
 @pytest.mark.parametrize("near, far, planes", [(0.5, 2.0, 3), (0.4, 3.0, 4), (0.55, 0.75, 2)])
 def test_depth_between_few_planes_refined_at_the_ends(kaleido_lf, near, far, planes):
     """With few planes a card between two of them peaks at an end plane; the end is refined like the inside
