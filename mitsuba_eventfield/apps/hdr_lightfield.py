@@ -184,13 +184,15 @@ def lightfield(scene_path: str | None = None, defines: dict | None = None, depth
     same views refocused alike, scored against the renderer (module docstring). ``steps``: render steps over
     the period (default: 1 px of scan motion per step, at least 2 per view); ``samples``: the galvo solver's;
     ``preset``/``pixel``: override the scene's pixel model (``render_events``)."""
-    from ..evaluation.truth import truth_depth
+    from ..evaluation.truth import check_planes_seen, truth_depth
     from ..lightfield.model import from_galvo, galvo_steps_per_period, galvo_view_times
     from ..plugins.pixel_model import linlog_np
-    from .slomorf import focus_check
+    from .slomorf import FOCUS_BAND, focus_check
     depths, views, solver_depth, steps, samples, spp = _check(depths, views, solver_depth, steps, samples, spp)
     scene_path = scene_path or DEFAULT_SCENE
     timed, period = load_static_scan(scene_path, defines)
+    # each refocus depth holds part of the scene (another scene with hdr_depth's 0.6 and 1.5 m scored NaN)
+    check_planes_seen(timed, {f"--depths {z:g}": z for z in depths}, [0.0], FOCUS_BAND, scene_path)
     optics = timed.sensor.optics_metadata()
     steps = steps or max(2 * views, galvo_steps_per_period(optics, *timed.film_size, 1.0))
     t0 = time.perf_counter()

@@ -116,3 +116,12 @@ def test_a_highspeed_plane_where_nothing_lies_is_refused_before_the_render(tmp_p
     _refused(["highspeed", FAN, "-D", "width=48", "-D", "height=36", "--plane", "fan=0.05", "-o", tmp_path / "hs"],
              capsys, "plane 'fan' at 0.05: no part of", "lies within 0.15 (relative) of that depth")
     assert not (tmp_path / "hs").exists()
+
+
+def test_hdr_lightfield_depths_must_hold_part_of_the_scene(tmp_path, capsys):
+    """hdr --lightfield on another scene refocused at hdr_depth's 0.6 and 1.5 m and reported NaN ("focus check
+    FAILED (xnan)") after the render: the depths are checked against Mitsuba's depth first."""
+    _refused(["hdr", "--lightfield", os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"), "-D",
+              "width=32", "-D", "height=24", "-o", tmp_path / "h"], capsys,
+             "plane '--depths 0.6' at 0.6: no part of", "galvo_static.xml lies within 0.1")
+    assert not (tmp_path / "h").exists()
