@@ -171,6 +171,15 @@ def _unanchored_warning(a, lf) -> None:
           "from it are unreliable (the default, periods, solves the image from the events)", file=sys.stderr)
 
 
+def _flat_warning(a, lf) -> None:
+    """Views that hold one value everywhere refocus to a constant image, which was written without a word (a
+    kaleidoscope stream at --time 0: its views integrate the events before that time, and there are none)."""
+    if np.ptp(lf.views) == 0:
+        print(f"eventfield: warning: {a.file}: the light field's views are flat (no event changes them by the "
+              "time they stand for: a kaleidoscope's views integrate the events before --time): its refocus is a "
+              "constant image", file=sys.stderr)
+
+
 def _calibrated(lf) -> str:
     """The console's word on a calibration: which parts the light field took."""
     return f"; calibration applied: {', '.join(lf.meta['calibrated'])}" if lf.meta.get("calibrated") else ""
@@ -326,6 +335,7 @@ def run_refocus(a) -> int:
     except ConfigError as e:
         raise EventFieldError(f"{a.file}: {e}") from None
     _unanchored_warning(a, lf)
+    _flat_warning(a, lf)
     _solver_warning(lf)
     for z, root in roots:
         save_image(root + ".png", refocus(lf, z), _out_meta(a, ev, lf, depth=z, views=len(lf.views)))

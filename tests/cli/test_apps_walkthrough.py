@@ -125,3 +125,14 @@ def test_hdr_lightfield_depths_must_hold_part_of_the_scene(tmp_path, capsys):
               "width=32", "-D", "height=24", "-o", tmp_path / "h"], capsys,
              "plane '--depths 0.6' at 0.6: no part of", "galvo_static.xml lies within 0.1")
     assert not (tmp_path / "h").exists()
+
+
+def test_a_flat_light_field_is_said_before_its_constant_refocus(tmp_path, capsys):
+    """A kaleidoscope stream refocused at --time 0 (no event integrated yet) wrote an all-white image silently."""
+    events = tmp_path / "k.h5"
+    scene = ef.load_scene(os.path.join(ROOT, "scenes", "moving_grid", "kaleidoscope.xml"), views_px=30)
+    ef.write_events(str(events), ef.render_events(scene, 0.004, steps=8))
+    assert cli.main(["refocus", str(events), "--depth", "1", "--time", "0", "-o", str(tmp_path / "r.png")]) == 0
+    assert "the light field's views are flat" in capsys.readouterr().err
+    assert cli.main(["refocus", str(events), "--depth", "1", "--time", "4", "-o", str(tmp_path / "r4.png")]) == 0
+    assert "views are flat" not in capsys.readouterr().err
