@@ -264,6 +264,11 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
                          "object_far > near (scene units)")
     _check_roi(roi)                                   # before rendering: bad input costs nothing
     _check_positive("planes", planes, integer=True, low=1)
+    if captured is None:                              # the ROI's size in pixels too (1 x 0 px failed after it)
+        timed = load_scene(scene_path, **(defines or {}))
+        optics = timed.sensor.optics_metadata() if hasattr(timed.sensor, "optics_metadata") else {}
+        n = int(optics.get("n", 1)) if optics.get("design") == "kaleidoscope" else 1     # one view's image
+        roi_pixels(roi, timed.film_size[0] // n, timed.film_size[1] // n)
     cap = captured or capture(scene_path, defines, periods, views, start, spp=spp, progress=progress,
                               depth_range=(near, max(far, background_depth or far)), truth_views=False)
     h, w = cap.lightfields[0].shape

@@ -136,3 +136,10 @@ def test_a_flat_light_field_is_said_before_its_constant_refocus(tmp_path, capsys
     assert "the light field's views are flat" in capsys.readouterr().err
     assert cli.main(["refocus", str(events), "--depth", "1", "--time", "4", "-o", str(tmp_path / "r4.png")]) == 0
     assert "views are flat" not in capsys.readouterr().err
+
+
+def test_a_track_focus_roi_too_small_is_refused_before_the_render(tmp_path, capsys):
+    """--roi 0.01 0.01 0.02 0.02 (a few pixels) was refused only after the whole capture."""
+    _refused(["track-focus", "--roi", "0.01", "0.01", "0.02", "0.02", "-o", tmp_path / "tf"], capsys,
+             "roi = (0.01, 0.01, 0.02, 0.02) is 3 x 2 pixels at 240 x 180: needs at least 3 x 3")
+    assert not (tmp_path / "tf").exists()
