@@ -101,6 +101,7 @@ def reference_level(dr, Float, anchor, k_on, k_off, c_on, c_off):
 BYTES_PER_EVENT_MADE = {"device": 48, "host": 96}
 MAX_CHUNK_EVENTS = (1 << 31) - 1
 MEMORY_SHARE = 0.5       # of the memory available, what one step's events may take (the rest: everything else)
+SMALL_CHUNK_BYTES = 64 << 20    # a chunk's events below this are not checked against the memory
 
 
 def check_event_count(count: float, t0: float, t1: float, pixels: int, path: str = "device") -> None:
@@ -108,6 +109,8 @@ def check_event_count(count: float, t0: float, t1: float, pixels: int, path: str
     its kept crossing counts, before any is made; ``path``: "device" or "host", what an event costs there) would
     take more than ``MEMORY_SHARE`` of the memory available: a threshold far below any sensor's (1e-6 asked
     for 4 G events in one step of a 64x48 film and crashed on a 32-bit size; 1e-9 exhausted the memory)."""
+    if count * BYTES_PER_EVENT_MADE[path] < SMALL_CHUNK_BYTES:    # (no /proc read a step for what any machine holds)
+        return
     from mitsuba_eventfield.errors import EventFieldError
     from mitsuba_eventfield.validate import available_memory
     most = min(MAX_CHUNK_EVENTS, int(MEMORY_SHARE * available_memory()) // BYTES_PER_EVENT_MADE[path])

@@ -34,6 +34,7 @@ MIN_RESERVE = 1 << 16
 SPLIT_COPY_MIN = 1 << 17   # events in a chunk before its copy is split: a smaller one is not worth a hand-off
 COPY_THREADS = 4           # at most, the calling thread included (bounded by the usable cores)
 MEMORY_LEFT = 256 << 20    # bytes an in-memory result leaves the system when it takes a chunk
+MEMORY_CHECK_BYTES = 16 << 20   # event bytes appended between two reads of the memory available
 
 _pool = None
 _pool_lock = threading.Lock()
@@ -97,7 +98,7 @@ class EventBuffer:
                 if capacity <= MIN_RESERVE:
                     raise
                 capacity = max(MIN_RESERVE, capacity // 2)
-        self.count = 0
+        self.count, self._unchecked = 0, 0
 
     def __len__(self) -> int:
         return self.count
@@ -110,12 +111,16 @@ class EventBuffer:
         """Copy one chunk's columns in after the events already held; refused in one line where the memory left
         cannot take them (a render into memory grew until the system killed it: a file streams them instead)."""
         end = self.count + len(t)
-        if len(t) * BYTES_PER_EVENT > available_memory() - MEMORY_LEFT:
+        self._unchecked += len(t) * BYTES_PER_EVENT     # memory read once per MEMORY_CHECK_BYTES, not per step
+        if self._unchecked >= MEMORY_CHECK_BYTES and self._unchecked > available_memory() - MEMORY_LEFT:
             from ..errors import EventFieldError
+            self._unchecked -= len(t) * BYTES_PER_EVENT      # (not taken)
             held = self.count * BYTES_PER_EVENT / 2**30
             raise EventFieldError(f"events in memory: {self.count} held ({held:.2f} GiB) and no memory left for "
                                   f"{len(t)} more: write them to a file (an output path, -o events.h5), which "
                                   "streams them")
+        if self._unchecked >= MEMORY_CHECK_BYTES:
+            self._unchecked = 0
         if end > self.capacity:
             grown = max(end, 2 * self.capacity)
             for col in self._cols:         # the buffer owns its columns and has handed out no view of them

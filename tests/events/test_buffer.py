@@ -97,6 +97,7 @@ def test_a_chunk_the_memory_left_cannot_take_is_refused_in_one_line(monkeypatch)
     the memory left (less ``MEMORY_LEFT``) cannot take is refused, naming what is held and what to do."""
     from mitsuba_eventfield.errors import EventFieldError
     from mitsuba_eventfield.events import buffer
+    monkeypatch.setattr(buffer, "MEMORY_CHECK_BYTES", 1)      # read the memory at every chunk, however small
     buf = buffer.EventBuffer(capacity=16)
     chunk = (np.zeros(1000, np.uint16), np.zeros(1000, np.uint16), np.arange(1000, dtype=np.int64),
              np.ones(1000, np.int8))
