@@ -79,7 +79,8 @@ def _steps_per_period(timed, periods: int, per_period: int, px_per_step: float) 
 
 def capture(scene_path: str, defines: dict | None = None, periods: int | None = None, views: int = 40,
             start: str = "events", px_per_step: float = 1.0, spp: int = 4, progress: bool = False,
-            truth_views: bool = True, depth_range=None, truth_spp: int = 64, calibration=None) -> Capture:
+            truth_views: bool = True, depth_range=None, truth_spp: int = 64, calibration=None,
+            before_render=None) -> Capture:
     """Events of ``periods`` whole scan periods (default: all of the motion file's duration) and, per period,
     the light field from the events; with ``truth_views`` also the ground-truth light field of the same views
     (for scoring only).
@@ -90,7 +91,9 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     t = 0 that every view integrates onto: a conventional camera beside the event camera, extra information
     the paper's rig does not have; every report says which). Steps: enough that the scan moves the image at
     most ``px_per_step`` pixels per step anywhere in the field. Truth views are rendered at ``truth_spp``
-    (converged: the reference is the scene, not one noisy render). ``calibration``: see ``lightfields``."""
+    (converged: the reference is the scene, not one noisy render). ``calibration``: see ``lightfields``.
+    ``before_render(timed, periods, period)``: an application's checks of its inputs against the loaded scene,
+    run before any event is rendered."""
     from ..lightfield.model import from_galvo, galvo_steps_per_period
     if start not in START_METHODS:
         raise ValueError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
@@ -107,6 +110,8 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
             raise ValueError(f"{scene_path}: {has}: give the scan periods to capture (--periods, periods=)")
         periods = max(1, int(math.floor(duration / period + 1e-9)))
     _check_positive("periods", periods, integer=True)
+    if before_render is not None:
+        before_render(timed, periods, period)
     optics = timed.sensor.optics_metadata()
     width, height = (int(v) for v in timed.sensor.film().size())
     steps = periods * _steps_per_period(timed, periods, max(2 * views, galvo_steps_per_period(

@@ -264,13 +264,20 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
                          "object_far > near (scene units)")
     _check_roi(roi)                                   # before rendering: bad input costs nothing
     _check_positive("planes", planes, integer=True, low=1)
-    if captured is None:                              # the ROI's size in pixels too (1 x 0 px failed after it)
-        timed = load_scene(scene_path, **(defines or {}))
+    def before_render(timed, periods, period):
         optics = timed.sensor.optics_metadata() if hasattr(timed.sensor, "optics_metadata") else {}
         n = int(optics.get("n", 1)) if optics.get("design") == "kaleidoscope" else 1     # one view's image
-        roi_pixels(roi, timed.film_size[0] // n, timed.film_size[1] // n)
+        roi_pixels(roi, timed.film_size[0] // n, timed.film_size[1] // n)    # 1 x 0 px failed after the render
+        # the scoring needs the object in view in every period: past it, the render was thrown away
+        gone = [k for k in range(periods) if not np.any(truth_depth(timed, (k + 0.5) * period) < object_far)]
+        if gone:
+            raise EventFieldError(f"{scene_path}: periods = {periods}: no part of the scene is nearer than "
+                                  f"object_far = {object_far} in periods {gone} (Mitsuba's depth at each "
+                                  "period's middle): the object is out of view there; capture fewer periods")
+
     cap = captured or capture(scene_path, defines, periods, views, start, spp=spp, progress=progress,
-                              depth_range=(near, max(far, background_depth or far)), truth_views=False)
+                              depth_range=(near, max(far, background_depth or far)), truth_views=False,
+                              before_render=before_render)
     h, w = cap.lightfields[0].shape
     roi_px = roi_pixels(roi, w, h)
     t0 = time.perf_counter()

@@ -65,6 +65,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
+from ..evaluation.truth import check_planes_seen
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events, render_frames
 from .result import AppResult, time_split_line
@@ -244,6 +245,9 @@ def _capture(scene_path, defines, fps, factor, duration, depths, spp, seed, step
     if optics.get("design") not in ("kaleidoscope", "microlens"):
         raise ConfigError(f"{scene_path}: SloMoRF needs a kaleidoscope (or microlens) sensor; the scene's "
                           f"sensor is {type(timed.sensor).__name__}")
+    # a depth with nothing on it scored NaN after every render (the defaults are scenes/falling's): said first
+    check_planes_seen(timed, {f"--depths {z:g}": z for z in depths}, [0.0, duration / 2, duration], FOCUS_BAND,
+                      scene_path, min_pixels=1, depth_at=lambda t: _depth_views(timed, [t], optics)[0])
     events = render_events(timed, duration, steps=intervals * steps_per_frame, spp=spp, seed=seed,
                            progress=progress)
     t1 = time.perf_counter()

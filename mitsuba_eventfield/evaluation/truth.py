@@ -48,13 +48,16 @@ def truth_depth(timed, t: float, spp: int = 1, scale: int = 1) -> np.ndarray:
     return np.where(dist > 0, z, np.inf)
 
 
-def check_planes_seen(timed, planes: dict, times, tolerance: float, where: str, min_pixels: int = 16) -> None:
+def check_planes_seen(timed, planes: dict, times, tolerance: float, where: str, min_pixels: int = 16,
+                      depth_at=None) -> None:
     """Refuse, before any rendering of events, a named plane ({name: depth}) on which no part of the scene lies
     at any of ``times`` (s; fewer than ``min_pixels`` pixels within ``tolerance``, relative, of its depth in
-    Mitsuba's depth): its scores came out NaN after the whole render (``highspeed --plane fan=0.05``)."""
+    Mitsuba's depth): its scores came out NaN after the whole render (``highspeed --plane fan=0.05``).
+    ``depth_at(t)``: the depth map at time t where the centre pinhole (``truth_depth``) does not apply, e.g. a
+    kaleidoscope's centre view."""
     from ..errors import ConfigError
     times = np.atleast_1d(np.asarray(times, np.float64))
-    zs = [truth_depth(timed, float(t)) for t in times]
+    zs = [(depth_at or (lambda t: truth_depth(timed, t)))(float(t)) for t in times]
     for name, depth in planes.items():
         if max(np.count_nonzero(np.abs(z / depth - 1) < tolerance) for z in zs) < min_pixels:
             when = ", ".join(f"{t * 1e3:g}" for t in times)

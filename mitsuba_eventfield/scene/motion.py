@@ -74,10 +74,14 @@ class ObjectMotion:
                 self._rotation_interp = Slerp(self.key_times, self.key_rotations)
 
     @property
-    def is_static(self) -> bool:
-        moving_keys = self.key_times is not None and (np.ptp(self.key_translations, axis=0).any() or len(
+    def keys_move(self) -> bool:
+        """The keyframes differ in pose (the object moves between them)."""
+        return self.key_times is not None and bool(np.ptp(self.key_translations, axis=0).any() or len(
             self.key_times) > 1 and not np.allclose(self.key_rotations.as_quat(), self.key_rotations[0].as_quat()))
-        return not (moving_keys or self.spin_rpm != 0.0 or (self.velocity is not None and np.any(self.velocity)))
+
+    @property
+    def is_static(self) -> bool:
+        return not (self.keys_move or self.spin_rpm != 0.0 or (self.velocity is not None and np.any(self.velocity)))
 
     def matrix(self, t: float) -> np.ndarray:
         """4x4 transform from the t=0 placement to the placement at time t (seconds)."""
@@ -148,6 +152,23 @@ class Motion:
     @property
     def is_static(self) -> bool:
         return all(o.is_static for o in self.objects.values())
+
+    def held_poses(self, t0: float, t1: float) -> list:
+        """(object id, first keyframe time, last keyframe time) of each object whose keyframes move it and
+        do not cover [t0, t1]: outside its keyframes such an object holds its first or last pose (its velocity
+        and spin, if any, go on), which a render past them should say."""
+        held = []
+        for name, o in self.objects.items():
+            if not o.keys_move:
+                continue
+            first, last = float(o.key_times[0]), float(o.key_times[-1])
+            if t0 < first - 1e-12 or t1 > last + 1e-12:
+                held.append((name, first, last))
+        return held
+
+
+class MotionHeldWarning(UserWarning):
+    """A render runs outside an object's keyframes, where the object holds its first or last pose."""
 
 
 def motion_path_for(scene_path: str) -> str:

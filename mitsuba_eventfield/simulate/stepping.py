@@ -19,6 +19,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -83,6 +84,17 @@ def _duration(timed, duration):
     return duration
 
 
+def _say_held_poses(timed, t_start, duration):
+    """Warn where the render runs outside an object's keyframes: there it holds a pose (``Motion.held_poses``),
+    which on a keyframed fall or throw is an object stopped in mid-air."""
+    from ..scene.motion import MotionHeldWarning
+    motion = getattr(timed, "motion", None)
+    for name, first, last in (motion.held_poses(t_start, t_start + duration) if motion is not None else ()):
+        warnings.warn(f"{motion.source or 'motion'}: object '{name}' has keyframes from {first:g} to {last:g} s; "
+                      f"the render runs {t_start:g} to {t_start + duration:g} s, and outside them the object "
+                      "holds its first or last pose", MotionHeldWarning, stacklevel=3)
+
+
 def stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_step, spp, seed, seed_mode,
              t_start, px_per_step: float = 1.0) -> Stepping:
     """Every stepping and sampling argument checked, with the duration from the motion file if not given."""
@@ -96,6 +108,7 @@ def stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_ste
         raise EventFieldError(f"steps = {steps!r} and adaptive = {adaptive!r}: give one (adaptive stepping "
                               "chooses the steps itself)")
     t_start = finite(t_start, "t_start")
+    _say_held_poses(timed, t_start, duration)
     schedule = None
     if adaptive:
         max_log_change = positive(max_log_change, "max_log_change")

@@ -137,6 +137,19 @@ def test_bad_input_is_refused_before_rendering(kw, words):
         assert w in str(err.value)
 
 
+def test_a_depth_with_nothing_on_it_is_refused_before_rendering(monkeypatch):
+    """scenes/falling lies between 0.55 and 1.4 m: a refocus depth of 0.2 m (the default depths on another
+    scene, a typo) has no pixel in its focus band, whose scores came out NaN after every render; the dart's
+    scene lacks the falling scene's post at 0.55 m. Refused from Mitsuba's depth before any event."""
+    def no_render(*a, **k):
+        raise AssertionError("rendered before the depths were checked")
+    monkeypatch.setattr(slomorf, "render_events", no_render)
+    with pytest.raises(ValueError, match=r"plane '--depths 0.2' at 0.2: no part of .*falling.xml lies within 0.1"):
+        slomorf.slomorf(SCENE, {"views_px": 90}, duration=0.025, depths=(0.8, 0.2))
+    with pytest.raises(ValueError, match=r"plane '--depths 0.55' at 0.55: no part of .*kaleidoscope.xml"):
+        slomorf.slomorf(DART, {"width": 99, "height": 66}, duration=0.0084)
+
+
 def test_cli_report_and_bad_factor(tmp_path):
     cmd = [sys.executable, "-m", "mitsuba_eventfield.cli", "slomorf", SCENE, "-o", str(tmp_path / "c"),
            "-D", "views_px=90", "--duration", "0.00834", "--factor", "2"]

@@ -143,3 +143,22 @@ def test_a_track_focus_roi_too_small_is_refused_before_the_render(tmp_path, caps
     _refused(["track-focus", "--roi", "0.01", "0.01", "0.02", "0.02", "-o", tmp_path / "tf"], capsys,
              "roi = (0.01, 0.01, 0.02, 0.02) is 3 x 2 pixels at 240 x 180: needs at least 3 x 3")
     assert not (tmp_path / "tf").exists()
+
+
+def test_track_focus_past_the_object_is_refused_before_the_render(tmp_path, capsys, monkeypatch):
+    """The dart leaves the view after eight 4 ms periods: --periods 14 rendered 56 ms of events, then failed on
+    "the object was lost". Mitsuba's depth at each period's middle says so first; the default 6 periods pass
+    that check and go on to the render."""
+    from mitsuba_eventfield.apps import capture
+
+    rendered = []
+
+    def no_render(timed, duration, **k):
+        rendered.append(duration)
+        raise ef.EventFieldError("stopped before the render")
+    monkeypatch.setattr(capture, "render_events", no_render)
+    _refused(["track-focus", "-D", "width=64", "-D", "height=48", "--periods", "14", "-o", tmp_path / "tf"], capsys,
+             "periods = 14: no part of the scene is nearer than object_far = 1.6 in periods [8, 9, 10, 11, 12, 13]")
+    assert rendered == []
+    _refused(["track-focus", "-D", "width=64", "-D", "height=48", "-o", tmp_path / "tf6"], capsys, "stopped before")
+    assert rendered == [pytest.approx(0.024)]

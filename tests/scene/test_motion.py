@@ -1,5 +1,6 @@
 """Motion files: poses against closed-form geometry, validation errors that name file and key."""
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -198,3 +199,26 @@ def test_moving_emitting_shapes_compile_nothing_after_the_first_frames():
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     assert history and all(k["cache_hit"] for k in history)
     assert np.abs(later[-1] - first[0]).max() > 0.1          # the lamp and the ball did move in the image
+
+
+def test_a_render_past_the_keyframes_says_the_object_holds_its_pose():
+    """Outside its keyframes an object holds its first or last pose (the motion file's rule): a render past
+    them warns with the object and both spans; one inside them, or of a keyframed object that does not move,
+    says nothing; velocity and spin alone never end."""
+    from mitsuba_eventfield.scene.motion import MotionHeldWarning
+    from mitsuba_eventfield.simulate.stepping import stepping
+    m = ef.parse_motion({"objects": {
+        "thrown": {"keyframes": [{"t": 0.01, "translate": [0, 0, 0]}, {"t": 0.05, "translate": [0, -0.1, 0]}]},
+        "parked": {"keyframes": [{"t": 0.0, "translate": [1, 0, 0]}, {"t": 0.01, "translate": [1, 0, 0]}]},
+        "rolling": {"velocity": [1, 0, 0], "spin": {"rpm": 60}}}})
+    assert m.held_poses(0.01, 0.05) == []
+    assert m.held_poses(0.0, 0.05) == [("thrown", 0.01, 0.05)]
+    assert m.held_poses(0.02, 0.06) == [("thrown", 0.01, 0.05)]
+    timed = ef.load_scene(DEMO)
+    timed.motion = m
+    with pytest.warns(MotionHeldWarning, match=r"'thrown' has keyframes from 0.01 to 0.05 s; the render runs "
+                                               r"0.01 to 0.08 s"):
+        stepping(timed, 0.07, 4, False, 0.1, None, None, 1, 0, "fixed", 0.01)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MotionHeldWarning)
+        stepping(timed, 0.04, 4, False, 0.1, None, None, 1, 0, "fixed", 0.01)
