@@ -53,6 +53,15 @@ def sines_from_curve(curve) -> list:
         raise SafetyError(str(e)) from None
 
 
+def check_envelope(spec: GalvoSpec, curve) -> list:
+    """A curve's per-axis sines, each checked against the galvo's envelope on both axes (the simulator's
+    reason); what any output (generator or card) must pass. Raises SafetyError."""
+    sines = sines_from_curve(curve)
+    for s, axis in zip(sines, "xy"):
+        spec.check_axis(axis, s.frequency, s.amplitude_deg, s.offset_deg, s.phase_deg)
+    return sines
+
+
 class GalvoController:
     """``transport``: write/query/close (device.transport, device.simulator); ``dialect``: a Dialect or its name.
     Use as a context manager (or call ``close``) so the outputs are off before the connection closes."""
@@ -99,10 +108,9 @@ class GalvoController:
 
     # ------------------------------------------------------------------ planning (no bytes sent)
     def plan(self, curve) -> list:
-        """Check a curve against the envelope and return its per-axis sines (raises SafetyError; sends nothing)."""
-        sines = sines_from_curve(curve)
-        for s, axis in zip(sines, "xy"):      # the envelope first, on both axes (its reason is the simulator's)
-            self.spec.check_axis(axis, s.frequency, s.amplitude_deg, s.offset_deg, s.phase_deg)
+        """Check a curve against the envelope and what a generator can play, and return its per-axis sines
+        (raises SafetyError; sends nothing)."""
+        sines = check_envelope(self.spec, curve)
         for s, axis in zip(sines, "xy"):
             self.spec.check_playable(axis, s.frequency, s.amplitude_deg, self.ramp_steps)
         self._check_commands(sines)
@@ -211,6 +219,8 @@ class GalvoController:
         """Check, configure (outputs off), verify, align phases, switch on, ramp up, verify. Returns the
         read-back report; raises SafetyError (outputs off) when the instrument does not confirm."""
         sines = self.plan(curve)                          # raises before any byte
+        if self.running:       # a scan is on: ramped down first ("output off" at once cut it at full amplitude)
+            self.stop(sleep)
         self.sines, self._armed = sines, False
         first = 1.0 / self.ramp_steps
         try:

@@ -32,7 +32,7 @@ def add_parsers(sub) -> None:
     ds.add_argument("--duration", type=num(0, MAX_SCAN_S), default=0.0,
                     help="seconds to scan, then stop (default 0: until Ctrl-C or SIGTERM)")
     ds.add_argument("--metadata", help="write the capture metadata (instrument, read-back, scan) to this JSON")
-    dsub.add_parser("stop", parents=[conn], help="switch both outputs off")
+    dsub.add_parser("stop", parents=[conn], help="ramp down whatever the generator is scanning (read back), then switch both outputs off")
     dsub.add_parser("status", parents=[conn], help="identity, settings read back, error queue")
 
 
@@ -102,9 +102,9 @@ def run_device(a) -> int:
     with GalvoController(open_transport(a.dialect, a.resource, a.simulate), a.dialect, spec) as ctl:
         if a.action == "status":
             _status(ctl)
-        elif a.action == "stop":
-            ctl.outputs_off()
-            print("outputs off")
+        elif a.action == "stop":       # a scan a killed process left on: ramped down from what it reports
+            from ..device.recovery import ramp_off
+            print(ramp_off(ctl))
         else:
             _scan(a, ctl, curve, duration)
     return 0

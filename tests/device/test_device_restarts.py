@@ -1,0 +1,85 @@
+"""A rig user's second walkthrough (2026-11-27, twenty-fifth session): a scan started over a running one, the
+recovery after a killed process (``device stop``) and a card's small amplitudes. What the galvo sees is read
+from the simulated instrument's state after every write (``history``), never from the controller."""
+import pytest
+
+import mitsuba_eventfield as ef
+from mitsuba_eventfield import cli
+from mitsuba_eventfield.device import GalvoController, GalvoSpec, simulated
+
+NO_SLEEP = lambda s: None  # noqa: E731
+
+
+def _on_levels(history, ch, key):
+    """Channel ``ch``'s ``key`` at every write while its output was on, each level once."""
+    seen = [state[ch][key] for _, state in history if state[ch]["output"]]
+    return [v for i, v in enumerate(seen) if i == 0 or v != seen[i - 1]]
+
+
+def test_a_second_start_ramps_the_running_scan_down_before_the_new_one():
+    """start() over a running 6 deg circle offset by 4 deg switched both outputs off at 9.6 Vpp and 3.2 V: the
+    step the ramps exist to avoid. Now the first scan goes down in the ramp's steps, then the second one up."""
+    slow = ef.make_curve("circle", frequency=20.0, amplitude=6.0, offset_x=4.0)
+    fast = ef.make_curve("circle", frequency=250.0, amplitude=0.5)
+    g = simulated("keysight")
+    with GalvoController(g, "keysight", GalvoSpec(), ramp_steps=4, ramp_time=0) as c:
+        c.start(slow, sleep=NO_SLEEP)
+        c.start(fast, sleep=NO_SLEEP)
+        assert c.running and g.state[1]["vpp"] == pytest.approx(0.8)
+        c.stop(sleep=NO_SLEEP)
+    # up to 9.6 Vpp in four steps, down in three, off; then the new scan up to 0.8 Vpp and down
+    assert _on_levels(g.history, 1, "vpp") == pytest.approx([2.4, 4.8, 7.2, 9.6, 7.2, 4.8, 2.4,
+                                                               0.2, 0.4, 0.6, 0.8, 0.6, 0.4, 0.2])
+    assert _on_levels(g.history, 1, "offset") == pytest.approx([0.8, 1.6, 2.4, 3.2, 2.4, 1.6, 0.8, 0.0])
+
+
+@pytest.mark.parametrize("dialect", ["keysight", "rigol", "siglent"])
+def test_device_stop_ramps_down_what_a_killed_process_left_running(dialect, capsys, monkeypatch):
+    """After a SIGKILL the generator scans on at full amplitude: `device stop` switched it off in one step.
+    It now ramps the read-back amplitude and offset down in the controller's steps, then switches off."""
+    import mitsuba_eventfield.device.transport as transport
+    g = simulated(dialect, preset={1: {"function": "SIN", "frequency": 20.0, "vpp": 9.6, "offset": 3.2,
+                                       "high_z": True, "output": True},
+                                   2: {"function": "SIN", "frequency": 20.0, "vpp": 9.6, "offset": 0.0,
+                                       "high_z": True, "output": True}})
+    monkeypatch.setattr(transport, "open_transport", lambda *a, **k: g)
+    monkeypatch.setattr("mitsuba_eventfield.device.open_transport", lambda *a, **k: g)
+    assert cli.main(["device", "stop", "--simulate", "--dialect", dialect]) == 0
+    assert "channel 1, 2: amplitude and offset ramped down from the read-back, outputs off" in capsys.readouterr().out
+    # (the preset's 9.6 Vpp and 3.2 V are not in the history, which holds the writes)
+    assert _on_levels(g.history, 1, "vpp") == pytest.approx([7.68, 5.76, 3.84, 1.92])
+    assert _on_levels(g.history, 1, "offset") == pytest.approx([3.2, 2.56, 1.92, 1.28, 0.64])
+    assert _on_levels(g.history, 2, "vpp")[-1] == pytest.approx(1.92)
+    assert not g.state[1]["output"] and not g.state[2]["output"]
+
+
+def test_device_stop_beyond_the_galvos_limits_switches_off_without_a_ramp(capsys, monkeypatch):
+    """A generator left at 5 kHz (beyond this galvo's 1 kHz): the guard refuses every step of a ramp at that
+    frequency, so the outputs go off at once and the line says why; a generator scanning nothing just goes
+    off. (A ramp from an amplitude beyond the limits is taken: its steps are below them.)"""
+    g = simulated("keysight", preset={1: {"vpp": 1.0, "frequency": 5000.0, "high_z": True, "output": True}})
+    monkeypatch.setattr("mitsuba_eventfield.device.open_transport", lambda *a, **k: g)
+    assert cli.main(["device", "stop", "--simulate", "--dialect", "keysight"]) == 0
+    out = capsys.readouterr().out
+    assert "outputs off (no ramp: " in out and not g.state[1]["output"]
+    assert [s[1]["vpp"] for _, s in g.history] == [1.0] * len(g.history)          # no step sent to it
+    idle = simulated("keysight")
+    monkeypatch.setattr("mitsuba_eventfield.device.open_transport", lambda *a, **k: idle)
+    assert cli.main(["device", "stop", "--simulate", "--dialect", "keysight"]) == 0
+    assert "outputs off (none was scanning)" in capsys.readouterr().out
+
+
+def test_a_daq_card_plays_amplitudes_below_a_generators_smallest_sine():
+    """A 0.002 deg circle is 0.08 mVpp: below a generator's 1 mVpp at its first ramp step, which was refused for
+    the card too (its plan was the generator's). The card checks the envelope only; beyond it still refused."""
+    import numpy as np
+
+    from mitsuba_eventfield.device import SafetyError
+    from mitsuba_eventfield.device.daq import DAQmxOutput
+    volts = DAQmxOutput(rate=50_000).waveform(ef.make_curve("circle", frequency=100.0, amplitude=0.002))
+    assert np.abs(volts).max() == pytest.approx(0.002 * GalvoSpec().volts_per_deg, rel=1e-6)
+    with pytest.raises(SafetyError, match="below the generators' smallest sine"):
+        GalvoController(None, "keysight").plan(ef.make_curve("circle", frequency=100.0, amplitude=0.002))
+    with pytest.raises(SafetyError, match="derated"):
+        DAQmxOutput(rate=50_000).waveform(ef.make_curve("circle", frequency=900.0, amplitude=5.0,
+                                                        max_angle_deg=12.5, galvo_model="ideal"))
