@@ -27,8 +27,10 @@ def add_parsers(sub) -> None:
     ds.add_argument("--freq-y", type=num(0, lo_open=True), help="lissajous: y frequency")
     ds.add_argument("--amplitude-deg", type=num(0), required=True, help="mechanical degrees (x for lissajous)")
     ds.add_argument("--amplitude-y-deg", type=num(0), help="lissajous: y amplitude")
-    ds.add_argument("--phase", type=num(*PHASE_RANGE_DEG), default=0.0, help="degrees")
-    ds.add_argument("--axis", default="x", choices=("x", "y"), help="line: x or y")
+    ds.add_argument("--phase", type=num(*PHASE_RANGE_DEG),
+                    help="degrees: the curve's phase (lissajous: the x axis's; default 0, lissajous 90: the "
+                         "scene plugin's and make_curve's defaults)")
+    ds.add_argument("--axis", choices=("x", "y"), help="line: x (default) or y")
     ds.add_argument("--duration", type=num(0, MAX_SCAN_S), default=0.0,
                     help="seconds to scan, then stop (default 0: until Ctrl-C or SIGTERM)")
     ds.add_argument("--metadata", help="write the capture metadata (instrument, read-back, scan) to this JSON")
@@ -40,20 +42,24 @@ def scan_curve(a, spec):
     """The scan curve a ``device scan`` request names (validated by the scan module)."""
     from ..errors import EventFieldError
     from ..optics.scan import make_curve
-    if a.curve != "lissajous":      # taken silently before, as if the scan were what was asked
-        given = [f for f, v in (("--freq-y", a.freq_y), ("--amplitude-y-deg", a.amplitude_y_deg)) if v is not None]
-        if given:
-            raise EventFieldError(f"{' and '.join(given)}: a lissajous scan's y axis; a {a.curve} takes --freq and "
-                                  "--amplitude-deg" + (" (and --axis)" if a.curve == "line" else ""))
-    common = {"phase": a.phase} if a.curve != "lissajous" else {}
+    # options a curve does not take were taken silently before, as if the scan were what was asked
+    given = [f for f, v in (("--freq-y", a.freq_y), ("--amplitude-y-deg", a.amplitude_y_deg)) if v is not None]
+    if given and a.curve != "lissajous":
+        raise EventFieldError(f"{' and '.join(given)}: a lissajous scan's y axis; a {a.curve} takes --freq and "
+                              "--amplitude-deg" + (" (and --axis)" if a.curve == "line" else ""))
+    if a.axis is not None and a.curve != "line":
+        raise EventFieldError(f"--axis {a.axis}: a line scan's axis; a {a.curve} scans both axes")
+    # the phase when not given: make_curve's own default (a lissajous 90 deg on x: the circle-like figure a
+    # scene renders; the command line's 0 drove the diagonal line instead)
+    phase = {} if a.phase is None else {"phase_x" if a.curve == "lissajous" else "phase": a.phase}
     limit = {"envelope": spec.scan_envelope, "where": "device scan"}     # the rig's own, with its driver scaling
     if a.curve == "lissajous":
         return make_curve("lissajous", freq_x=a.freq, freq_y=a.freq_y or a.freq, amplitude_x=a.amplitude_deg,
                           amplitude_y=a.amplitude_y_deg if a.amplitude_y_deg is not None else a.amplitude_deg,
-                          phase_x=a.phase, **limit)
+                          **limit, **phase)
     if a.curve == "line":
-        return make_curve("line", frequency=a.freq, amplitude=a.amplitude_deg, axis=a.axis, **limit, **common)
-    return make_curve(a.curve, frequency=a.freq, amplitude=a.amplitude_deg, **limit, **common)
+        return make_curve("line", frequency=a.freq, amplitude=a.amplitude_deg, axis=a.axis or "x", **limit, **phase)
+    return make_curve(a.curve, frequency=a.freq, amplitude=a.amplitude_deg, **limit, **phase)
 
 
 def _status(ctl) -> None:
@@ -90,8 +96,11 @@ def _scan(a, ctl, curve, duration) -> None:
 def run_device(a) -> int:
     from ..device import GalvoController, GalvoSpec, dialect, open_transport
     from ..device.spec import check_duration
+    from ..errors import EventFieldError
     spec = GalvoSpec(volts_per_deg=a.volts_per_deg)
     dialect(a.dialect)
+    if a.simulate and a.resource:      # the simulation ran, silently, instead of the named instrument
+        raise EventFieldError(f"--resource {a.resource} and --simulate: give one (--simulate drives no hardware)")
     curve = duration = None
     if a.action == "scan":      # every check happens before a connection is even opened
         curve = scan_curve(a, spec)

@@ -83,3 +83,30 @@ def test_a_daq_card_plays_amplitudes_below_a_generators_smallest_sine():
     with pytest.raises(SafetyError, match="derated"):
         DAQmxOutput(rate=50_000).waveform(ef.make_curve("circle", frequency=900.0, amplitude=5.0,
                                                         max_angle_deg=12.5, galvo_model="ideal"))
+
+
+def test_a_lissajous_from_the_command_line_is_the_one_python_and_scenes_make(tmp_path):
+    """--phase defaulted to 0 for a lissajous's x axis: equal frequencies drove a 45 deg diagonal line where
+    ``make_curve`` and the scene plugin (phase_x 90) draw a circle. Both axes read back in the metadata."""
+    import json
+    meta = tmp_path / "l.json"
+    assert cli.main(["device", "scan", "--simulate", "--dialect", "keysight", "--curve", "lissajous", "--freq", "100",
+                     "--amplitude-deg", "1", "--duration", "0.05", "--metadata", str(meta)]) == 0
+    scan = json.loads(meta.read_text())["scan"]
+    python = ef.make_curve("lissajous", freq_x=100, freq_y=100, amplitude_x=1, amplitude_y=1)
+    assert scan["phase_x"] == python.phase_x == 90.0 and scan["phase_y"] == python.phase_y == 0.0
+    assert cli.main(["device", "scan", "--simulate", "--dialect", "keysight", "--curve", "lissajous", "--freq", "100",
+                     "--amplitude-deg", "1", "--phase", "0", "--duration", "0.05", "--metadata", str(meta)]) == 0
+    assert json.loads(meta.read_text())["scan"]["phase_x"] == 0.0                 # asked for: taken
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--curve", "circle", "--axis", "y"], "--axis y: a line scan's axis; a circle scans both axes"),
+    (["--curve", "lissajous", "--axis", "y"], "--axis y: a line scan's axis; a lissajous scans both axes"),
+    (["--resource", "TCPIP0::192.0.2.7::inst0::INSTR"], "--resource TCPIP0::192.0.2.7::inst0::INSTR and --simulate"),
+])
+def test_options_the_scan_would_ignore_are_refused(argv, words, capsys):
+    assert cli.main(["device", "scan", "--simulate", "--dialect", "keysight", "--freq", "100", "--amplitude-deg",
+                     "0.5", "--duration", "0.05", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err, err
