@@ -180,3 +180,22 @@ def test_times_files_and_clocks_for_every_input(tmp_path):
     with pytest.raises(ef.EventFieldError, match=r"f: give the frame rate \(--fps / fps=\) or the frames' times "
                                                  r"\(--times FILE / times=\)"):
         ef.events_from_frames(str(tmp_path / "f"))
+
+
+@pytest.mark.parametrize("start", [0.0, 1000.0])
+def test_a_converted_file_is_indexed_from_its_first_frame(tmp_path, start):
+    """/t_offset came from the first event (6 ms into a clip still for its first frames), so the DSEC slicer's
+    first frame window [0, 40 ms) asked ms_to_idx for -6 ms and failed; written from memory the same events
+    got t_offset 0. Now both: the first frame's millisecond, and every ms_to_idx entry is the first event at
+    or after its millisecond (DSEC's definition), checked on the events read back."""
+    import h5py
+    frames = np.full((30, 12, 16), 0.3, np.float32)
+    frames[6:] = 0.3 * np.exp(0.05 * (np.arange(24)[:, None, None] + 1) * (1 + np.arange(16)[None, None, :] / 16))
+    times = start + np.arange(30) / 1000.0
+    ef.events_from_frames(frames, times, output=str(tmp_path / "streamed.h5"))
+    ef.write_events(str(tmp_path / "kept.h5"), ef.events_from_frames(frames, times))
+    for name in ("streamed.h5", "kept.h5"):
+        with h5py.File(tmp_path / name) as f:
+            offset, t, index = int(f["t_offset"][()]), f["events/t"][()], f["ms_to_idx"][()]
+        assert offset == int(start * 1e6) and t[0] >= 6000, name               # the first event 6 ms in
+        assert len(index) >= 30 and list(index) == [int(np.searchsorted(t, ms * 1000)) for ms in range(len(index))]
