@@ -13,12 +13,14 @@ model draws in its step kernel, which both event paths share; the readout cap's 
 on the device (NumPy and Dr.Jit wrap uint32 the same way), so both paths draw the same keys without
 exchanging any.
 
-The mixing function is MurmurHash3's 32-bit finaliser (a bijection with full avalanche) applied twice: to the
-pixel (a Weyl step) under the stream's word, then to that xor the counter's odd multiple. Not the pixel added
-after hashing the counter: then the draws of two counters whose hashes differ by a multiple of the Weyl step
-smaller than the film are one row of pixels shifted (odds of 2 x pixels / 2^32 a pair of counters: about 250
-pairs among the first thousand counters of a 1280x720 film); xored after a nonlinear hash of the pixel, two
-counters' rows coincide only pixel by pixel, at random.
+The mixing function is MurmurHash3's 32-bit finaliser (a bijection with full avalanche): on the pixel (a Weyl
+step), xored with the stream's word and hashed again, then xored with the counter's odd multiple and hashed a
+third time. Every input enters through a nonlinear hash, never added to another one: where two inputs were
+added (the pixel's Weyl step to the word until 2026-11-27; the pixel after hashing the counter before that),
+two words or counters differing by a multiple of the Weyl step smaller than the film drew one row of pixels
+shifted (odds of 2 x pixels / 2^32 a pair: about 100 pairs among a thousand seeds of a 1280x720 film, each
+sharing up to all its noise events); xored after a hash, two rows coincide only pixel by pixel, at random.
+Seeds and streams become words the same way (``hash_words``, ``stream_word``).
 """
 from __future__ import annotations
 
@@ -33,7 +35,10 @@ JITTER_ON, JITTER_OFF, NOISE_WAIT, NOISE_POLARITY = 1, 2, 3, 4
 
 
 def finalise(h):
-    """MurmurHash3's finaliser on uint32 words: NumPy ``uint32`` arrays or Dr.Jit ``UInt32`` (both wrap)."""
+    """MurmurHash3's finaliser on uint32 words: NumPy ``uint32`` arrays or Dr.Jit ``UInt32`` (both wrap), or a
+    Python int (masked to 32 bits here)."""
+    if isinstance(h, int):
+        return _finalise_int(h)
     h = h ^ (h >> 16)
     h = h * M1
     h = h ^ (h >> 13)
@@ -41,10 +46,21 @@ def finalise(h):
     return h ^ (h >> 16)
 
 
+def _finalise_int(h: int) -> int:
+    h &= MASK
+    h ^= h >> 16
+    h = (h * M1) & MASK
+    h ^= h >> 13
+    h = (h * M2) & MASK
+    return h ^ (h >> 16)
+
+
 def mixed(index, word):
     """The hash of ``index`` (uint32 array) under ``word`` (one, or one an index): the draw ``index`` of the
-    sequence ``word`` names."""
-    return finalise(index * GOLDEN + word)
+    sequence ``word`` names. The index is hashed before the word enters: with ``finalise(index * GOLDEN +
+    word)`` (until 2026-11-27) two words 902 Weyl steps apart drew one sequence shifted by 902 indices, and two
+    seeds of a 1280x720 sensor shared an eighth of their noise events, pixel for shifted pixel."""
+    return finalise(finalise(index * GOLDEN) ^ word)
 
 
 def mixed_np(index: np.ndarray, word) -> np.ndarray:
@@ -53,9 +69,29 @@ def mixed_np(index: np.ndarray, word) -> np.ndarray:
         return mixed(np.asarray(index, dtype=np.uint32), np.uint32(word) if np.isscalar(word) else word)
 
 
+def hash_words(*values: int) -> int:
+    """One 32-bit word from integers >= 0 of any size (every bit used, 32 at a time, and how many): unrelated
+    words for different inputs, where a sum (``seed + step``) made seed s at step k + 1 the seed s + 1 at
+    step k, and a 32-bit cut made seed 2^32 the seed 0."""
+    h = 7919
+    for v in values:
+        v = int(v)
+        if v < 0:
+            raise ValueError(f"hash_words: {v} is negative; seeds and counters are integers >= 0")
+        chunks = 0
+        while True:
+            h = _finalise_int(h ^ _finalise_int((v & MASK) * _SEED_MUL + GOLDEN))
+            v, chunks = v >> 32, chunks + 1
+            if not v:
+                break
+        h = _finalise_int(h ^ chunks * _COUNTER_MUL)
+    return h
+
+
 def seed_word(seed: int) -> int:
-    """The 32-bit word of a render's ``seed`` that every pixel-model draw is keyed by."""
-    return (int(seed) * _SEED_MUL + 7919) & MASK
+    """The 32-bit word of a render's ``seed`` that every pixel-model draw is keyed by (a hash of all its bits:
+    it was the seed's low 32 bits times a constant, so seeds 2^32 apart drew the same noise)."""
+    return hash_words(seed)
 
 
 def seed_array(mi, seed: int):
@@ -67,8 +103,8 @@ def seed_array(mi, seed: int):
 
 def stream_word(seed_word_, stream: int):
     """``seed_word_`` (int or UInt32) turned to the stream ``stream``: the draws of different streams of one
-    seed are unrelated."""
-    return seed_word_ + (stream * _STREAM_MUL & MASK)
+    seed are unrelated (a hash, not a sum: two seeds whose words differed by a stream step shared draws)."""
+    return finalise(seed_word_ ^ _finalise_int(stream * _STREAM_MUL + 1))
 
 
 def bits(pixel, counter, word):

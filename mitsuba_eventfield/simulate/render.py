@@ -28,7 +28,7 @@ from .accuracy_limit import AccuracyLimit
 from .checkpoint import checkpoints_for
 from .device_stream import check_on_device
 from .image_motion import note_image_motion
-from .stepping import SEED_MODES, Stepping, default_steps, stepping  # noqa: F401  (SEED_MODES: re-exported)
+from .stepping import SEED_MODES, Stepping, default_steps, step_seed, stepping  # noqa: F401  (SEED_MODES: re-exported)
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary, run_metadata
 
@@ -157,7 +157,7 @@ class _Loop:
         if moving and overlap:
             self.timed.apply_time()
         t3 = time.perf_counter()
-        self.render_frame(self.st.seed if self.st.seed_mode == "fixed" else self.st.seed + step_index,
+        self.render_frame(self.st.seed if self.st.seed_mode == "fixed" else step_seed(self.st.seed, step_index),
                           step=step_index)
         if not overlap or self.batch is None:            # (a step's own events read back would wait anyway)
             dr.sync_thread()
