@@ -92,11 +92,10 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     summary = RenderSummary(width=source.width, height=source.height, output=os.path.abspath(output) if output else None)
     meta = {"package": "mitsuba-eventfield", "package_version": __version__, "variant": mi.variant(),
             "width": source.width, "height": source.height, "optics": {"design": "frames (converted)"},
-            "pixel_model": integ.pixel_model_metadata(), "source": source.describe, **(meta or {})}
-    if source.start_s is not None:
-        # known before the first event: a file's /t_offset is the first frame's millisecond, as a render's is
-        # its start's (it was the first event's: DSEC's slicer failed on the first frame interval)
-        meta["t_start_us"] = int(round(source.start_s * 1e6))
+            "pixel_model": integ.pixel_model_metadata(), "source": source.describe, **(meta or {}),
+            # known before the first event: /t_offset is the first frame's millisecond, as a render's is its
+            # start's (it was the first event's: DSEC's slicer failed on the first frame interval)
+            **({} if source.start_s is None else {"t_start_us": int(round(source.start_s * 1e6))})}
     sink = Sink(output, fmt, source.width, source.height, meta, count=summary.count,
                 buffer_mb=event_buffer_mb, on_device=on_device)
     wall0 = time.perf_counter()
