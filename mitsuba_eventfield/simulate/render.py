@@ -119,8 +119,8 @@ class _Loop:
             self.limit.spp = allocation.spp_changing
         self.width, self.height = timed.film_size
         # a moving scene under a periodic scan: the pixels no moving object can change rendered once a period
-        self.static = None if not reuse or allocation is not None or checkpoints is not None else \
-            static_pixels.plan(timed, st, integ, summary.notes)
+        self.static = None if not reuse or allocation is not None else \
+            static_pixels.plan(timed, st, integ, summary.notes, checkpointed=checkpoints is not None)
         self.renderer = FrameRenderer(integ.inner, st.spp, allocation, summary.notes, self.static, frozen)
         self.overlap = backend.overlaps_steps()
         if self.overlap:

@@ -254,9 +254,9 @@ def _dynamic_masks(timed, st, steps_per_period, inner, threshold, linlog):
     return direct, grow, shadows, probe_grow, len(times)
 
 
-def plan(timed, st, integ, notes: list) -> StaticPixels | None:
+def plan(timed, st, integ, notes: list, checkpointed: bool = False) -> StaticPixels | None:
     """The static/dynamic split of a render of a moving scene under a periodic scan, or None (not such a render,
-    or the split would not pay: then a note says why)."""
+    or the split would not pay, or the render is ``checkpointed``: then a note says why)."""
     if st.steps is None or st.seed_mode != "fixed" or timed.is_static or not timed.scan_period \
             or "scan" not in getattr(timed.sensor, "optics_metadata", dict)():
         return None
@@ -266,6 +266,11 @@ def plan(timed, st, integ, notes: list) -> StaticPixels | None:
     if st.steps < MIN_PERIODS * k:
         notes.append(f"static pixels not reused: {st.steps / k:g} scan periods are too few to pay for the masks "
                      f"(at least {MIN_PERIODS})")
+        return None
+    if checkpointed:        # its cache of a period's static frames is not in a checkpoint: said, not silent
+        notes.append("static pixels not reused: a checkpointed render renders every pixel at every step (the "
+                     "reuse's cache of one period's frames is not checkpointed), so its events differ from an "
+                     "uncheckpointed render's by Monte-Carlo noise, as --no-reuse's do")
         return None
     t0 = time.perf_counter()
     width, height = timed.film_size

@@ -158,3 +158,18 @@ def test_interrupt_before_any_checkpoint_leaves_nothing(tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         ef.render_events(timed, 0.004, steps=8, output=str(tmp_path / "n.h5"), checkpoint_s=3600)
     assert os.listdir(tmp_path) == []
+
+
+def test_a_checkpointed_render_says_it_renders_the_static_pixels_every_step(tmp_path):
+    """The fan under its 250 Hz scan reuses its static pixels a period at a time; a checkpointed render does
+    not (the cache is not in a checkpoint) and its events differed without a word. The summary and the file's
+    metadata now say so, and the plain render says it reused them."""
+    fan = os.path.join(ROOT, "scenes", "fan", "fan.xml")
+    kw = dict(duration=0.16, steps=320)                 # 40 scan periods of 8 steps: the fewest the reuse takes
+    plain = ef.render_events(ef.load_scene(fan, width=64, height=48), output=str(tmp_path / "plain.h5"), **kw)
+    saved = ef.render_events(ef.load_scene(fan, width=64, height=48), output=str(tmp_path / "saved.h5"),
+                             checkpoint_s=1e6, **kw)
+    assert plain.as_dict()["static_pixels"] is not None and saved.as_dict()["static_pixels"] is None
+    said = [n for n in saved.notes if "static pixels not reused: a checkpointed render" in n]
+    assert said and said[0] in ef.read_events(str(tmp_path / "saved.h5")).meta["render"]["notes"]
+    assert not any("checkpointed" in n for n in plain.notes)
