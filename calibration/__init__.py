@@ -9,7 +9,8 @@
 * ``store``: save / load calibration files (JSON) and apply them to light fields.
 """
 from .depth import DepthCalibration, fit_depth, fit_depth_from_tracks  # noqa: F401
-from .galvo import (CalibrationError, GalvoCalibration, PatchTrack, capture_of, fit_galvo, fit_tracks,
+from .galvo import (CalibrationError, GalvoCalibration, PatchTrack, capture_of, fit_galvo, fit_galvo_consistent,
+                    fit_tracks,
                     galvo_scale_limit, scale_note, track_patch, track_point)
 from .led import fit_led, fit_point_track, track_led  # noqa: F401,E402
 from .kaleidoscope import KaleidoscopeCalibration, find_tiles, flat_field, known_tiles, register  # noqa: F401,E402

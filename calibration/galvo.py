@@ -272,6 +272,34 @@ def fit_galvo(frames, times, curve: ScanCurve, patches, half: int = 12, search: 
     return result
 
 
+PHASE_AGREEMENT_DEG = 2.0     # the scan phase a solver assumed and the one its frames gave: the same within this
+
+
+def fit_galvo_consistent(frames_at, curve: ScanCurve, patches, **fit_kw) -> GalvoCalibration:
+    """``fit_galvo`` on frames that an events-only solver builds under an assumed scan phase: ``frames_at(dt)``
+    returns (frames, times) made with the scan curve moved ``dt`` seconds ahead (``optics.scan.shifted``).
+
+    That solver's views are right only at the true phase, and a camera's clock starts anywhere in the scan
+    (docs/calibration.md: 90 deg off read the curve 27 % large). So the frames are made again at the phase
+    each fit finds until the two agree (``PHASE_AGREEMENT_DEG``); where the commanded phase gives no fit, from
+    half, a quarter and three quarters of a period. The first refusal is raised when no start gives a fit."""
+    period = curve.period
+    refusals = []
+    for start in (0.0, 0.5, 0.25, 0.75):
+        assumed = start * period
+        try:
+            for _ in range(4):
+                result = fit_galvo(*frames_at(assumed), curve, patches, **fit_kw)
+                found = (result.tau0 - result.t_first) % period
+                if abs((found - assumed + period / 2) % period - period / 2) * 360 / period <= PHASE_AGREEMENT_DEG:
+                    return result
+                assumed = found
+            return result
+        except CalibrationError as e:
+            refusals.append(e)
+    raise refusals[0]
+
+
 def _initial_guess(residuals, curve: ScanCurve, sel_t, obs):
     """Best tau0 on a grid (the curve is periodic: avoid local minima); at each, per axis, the scale and every
     track's offset by one linear least-squares fit. Returns (tau0, sx, sy, offsets (P, 2))."""

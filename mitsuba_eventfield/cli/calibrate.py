@@ -10,7 +10,7 @@ from ..calibration.nominal import nominal_optics
 from ..errors import EventFieldError
 from ..validate import MAX_VIEWS, number_list
 from .args import num
-from .inputs import galvo_frames, give_optics, luminance_channel, start_log, with_contrast
+from .inputs import galvo_frames, galvo_scan, give_optics, luminance_channel, start_log, with_contrast
 
 OPTICS_HELP = ("JSON of the set-up's nominal galvo optics (design, fov_x_deg, mirror_distance, mirror_separation, "
                "scan), for a camera recording that carries none")
@@ -70,10 +70,24 @@ def _galvo(a) -> None:
         if len(xy) != 2 or xy[0] >= ev.width or xy[1] >= ev.height:
             raise EventFieldError(f"--patch {p!r}: expected X,Y inside the {ev.width}x{ev.height} frame")
         patches.append(tuple(xy))
+    nominal = ev.meta.get("optics", {})
+
+    def frames_at(dt):              # the events-only solver's frames under the scan moved dt seconds ahead
+        scan = dict(nominal["scan"], time_offset=nominal["scan"].get("time_offset", 0.0) + dt)
+        ev.meta["optics"] = dict(nominal, scan=scan)
+        try:
+            return galvo_frames(ev, a.period, a.views)[:2]
+        finally:
+            ev.meta["optics"] = nominal
     try:            # every refusal names the recording (the fit's own knew none)
-        frames, times, curve = galvo_frames(ev, a.period, a.views, start_log(a.start_frame, ev))
-        optics = cal.optics_record(ev.meta["optics"], ev.width, ev.height, where=a.file)
-        result = cal.fit_galvo(frames, times, curve, patches, scale_limit=cal.galvo_scale_limit(optics))
+        nominal_curve = galvo_scan(ev)             # (a stream of another design: refused first)
+        optics = cal.optics_record(nominal, ev.width, ev.height, where=a.file)
+        kw = {"scale_limit": cal.galvo_scale_limit(optics)}
+        if a.start_frame:           # views from a frame: no scan phase assumed
+            frames, times, curve = galvo_frames(ev, a.period, a.views, start_log(a.start_frame, ev))
+            result = cal.fit_galvo(frames, times, curve, patches, **kw)
+        else:                       # a camera's clock starts anywhere in the scan: the phase found, consistently
+            result = cal.fit_galvo_consistent(frames_at, nominal_curve, patches, **kw)
     except EventFieldError as e:
         raise EventFieldError(e if str(e).startswith(a.file) else f"{a.file}: {e}") from None
     result.capture = cal.capture_of(ev)

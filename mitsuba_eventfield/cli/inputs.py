@@ -65,16 +65,21 @@ def start_log(path, events):
     return linlog_np(img, stream_linlog_threshold(events.meta))
 
 
-def galvo_frames(ev, period, views, start_frame_log=None):
-    """Reconstructed log frames and their times over one scan period of a galvo stream, and its scan curve."""
-    from ..lightfield.model import galvo_period_starts, galvo_view_times
-    from ..lightfield.reconstruct import reconstruct
+def galvo_scan(ev):
+    """The scan curve of a galvo stream, or a one-line refusal of any other."""
     from ..optics.scan import curve_from_dict
     optics = ev.meta.get("optics", {})
     if optics.get("design") != "galvo":
         raise EventFieldError("not a galvo event stream (optics.design != 'galvo')" if optics else
                               "the stream carries no optics (a camera recording?): a galvo stream is needed")
-    curve = curve_from_dict(optics["scan"])
+    return curve_from_dict(optics["scan"])
+
+
+def galvo_frames(ev, period, views, start_frame_log=None):
+    """Reconstructed log frames and their times over one scan period of a galvo stream, and its scan curve."""
+    from ..lightfield.model import galvo_period_starts, galvo_view_times
+    from ..lightfield.reconstruct import reconstruct
+    curve, optics = galvo_scan(ev), ev.meta["optics"]
     try:
         t0 = galvo_period_starts(ev, [period])[period]
     except ValueError as e:
