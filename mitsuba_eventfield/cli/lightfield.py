@@ -51,7 +51,9 @@ def add_parsers(sub) -> None:
     rc.add_argument("--method", default="direct", help="direct, highpass, complementary, galvo (default direct)")
     g = rc.add_mutually_exclusive_group()
     g.add_argument("--times", help="comma-separated times in ms")
-    g.add_argument("--fps", type=num(0, 1e6, lo_open=True), help="frames per second over the whole stream")
+    g.add_argument("--fps", type=num(0, 1e6, lo_open=True),
+                   help="frames per second over the whole stream, from the start frame's time (default 1000; a "
+                        "stream shorter than 1 ms gives one frame, at its end)")
     rc.add_argument("--start-frame", help="EXR of the linear frame at the stream start (or at --start-time)")
     rc.add_argument("--start-time", type=num(), metavar="MS",
                     help="the start frame's time in ms on the file's clock (a frame camera beside the event camera; "
