@@ -277,24 +277,25 @@ PHASE_AGREEMENT_DEG = 2.0     # the scan phase a solver assumed and the one its 
 
 def fit_galvo_consistent(frames_at, curve: ScanCurve, patches, **fit_kw) -> GalvoCalibration:
     """``fit_galvo`` on frames that an events-only solver builds under an assumed scan phase: ``frames_at(dt)``
-    returns (frames, times) made with the scan curve moved ``dt`` seconds ahead (``optics.scan.shifted``).
-
-    That solver's views are right only at the true phase, and a camera's clock starts anywhere in the scan
+    returns (frames, times) made with the scan curve moved ``dt`` seconds ahead (``optics.scan.shifted``). That
+    solver's views are right only at the true phase, and a camera's clock starts anywhere in the scan
     (docs/calibration.md: 90 deg off read the curve 27 % large). So the frames are made again at the phase
     each fit finds until the two agree (``PHASE_AGREEMENT_DEG``); where the commanded phase gives no fit, from
-    half, a quarter and three quarters of a period. The first refusal is raised when no start gives a fit."""
-    period = curve.period
-    refusals = []
+    half, a quarter and three quarters of a period. The first refusal is raised when no start settles."""
+    period, refusals = curve.period, []
     for start in (0.0, 0.5, 0.25, 0.75):
-        assumed = start * period
+        assumed, found = start * period, None
         try:
             for _ in range(4):
+                if found is not None:
+                    assumed = found
                 result = fit_galvo(*frames_at(assumed), curve, patches, **fit_kw)
                 found = (result.tau0 - result.t_first) % period
-                if abs((found - assumed + period / 2) % period - period / 2) * 360 / period <= PHASE_AGREEMENT_DEG:
+                if abs((found - assumed + period / 2) % period - period / 2) <= PHASE_AGREEMENT_DEG * period / 360:
                     return result
-                assumed = found
-            return result
+            refusals.append(CalibrationError(f"the scan phase did not settle: views made at "
+                                             f"{assumed * 360 / period:.1f} deg gave {found * 360 / period:.1f} deg"
+                                             " after four passes"))
         except CalibrationError as e:
             refusals.append(e)
     raise refusals[0]

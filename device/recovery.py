@@ -19,41 +19,57 @@ from .spec import SafetyError
 SETTINGS = ("function", "frequency", "vpp", "offset")
 
 
-def _running_channels(ctl) -> dict:
-    """{channel: read-back settings} of each output that reports on with numbers to ramp from."""
-    running = {}
+def _running_channels(ctl) -> tuple:
+    """({channel: read-back settings} of each output that reports on with numbers to ramp from, [channels that
+    report on, or do not answer, without them])."""
+    running, as_is = {}, []
     for ch in (1, 2):
-        got = ctl.read_channel(ch)
+        try:
+            got = ctl.read_channel(ch)
+        except Exception:  # noqa: BLE001  (a timeout, a dropped link: that channel goes off as it is)
+            as_is.append(ch)
+            continue
         needed = ("offset",) if got.get("function") == "DC" else ("frequency", "vpp", "offset")
-        if got.get("output") is True and got.get("function") in ("SIN", "DC") and all(
+        if got.get("function") in ("SIN", "DC") and all(
                 isinstance(got.get(k), float) and math.isfinite(got[k]) for k in needed):
-            running[ch] = got
-    return running
+            if got.get("output") is True:
+                running[ch] = got
+            elif got.get("output") is not False:
+                as_is.append(ch)
+        elif got.get("output") is not False:
+            as_is.append(ch)
+    return running, as_is
 
 
 def ramp_off(ctl, sleep=time.sleep) -> str:
     """Ramp down whatever the generator of ``ctl`` (a ``GalvoController``) reports running, then switch both
-    outputs off (confirmed, as ``outputs_off``). Ctrl-C and SIGTERM wait for it. Returns what was done, in one
-    line."""
-    running = _running_channels(ctl)
-    note = ""
+    outputs off (confirmed, as ``outputs_off``) whatever happens on the way (a read-back that times out
+    included). Ctrl-C and SIGTERM wait for it. Returns what was done, in one line."""
+    running, as_is, refused = {}, [], None
+    ctl.running = True          # until confirmed off: a failed switch-off here is tried again by ``close``
     with signals_held():
         try:
+            running, as_is = _running_channels(ctl)
             # the guard checks each step against the state the instrument holds, as if this process had sent it
             ctl._commanded = {ch: {k: running[ch][k] for k in SETTINGS if k in running[ch]} if ch in running else {}
                               for ch in (1, 2)}
             for k in range(ctl.ramp_steps - 1, 0, -1) if running else ():
                 fraction = k / ctl.ramp_steps
                 for ch, got in running.items():
-                    cmds = [] if got["function"] == "DC" else list(ctl.d.amplitude(ch, toward_zero(got["vpp"] * fraction)))
+                    cmds = [] if got["function"] == "DC" else \
+                        list(ctl.d.amplitude(ch, toward_zero(got["vpp"] * fraction)))
                     ctl._send(cmds + (list(ctl.d.offset(ch, toward_zero(got["offset"] * fraction)))
                                       if got["offset"] else []))
                 sleep(ctl.ramp_time / ctl.ramp_steps)
         except SafetyError as e:
-            note = f" (no ramp: {e})"
+            refused = " ".join(str(e).split())
         finally:
             ctl.outputs_off()
-    if not running:
-        return "outputs off (none was scanning)" + note
-    return (f"channel {', '.join(map(str, running))}: amplitude and offset ramped down from the read-back, "
-            "outputs off" + note)
+    said = []
+    if running and refused is None:
+        said.append(f"channel {', '.join(map(str, running))}: ramped down from the read-back amplitude and offset")
+    elif running:
+        said.append(f"channel {', '.join(map(str, running))}: switched off without a ramp ({refused})")
+    if as_is:
+        said.append(f"channel {', '.join(map(str, as_is))}: settings unreadable, switched off without a ramp")
+    return "; ".join(said + ["outputs off"]) if said else "outputs off (none was scanning)"

@@ -37,7 +37,7 @@ JITTER_ON, JITTER_OFF, NOISE_WAIT, NOISE_POLARITY = 1, 2, 3, 4
 def finalise(h):
     """MurmurHash3's finaliser on uint32 words: NumPy ``uint32`` arrays or Dr.Jit ``UInt32`` (both wrap), or a
     Python int (masked to 32 bits here)."""
-    if isinstance(h, int):
+    if isinstance(h, (int, np.integer)):         # (a NumPy integer would take the array path unwrapped)
         return _finalise_int(h)
     h = h ^ (h >> 16)
     h = h * M1
@@ -47,7 +47,7 @@ def finalise(h):
 
 
 def _finalise_int(h: int) -> int:
-    h &= MASK
+    h = int(h) & MASK
     h ^= h >> 16
     h = (h * M1) & MASK
     h ^= h >> 13
@@ -104,7 +104,7 @@ def seed_array(mi, seed: int):
 def stream_word(seed_word_, stream: int):
     """``seed_word_`` (int or UInt32) turned to the stream ``stream``: the draws of different streams of one
     seed are unrelated (a hash, not a sum: two seeds whose words differed by a stream step shared draws)."""
-    return finalise(seed_word_ ^ _finalise_int(stream * _STREAM_MUL + 1))
+    return finalise(seed_word_ ^ _finalise_int(int(stream) * _STREAM_MUL + 1))
 
 
 def bits(pixel, counter, word):

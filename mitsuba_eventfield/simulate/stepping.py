@@ -211,7 +211,9 @@ def default_steps(st: Stepping, timed, integ, probe_spp: int | None = None, froz
     sigma, first, noise, bound = None, None, None, FINE_PX_PER_STEP
     others = max(v for k, v in floors.items() if k != "low-pass pixel")
     if fine > others:                      # the bound decides: is the noise large against the threshold?
-        sigma, first = noise_map(timed, probe_spp or st.spp, st.seed, st.t_start, integ,
+        # the probe's first frame is step 0's: at step 0's seed (an independent-seed render's differs)
+        seed0 = st.seed if st.seed_mode == "fixed" else step_seed(st.seed, 0)
+        sigma, first = noise_map(timed, probe_spp or st.spp, seed0, st.t_start, integ,
                                  frozen if probe_spp is None else None)    # the frozen render is at st.spp
         noise = float(np.median(sigma)) / min(integ.threshold_on, integ.threshold_off)
         bound = NOISY_PX_PER_STEP if noise >= NOISE_LIMITED else FINE_PX_PER_STEP

@@ -37,3 +37,29 @@ def test_the_curve_from_events_alone_does_not_depend_on_where_the_clock_started(
     events_only, framed = (load_calibration(str(tmp_path / n))["galvo"] for n in ("e.json", "f.json"))
     assert events_only.radius_px() == pytest.approx(framed.radius_px(), rel=0.02)
     assert abs((events_only.clock_phase_deg - phase + 180) % 360 - 180) < 2.0, events_only.clock_phase_deg
+
+
+def test_a_phase_that_does_not_settle_is_refused_not_returned(monkeypatch):
+    """Fits stand in for the solver (``fit_galvo`` replaced): one whose phase follows the assumed one by a
+    quarter period never agrees with it, and was returned after four passes as if it had; one that always
+    finds 36 deg is taken on the second pass, made at 36 deg."""
+    from types import SimpleNamespace
+
+    from mitsuba_eventfield.calibration import CalibrationError, galvo
+    curve = ef.make_curve("circle", frequency=250.0, amplitude=0.5)
+    made_at = []
+
+    def frames_at(dt):
+        made_at.append(dt)
+        return dt, None
+
+    monkeypatch.setattr(galvo, "fit_galvo", lambda assumed, times, *a, **k: SimpleNamespace(
+        tau0=assumed + curve.period / 4, t_first=0.0))
+    with pytest.raises(CalibrationError, match="the scan phase did not settle: views made at 270.0 deg gave 0.0 deg after four passes"):
+        galvo.fit_galvo_consistent(frames_at, curve, [(1, 1)])
+    assert len(made_at) == 16                                     # four starts, four passes each
+    made_at.clear()
+    monkeypatch.setattr(galvo, "fit_galvo", lambda assumed, times, *a, **k: SimpleNamespace(
+        tau0=curve.period / 10, t_first=0.0, settled_at=assumed))
+    result = galvo.fit_galvo_consistent(frames_at, curve, [(1, 1)])
+    assert made_at == [0.0, pytest.approx(curve.period / 10)] and result.settled_at == pytest.approx(curve.period / 10)

@@ -45,7 +45,7 @@ def test_device_stop_ramps_down_what_a_killed_process_left_running(dialect, caps
     monkeypatch.setattr(transport, "open_transport", lambda *a, **k: g)
     monkeypatch.setattr("mitsuba_eventfield.device.open_transport", lambda *a, **k: g)
     assert cli.main(["device", "stop", "--simulate", "--dialect", dialect]) == 0
-    assert "channel 1, 2: amplitude and offset ramped down from the read-back, outputs off" in capsys.readouterr().out
+    assert "channel 1, 2: ramped down from the read-back amplitude and offset; outputs off" in capsys.readouterr().out
     # (the preset's 9.6 Vpp and 3.2 V are not in the history, which holds the writes)
     assert _on_levels(g.history, 1, "vpp") == pytest.approx([7.68, 5.76, 3.84, 1.92])
     assert _on_levels(g.history, 1, "offset") == pytest.approx([3.2, 2.56, 1.92, 1.28, 0.64])
@@ -61,7 +61,9 @@ def test_device_stop_beyond_the_galvos_limits_switches_off_without_a_ramp(capsys
     monkeypatch.setattr("mitsuba_eventfield.device.open_transport", lambda *a, **k: g)
     assert cli.main(["device", "stop", "--simulate", "--dialect", "keysight"]) == 0
     out = capsys.readouterr().out
-    assert "outputs off (no ramp: " in out and not g.state[1]["output"]
+    assert "channel 1: switched off without a ramp (channel 1: 5000 Hz is outside 0 to 1000 Hz)" in out
+    assert not g.state[1]["output"]
+    assert "ramped down" not in out
     assert [s[1]["vpp"] for _, s in g.history] == [1.0] * len(g.history)          # no step sent to it
     idle = simulated("keysight")
     monkeypatch.setattr("mitsuba_eventfield.device.open_transport", lambda *a, **k: idle)
@@ -110,3 +112,22 @@ def test_options_the_scan_would_ignore_are_refused(argv, words, capsys):
                      "0.5", "--duration", "0.05", *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert words in err and "\n" not in err, err
+
+
+@pytest.mark.parametrize("fault", ["timeout", "garbage"])
+def test_device_stop_switches_off_when_a_read_back_fails(fault, capsys, monkeypatch):
+    """A read-back that timed out (an OSError from the link) escaped before anything was written: both outputs
+    stayed on at 9.6 Vpp. One that answered garbage was reported as "none was scanning". Either channel is now
+    switched off as it is, and named."""
+    def link(cmd):
+        return OSError("VI_ERROR_TMO: timeout") if fault == "timeout" and cmd == "SOUR1:PHAS?" else None
+    g = simulated("keysight", preset={ch: {"vpp": 9.6, "offset": 3.2, "frequency": 20.0, "high_z": True,
+                                           "output": True} for ch in (1, 2)}, raise_on=link)
+    if fault == "garbage":
+        answer = g.query
+        monkeypatch.setattr(g, "query", lambda cmd: "?!" if cmd == "SOUR1:FREQ?" else answer(cmd))
+    monkeypatch.setattr("mitsuba_eventfield.device.open_transport", lambda *a, **k: g)
+    assert cli.main(["device", "stop", "--simulate", "--dialect", "keysight"]) == 0
+    out = capsys.readouterr().out
+    assert not g.state[1]["output"] and not g.state[2]["output"]
+    assert "channel 2: ramped down" in out and "channel 1: settings unreadable, switched off without a ramp" in out
