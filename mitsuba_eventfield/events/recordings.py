@@ -68,13 +68,19 @@ def _evt_version(header: str, named: str | None) -> str:
 
 
 def _size_of(header: str):
-    """(width, height) from a Prophesee header, or None when it gives none."""
-    for pattern in (r"width=(\d+);height=(\d+)", r"geometry\s+(\d+)x(\d+)",
-                    r"^%\s*Width\s+(\d+)\s*\n%\s*Height\s+(\d+)"):
-        m = re.search(pattern, header, re.M | re.I)
+    """(width, height) from a Prophesee header, or None when it gives none. Width and height are read each on
+    its own, in either order: Metavision writes ``format EVT3;height=720;width=1280`` and a DAT header
+    ``% Height`` before ``% Width`` (read in one order only, such files took the events' extent as the sensor:
+    a 96x72 recording read 94x71, and its depth came out 10 % far)."""
+    m = re.search(r"geometry\s+(\d+)x(\d+)", header, re.I)
+    if m:
+        return int(m[1]), int(m[2])
+    found = {}
+    for key in ("width", "height"):
+        m = re.search(rf"(?:^%\s*|[;,:\s]){key}(?:\s*=\s*|\s+)(\d+)", header, re.M | re.I)
         if m:
-            return int(m[1]), int(m[2])
-    return None
+            found[key] = int(m[1])
+    return (found["width"], found["height"]) if len(found) == 2 else None
 
 
 def check_recording(path: str, fmt: str) -> dict:
@@ -103,13 +109,16 @@ def check_recording(path: str, fmt: str) -> dict:
     return {"version": version, "size": _size_of(header), "header": header}
 
 
-def _stream(decoder, size, meta) -> EventStream:
+def _stream(decoder, size, meta, where: str = "the recording") -> EventStream:
     packets = [p for p in decoder if len(p)]
     import faery
     a = np.concatenate(packets) if packets else np.empty(0, faery.EVENTS_DTYPE)
-    if size is None:                          # no size in the header: the events' extent
+    if size is None:                          # no size in the header: the events' extent, said (as for DSEC)
         size = (int(a["x"].max()) + 1, int(a["y"].max()) + 1) if len(a) else decoder.dimensions()
-        meta["size_from_events"] = True
+        meta["sensor_size"] = "from the largest coordinates"
+        import warnings
+        warnings.warn(f"{where}: no sensor size in its header: taken as {size[0]}x"
+                      f"{size[1]} from its largest coordinates; light fields need the sensor's own", stacklevel=3)
     t = a["t"].astype(np.int64)
     if len(t):
         meta.setdefault("t_start_us", int(t[0]))
@@ -123,7 +132,7 @@ def read_recording(path: str, fmt: str) -> EventStream:
     info = check_recording(path, fmt)
     decoder = faery.events_stream_from_file(path, version_fallback=info["version"],
                                             file_type="dat" if fmt == "dat" else "evt")
-    return _stream(decoder, info["size"], {"recording": {"format": info["version"], "header": info["header"]}})
+    return _stream(decoder, info["size"], {"recording": {"format": info["version"], "header": info["header"]}}, path)
 
 
 def read_aedat4_faery(path: str) -> EventStream:
