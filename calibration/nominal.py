@@ -47,6 +47,15 @@ def nominal_optics(path: str, width: int, height: int, design: str | None = "gal
         raise EventFieldError(f"{path}: {e}") from None
 
 
+# what a scan record of a rig's nominal optics must give, per curve (``optics.scan.make_curve``'s parameters
+# that set its rate and size): their defaults are for curves built in code, and a record without them took
+# them silently (a 2 deg circle without its frequency read as 250 Hz: depths 0.94 / 0.73 m for 0.5 / 1.2)
+SCAN_SIZE_AND_RATE = {"circle": ("frequency", "amplitude"), "line": ("frequency", "amplitude"),
+                      "lissajous": ("freq_x", "freq_y", "amplitude_x", "amplitude_y"),
+                      "raster": ("frequency", "lines", "amplitude_x", "amplitude_y"),
+                      "moore": ("frequency", "order", "amplitude")}
+
+
 def _galvo_nominal(path: str, optics: dict) -> dict:
     from mitsuba_eventfield.optics.galvo import OPTICS_RECORD_KEYS, checked_optics
     from mitsuba_eventfield.optics.scan import curve_from_dict
@@ -62,6 +71,10 @@ def _galvo_nominal(path: str, optics: dict) -> dict:
         optics.update(zip(keys, checked_optics(*(optics[k] for k in keys), path)))
         if not isinstance(optics["scan"], dict):
             raise EventFieldError(f"{path}: scan = {optics['scan']!r}: expected a scan curve record")
+        missing = [k for k in SCAN_SIZE_AND_RATE.get(optics["scan"].get("curve"), ()) if k not in optics["scan"]]
+        if missing:        # a default (250 Hz, 1 deg) is no rig's: refused as a missing field is
+            raise EventFieldError(f"{path}: scan: a {optics['scan']['curve']} record without {', '.join(missing)} "
+                                  f"(it needs {', '.join(SCAN_SIZE_AND_RATE[optics['scan']['curve']])})")
         curve_from_dict(optics["scan"], where=f"{path}: scan")
     except ConfigError as e:
         raise EventFieldError(str(e)) from None

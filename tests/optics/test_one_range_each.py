@@ -51,3 +51,20 @@ def test_contrast_thresholds_have_the_renders_range_wherever_they_come_from(tmp_
     ef.write_events(path, stream)
     assert cli.main(["reconstruct", path, "-o", str(tmp_path / "r.npz"), "--contrast", "11"]) == 2
     assert "--contrast" in capsys.readouterr().err and not (tmp_path / "r.npz").exists()
+
+
+@pytest.mark.parametrize("scan, missing", [
+    ({"curve": "circle", "amplitude": 2.0}, "frequency"),
+    ({"curve": "circle", "frequency": 100.0}, "amplitude"),
+    ({"curve": "lissajous", "freq_x": 100.0, "freq_y": 100.0, "amplitude_x": 1.0}, "amplitude_y"),
+])
+def test_a_nominal_scan_without_its_rate_or_size_is_refused(tmp_path, scan, missing):
+    """A recording's scan record without its frequency took 250 Hz (a 100 Hz rig's cards read at 0.94 / 0.73 m
+    for 0.5 / 1.2), without its amplitude 1 deg: defaults for curves built in code, not any rig's. Refused in
+    one line as a missing optics field is; a record that gives them (phase left out) is taken."""
+    with pytest.raises(ef.EventFieldError) as e:
+        nominal_optics(_nominal(tmp_path, scan=scan), 64, 48)
+    assert f"optics.json: scan: a {scan['curve']} record without {missing} (it needs " in str(e.value)
+    assert "\n" not in str(e.value)
+    taken = nominal_optics(_nominal(tmp_path, scan={"curve": "circle", "frequency": 100.0, "amplitude": 2.0}), 64, 48)
+    assert taken["scan"]["frequency"] == 100.0
