@@ -8,6 +8,7 @@ import numpy as np
 
 from ..calibration.nominal import nominal_optics
 from ..errors import EventFieldError
+from ..events.stuck_pixels import without_stuck_pixels
 from ..validate import MAX_VIEWS, number_list
 from .args import num
 from .inputs import galvo_frames, galvo_scan, give_optics, luminance_channel, start_log, with_contrast
@@ -58,7 +59,7 @@ def _capture(path: str, a):
     from ..events.io import read_events
     ev = read_events(path)
     give_optics(ev, path, a.optics, design="galvo", takes_calibration=False)
-    return with_contrast(ev, a.contrast, path)
+    return without_stuck_pixels(with_contrast(ev, a.contrast, path), path)
 
 
 def _galvo(a) -> None:

@@ -1,9 +1,10 @@
 """What the commands that read event files share (``reconstruct``, ``refocus``, ``depth``, ``calibrate``): the
-event file with its contrast thresholds, a start frame, a galvo period's frames, and the optics of a recording
-that carries none."""
+event file with its contrast thresholds and without its stuck pixels (``events.stuck_pixels``), a start frame, a
+galvo period's frames, and the optics of a recording that carries none."""
 from __future__ import annotations
 
 from ..errors import EventFieldError
+from ..events.stuck_pixels import without_stuck_pixels
 from ..validate import MAX_THRESHOLD, number_list
 
 
@@ -16,7 +17,7 @@ def read_input(a, needs_optics: bool = False):
     if not len(ev):        # refocused, a flat image; as a depth map, no confident pixel: both written as done
         raise EventFieldError(f"{a.file}: no events: nothing to reconstruct")
     try:
-        return with_contrast(ev, getattr(a, "contrast", None), a.file)
+        return without_stuck_pixels(with_contrast(ev, getattr(a, "contrast", None), a.file), a.file)
     except EventFieldError as e:
         if needs_optics and not ev.meta.get("optics") and not (getattr(a, "optics", None)
                                                                or getattr(a, "calibration", None)):
