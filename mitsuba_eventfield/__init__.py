@@ -30,6 +30,7 @@ from .evaluation.sweep import SweepTable, sweep  # noqa: E402
 from .events.io import H5EventWriter, read_events, write_events  # noqa: E402
 from .events.preview import event_frame_rgb, write_preview  # noqa: E402
 from .events.stream import EventStream  # noqa: E402
+from .events.stuck_pixels import stuck_pixels, without_stuck_pixels  # noqa: E402
 from .focus import depth  # noqa: E402
 from .focus.depth import DepthMap, depth_from_focus, focus_measure  # noqa: E402
 from .focus.refocus import depth_planes, focal_stack, refocus  # noqa: E402
@@ -47,7 +48,7 @@ from .simulate.render import RenderSummary, render_events, render_frames  # noqa
 
 __all__ = ["__version__", "choose_variant", "set_variant", "quiet_mitsuba_log", "EventFieldError", "ConfigError", "EventStream",
            "DeviceEventStream",
-           "H5EventWriter", "read_events", "write_events", "Motion", "load_motion", "parse_motion",
+           "H5EventWriter", "read_events", "write_events", "stuck_pixels", "without_stuck_pixels", "Motion", "load_motion", "parse_motion",
            "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "render_frames", "events_from_frames", "reconstruct",
            "TimedScene", "load_scene", "scan", "ScanCurve", "make_curve", "curve_from_dict", "event_angles",
            "ViewStack", "extract_views", "split_events", "view_of_pixel", "LightField", "from_galvo",

@@ -30,6 +30,13 @@ def stuck_pixels(ev, threshold_on: float, threshold_off: float, max_span: float 
                  window_s: float = WINDOW_S) -> dict:
     """{(x, y): the largest span of the pixel's running level (log intensity) within one ``window_s`` window}
     for every pixel of ``ev`` whose level spans more than ``max_span`` within a window."""
+    from ..errors import ConfigError
+    from ..events.stream import EventStream
+    from ..validate import positive
+    if not isinstance(ev, EventStream):
+        raise ConfigError(f"stuck_pixels: events = {type(ev).__name__}: expected an EventStream")
+    threshold_on, threshold_off = positive(threshold_on, "threshold_on"), positive(threshold_off, "threshold_off")
+    max_span, window_s = positive(max_span, "max_span"), positive(window_s, "window_s")
     if not len(ev):
         return {}
     key = ev.y.astype(np.int64) * ev.width + ev.x
@@ -55,8 +62,12 @@ def stuck_pixels(ev, threshold_on: float, threshold_off: float, max_span: float 
 def without_stuck_pixels(ev, where: str):
     """``ev`` without the events of its stuck pixels (``stuck_pixels``, at its own contrast thresholds), with a
     warning that names them; ``ev`` itself where there are none."""
-    pm = ev.meta.get("pixel_model") or {}
-    found = stuck_pixels(ev, float(pm["threshold_on"]), float(pm["threshold_off"]))
+    from ..errors import ConfigError
+    pm = (getattr(ev, "meta", None) or {}).get("pixel_model") or {}
+    if pm.get("threshold_on") is None or pm.get("threshold_off") is None:
+        raise ConfigError(f"{where}: no contrast thresholds in the stream's pixel_model metadata: stuck pixels are "
+                          "found by the level their events integrate to (a recording: give them, e.g. --contrast)")
+    found = stuck_pixels(ev, pm["threshold_on"], pm["threshold_off"])
     if not found:
         return ev
     worst = sorted(found, key=found.get, reverse=True)
