@@ -11,7 +11,7 @@ from ..errors import EventFieldError
 from ..events.stuck_pixels import without_stuck_pixels
 from ..validate import MAX_VIEWS, number_list
 from .args import num
-from .inputs import galvo_frames, galvo_scan, give_optics, luminance_channel, start_log, with_contrast
+from .inputs import galvo_frames, galvo_scan, give_optics, luminance_channel, nonempty, start_log, with_contrast
 
 OPTICS_HELP = ("JSON of the set-up's nominal galvo optics (design, fov_x_deg, mirror_distance, mirror_separation, "
                "scan), for a camera recording that carries none")
@@ -59,7 +59,7 @@ def _capture(path: str, a):
     from ..events.io import read_events
     ev = read_events(path)
     give_optics(ev, path, a.optics, design="galvo", takes_calibration=False)
-    return without_stuck_pixels(with_contrast(ev, a.contrast, path), path)
+    return nonempty(without_stuck_pixels(with_contrast(ev, a.contrast, path), path), path)
 
 
 def _galvo(a) -> None:

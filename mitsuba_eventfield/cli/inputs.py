@@ -17,12 +17,20 @@ def read_input(a, needs_optics: bool = False):
     if not len(ev):        # refocused, a flat image; as a depth map, no confident pixel: both written as done
         raise EventFieldError(f"{a.file}: no events: nothing to reconstruct")
     try:
-        return without_stuck_pixels(with_contrast(ev, getattr(a, "contrast", None), a.file), a.file)
+        kept = without_stuck_pixels(with_contrast(ev, getattr(a, "contrast", None), a.file), a.file)
     except EventFieldError as e:
         if needs_optics and not ev.meta.get("optics") and not (getattr(a, "optics", None)
                                                                or getattr(a, "calibration", None)):
             raise EventFieldError(f"{e}; nor optics: pass {_optics_options()}") from None
         raise
+    return nonempty(kept, a.file)
+
+
+def nonempty(ev, where: str):
+    """``ev``, refused in one line when its stuck pixels held every event (a flat image written as done)."""
+    if not len(ev):
+        raise EventFieldError(f"{where}: no events once its stuck pixels are left out: nothing to reconstruct")
+    return ev
 
 
 def with_contrast(ev, contrast, where: str):
