@@ -48,7 +48,8 @@ from .simulate.render import RenderSummary, render_events, render_frames  # noqa
 
 __all__ = ["__version__", "choose_variant", "set_variant", "quiet_mitsuba_log", "EventFieldError", "ConfigError", "EventStream",
            "DeviceEventStream",
-           "H5EventWriter", "read_events", "write_events", "stuck_pixels", "without_stuck_pixels", "Motion", "load_motion", "parse_motion",
+           "H5EventWriter", "read_events", "write_events", "stuck_pixels", "without_stuck_pixels", "Motion",
+           "load_motion", "parse_motion",
            "event_frame_rgb", "write_preview", "RenderSummary", "render_events", "render_frames", "events_from_frames", "reconstruct",
            "TimedScene", "load_scene", "scan", "ScanCurve", "make_curve", "curve_from_dict", "event_angles",
            "ViewStack", "extract_views", "split_events", "view_of_pixel", "LightField", "from_galvo",

@@ -264,6 +264,7 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
                          "object_far > near (scene units)")
     _check_roi(roi)                                   # before rendering: bad input costs nothing
     _check_positive("planes", planes, integer=True, low=1)
+
     def before_render(timed, periods, period):
         optics = timed.sensor.optics_metadata() if hasattr(timed.sensor, "optics_metadata") else {}
         n = int(optics.get("n", 1)) if optics.get("design") == "kaleidoscope" else 1     # one view's image

@@ -34,7 +34,8 @@ def add_parsers(sub) -> None:
     ds.add_argument("--duration", type=num(0, MAX_SCAN_S), default=0.0,
                     help="seconds to scan, then stop (default 0: until Ctrl-C or SIGTERM)")
     ds.add_argument("--metadata", help="write the capture metadata (instrument, read-back, scan) to this JSON")
-    dsub.add_parser("stop", parents=[conn], help="ramp down whatever the generator is scanning (read back), then switch both outputs off")
+    dsub.add_parser("stop", parents=[conn],
+                    help="ramp down whatever the generator is scanning (read back), then switch both outputs off")
     dsub.add_parser("status", parents=[conn], help="identity, settings read back, error queue")
 
 

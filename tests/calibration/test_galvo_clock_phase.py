@@ -55,7 +55,8 @@ def test_a_phase_that_does_not_settle_is_refused_not_returned(monkeypatch):
 
     monkeypatch.setattr(galvo, "fit_galvo", lambda assumed, times, *a, **k: SimpleNamespace(
         tau0=assumed + curve.period / 4, t_first=0.0))
-    with pytest.raises(CalibrationError, match="the scan phase did not settle: views made at 270.0 deg gave 0.0 deg after four passes"):
+    with pytest.raises(CalibrationError,
+                       match="the scan phase did not settle: views made at 270.0 deg gave 0.0 deg after four passes"):
         galvo.fit_galvo_consistent(frames_at, curve, [(1, 1)])
     assert len(made_at) == 16                                     # four starts, four passes each
     made_at.clear()
