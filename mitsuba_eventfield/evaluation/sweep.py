@@ -22,6 +22,7 @@ import itertools
 import json
 import os
 import re
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -32,6 +33,10 @@ from ..simulate.render import render_events
 
 METRICS = ("events", "rate_ev_s", "on_fraction", "dropped_readout", "wall_s", "render_s")
 _PREFIXES = ("xml.", "render.", "pixel.")
+# one point at a time in a process: Mitsuba's scene loading and its file resolver are process-wide, and a Dask
+# worker with two threads (Dask's default layout) failed on a texture's I/O or crashed Dr.Jit, loading two
+# scenes at once (plain Mitsuba too); processes, not threads, give a sweep its parallelism
+_ONE_POINT_AT_A_TIME = threading.Lock()
 
 
 @dataclass
@@ -150,7 +155,8 @@ def run_point(scene: str, point: dict, out_dir: str | None = None, keep_events: 
     out = os.path.join(out_dir, f"point-{key}.h5") if (out_dir and keep_events) else None
     duration = render.pop("duration", None)
     try:
-        result = render_events(load_scene(scene, **xml), duration, pixel=pixel or None, output=out, **render)
+        with _ONE_POINT_AT_A_TIME:
+            result = render_events(load_scene(scene, **xml), duration, pixel=pixel or None, output=out, **render)
     except EventFieldError as e:     # which point: an xml.* or render.* refusal named only its value
         raise EventFieldError(f"sweep point {', '.join(f'{k}={v}' for k, v in point.items())}: {e}") from None
     r = result.meta["render"] if hasattr(result, "meta") else result.as_dict()
@@ -202,22 +208,54 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
                                  [keep_events] * len(todo), [inputs] * len(todo), [quiet] * len(todo), pure=False)
             rows = client.gather(futures)
         else:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
-            with ProcessPoolExecutor(max_workers=max(1, processes),
-                                     mp_context=multiprocessing.get_context("spawn")) as pool:
-                futs = [pool.submit(run_point, scene, p, out_dir, keep_events, inputs, quiet) for p in todo]
-                if progress:
-                    from ..simulate.summary import progress_bar
-                    for _ in progress_bar(futs, desc="sweep", unit="point"):
-                        _.exception()
-                rows = [f.result() for f in futs if f.exception() is None]
-                failed = [(p, f.exception()) for p, f in zip(todo, futs) if f.exception() is not None]
-                if failed:       # every other point ran (and is kept in out_dir): one line for the first refusal
-                    raise _failed_points(failed, len(todo), out_dir)
+            rows = _local(scene, todo, out_dir, keep_events, inputs, quiet, processes, progress)
         results = {r["key"]: dict(r, resumed=False) for r in rows}
     results.update(done)
     return SweepTable([results[key] for key in keys])
+
+
+def _worker_start() -> None:
+    """A local sweep worker: Ctrl-C is the sweeping process's to handle (a terminal sends it to the whole
+    group, and workers interrupted mid-point were replaced by the pool, which went on with the queue), and the
+    worker ends when that process does (SIGTERM to it left the workers idle for ever: Linux's parent-death
+    signal, where there is one)."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))        # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _local(scene, todo, out_dir, keep_events, inputs, quiet, processes, progress) -> list:
+    """The points ``todo`` in a pool of spawned processes; their rows. Interrupted (Ctrl-C, or SIGTERM turned
+    into an exception), the points not started are cancelled and the workers ended at once: the pool's own
+    exit waited for the whole queue (a second Ctrl-C then hung it). What finished is kept for a resume."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    pool = ProcessPoolExecutor(max_workers=max(1, processes), mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_worker_start)
+    try:
+        futs = [pool.submit(run_point, scene, p, out_dir, keep_events, inputs, quiet) for p in todo]
+        if progress:
+            from ..simulate.summary import progress_bar
+            for _ in progress_bar(futs, desc="sweep", unit="point"):
+                _.exception()
+        rows = [f.result() for f in futs if f.exception() is None]
+    except BaseException:
+        workers = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for w in workers:                       # a point in flight: its partial file is removed on the next run
+            w.terminate()
+        for w in workers:
+            w.join(timeout=10)
+        raise
+    pool.shutdown(wait=True)
+    failed = [(p, f.exception()) for p, f in zip(todo, futs) if f.exception() is not None]
+    if failed:       # every other point ran (and is kept in out_dir): one line for the first refusal
+        raise _failed_points(failed, len(todo), out_dir)
+    return rows
 
 
 def _failed_points(failed: list, total: int, out_dir) -> EventFieldError:
