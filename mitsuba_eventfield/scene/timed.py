@@ -48,6 +48,7 @@ class TimedScene:
         if width < 1 or height < 1:       # a 0-pixel side divided by zero when the event batches were sized
             raise EventFieldError(f"{path or 'scene'}: film {width}x{height}: each side must be at least 1 pixel")
         self.scene = scene
+        self.variant = mi.variant()        # what its objects belong to (load_scene switches back to it)
         self.motion = motion
         self.path = path
         self.defines: dict = {}   # the XML's <default> values given at load (-D): recorded, compared on resume
@@ -217,6 +218,10 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
     None: the scene's own, or ``scene.sampler.DEFAULT_SAMPLER`` when it names none (``timed.sampler_choice``).
     """
     if isinstance(scene, TimedScene):
+        # its Mitsuba objects belong to the variant it was loaded in: a colour scene loaded since then had
+        # switched the process's variant, and rendering this one failed on a bare AssertionError in Mitsuba
+        if scene.variant is not None and mi.variant() != scene.variant:
+            backend.set_variant(scene.variant)
         return scene
     if variant is not None or color:
         backend.set_variant(variant, color)

@@ -54,3 +54,22 @@ def test_contradicting_options_are_one_line(tmp_path, capsys):
     code = cli(["render", DEMO, "--motion", "nope.toml", "--no-motion", "-o", str(tmp_path / "e.h5"), "--quiet"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.endswith("--motion nope.toml and --no-motion: give one") and not os.listdir(tmp_path)
+
+
+def test_a_scene_renders_in_its_own_variant_after_a_colour_scene_was_loaded():
+    """load_scene(color=True) switches the process's variant, and a mono scene loaded before it then failed to
+    render on a bare AssertionError inside Mitsuba; each scene now renders in the variant it was loaded in, and
+    the same events as before the colour load."""
+    import mitsuba as mi
+    from conftest import TEST_VARIANT
+    fan = os.path.join(ROOT, "scenes", "fan", "fan.xml")
+    mono = ef.load_scene(fan, width=32, height=24)
+    first = ef.render_events(mono, 0.002, steps=4)
+    colour = ef.load_scene(os.path.join(ROOT, "scenes", "demo", "demo.xml"), width=32, height=24, color=True)
+    assert mi.variant() != mono.variant
+    try:
+        again = ef.render_events(mono, 0.002, steps=4)
+        assert mi.variant() == mono.variant and len(first) > 1000 and again.equals(first)
+        assert ef.render_frames(colour, [0.0], log=False, rgb=True).shape[-1] == 3 and mi.variant() == colour.variant
+    finally:
+        ef.set_variant(TEST_VARIANT)
