@@ -20,6 +20,18 @@ def plugin_message(e: Exception) -> str | None:
     return errors[-1] if errors else None
 
 
+def interrupt_in(e: BaseException):
+    """The KeyboardInterrupt or SystemExit in ``e``'s chain of causes, or None: a library (Dr.Jit, Mitsuba) that
+    wraps what our Python raised inside it wraps the user's Ctrl-C too, and a stop must stay a stop."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, (KeyboardInterrupt, SystemExit)):
+            return e
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return None
+
+
 # The signals that asked this process to stop, in order: the ``eventfield`` command's handler adds each before
 # it raises KeyboardInterrupt, and clears them when the command ends. Why a record as well as the exception: an
 # interrupt raised while a library runs our Python (Dr.Jit recording a frozen render, Mitsuba calling a plugin)

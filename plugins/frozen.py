@@ -10,7 +10,7 @@ import threading
 
 import drjit as dr
 
-from mitsuba_eventfield.errors import raise_if_stopped
+from mitsuba_eventfield.errors import interrupt_in, raise_if_stopped
 
 FREEZE_ENV = "EVENTFIELD_FREEZE"
 
@@ -58,14 +58,15 @@ class FrozenOrTraced:
             try:
                 return self.frozen(*args)
             except RuntimeError as e:
-                if "frozen function" not in str(e):
-                    raise
                 # Dr.Jit wraps whatever the recorded function raised, a KeyboardInterrupt too (Ctrl-C or the
-                # CLI's SIGTERM landing inside a recording): that is the user stopping, not a refusal to freeze,
-                # and tracing on would swallow it (the render ran to its end: seen under pytest-xdist)
-                stop = _interrupt_in(e)
+                # CLI's SIGTERM landing inside a recording, or in its traversal of the arguments: "FlatVariables::
+                # assign()", which reached a library user as a RuntimeError): that is the user stopping, not a
+                # refusal to freeze, and tracing on would swallow it (the render ran to its end: pytest-xdist)
+                stop = interrupt_in(e)
                 if stop is not None:
                     raise stop from e
+                if "frozen function" not in str(e):
+                    raise
                 raise_if_stopped()      # the interrupt's own exception lost in Dr.Jit's wrapping: still a stop
                 why = " ".join(str(e.__cause__ or e).split()).split("validate(): ")[-1].split(". ")[0][:160]
                 self.refused = why or "refused"
@@ -73,17 +74,6 @@ class FrozenOrTraced:
                 if collecting:
                     gc.enable()
         return self.fn(*args)
-
-
-def _interrupt_in(e: BaseException):
-    """The KeyboardInterrupt or SystemExit in ``e``'s chain of causes, or None."""
-    seen = set()
-    while e is not None and id(e) not in seen:
-        if isinstance(e, (KeyboardInterrupt, SystemExit)):
-            return e
-        seen.add(id(e))
-        e = e.__cause__ or e.__context__
-    return None
 
 
 class FrozenCache(dict):

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import backend
-from ..errors import EventFieldError, plugin_message
+from ..errors import EventFieldError, interrupt_in, plugin_message
 from . import instancing
 from . import sampler as sampler_module
 from .motion import Motion, load_motion, motion_path_for, parse_motion
@@ -252,6 +252,11 @@ def load_scene(scene, motion="auto", variant: str | None = None, color: bool = F
         except OSError as e:
             raise EventFieldError(f"{path}: cannot read the scene ({e.strerror or type(e).__name__})") from None
         except Exception as e:  # Mitsuba reports XML/plugin errors as RuntimeError with a long trace
+            # a Ctrl-C inside a plugin's constructor comes back as Mitsuba's error, the interrupt in its cause or
+            # only in its text: a stop, not a bad scene (a generation loop catching EventFieldError went on)
+            stop = interrupt_in(e)
+            if stop is not None or "KeyboardInterrupt" in str(e):
+                raise stop or KeyboardInterrupt() from e
             raise EventFieldError(f"{path}: {_load_error(e, path, original, text, xml_params)}") from None
     timed = TimedScene(scene, motion, path, instanced)
     timed.sampler_choice = sampler_choice

@@ -222,3 +222,35 @@ def test_a_render_past_the_keyframes_says_the_object_holds_its_pose():
     with warnings.catch_warnings():
         warnings.simplefilter("error", MotionHeldWarning)
         stepping(timed, 0.04, 4, False, 0.1, None, None, 1, 0, "fixed", 0.01)
+
+
+def test_a_ctrl_c_inside_a_load_or_a_frozen_call_stays_a_stop(monkeypatch):
+    """A generation loop that catches EventFieldError per scene went on after the user's Ctrl-C: Mitsuba
+    returned the interrupt raised in a plugin's constructor as its own error (the interrupt in its cause or only
+    in its text), and Dr.Jit's traversal of a frozen function's arguments as a RuntimeError. Both are
+    KeyboardInterrupt again."""
+    from mitsuba_eventfield.plugins.frozen import FrozenOrTraced
+    from mitsuba_eventfield.scene import timed
+
+    def interrupted_load(*a, **k):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as stop:
+            raise RuntimeError('failed to instantiate integrator plugin of type "eventfield":') from stop
+    monkeypatch.setattr(timed.sampler_module, "load_text", interrupted_load)
+    with pytest.raises(KeyboardInterrupt):
+        ef.load_scene(DEMO)
+    monkeypatch.setattr(timed.sampler_module, "load_text", lambda *a, **k: (_ for _ in ()).throw(
+        RuntimeError("plugin raised\nTraceback (most recent call last):\nKeyboardInterrupt")))
+    with pytest.raises(KeyboardInterrupt):
+        ef.load_scene(DEMO)
+    frozen = FrozenOrTraced(lambda x: x)
+
+    def interrupted_call(*a):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as stop:
+            raise RuntimeError("FlatVariables::assign(): error encountered while processing an argument") from stop
+    frozen.frozen = interrupted_call
+    with pytest.raises(KeyboardInterrupt):
+        frozen(1)
