@@ -58,8 +58,8 @@ def _finalise_int(h: int) -> int:
 def mixed(index, word):
     """The hash of ``index`` (uint32 array) under ``word`` (one, or one an index): the draw ``index`` of the
     sequence ``word`` names. The index is hashed before the word enters: with ``finalise(index * GOLDEN +
-    word)`` (until 2026-11-27) two words 902 Weyl steps apart drew one sequence shifted by 902 indices, and two
-    seeds of a 1280x720 sensor shared an eighth of their noise events, pixel for shifted pixel."""
+    word)`` (until 2026-11-27) two words k Weyl steps apart drew one sequence shifted by k indices (seeds 0 and
+    902: k = 806,330, an eighth of a 1280x720 sensor's noise events shared, pixel for shifted pixel)."""
     return finalise(finalise(index * GOLDEN) ^ word)
 
 
