@@ -50,6 +50,24 @@ def check_space(path: str, need: int) -> None:
         raise _disk_full(path, free, need)
 
 
+def check_file_limit(path: str, partial: str, need: int) -> None:
+    """Refuse growing ``partial`` (the file being written for ``path``) by about ``need`` bytes past the
+    process's file-size limit (``ulimit -f``, RLIMIT_FSIZE): dv-processing's writer thread met it as EFBIG and
+    aborted the whole process (a quota it cannot see: the free-space check is all there is)."""
+    try:
+        import resource
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    except (ImportError, OSError, ValueError):
+        return
+    if limit == resource.RLIM_INFINITY:
+        return
+    size = os.path.getsize(partial) if os.path.exists(partial) else 0
+    if size + int(need) + DISK_MARGIN > limit:
+        raise EventFieldError(f"{path}: the process's file-size limit (ulimit -f) is {limit} bytes: this file "
+                              f"would pass it ({size} bytes written, about {int(need)} more); raise the limit or "
+                              "write a shorter render")
+
+
 def _no_space(e: BaseException) -> bool:
     # h5py and Python set errno; dv-processing only says it in the message text
     return getattr(e, "errno", None) == errno.ENOSPC or "No space left on device" in str(e)

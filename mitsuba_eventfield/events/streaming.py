@@ -20,7 +20,7 @@ import numpy as np
 
 from ..atomic import check_writable, remove_stale_partials, temporary_name
 from ..errors import EventFieldError
-from .disk import HEADER_BYTES, check_space, disk_errors
+from .disk import HEADER_BYTES, check_file_limit, check_space, disk_errors
 from .hdf5 import H5EventWriter, _json
 from .stream import chunk_columns, first_out_of_order
 
@@ -188,7 +188,7 @@ class NpzEventWriter(_PartialFile):
 
 class Aedat4EventWriter(_PartialFile):
     """AEDAT4 through dv-processing. Its writer thread aborts the process on a write error, so the free space
-    for every chunk is checked before the chunk is handed over."""
+    and the process's file-size limit are checked for every chunk before the chunk is handed over."""
 
     def __init__(self, path, width, height, meta=None):
         if not (0 < int(width) <= AEDAT4_MAX_SIDE and 0 < int(height) <= AEDAT4_MAX_SIDE):
@@ -212,6 +212,7 @@ class Aedat4EventWriter(_PartialFile):
                                   f"{int(t[0])} us): choose .h5, .npz or .txt, or shift the times")
         need = AEDAT4_BYTES_PER_EVENT * len(t) + HEADER_BYTES
         check_space(self.path, need)
+        check_file_limit(self.path, self.tmp, need)
         with disk_errors(self.path, need):
             store = self.dv.EventStore()
             for ti, xi, yi, pi in zip(t.tolist(), x.tolist(), y.tolist(), (p > 0).tolist()):

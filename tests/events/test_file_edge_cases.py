@@ -225,3 +225,37 @@ def test_abort_on_a_full_disk_leaves_nothing(tmp_path, suffix):
     assert len(os.listdir(tmp_path)) >= 1
     w.abort()
     assert os.listdir(tmp_path) == []
+
+
+def test_an_aedat4_past_the_file_size_limit_is_one_line_not_an_abort(tmp_path):
+    """Under ``ulimit -f`` (a file-size limit; a quota behaves alike but cannot be seen) dv-processing's writer
+    thread met EFBIG and aborted the whole process (exit 134, a partial file left). The limit is checked with
+    the free space before each chunk: one line, no file; under no limit the same write is taken."""
+    import resource
+    import subprocess
+    import sys
+    script = tmp_path / "write.py"
+    script.write_text(
+        "import sys, numpy as np, mitsuba_eventfield as ef\n"
+        "n = 300_000\n"
+        "rng = np.random.default_rng(0)\n"
+        "ev = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 10**6, n)),\n"
+        "                    rng.choice([-1, 1], n), 64, 48)\n"
+        "try:\n"
+        "    ef.write_events(sys.argv[1], ev)\n"
+        "    print('written')\n"
+        "except ef.EventFieldError as e:\n"
+        "    print('refused:', e)\n")
+    out = tmp_path / "out"
+    out.mkdir()
+
+    def limited():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2 << 20, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+    r = subprocess.run([sys.executable, str(script), str(out / "o.aedat4")], capture_output=True, text=True,
+                       preexec_fn=limited, timeout=300)
+    assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
+    assert "refused:" in r.stdout and "file-size limit (ulimit -f) is 2097152 bytes" in r.stdout, r.stdout
+    assert os.listdir(out) == []
+    r = subprocess.run([sys.executable, str(script), str(out / "o.aedat4")], capture_output=True, text=True,
+                       timeout=300)
+    assert "written" in r.stdout and os.listdir(out) == ["o.aedat4"]
