@@ -30,13 +30,11 @@ def _running_channels(ctl) -> tuple:
             as_is.append(ch)
             continue
         needed = ("offset",) if got.get("function") == "DC" else ("frequency", "vpp", "offset")
-        if got.get("function") in ("SIN", "DC") and all(
-                isinstance(got.get(k), float) and math.isfinite(got[k]) for k in needed):
-            if got.get("output") is True:
-                running[ch] = got
-            elif got.get("output") is not False:
-                as_is.append(ch)
-        elif got.get("output") is not False:
+        readable = got.get("function") in ("SIN", "DC") and all(
+            isinstance(got.get(k), float) and math.isfinite(got[k]) for k in needed)
+        if readable and got.get("output") is True:
+            running[ch] = got
+        elif got.get("output") is not False:          # on, or not clearly off
             as_is.append(ch)
     return running, as_is
 
