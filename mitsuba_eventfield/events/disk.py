@@ -1,6 +1,8 @@
-"""Full disks, before and during a write: every event writer checks the free space before each chunk and
-turns an ENOSPC met anyway into one ``EventFieldError``, because HDF5 and dv-processing do not recover from it
-(a segfault, an abort from dv's writer thread)."""
+"""Full disks and quotas, before and during a write: every event writer checks the free space before each chunk
+and turns a refused write met anyway (ENOSPC, a user quota's EDQUOT, a file-size limit's EFBIG) into one
+``EventFieldError``, because HDF5 and dv-processing do not recover from it (a segfault, an abort from dv's writer
+thread). A quota is not in the free-space figure: the AEDAT4 writer reserves each chunk's bytes first
+(:func:`check_room`)."""
 from __future__ import annotations
 
 import contextlib
@@ -37,7 +39,15 @@ def _free_bytes(path: str) -> int | None:
         return None
 
 
-def _disk_full(path: str, free: int | None, need: int) -> EventFieldError:
+def _disk_full(path: str, free: int | None, need: int, cause: BaseException | None = None) -> EventFieldError:
+    """The one-line error of a write the file system refused (``cause``, when known, says which refusal)."""
+    code = getattr(cause, "errno", None)
+    if code == errno.EDQUOT or "quota exceeded" in str(cause or "").lower():
+        return EventFieldError(f"{path}: disk quota exceeded: the file system refused about {_size(need)} more "
+                               "(a user or group quota; `quota -s` shows it)")
+    if code == errno.EFBIG:
+        return EventFieldError(f"{path}: file too large: the file system or the process's file-size limit "
+                               f"(ulimit -f) refused about {_size(need)} more")
     have = "unknown" if free is None else _size(free)
     return EventFieldError(f"{path}: disk full: {have} free, need about {_size(need)}")
 
@@ -68,9 +78,49 @@ def check_file_limit(path: str, partial: str, need: int) -> None:
                               "write a shorter render")
 
 
+_REFUSED = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+_REFUSED_TEXT = ("No space left on device", "Disk quota exceeded", "File too large")
+
+
 def _no_space(e: BaseException) -> bool:
-    # h5py and Python set errno; dv-processing only says it in the message text
-    return getattr(e, "errno", None) == errno.ENOSPC or "No space left on device" in str(e)
+    """Whether ``e`` is the file system refusing more bytes: a full disk, a quota, a file-size limit (h5py and
+    Python set errno; dv-processing only says it in the message text)."""
+    return getattr(e, "errno", None) in _REFUSED or any(t in str(e) for t in _REFUSED_TEXT)
+
+
+def _reserve(fd: int, size: int) -> int:
+    """fallocate(2) of ``size`` bytes: 0, or the errno (EOPNOTSUPP where the file system cannot reserve; -1
+    where the call does not exist). The system call, not glibc's posix_fallocate, which on such a file system
+    writes a byte into every block instead (NFS: a network write each)."""
+    import ctypes
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fallocate = libc.fallocate64
+    except (OSError, AttributeError):
+        return -1
+    fallocate.argtypes = (ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64)
+    return 0 if fallocate(fd, 0, 0, size) == 0 else ctypes.get_errno()
+
+
+def check_room(path: str, partial: str, need: int) -> None:
+    """Refuse a chunk of about ``need`` bytes for ``partial`` (the file being written for ``path``) unless the
+    file system grants them now: they are reserved in a probe file beside it and released at once. A user quota
+    (a cluster's home or project space) is not in the free-space figure, and dv-processing's writer thread,
+    meeting EDQUOT, aborted the process (exit 134) and left the partial file. The probe is named after
+    ``partial``, so a run killed while it exists leaves a file the next run removes (``remove_stale_partials``)."""
+    probe = partial + ".room"
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except OSError:
+        return                   # cannot tell (odd file system): the write itself will say
+    try:
+        code = _reserve(fd, int(need) + DISK_MARGIN)
+    finally:
+        os.close(fd)
+        with contextlib.suppress(OSError):
+            os.remove(probe)
+    if code in _REFUSED:
+        raise _disk_full(path, _free_bytes(path), int(need) + DISK_MARGIN, OSError(code, os.strerror(code)))
 
 
 @contextlib.contextmanager
@@ -83,7 +133,7 @@ def disk_errors(path: str, need: int):
     except Exception as e:
         if not _no_space(e):
             raise
-        raise _disk_full(path, _free_bytes(path), int(need) + DISK_MARGIN) from None
+        raise _disk_full(path, _free_bytes(path), int(need) + DISK_MARGIN, e) from None
 
 
 class GuardedFile(io.FileIO):

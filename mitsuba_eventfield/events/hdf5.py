@@ -190,16 +190,19 @@ class H5EventWriter:
         """One write step of about ``need`` bytes: refused up front when the disk has no room for it, and any
         full disk met during it (recorded by GuardedFile, or raised) ends it as the one-line error."""
         check_space(self.path, need)
+        cause = None
         try:
             yield
         except Exception as e:
             # after a swallowed failed write HDF5 may trip over what it then reads back: still a full disk
             if not (self._io is not None and self._io.failed) and not _no_space(e):
                 raise
+            cause = e
         else:
             if not (self._io is not None and self._io.failed):
                 return
-        raise _disk_full(self.path, _free_bytes(self.path), int(need) + DISK_MARGIN)
+        cause = (self._io.failed if self._io is not None else None) or cause    # the write the disk refused
+        raise _disk_full(self.path, _free_bytes(self.path), int(need) + DISK_MARGIN, cause)
 
     def _offset(self, first_us: int) -> int:
         """/t_offset, fixed by the first event or promise (``first_us``): events and promises never go back."""

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..atomic import check_writable, remove_stale_partials, temporary_name
 from ..errors import EventFieldError
-from .disk import HEADER_BYTES, check_file_limit, check_space, disk_errors
+from .disk import HEADER_BYTES, check_file_limit, check_room, check_space, disk_errors
 from .hdf5 import H5EventWriter, _json
 from .stream import chunk_columns, first_out_of_order
 
@@ -187,8 +187,11 @@ class NpzEventWriter(_PartialFile):
 
 
 class Aedat4EventWriter(_PartialFile):
-    """AEDAT4 through dv-processing. Its writer thread aborts the process on a write error, so the free space
-    and the process's file-size limit are checked for every chunk before the chunk is handed over."""
+    """AEDAT4 through dv-processing. Its writer thread aborts the process on a write error, so the free space,
+    the process's file-size limit and the room the file system grants (a quota) are checked for every chunk
+    before the chunk is handed over."""
+
+    _in_flight = 0      # bytes of the chunk handed to dv's writer thread last (maybe not yet on disk)
 
     def __init__(self, path, width, height, meta=None):
         if not (0 < int(width) <= AEDAT4_MAX_SIDE and 0 < int(height) <= AEDAT4_MAX_SIDE):
@@ -201,6 +204,7 @@ class Aedat4EventWriter(_PartialFile):
             raise EventFieldError(f"{path}: AEDAT4 export needs dv-processing (pip install dv-processing)") from None
         self.dv = dv
         check_space(self.path, HEADER_BYTES)
+        check_room(self.path, self.tmp, HEADER_BYTES)
         with disk_errors(self.path, HEADER_BYTES):
             self.writer = dv.io.MonoCameraWriter(self.tmp, dv.io.MonoCameraWriter.EventOnlyConfig(
                 "mitsuba-eventfield", (self.width, self.height)))
@@ -213,6 +217,9 @@ class Aedat4EventWriter(_PartialFile):
         need = AEDAT4_BYTES_PER_EVENT * len(t) + HEADER_BYTES
         check_space(self.path, need)
         check_file_limit(self.path, self.tmp, need)
+        # a quota is not in the free space; the chunk before may still be in dv's writer thread: room for both
+        check_room(self.path, self.tmp, need + self._in_flight)
+        self._in_flight = need
         with disk_errors(self.path, need):
             store = self.dv.EventStore()
             for ti, xi, yi, pi in zip(t.tolist(), x.tolist(), y.tolist(), (p > 0).tolist()):

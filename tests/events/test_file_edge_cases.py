@@ -1,6 +1,7 @@
 """Event files at their edges (a reviewer's findings, 2026-11-26): late starts, values that wrapped around, chunks
 that were never checked, foreign files out of order, and writers used after they were closed. Each case is a
 file that reads back as what went in, or one line naming the file before anything is written."""
+import errno
 import os
 
 import h5py
@@ -259,3 +260,50 @@ def test_an_aedat4_past_the_file_size_limit_is_one_line_not_an_abort(tmp_path):
     r = subprocess.run([sys.executable, str(script), str(out / "o.aedat4")], capture_output=True, text=True,
                        timeout=300)
     assert "written" in r.stdout and os.listdir(out) == ["o.aedat4"]
+
+
+def test_a_quota_refuses_an_aedat4_chunk_before_dv_processing_sees_it(tmp_path, monkeypatch):
+    """A user quota (a cluster's home) is not in the free-space figure: dv-processing's writer thread met
+    EDQUOT and aborted the process. Each chunk's bytes are reserved first; a refusal is the one line, in this
+    process, with nothing left beside the output (no partial file, no probe)."""
+    pytest.importorskip("dv_processing")
+    from mitsuba_eventfield.events import disk
+    reserved = []
+
+    def reserve(fd, size):              # the quota grants the header, then refuses the first chunk
+        reserved.append(size)
+        return 0 if len(reserved) == 1 else errno.EDQUOT
+    monkeypatch.setattr(disk, "_reserve", reserve)
+    n = 3 * disk.WRITE_CHUNK
+    rng = np.random.default_rng(0)
+    ev = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 10**6, n)),
+                        rng.choice([-1, 1], n), 64, 48)
+    path = str(tmp_path / "o.aedat4")
+    with pytest.raises(ef.EventFieldError) as err:
+        ef.write_events(path, ev)
+    assert str(err.value).startswith(f"{path}: disk quota exceeded: the file system refused about ")
+    assert "\n" not in str(err.value) and len(reserved) == 2 and reserved[1] > 16 * disk.WRITE_CHUNK
+    assert os.listdir(tmp_path) == []
+
+
+def test_the_room_probe_meets_the_kernels_refusal(tmp_path):
+    """The reservation is the real system call: under a 2 MiB file-size limit the kernel refuses a 4 MiB
+    reservation (EFBIG) and grants a 100 kB one; the probe file is gone either way."""
+    import subprocess
+    import sys
+    script = ("import resource, sys\n"
+              "from mitsuba_eventfield.events import disk\n"
+              "resource.setrlimit(resource.RLIMIT_FSIZE, (2 << 20, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))\n"
+              "out, part = sys.argv[1], sys.argv[1] + '.partial'\n"
+              "disk.check_room(out, part, 100_000)\n"
+              "print('granted')\n"
+              "try:\n"
+              "    disk.check_room(out, part, 4 << 20)\n"
+              "except Exception as e:\n"
+              "    print(type(e).__name__, e)\n")
+    path = str(tmp_path / "o.aedat4")
+    r = subprocess.run([sys.executable, "-c", script, path], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.splitlines() == ["granted", f"EventFieldError {path}: file too large: the file system or the "
+                                     "process's file-size limit (ulimit -f) refused about 5 MiB more"], r.stdout
+    assert os.listdir(tmp_path) == []

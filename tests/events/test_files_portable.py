@@ -5,6 +5,7 @@ import collections
 import errno
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -453,15 +454,22 @@ def test_disk_fills_during_render(tmp_path, demo_small, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
+REFUSALS = [(errno.ENOSPC, r"disk full: [\d.]+ [KMG]iB free, need about [\d.]+ [KM]iB$"),
+            (errno.EDQUOT, r"disk quota exceeded: the file system refused about [\d.]+ [KM]iB more \(a user or "),
+            (errno.EFBIG, r"file too large: the file system or the process's file-size limit")]
+
+
+@pytest.mark.parametrize("code, says", REFUSALS)
 @pytest.mark.parametrize("ext, module, writer", [(".npz", np.lib.format, "write_array_header_1_0"),
                                                 (".txt", np, "savetxt")])
-def test_enospc_from_a_write_is_one_line(tmp_path, stream, ext, module, writer, monkeypatch):
-    """The disk fills between the check and the write (another program): the OSError becomes the same error,
-    and the partial file (and the npz writer's column files) are gone."""
+def test_enospc_from_a_write_is_one_line(tmp_path, stream, ext, module, writer, code, says, monkeypatch):
+    """The disk fills between the check and the write (another program), or a quota or file-size limit
+    refuses it: the OSError becomes the one line saying which, and the partial file (and the npz writer's
+    column files) are gone (a quota's EDQUOT was a traceback)."""
     def no_space(*a, **k):
-        raise OSError(errno.ENOSPC, "No space left on device")
+        raise OSError(code, os.strerror(code))
     monkeypatch.setattr(module, writer, no_space)
-    with pytest.raises(ef.EventFieldError, match="disk full"):
+    with pytest.raises(ef.EventFieldError, match=says):
         ef.write_events(str(tmp_path / f"ev{ext}"), stream)
     assert os.listdir(tmp_path) == []
 
@@ -472,9 +480,9 @@ import numpy as np
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.events import disk, io as eventio
 written = [0]
-def write_some(self, view):              # the disk is full after 40 kB
+def write_some(self, view):              # the disk (or a quota: errno argv[2]) is full after 40 kB
     if written[0] > 40_000:
-        raise OSError(errno.ENOSPC, "No space left on device")
+        raise OSError(int(sys.argv[2]), os.strerror(int(sys.argv[2])))
     written[0] += len(view)
     return io.FileIO.write(self, view)
 disk.GuardedFile._write_some = write_some
@@ -489,11 +497,14 @@ except ef.EventFieldError as e:
 """
 
 
-def test_enospc_inside_hdf5_does_not_crash(tmp_path):
-    """HDF5 crashes (segfault) on closing a file whose write failed, so it must never see the failure: run in a
-    process of its own, where a crash shows as the exit status."""
+@pytest.mark.parametrize("code, says", REFUSALS[:2])
+def test_enospc_inside_hdf5_does_not_crash(tmp_path, code, says):
+    """HDF5 crashes (segfault) on closing a file whose write failed, so it must never see the failure, a
+    quota's EDQUOT included (it reached HDF5): run in a process of its own, where a crash shows as the exit
+    status."""
     path = str(tmp_path / "ev.h5")
-    r = subprocess.run([sys.executable, "-c", HDF5_ENOSPC, path], capture_output=True, text=True, timeout=300)
+    r = subprocess.run([sys.executable, "-c", HDF5_ENOSPC, path, str(code)], capture_output=True, text=True,
+                       timeout=300)
     assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
-    assert r.stdout.startswith(f"{path}: disk full") and r.stdout.count("\n") == 1, r.stdout
+    assert re.match(re.escape(f"{path}: ") + says.rstrip("$"), r.stdout) and r.stdout.count("\n") == 1, r.stdout
     assert os.listdir(tmp_path) == []
