@@ -317,6 +317,20 @@ def _command(name: str, result, extra: str = "") -> str:
     return cmd + ("" if result.meta["start"] == "events" else " --start frame")
 
 
+def _spin_note(scene_path: str) -> str:
+    """The fan's speed where it is not the paper's Fig. 10 (300 rpm, 0.2 s a turn), from the scene's motion file."""
+    import os
+    from ..scene.motion import load_motion, motion_path_for
+    path = motion_path_for(scene_path)
+    rpms = sorted({o.spin_rpm for o in load_motion(path).objects.values() if o.spin_rpm}) \
+        if os.path.exists(path) else []
+    if not rpms or rpms == [300.0]:
+        return ""
+    turn = 360.0 * rpms[-1] / 60.0
+    return (f" The fan turns at {', '.join(f'{v:g}' for v in rpms)} rpm (the paper's Fig. 10: 300; its Fig. 11: "
+            f"480), {turn * 0.004:.1f} deg in a 250 Hz scan period where the paper's turns 7.2.")
+
+
 def paper_rows(result) -> list:
     """The paper's Fig. 10 (fan refocus at 250 Hz) or Fig. 9's galvo counterpart (the dart) as table rows."""
     inputs = result.meta["inputs"]
@@ -331,7 +345,8 @@ def paper_rows(result) -> list:
                  f"{psnr}; each plane's own pixels sharper refocused on it: {sel}.",
                  "command": _command("highspeed", result, planes),
                  "differs": "The paper reconstructs views with E2VID from real events; here the events-only galvo "
-                 "solver on simulated events. Scoring fits one overall gain (events record no absolute level)."}]
+                 "solver on simulated events. Scoring fits one overall gain (events record no absolute level)."
+                 + _spin_note(result.meta["scene"])}]
     e = result.relative_errors
     return [{"figure": "Fig. 9 (galvo)", "claim": "A dart flying at the camera is refocused at high speed; with the "
              "galvo, the sharpest refocus plane per scan period tracks its depth.",

@@ -1,4 +1,4 @@
-"""SloMoRF (paper section 6.1): slow-motion refocus from a kaleidoscope seen by an event camera and, through a
+"""SloMoRF (paper section 6.3): slow-motion refocus from a kaleidoscope seen by an event camera and, through a
 beam splitter, by a 120 fps RGB camera with the same views.
 
 The splitter is ideal and lossless here: both cameras see the full radiance of the same film. A real 50/50

@@ -107,6 +107,14 @@ def test_outputs_name_the_paper_results(comparison, grid, tmp_path):
     for r in rows:
         assert set(r) == {"figure", "claim", "measured", "command", "differs"}
         assert r["command"].startswith("eventfield ") and "--film 96" in r["command"]
+    # the row says what goes against the paper: the galvo's tiny scan refocuses nothing (0.1 deg: ~0.1 px of
+    # parallax at half the refocus depth), and the kaleidoscope's moving-card score moves with speed
+    par = comparison.meta["galvo_parallax_px"]
+    assert max(par.values()) < 0.5 and f"by {par['0.5x']:.2g} / {par['2x']:.2g} px" in rows[0]["differs"]
+    assert "too little to tell depths apart" in rows[0]["differs"]
+    moving = comparison.summary()["kaleidoscope"]["moving"]["psnr_db"]
+    said = "goes against the paper's kaleidoscope" in rows[0]["differs"]
+    assert said == (abs(moving[-1] - moving[0]) > 0.5)
     k = comparison.per_speed[0]["events_per_s"]["kaleidoscope"] / 1e6
     assert f"{k:.2f} vs" in rows[1]["measured"]                       # formatted from this run's numbers
     assert f"ratio {grid.rates['kaleidoscope']['ratio']:.3f}" in rows[2]["measured"]

@@ -54,6 +54,8 @@ def test_hdr_cli_outputs_and_bad_depth(tmp_path):
     row = m["paper"][0]
     assert row["figure"] == "Fig. 7" and f"long exposure {m['errors']['ldr_long']['bright']:.2f}" in row["measured"]
     assert row["command"].startswith("eventfield hdr ") and "-D width=48" in row["command"]
+    # the depth the solver was given (the default, from how the scene was built) is said in the row
+    assert f"The solver is given the scene's depth ({m['solver_depth']:g} m" in row["differs"]
     bad = subprocess.run(cmd[:-2] + ["--depth", "-1"], capture_output=True, text=True, env=env, timeout=600)
     assert bad.returncode == 2 and "argument --depth: '-1': allowed range is (0, inf)" in bad.stderr
 

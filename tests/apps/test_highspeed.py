@@ -188,3 +188,13 @@ def test_bad_arguments_name_the_field():
     with pytest.raises(ValueError, match="near"):
         highspeed.track_focus_depth(DART, DART_ROI, 1.5, 0.6, 1.6)
     assert math.isclose(highspeed.roi_pixels((0.25, 0.5, 0.75, 1.0), 64, 48)[0], 16)
+
+
+def test_the_fan_row_says_its_speed_against_the_papers(tmp_path):
+    """The paper's Fig. 10 fan turns at 300 rpm; the bundled fan at 480 (its Fig. 11's): the row says so, with
+    the turn in a 250 Hz scan period, read from the scene's motion file."""
+    note = highspeed._spin_note(os.path.join(ROOT, "scenes", "fan", "fan.xml"))
+    assert "turns at 480 rpm" in note and "11.5 deg in a 250 Hz scan period" in note   # 8 turns/s x 4 ms
+    (tmp_path / "s.motion.toml").write_text('version = 1\n[objects.a]\nspin = { rpm = 300, axis = [0, 0, 1] }\n')
+    assert highspeed._spin_note(str(tmp_path / "s.xml")) == ""
+    assert highspeed._spin_note(str(tmp_path / "none.xml")) == ""

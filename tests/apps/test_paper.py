@@ -47,3 +47,16 @@ def test_unknown_result_is_one_line(tmp_path):
         paper.generate(str(tmp_path / "o"), str(tmp_path / "p.md"), only=["nonsense"])
     assert not (tmp_path / "p.md").exists()
     assert os.listdir(tmp_path) == []
+
+
+def test_fig_8_runs_at_the_papers_factor(monkeypatch):
+    """The paper's Fig. 8 is 6x (720 fps from 120 fps); the app's default 8x is its Fig. 9's dart."""
+    from mitsuba_eventfield.apps import slomorf
+    asked = {}
+    monkeypatch.setattr(slomorf, "slomorf", lambda *a, **k: asked.update(k))
+    for quick in (True, False):
+        next(e for e in paper.ENTRIES if e.key == "slomorf").run(quick)
+        assert asked["factor"] == 6
+        asked.clear()
+        next(e for e in paper.ENTRIES if e.key == "slomorf_dart").run(quick)
+        assert asked["factor"] == 8
