@@ -31,7 +31,7 @@ from .events.io import H5EventWriter, read_events, write_events  # noqa: E402
 from .events.preview import event_frame_rgb, write_preview  # noqa: E402
 from .events.stream import EventStream  # noqa: E402
 from .events.stuck_pixels import stuck_pixels, without_stuck_pixels  # noqa: E402
-from .focus import depth  # noqa: E402
+from .focus import depth, galvo_periods  # noqa: E402,F401  (galvo_periods: from_events' "periods" method)
 from .focus.depth import DepthMap, depth_from_focus, focus_measure  # noqa: E402
 from .focus.refocus import depth_planes, focal_stack, refocus  # noqa: E402
 from .focus.tracking import track_focus  # noqa: E402

@@ -2,13 +2,18 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import sys
+import warnings
 
 import numpy as np
 
 from ..errors import ConfigError, EventFieldError
+from ..focus.depth import DEFAULT_MEASURE
+from ..focus.galvo_periods import default_depth_range
+from ..lightfield.model import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import num, save_image, times_ms
@@ -37,7 +42,7 @@ def add_parsers(sub) -> None:
     lf_args.add_argument("--start-frame", help="EXR of the linear frame at the stream start (eventfield frame)")
     lf_args.add_argument("--period", type=num(0, integer=True),      # None: not given (refused on a kaleidoscope)
                          help=f"galvo: scan period index (default {DEFAULT_PERIOD})")
-    lf_args.add_argument("--views", type=num(2, MAX_VIEWS, integer=True),
+    lf_args.add_argument("--views", type=num(MIN_VIEWS, MAX_VIEWS, integer=True),
                          help=f"galvo: views per scan period (default {DEFAULT_VIEWS})")
     lf_args.add_argument("--time", type=num(0), help="kaleidoscope: time in ms (default: stream end)")
     lf_args.add_argument("--calibration", help="calibration JSON (eventfield calibrate): galvo view phase, depth "
@@ -74,8 +79,8 @@ def add_parsers(sub) -> None:
     dp.add_argument("--near", type=num(0, lo_open=True), required=True, help="nearest depth searched (scene units)")
     dp.add_argument("--far", type=num(0, lo_open=True), required=True, help="farthest depth searched (scene units)")
     dp.add_argument("--planes", type=num(2, MAX_PLANES, integer=True), default=32, help="planes searched (default 32)")
-    dp.add_argument("--measure", default="variance", help="focus measure: sml, tenengrad or variance (default "
-                    "variance; the demo uses tenengrad)")
+    dp.add_argument("--measure", default=DEFAULT_MEASURE, help="focus measure: sml, tenengrad or variance (default "
+                    f"{DEFAULT_MEASURE}, as depth_from_focus; the demo uses tenengrad)")
     dp.add_argument("--min-confidence", type=num(0, 1), default=0.2,
                     help="greyed out below this in the PNG (default 0.2; a confidence is near 0 or above ~0.75, "
                          "not a probability: focus/depth.py)")
@@ -105,10 +110,9 @@ def _lightfield(a, ev, nearest: float | None = None):
     optics than this stream's is refused before any reconstruction). ``nearest``: the nearest depth the command
     needs (--near, the nearest --depth), searched by the per-period solver too."""
     from ..calibration import apply_to_lightfield, calibrated_events, check_optics, load_calibration, optics_record
-    from ..lightfield.model import default_method, from_events
-    from ..lightfield.reconstruct import methods
-    if a.method is not None and a.method not in (*methods(), PERIODS):
-        raise EventFieldError(f"--method {a.method!r}: allowed: {', '.join((*methods(), PERIODS))}")
+    from ..lightfield.model import PERIODS, default_method, from_events, methods
+    if a.method is not None and a.method not in methods("galvo"):
+        raise EventFieldError(f"--method {a.method!r}: allowed: {', '.join(methods('galvo'))}")
     calibration = load_calibration(a.calibration) if a.calibration else None
     give_optics(ev, a.file, a.optics, calibration)
     optics = None
@@ -120,46 +124,61 @@ def _lightfield(a, ev, nearest: float | None = None):
     period, views = _design_options(a, ev)
     design = (ev.meta.get("optics") or {}).get("design")
     if a.method is None:         # named, so that the outputs' metadata says which (it said "default")
-        # without a start frame a galvo stream takes the per-period solver: the one-depth solver (the Python
-        # API's default) read galvo_static's card 10 % far
-        a.method = PERIODS if design == "galvo" and not a.start_frame else default_method(design, bool(a.start_frame))
+        a.method = default_method(design, bool(a.start_frame))
     _warn_coarse_steps(a.file, ev)
+    galvo = design == "galvo"
     try:
-        if a.method == PERIODS:
-            lf = _periods_lightfield(a, ev, period, views, nearest)
-        else:
-            lf = from_events(ev, period=period, views=views, time=None if a.time is None else a.time * 1e-3,
-                             method=a.method, log_start=start_log(a.start_frame, ev))
+        with _solver_warnings_held() as held:
+            if a.method == PERIODS:
+                _check_periods(a, design)
+                # the nearer depths the command needs are searched by the solver too
+                lf = from_events(ev, period, views, method=PERIODS,
+                                 depth_range=default_depth_range(ev.meta["optics"], nearest))
+            else:
+                lf = from_events(ev, period if galvo else None, views if galvo else None,
+                                 time=None if a.time is None else a.time * 1e-3, method=a.method,
+                                 log_start=start_log(a.start_frame, ev))
+        lf.meta["warnings"] = [f"{a.file}: {w}" for w in held]
     except (ValueError, KeyError, StopIteration) as e:
         raise EventFieldError(f"{a.file}: {e}") from None
     calibrated = calibration is not None and not lf.meta.get("calibrated")     # not through the events
     return apply_to_lightfield(lf, calibration, optics) if calibrated else lf
 
 
-PERIODS = "periods"      # --method: the galvo solver per period with per-pixel depth (focus.galvo_periods)
+@contextlib.contextmanager
+def _solver_warnings_held():
+    """The solver's warnings (``SolverWarning``) of the light field made inside, held as texts in the list
+    yielded: the command says them after its own checks, so a refused command says one line. Any other warning
+    is shown as it comes."""
+    from ..focus.galvo_periods import SolverWarning
+    held = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SolverWarning)
+        yield held
+    for w in caught:
+        if issubclass(w.category, SolverWarning):
+            held.append(str(w.message))
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
-def _periods_lightfield(a, ev, period: int, views: int, nearest: float | None = None):
-    """The light field of galvo scan period ``period`` as the demo makes it (``focus.galvo_periods``: the period's
-    image solved from its events with per-pixel depth from focus), the default without a start frame. The
-    one-depth solver (``--method galvo``, the Python API's default) is faster, biased where depths differ: cards
-    of offaxis_cards (160x120) 0.5025 / 1.2058 m against 0.4990 / 1.1963 (truth 0.5 / 1.2), 0.8 against 6.1 s
-    a light field; galvo_static's (346x260) 0.549 against 0.490 m (0.491 with the rendered start frame), 27
-    against 59 s for `eventfield depth`. A solver's warning waits in ``lf.meta`` for the command's checks."""
-    from ..focus.galvo_periods import default_depth_range, reconstruct_periods
-    design = (ev.meta.get("optics") or {}).get("design")
+def _solver_warning(lf) -> None:
+    for text in lf.meta.get("warnings", ()):
+        print(f"eventfield: warning: {text}", file=sys.stderr)
+
+
+def _check_periods(a, design) -> None:
+    """``--method periods`` (``focus.galvo_periods``: each period's image solved from its events, each pixel at
+    its own depth; the default without a start frame) asked where it cannot run, said with the options' names.
+    The one-depth solver (``--method galvo``) is faster, biased where depths differ: cards of offaxis_cards
+    (160x120) 0.5025 / 1.2058 m against 0.4990 / 1.1963 (truth 0.5 / 1.2), 0.8 against 6.1 s a light field;
+    galvo_static's (346x260) 0.549 against 0.490 m (0.491 with the rendered start frame), 27 against 59 s for
+    `eventfield depth`."""
     if design != "galvo":
-        raise EventFieldError(f"{a.file}: --method {PERIODS} is for a galvo stream; this one is {design}")
+        raise EventFieldError(f"{a.file}: --method periods is for a galvo stream; this one is {design}")
     if a.start_frame:
-        raise EventFieldError(f"--method {PERIODS} reconstructs from the events alone: --start-frame is used by "
+        raise EventFieldError("--method periods reconstructs from the events alone: --start-frame is used by "
                               "the direct and complementary methods")
-    depth_range = default_depth_range(ev.meta["optics"], nearest)     # nearer ones when the command asks
-    lf, solved = next(reconstruct_periods(ev, views, periods=[period], depth_range=depth_range))
-    if not solved.reliable:
-        lf.meta["warning"] = (f"{a.file}: scan period {period}: the solver turned down {solved.outliers:.0%} of its "
-                              "equations as not fitting a static scene at the depths found (moving content, depths "
-                              "beyond the range searched, noise)")
-    return lf
 
 
 def _unanchored_warning(a, lf) -> None:
@@ -188,9 +207,6 @@ def _calibrated(lf) -> str:
     return f"; calibration applied: {', '.join(lf.meta['calibrated'])}" if lf.meta.get("calibrated") else ""
 
 
-def _solver_warning(lf) -> None:
-    if lf.meta.get("warning"):
-        print(f"eventfield: warning: {lf.meta['warning']}", file=sys.stderr)
 
 
 def _warn_coarse_steps(path: str, ev) -> None:

@@ -110,3 +110,28 @@ def reconstruct_periods(events: EventStream, views: int = VIEWS_PER_PERIOD, peri
         lf = from_galvo(direct(events, times, log_s, t_s, c_on, c_off), times, optics,
                         {"period_index": p, "inputs": "events only"}, linear_below=stream_linlog_threshold(events.meta))
         yield lf, prev
+
+
+class SolverWarning(UserWarning):
+    """A scan period whose events do not fit a static scene at the depths the solver mapped (``reliable``)."""
+
+
+def solved_lightfields(events: EventStream, views: int, periods: list, solver_kw: dict):
+    """``lightfield.galvo_lightfields``' ``periods`` method: the light field of each of ``periods`` (checked
+    indices) from :func:`reconstruct_periods` with ``solver_kw``, each with a ``SolverWarning`` where the
+    solver's robust weights turned down more than ``MAX_OUTLIERS`` of its equations."""
+    import warnings
+    for lf, solved in reconstruct_periods(events, views, periods=periods, **solver_kw):
+        if not solved.reliable:
+            warnings.warn(f"scan period {solved.period_index}: the solver turned down {solved.outliers:.0%} of its "
+                          "equations as not fitting a static scene at the depths found (moving content, depths "
+                          "beyond the range searched, noise)", SolverWarning, stacklevel=2)
+        yield lf
+
+
+def _register():
+    from ..lightfield.model import PERIODS, register_galvo_solver
+    register_galvo_solver(PERIODS, solved_lightfields)
+
+
+_register()

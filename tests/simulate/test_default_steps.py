@@ -227,7 +227,9 @@ def test_galvo_default_steps_give_each_light_field_view_an_instant():
     timed = ef.load_scene(bundled_scene("galvo_static/galvo_static.xml"), width=120, height=90)
     ev = ef.render_events(timed, timed.scan_period)
     assert ev.meta["render"]["steps"] == VIEWS_PER_PERIOD and _chosen(ev)["by"] == "light-field views"
-    dm = ef.depth_from_focus(ef.lightfield.from_events(ev), 0.3, 4.0, 32, "variance")
+    # the one-depth solver, as these numbers were measured (the per-period solver, from_events' default since
+    # 2026-11-27, reads the card at 0.464 m here: 7 % near at this film and one period)
+    dm = ef.depth_from_focus(ef.lightfield.from_events(ev, method="galvo"), 0.3, 4.0, 32, "variance")
     z = truth.truth_depth(timed, 0.0)
     card, wall = z < 1, z > 2
     text = card & truth.textured(truth.centre_frame(timed, 0.0), 0.1)     # the text on the card
