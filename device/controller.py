@@ -147,13 +147,14 @@ class GalvoController:
         return cmds + (list(self.d.offset(s.channel, self._offset(s, fraction))) if s.offset_deg else [])
 
     # ------------------------------------------------------------------ the guard: every byte passes here
-    def _send(self, cmds):
+    def _send(self, cmds, descent=None):
         for c in cmds:
-            self._guard(c)
+            self._guard(c, descent)
             self.t.write(c)
 
-    def _guard(self, cmd: str) -> None:
-        """Refuse ``cmd`` (SafetyError, nothing written) unless the channel settings it leads to are safe."""
+    def _guard(self, cmd: str, descent=None) -> None:
+        """Refuse ``cmd`` (SafetyError, nothing written) unless the channel settings it leads to are safe, or
+        ``descent(channel, settings)`` says they come down from what the instrument already runs (recovery)."""
         if self._closed:
             raise SafetyError(f"refusing {cmd!r}: the controller is closed")
         pending = {ch: dict(state) for ch, state in self._commanded.items()}
@@ -169,7 +170,8 @@ class GalvoController:
                 raise SafetyError(f"refusing {cmd!r}: channel {ch}'s settings are not confirmed by the instrument")
             if key == "phase":
                 finite_number(value, f"channel {ch}: phase")
-            self._check_state(ch, pending[ch], need_all=pending[ch].get("output", False))
+            if descent is None or not descent(ch, pending[ch]):
+                self._check_state(ch, pending[ch], need_all=pending[ch].get("output", False))
         self._commanded = pending          # only once the whole command passed
 
     def _check_state(self, ch, state, need_all):

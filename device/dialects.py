@@ -78,6 +78,10 @@ class Dialect:
         code, _, msg = text.strip().partition(",")
         return int(float(code)), msg.strip().strip('"')
 
+    def vpp_unit(self, ch) -> list:
+        """The commands that make channel ``ch``'s amplitude read and set in Vpp (none where it always is)."""
+        return []
+
     def decode(self, cmd: str) -> list:
         """[(channel, setting, value)] that ``cmd`` changes; channel None for instrument-wide commands.
         Raises SafetyError for a command this dialect does not produce (nothing unknown is ever sent)."""
@@ -91,9 +95,12 @@ class _SourceSubsystem(Dialect):
     sets_unit = False
     phase_sync = ""
 
+    def vpp_unit(self, ch):
+        return [f"{self.prefix}SOUR{ch}:VOLT:UNIT VPP"] if self.sets_unit else []
+
     def configure(self, ch, freq, vpp, offset, phase):
         src = f"{self.prefix}SOUR{ch}"
-        return ([f"{src}:FUNC SIN"] + ([f"{src}:VOLT:UNIT VPP"] if self.sets_unit else [])
+        return ([f"{src}:FUNC SIN"] + self.vpp_unit(ch)
                 + [f"{src}:FREQ {_g(freq)}", f"{src}:VOLT {_g(vpp)}", f"{src}:VOLT:OFFS {_g(offset)}",
                    f"{src}:PHAS {_g(phase)}"])
 

@@ -3,9 +3,13 @@ was killed (SIGKILL, a crash, a lost terminal), when the generator goes on at fu
 
 The controller that started a scan ramps it down from what it sent (``GalvoController.stop``). Here nothing was
 sent: the amplitude and offset each running channel reports are ramped down in the controller's steps and time,
-every command through its guard, then both outputs go off. A channel whose settings do not read back as numbers
-is switched off as it is, and so is everything when the guard refuses a step (the generator holds settings
-beyond this galvo's limits): only the ramp is skipped, never the switch-off.
+every command through its guard, then both outputs go off. A generator left in Vrms or dBm is first told to
+show its amplitude in Vpp (its output stays; the ramp scales Vpp: scaling a dBm figure switched off at 91 % of
+the amplitude). A step that comes down from what the instrument already runs is taken even while it is still
+beyond the galvo's derated amplitude (an overdriven scan is ramped, not cut: at 1.3x the whole ramp was
+refused); a frequency beyond the galvo's is never ramped at. A channel whose settings do not read back as
+numbers is switched off as it is, and so is everything when the guard refuses a step: only the ramp is
+skipped, never the switch-off.
 """
 from __future__ import annotations
 
@@ -26,17 +30,35 @@ def _running_channels(ctl) -> tuple:
     for ch in (1, 2):
         try:
             got = ctl.read_channel(ch)
+            if got.get("output") is not False and got.get("unit", "VPP") != "VPP":
+                ctl._send(ctl.d.vpp_unit(ch))        # the output stays; its amplitude now reads in Vpp
+                got = ctl.read_channel(ch)
         except Exception:  # noqa: BLE001  (a timeout, a dropped link: that channel goes off as it is)
             as_is.append(ch)
             continue
         needed = ("offset",) if got.get("function") == "DC" else ("frequency", "vpp", "offset")
-        readable = got.get("function") in ("SIN", "DC") and all(
+        readable = got.get("function") in ("SIN", "DC") and got.get("unit", "VPP") == "VPP" and all(
             isinstance(got.get(k), float) and math.isfinite(got[k]) for k in needed)
         if readable and got.get("output") is True:
             running[ch] = got
         elif got.get("output") is not False:          # on, or not clearly off
             as_is.append(ch)
     return running, as_is
+
+
+def _coming_down(ctl, running):
+    """The guard's exception for a ramp step: channel settings no larger than the read-back ones (amplitude,
+    offset's magnitude), at the function and frequency the channel runs, that frequency within the galvo's."""
+    def descends(ch, state) -> bool:
+        got = running.get(ch)
+        if got is None or state.get("function") != got["function"]:
+            return False
+        if got["function"] == "SIN" and not (state.get("frequency") == got["frequency"]
+                                             and 0 < got["frequency"] <= ctl.spec.max_frequency
+                                             and 0 <= state.get("vpp", math.inf) <= got["vpp"]):
+            return False
+        return abs(state.get("offset", math.inf)) <= abs(got["offset"])
+    return descends
 
 
 def ramp_off(ctl, sleep=time.sleep) -> str:
@@ -57,7 +79,7 @@ def ramp_off(ctl, sleep=time.sleep) -> str:
                     cmds = [] if got["function"] == "DC" else \
                         list(ctl.d.amplitude(ch, toward_zero(got["vpp"] * fraction)))
                     ctl._send(cmds + (list(ctl.d.offset(ch, toward_zero(got["offset"] * fraction)))
-                                      if got["offset"] else []))
+                                      if got["offset"] else []), descent=_coming_down(ctl, running))
                 sleep(ctl.ramp_time / ctl.ramp_steps)
         except SafetyError as e:
             refused = " ".join(str(e).split())

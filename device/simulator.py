@@ -12,6 +12,7 @@ after it) to check what the galvo would have seen at every instant; ``eventfield
 """
 from __future__ import annotations
 
+import math
 import re
 from collections import deque
 
@@ -24,6 +25,24 @@ MAX_PEAK_V = 10.0
 DEFAULT_CHANNEL = {"function": "SIN", "frequency": 1000.0, "vpp": 0.1, "offset": 0.0, "phase": 0.0,
                    "high_z": False, "output": False, "unit": "VPP"}
 UNITS = ("VPP", "VRMS", "DBM")     # the amplitude units SCPI generators keep (a preset may hold another)
+
+
+def amplitude_vpp(unit: str, value: float) -> float:
+    """An amplitude setting in ``unit`` as Vpp (a sine; dBm is power into the 50 ohm it refers to)."""
+    if unit == "VRMS":
+        return value * 2.0 * math.sqrt(2.0)
+    if unit == "DBM":
+        return 2.0 * math.sqrt(2.0) * math.sqrt(50.0 * 1e-3 * 10.0 ** (value / 10.0))
+    return value
+
+
+def amplitude_in(unit: str, vpp: float) -> float:
+    """``amplitude_vpp``'s inverse: a real generator changing unit keeps its output, and shows it anew."""
+    if unit == "VRMS":
+        return vpp / (2.0 * math.sqrt(2.0))
+    if unit == "DBM":
+        return 10.0 * math.log10((vpp / (2.0 * math.sqrt(2.0))) ** 2 / 50.0 / 1e-3)
+    return vpp
 IDENTITY = {"keysight": "Keysight Technologies,33522B,SIM00001,sim-2.0",
             "rigol": "Rigol Technologies,DG812,SIM00002,sim-2.0",
             "siglent": "Siglent Technologies,SDG2042X,SIM00003,sim-2.0"}
@@ -96,9 +115,13 @@ class SimulatedGenerator:
                 self.error_queue.append((-224, f"Illegal parameter value; function {value}"))
                 return
             pending.setdefault(ch, {})[key] = value
+            if key == "unit":          # the output stays; its amplitude reads in the new unit
+                old = self.state[ch]
+                pending[ch]["vpp"] = amplitude_in(value, amplitude_vpp(old.get("unit", "VPP"), old["vpp"]))
         for ch, new in pending.items():
             s = dict(self.state[ch], **new)
-            peak = abs(s["offset"]) + (s["vpp"] / 2 if s["function"] == "SIN" else 0.0)
+            vpp = amplitude_vpp(s.get("unit", "VPP"), s["vpp"])
+            peak = abs(s["offset"]) + (vpp / 2 if s["function"] == "SIN" else 0.0)
             if peak > MAX_PEAK_V:
                 self.error_queue.append((-221, f"Settings conflict; peak {peak:g} V"))
                 return

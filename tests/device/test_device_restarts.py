@@ -56,7 +56,7 @@ def test_device_stop_ramps_down_what_a_killed_process_left_running(dialect, caps
 def test_device_stop_beyond_the_galvos_limits_switches_off_without_a_ramp(capsys, monkeypatch):
     """A generator left at 5 kHz (beyond this galvo's 1 kHz): the guard refuses every step of a ramp at that
     frequency, so the outputs go off at once and the line says why; a generator scanning nothing just goes
-    off. (A ramp from an amplitude beyond the limits is taken: its steps are below them.)"""
+    off. (A ramp from an amplitude beyond the limits is taken: test_device_stop_ramps_down_an_overdriven_scan.)"""
     g = simulated("keysight", preset={1: {"vpp": 1.0, "frequency": 5000.0, "high_z": True, "output": True}})
     monkeypatch.setattr("mitsuba_eventfield.device.open_transport", lambda *a, **k: g)
     assert cli.main(["device", "stop", "--simulate", "--dialect", "keysight"]) == 0
@@ -131,3 +131,50 @@ def test_device_stop_switches_off_when_a_read_back_fails(fault, capsys, monkeypa
     out = capsys.readouterr().out
     assert not g.state[1]["output"] and not g.state[2]["output"]
     assert "channel 2: ramped down" in out and "channel 1: settings unreadable, switched off without a ramp" in out
+
+
+@pytest.mark.parametrize("dialect", ["keysight", "rigol"])
+@pytest.mark.parametrize("unit, value", [("DBM", 13.0), ("DBM", -6.0), ("VRMS", 1.5)])
+def test_device_stop_ramps_an_amplitude_set_in_dbm_or_vrms(dialect, unit, value):
+    """A generator left in dBm: the ramp scaled the dBm figure (1 dBm -> 0.8, 0.6 ... dBm: switched off at 91 %
+    of the amplitude while saying "ramped down"; at 13 dBm the first step was 26 %, at -6 dBm the guard refused
+    a negative amplitude). The amplitude is now shown in Vpp first (the output stays) and ramped in Vpp."""
+    from mitsuba_eventfield.device.recovery import ramp_off
+    from mitsuba_eventfield.device.simulator import amplitude_vpp
+    vpp = amplitude_vpp(unit, value)
+    g = simulated(dialect, preset={1: {"function": "SIN", "frequency": 20.0, "vpp": value, "unit": unit,
+                                       "offset": 0.0, "high_z": True, "output": True}})
+    with GalvoController(g, dialect, GalvoSpec(), ramp_steps=5, ramp_time=0) as c:
+        assert ramp_off(c, sleep=NO_SLEEP) == "channel 1: ramped down from the read-back amplitude and offset; outputs off"
+    assert g.state[1]["unit"] == "VPP" and not g.state[1]["output"]
+    levels = _on_levels(g.history, 1, "vpp")
+    assert levels == pytest.approx([vpp, 0.8 * vpp, 0.6 * vpp, 0.4 * vpp, 0.2 * vpp], rel=1e-6)
+
+
+def test_device_stop_ramps_down_an_overdriven_scan():
+    """A scan left at 1.3x the galvo's derated amplitude at 500 Hz: every ramp step from it was refused (the
+    80 % step is still beyond the limit), so it was cut at full amplitude. Steps that come down from what runs
+    are taken; a frequency beyond the galvo's is still never ramped at (the test above)."""
+    from mitsuba_eventfield.device.recovery import ramp_off
+    spec = GalvoSpec()
+    vpp = 1.3 * spec.vpp(spec.max_amplitude_deg(500.0))
+    g = simulated("keysight", preset={1: {"function": "SIN", "frequency": 500.0, "vpp": vpp, "offset": 0.0,
+                                          "high_z": True, "output": True}})
+    with GalvoController(g, "keysight", spec, ramp_steps=5, ramp_time=0) as c:
+        assert "channel 1: ramped down" in ramp_off(c, sleep=NO_SLEEP)
+    assert _on_levels(g.history, 1, "vpp") == pytest.approx([0.8 * vpp, 0.6 * vpp, 0.4 * vpp, 0.2 * vpp], rel=1e-6)
+    assert not g.state[1]["output"]
+
+
+def test_device_stop_switches_off_a_channel_whose_output_state_is_unreadable(monkeypatch):
+    """A channel whose output state reads back as neither on nor off (a garbled answer) is switched off as it
+    is, said so; a channel that reads clearly off is left out of the line."""
+    from mitsuba_eventfield.device.recovery import ramp_off
+    g = simulated("keysight", preset={1: {"function": "SIN", "frequency": 20.0, "vpp": 2.0, "offset": 0.0,
+                                          "high_z": True, "output": True}})
+    with GalvoController(g, "keysight", GalvoSpec(), ramp_steps=5, ramp_time=0) as c:
+        real = c.read_channel
+        monkeypatch.setattr(c, "read_channel", lambda ch: dict(real(ch), output="unreadable: '2'") if ch == 1
+                            else real(ch))
+        assert ramp_off(c, sleep=NO_SLEEP) == "channel 1: settings unreadable, switched off without a ramp; outputs off"
+    assert not g.state[1]["output"] and _on_levels(g.history, 1, "vpp") == []
