@@ -30,8 +30,10 @@ GOLDEN, M1, M2 = 0x9E3779B1, 0x85EBCA6B, 0xC2B2AE35     # Weyl step and MurmurHa
 MASK = 0xFFFFFFFF
 _SEED_MUL, _STREAM_MUL, _COUNTER_MUL = 0x27D4EB2F, 0x165667B1, 0x61C88647
 
-# the streams of the pixel model: what a draw is for
-JITTER_ON, JITTER_OFF, NOISE_WAIT, NOISE_POLARITY = 1, 2, 3, 4
+# the streams of the pixel model: what a draw is for; the readout cap's keys are a stream of their own, whose
+# steps are its sub-streams (``readout.step_word``: with the step as the stream number, the cap's steps 1-4
+# drew the pixel model's four streams, key for draw)
+JITTER_ON, JITTER_OFF, NOISE_WAIT, NOISE_POLARITY, READOUT = 1, 2, 3, 4, 5
 
 
 def finalise(h):

@@ -29,8 +29,10 @@ KEY_BITS = 24
 
 
 def step_word(seed: int, step: int) -> int:
-    """The 32-bit word that, with an event's index, keys the draws of one step."""
-    return counter_rng.stream_word(counter_rng.seed_word(seed), step) & counter_rng.MASK
+    """The 32-bit word that, with an event's index, keys the draws of one step: step ``step`` of the seed's
+    ``READOUT`` stream (unrelated to the pixel model's streams)."""
+    readout = counter_rng.stream_word(counter_rng.seed_word(seed), counter_rng.READOUT)
+    return counter_rng.stream_word(readout, step) & counter_rng.MASK
 
 
 def keys_np(n: int, word: int) -> np.ndarray:

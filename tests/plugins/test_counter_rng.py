@@ -202,3 +202,39 @@ def test_an_independent_seed_render_at_its_default_steps_equals_the_same_steps_a
     asked = ef.render_events(ef.load_scene(fan, width=64, height=48), 0.008, steps=steps, seed=3,
                              seed_mode="independent")
     assert chosen.meta["stepping"]["mode"] == "uniform" and len(chosen) > 10_000 and chosen.equals(asked)
+
+
+def test_words_a_weyl_step_apart_draw_unrelated_sequences():
+    """With ``finalise(index * GOLDEN + word)`` two words k Weyl steps apart drew one sequence shifted by k
+    indices (all but k of 100,000 draws shared); now about as many as chance gives two random sets (2)."""
+    index = np.arange(100_000, dtype=np.uint32)
+    with np.errstate(over="ignore"):
+        for k in (1, 902, 806_330):
+            a = counter_rng.mixed_np(index, 12345)
+            b = counter_rng.mixed_np(index, np.uint32((12345 + k * counter_rng.GOLDEN) & counter_rng.MASK))
+            assert len(np.intersect1d(a, b)) < 20
+
+
+def test_stream_words_are_no_arithmetic_progression():
+    """With ``word + stream * _STREAM_MUL`` seed word w's stream 1 was seed word w + _STREAM_MUL's stream 0."""
+    w = counter_rng.seed_word(7)
+    for s in range(1, 6):
+        shifted = (w + s * counter_rng._STREAM_MUL) & counter_rng.MASK
+        assert counter_rng.stream_word(w, s) != counter_rng.stream_word(shifted, 0)
+    assert len({counter_rng.stream_word(w, s) for s in range(1000)}) == 1000
+
+
+def test_the_readout_caps_keys_are_not_the_pixel_models_draws():
+    """The readout cap keyed step k by stream number k: its steps 1-4 drew the pixel model's streams (event i's
+    key was pixel i's first draw, one hash short). Its words and keys now share nothing with them."""
+    from mitsuba_eventfield.plugins import readout
+    pixel = np.arange(50_000, dtype=np.uint32)
+    for seed in (0, 3):
+        w = counter_rng.seed_word(seed)
+        pixel_words = {counter_rng.stream_word(w, s) & counter_rng.MASK for s in range(1, 5)}
+        steps = {readout.step_word(seed, k) for k in range(1, 200)}
+        assert not steps & pixel_words and len(steps) == 199
+        for k in range(1, 5):
+            keys = counter_rng.finalise(readout.keys_np(len(pixel), readout.step_word(seed, k)))
+            draws = _bits_np(pixel, np.zeros_like(pixel), seed, k)
+            assert np.count_nonzero(keys == draws) <= 2
