@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -78,7 +79,7 @@ def events_from_frames(frames, times=None, *, fps: float | None = None, preset: 
     backend.ensure_variant()
     check_on_device(on_device, output)
     group = None if frames_per_kernel is None else positive(frames_per_kernel, "frames_per_kernel", integer=True)
-    source = frame_source(frames, times, fps, srgb)
+    source = _with_known_start(frame_source(frames, times, fps, srgb))
     too_large = event_fill.film_limit_error(source.width, source.height)
     if too_large:
         raise EventFieldError(f"{source.name}: {too_large}")
@@ -129,6 +130,26 @@ def frame_source(frames, times, fps, srgb: bool) -> FrameSource:
     if isinstance(frames, (str, os.PathLike)):
         return open_frames(frames, fps, srgb, times)
     return from_device(frames, times, fps, srgb) if is_device_array(frames) else from_array(frames, times, fps, srgb)
+
+
+def _with_known_start(source: FrameSource) -> FrameSource:
+    """``source`` with its first frame's time known before the event file opens: a caller's FrameSource that
+    does not say it has its first frame read here and yielded again (its file's /t_offset was the first
+    event's millisecond, not the first frame's, so a streamed file and the same events written from memory
+    were indexed differently)."""
+    if source.start_s is not None:
+        return source
+    frames = iter(source.frames())
+    first = next(frames, None)
+    if first is None:
+        return replace(source, frames=lambda: iter(()))
+    t = first[0]
+    known = isinstance(t, (int, float, np.integer, np.floating)) and math.isfinite(t)   # else _feed says why
+
+    def again():
+        yield first
+        yield from frames
+    return replace(source, frames=again, start_s=float(t) if known else None)
 
 
 def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progress: bool,

@@ -199,3 +199,9 @@ def test_a_converted_file_is_indexed_from_its_first_frame(tmp_path, start):
             offset, t, index = int(f["t_offset"][()]), f["events/t"][()], f["ms_to_idx"][()]
         assert offset == int(start * 1e6) and t[0] >= 6000, name               # the first event 6 ms in
         assert len(index) >= 30 and list(index) == [int(np.searchsorted(t, ms * 1000)) for ms in range(len(index))]
+    # a caller's FrameSource that does not say when its first frame is (a review: still the first event's)
+    from mitsuba_eventfield.simulate.frame_sources import FrameSource
+    source = FrameSource("mine", 16, 12, 30, lambda: iter(zip(times.tolist(), frames)), {"kind": "mine"})
+    ef.events_from_frames(source, output=str(tmp_path / "source.h5"))
+    with h5py.File(tmp_path / "source.h5") as f:
+        assert int(f["t_offset"][()]) == int(start * 1e6) and len(f["events/t"][()]) == len(t)
