@@ -72,7 +72,9 @@ def check_file_limit(path: str, partial: str, need: int) -> None:
     if limit == resource.RLIM_INFINITY:
         return
     size = os.path.getsize(partial) if os.path.exists(partial) else 0
-    if size + int(need) + DISK_MARGIN > limit:
+    # ``need`` holds the headers' allowance already; the free-space margin (1 MiB) refused a 10-event file
+    # under a 1 MiB limit, saying "830 bytes written, about 65696 more"
+    if size + int(need) > limit:
         raise EventFieldError(f"{path}: the process's file-size limit (ulimit -f) is {limit} bytes: this file "
                               f"would pass it ({size} bytes written, about {int(need)} more); raise the limit or "
                               "write a shorter render")
@@ -114,13 +116,13 @@ def check_room(path: str, partial: str, need: int) -> None:
     except OSError:
         return                   # cannot tell (odd file system): the write itself will say
     try:
-        code = _reserve(fd, int(need) + DISK_MARGIN)
+        code = _reserve(fd, int(need))       # (need holds the headers' allowance: no free-space margin here)
     finally:
         os.close(fd)
         with contextlib.suppress(OSError):
             os.remove(probe)
     if code in _REFUSED:
-        raise _disk_full(path, _free_bytes(path), int(need) + DISK_MARGIN, OSError(code, os.strerror(code)))
+        raise _disk_full(path, _free_bytes(path), int(need), OSError(code, os.strerror(code)))
 
 
 @contextlib.contextmanager

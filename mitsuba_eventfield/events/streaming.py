@@ -216,8 +216,9 @@ class Aedat4EventWriter(_PartialFile):
                                   f"{int(t[0])} us): choose .h5, .npz or .txt, or shift the times")
         need = AEDAT4_BYTES_PER_EVENT * len(t) + HEADER_BYTES
         check_space(self.path, need)
-        check_file_limit(self.path, self.tmp, need)
-        # a quota is not in the free space; the chunk before may still be in dv's writer thread: room for both
+        # the chunk before may still be in dv's writer thread, not yet in the file: room for both; a quota is
+        # not in the free space (check_room)
+        check_file_limit(self.path, self.tmp, need + self._in_flight)
         check_room(self.path, self.tmp, need + self._in_flight)
         self._in_flight = need
         with disk_errors(self.path, need):

@@ -238,7 +238,7 @@ def test_an_aedat4_past_the_file_size_limit_is_one_line_not_an_abort(tmp_path):
     script = tmp_path / "write.py"
     script.write_text(
         "import sys, numpy as np, mitsuba_eventfield as ef\n"
-        "n = 300_000\n"
+        "n = int(sys.argv[2]) if len(sys.argv) > 2 else 300_000\n"
         "rng = np.random.default_rng(0)\n"
         "ev = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 10**6, n)),\n"
         "                    rng.choice([-1, 1], n), 64, 48)\n"
@@ -260,6 +260,12 @@ def test_an_aedat4_past_the_file_size_limit_is_one_line_not_an_abort(tmp_path):
     r = subprocess.run([sys.executable, str(script), str(out / "o.aedat4")], capture_output=True, text=True,
                        timeout=300)
     assert "written" in r.stdout and os.listdir(out) == ["o.aedat4"]
+    # a file far below the limit is taken (the free-space margin, 1 MiB, refused ten events under 1 MiB)
+    def one_mib():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (1 << 20, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+    r = subprocess.run([sys.executable, str(script), str(out / "small.aedat4"), "10"], capture_output=True,
+                       text=True, preexec_fn=one_mib, timeout=300)
+    assert "written" in r.stdout and os.path.getsize(out / "small.aedat4") < 4096, (r.stdout, r.stderr[-500:])
 
 
 def test_a_quota_refuses_an_aedat4_chunk_before_dv_processing_sees_it(tmp_path, monkeypatch):
@@ -305,5 +311,5 @@ def test_the_room_probe_meets_the_kernels_refusal(tmp_path):
     r = subprocess.run([sys.executable, "-c", script, path], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.splitlines() == ["granted", f"EventFieldError {path}: file too large: the file system or the "
-                                     "process's file-size limit (ulimit -f) refused about 5 MiB more"], r.stdout
+                                     "process's file-size limit (ulimit -f) refused about 4 MiB more"], r.stdout
     assert os.listdir(tmp_path) == []
