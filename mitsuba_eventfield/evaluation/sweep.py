@@ -219,6 +219,7 @@ def _worker_start() -> None:
     group, and workers interrupted mid-point were replaced by the pool, which went on with the queue), and the
     worker ends when that process does (SIGTERM to it left the workers idle for ever: Linux's parent-death
     signal, where there is one)."""
+    import multiprocessing
     import signal
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
@@ -226,6 +227,11 @@ def _worker_start() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))        # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
+    # a parent that died while this worker was still starting (importing for seconds) sent it no signal, and
+    # the orphan held the sweep's output pipes open (seen once in the full suite): checked after the prctl
+    parent = multiprocessing.parent_process()
+    if parent is not None and os.getppid() != parent.pid:
+        os._exit(1)
 
 
 def _local(scene, todo, out_dir, keep_events, inputs, quiet, processes, progress) -> list:

@@ -112,3 +112,61 @@ def test_no_worker_outlives_a_terminated_sweep(tmp_path):
     for pid in left:
         os.kill(pid, signal.SIGKILL)
     assert left == []
+
+
+def test_a_local_sweep_worker_leaves_ctrl_c_to_the_sweeping_process():
+    """A terminal's Ctrl-C reaches every process of the group: a worker interrupted mid-point was replaced by the
+    pool, which went on with the queue. The workers ignore SIGINT (``sweep._worker_start``): one sent to a
+    worker in the middle of a task leaves that task to finish."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                             initializer=sweep_module._worker_start) as pool:
+        pid = pool.submit(os.getpid).result(timeout=120)
+        task = pool.submit(time.sleep, 1.0)
+        time.sleep(0.3)
+        os.kill(pid, signal.SIGINT)
+        assert task.result(timeout=60) is None
+        assert pool.submit(signal.getsignal, signal.SIGINT).result(timeout=60) == signal.SIG_IGN
+
+
+ORPHAN = """
+import multiprocessing, os, sys, time
+
+def child(out):
+    time.sleep(1.0)                      # still starting (a worker imports for seconds) when the parent dies
+    with open(out + ".started", "w") as f:
+        f.write(str(os.getpid()))
+    from mitsuba_eventfield.evaluation.sweep import _worker_start
+    _worker_start()
+    open(out + ".continued", "w").close()
+
+if __name__ == "__main__":
+    multiprocessing.get_context("spawn").Process(target=child, args=(sys.argv[1],)).start()
+    os._exit(0)                          # dies without waiting: no parent-death signal reaches a child yet to ask
+"""
+
+
+def test_a_worker_whose_sweep_died_while_it_started_ends():
+    """The parent-death signal is asked for when the worker starts: a sweep killed before that sent none, and
+    the orphan held the sweep's output pipes (a full-suite run hung on them). It ends on finding its parent
+    gone."""
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        script, out = os.path.join(d, "orphan.py"), os.path.join(d, "marker")
+        with open(script, "w") as f:
+            f.write(ORPHAN)
+        subprocess.run([sys.executable, script, out], timeout=120, check=True)
+        deadline = time.monotonic() + 120
+        while not os.path.exists(out + ".started") and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert os.path.exists(out + ".started")
+        time.sleep(0.2)
+        pid = int(open(out + ".started").read())
+        while time.monotonic() < deadline:          # until the orphan has ended, one way or the other
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.2)
+        assert not os.path.exists(out + ".continued")
