@@ -36,7 +36,8 @@ from .focus.depth import DepthMap, depth_from_focus, focus_measure  # noqa: E402
 from .focus.refocus import depth_planes, focal_stack, refocus  # noqa: E402
 from .focus.tracking import track_focus  # noqa: E402
 from .lightfield import reconstruct  # noqa: E402
-from .lightfield.model import LightField, from_galvo, from_spatial, galvo_lightfields, galvo_view_times  # noqa: E402
+from .lightfield.model import LightField, from_galvo, from_spatial, galvo_view_times  # noqa: E402
+from .lightfield.streams import galvo_lightfields  # noqa: E402
 from .lightfield.views import ViewStack, extract_views, split_events, view_of_pixel  # noqa: E402
 from .optics import scan  # noqa: E402
 from .optics.scan import ScanCurve, curve_from_dict, event_angles, make_curve  # noqa: E402

@@ -6,6 +6,7 @@ import math
 import time
 from dataclasses import dataclass
 
+from ..errors import ConfigError
 from ..scene import load_scene
 from ..simulate.render import render_events, render_frames
 from ..validate import number
@@ -35,7 +36,7 @@ def lightfields(events, timed, views: int, start: str = "events", spp: int = 4, 
     light field's ``meta["inputs"]`` naming its inputs; ``start`` as for ``capture``. ``calibration``: a galvo /
     depth calibration of the events' optics, which the solver then solves with (``calibrated_events``)."""
     from ..focus.galvo_periods import reconstruct_periods
-    from ..lightfield.model import galvo_lightfields
+    from ..lightfield.streams import galvo_lightfields
     if calibration is not None:
         from ..calibration import calibrated_events, optics_record
         record = optics_record(events.meta.get("optics", {}), events.width, events.height)
@@ -96,18 +97,18 @@ def capture(scene_path: str, defines: dict | None = None, periods: int | None = 
     run before any event is rendered."""
     from ..lightfield.model import from_galvo, galvo_steps_per_period
     if start not in START_METHODS:
-        raise ValueError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
+        raise ConfigError(f"start = {start!r}: allowed {', '.join(START_METHODS)}")
     _check_positive("views", views, integer=True, low=1)
     _check_positive("px_per_step", px_per_step)
     timed = load_scene(scene_path, **(defines or {}))
     period = timed.scan_period
     if not period:
-        raise ValueError(f"{scene_path}: needs a galvo sensor with a periodic scan")
+        raise ConfigError(f"{scene_path}: needs a galvo sensor with a periodic scan")
     if periods is None:
         duration = timed.motion.duration if timed.motion is not None else None
         if not duration:
             has = "no duration in its motion file" if timed.motion is not None else "no motion file (with a duration)"
-            raise ValueError(f"{scene_path}: {has}: give the scan periods to capture (--periods, periods=)")
+            raise ConfigError(f"{scene_path}: {has}: give the scan periods to capture (--periods, periods=)")
         periods = max(1, int(math.floor(duration / period + 1e-9)))
     _check_positive("periods", periods, integer=True)
     if before_render is not None:

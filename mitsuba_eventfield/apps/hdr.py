@@ -115,7 +115,7 @@ def compare(scene_path: str, defines: dict | None = None, depth: float = math.in
     estimates = {k: linlog_np(ldr_to_linear(codes[k], e), linlog) for k, e in exposures.items()}
     well = (codes["long"] >= WELL_EXPOSED[0]) & (codes["long"] <= WELL_EXPOSED[1])
     if not well.any():
-        raise ValueError(f"{scene_path}: no pixel is well exposed in the long frame: the events' offset is unknown")
+        raise ConfigError(f"{scene_path}: no pixel is well exposed in the long frame: the events' offset is unknown")
     est = est + float(np.median(estimates["long"][well] - est[well]))
     estimates = {"events": est, "ldr_short": estimates["short"], "ldr_long": estimates["long"]}
     regions = {"bright": codes["long"] >= 2 ** LDR_BITS - 1, "dark": codes["short"] < WELL_EXPOSED[0]}

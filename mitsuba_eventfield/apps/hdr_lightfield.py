@@ -146,7 +146,7 @@ def _errors(estimates, truth, regions):
 def _events_lightfield(events, first, exposure_long, views, samples, solver_depth, where):
     """The light field from the events alone, up to one constant that the long exposure of the view at t = 0
     (``first``, noise-free radiance) fixes: (LightField, that constant)."""
-    from ..lightfield.model import galvo_lightfields
+    from ..lightfield.streams import galvo_lightfields
     from ..lightfield.reconstruct import galvo_start_image
     from ..plugins.pixel_model import linlog_np
     start = galvo_start_image(events, 0.0, samples, depth=solver_depth)

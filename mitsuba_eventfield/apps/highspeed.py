@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import EventFieldError
+from ..errors import ConfigError, EventFieldError
 from ..scene import load_scene
 from .capture import START_METHODS, Capture, _check_positive, capture  # noqa: F401  (the shared capture stage)
 from .highspeed_outputs import planes_figure, track_figure, write_planes, write_track  # noqa: F401  (outputs)
@@ -97,18 +97,18 @@ RESERVED_PLANE_NAMES = ("conventional", "highspeed", "metrics")
 
 def _check_planes(planes: dict) -> dict:
     if not planes:
-        raise ValueError("planes (--plane NAME=DEPTH): give at least one name=depth")
+        raise ConfigError("planes (--plane NAME=DEPTH): give at least one name=depth")
     out = {}
     for name, z in planes.items():
         if not PLANE_NAME.fullmatch(str(name)) or str(name) in RESERVED_PLANE_NAMES:
-            raise ValueError(f"plane {name!r}: a name of letters, digits, '_' and '-' (up to 64, names its output "
+            raise ConfigError(f"plane {name!r}: a name of letters, digits, '_' and '-' (up to 64, names its output "
                              f"files), not {', '.join(RESERVED_PLANE_NAMES)}")
         try:
             z = float(z)
         except (TypeError, ValueError):
-            raise ValueError(f"plane {name!r}: depth = {z!r} is not a number (scene units, > 0)") from None
+            raise ConfigError(f"plane {name!r}: depth = {z!r} is not a number (scene units, > 0)") from None
         if not (z > 0 and math.isfinite(z)):
-            raise ValueError(f"plane {name!r}: depth = {z!r} must be a finite number > 0 (scene units)")
+            raise ConfigError(f"plane {name!r}: depth = {z!r} must be a finite number > 0 (scene units)")
         out[str(name)] = z
     return out
 
@@ -228,9 +228,9 @@ def _check_roi(roi) -> tuple:
     try:
         x0, y0, x1, y1 = (float(v) for v in roi)
     except (TypeError, ValueError):
-        raise ValueError(f"roi = {roi!r}: expected four numbers x0, y0, x1, y1 (fractions of the image)") from None
+        raise ConfigError(f"roi = {roi!r}: expected four numbers x0, y0, x1, y1 (fractions of the image)") from None
     if not (0 <= x0 < x1 <= 1 and 0 <= y0 < y1 <= 1):
-        raise ValueError(f"roi = {tuple(roi)}: must be fractions 0 <= x0 < x1 <= 1, 0 <= y0 < y1 <= 1 of the image")
+        raise ConfigError(f"roi = {tuple(roi)}: must be fractions 0 <= x0 < x1 <= 1, 0 <= y0 < y1 <= 1 of the image")
     return x0, y0, x1, y1
 
 
@@ -239,7 +239,7 @@ def roi_pixels(roi, width: int, height: int) -> tuple:
     x0, y0, x1, y1 = _check_roi(roi)
     px = (int(round(x0 * width)), int(round(y0 * height)), int(round(x1 * width)), int(round(y1 * height)))
     if px[2] - px[0] < 3 or px[3] - px[1] < 3:
-        raise ValueError(f"roi = {tuple(roi)} is {px[2] - px[0]} x {px[3] - px[1]} pixels at {width} x {height}: "
+        raise ConfigError(f"roi = {tuple(roi)} is {px[2] - px[0]} x {px[3] - px[1]} pixels at {width} x {height}: "
                          "needs at least 3 x 3")
     return px
 
@@ -260,7 +260,7 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     from ..focus.refocus import depth_planes, refocus
     from ..focus.tracking import track_focus
     if not (0 < near < far and object_far > near):
-        raise ValueError(f"near = {near}, far = {far}, object_far = {object_far}: need 0 < near < far and "
+        raise ConfigError(f"near = {near}, far = {far}, object_far = {object_far}: need 0 < near < far and "
                          "object_far > near (scene units)")
     _check_roi(roi)                                   # before rendering: bad input costs nothing
     _check_positive("planes", planes, integer=True, low=1)

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..focus.depth import REASON_META, depth_from_focus
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events
@@ -92,10 +93,10 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
     target = load_scene(scene_path, **(defines or {}))
     optics = target.sensor.optics_metadata()
     if optics.get("design") != "galvo":
-        raise ValueError(f"{scene_path}: depth calibration needs a galvo sensor (got {optics.get('design')!r})")
+        raise ConfigError(f"{scene_path}: depth calibration needs a galvo sensor (got {optics.get('design')!r})")
     scan = optics["scan"]
     if scan["curve"] != "circle":
-        raise ValueError(f"{scene_path}: the LED calibration here expects a circular scan (got {scan['curve']!r})")
+        raise ConfigError(f"{scene_path}: the LED calibration here expects a circular scan (got {scan['curve']!r})")
     w, h = (int(v) for v in target.sensor.film().size())
     curve = curve_from_dict(scan)
     record = optics_record(optics, w, h, where=scene_path)
@@ -140,13 +141,13 @@ def run(scene_path: str, defines: dict | None = None, periods: int | None = None
     from ..evaluation.truth import centre_frame, textured, truth_depth
     from .highspeed import capture
     if not (0 < near < far):
-        raise ValueError(f"near = {near}, far = {far}: need 0 < near < far (scene units)")
+        raise ConfigError(f"near = {near}, far = {far}: need 0 < near < far (scene units)")
     if not (0 <= min_confidence < 1):
-        raise ValueError(f"min_confidence = {min_confidence}: must be in [0, 1)")
+        raise ConfigError(f"min_confidence = {min_confidence}: must be in [0, 1)")
     if not (isinstance(planes, (int, np.integer)) and planes >= 2):
-        raise ValueError(f"planes = {planes!r}: must be an integer >= 2")
+        raise ConfigError(f"planes = {planes!r}: must be an integer >= 2")
     if not split_depth > 0:
-        raise ValueError(f"split_depth = {split_depth}: must be > 0 (scene units)")
+        raise ConfigError(f"split_depth = {split_depth}: must be > 0 (scene units)")
     if calibration:
         _check_calibration(calibration, scene_path, defines, captured)
     cap = captured or capture(scene_path, defines, periods, views, start, progress=progress,

@@ -5,7 +5,7 @@ import json
 import os
 
 from ..errors import EventFieldError
-from ..validate import MAX_DURATION_S, MAX_SPP, MAX_STEPS, MAX_THRESHOLD
+from ..validate import DEFAULT_SPP, FRAME_SPP, MAX_DURATION_S, MAX_SEED, MAX_SPP, MAX_STEPS, MAX_THRESHOLD
 from .args import add_defines, defines, num, pairs, save_image, times_ms
 
 PIXEL_INTEGERS = ("seed", "readout_cap_native_pixels")
@@ -36,7 +36,9 @@ def add_parsers(sub) -> None:
     f.add_argument("scene")
     f.add_argument("-o", "--output", required=True, help="EXR path (PNG alongside); several times: _0000 suffixes")
     f.add_argument("--times", default="0", help="comma-separated times in ms (default 0)")
-    f.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=16)
+    f.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=FRAME_SPP,
+                   help=f"samples per pixel (default {FRAME_SPP}, as ef.render_frames; a render's {DEFAULT_SPP} gives "
+                        "the very image the event pixel saw)")
     add_defines(f)
 
 
@@ -66,12 +68,12 @@ def _add_render(sub) -> None:
                    help="adaptive: shortest step in seconds (default 1e-6)")
     r.add_argument("--max-step", type=num(0, MAX_DURATION_S, lo_open=True),
                    help="adaptive: longest step in seconds (default duration/20)")
-    r.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=4,
-                   help="samples per pixel per step (default 4)")
+    r.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=DEFAULT_SPP,
+                   help=f"samples per pixel per step (default {DEFAULT_SPP})")
     r.add_argument("--spp-changing", type=num(1, MAX_SPP, integer=True), metavar="N",
                    help="samples where they matter: pixels whose brightness changes during the render (found by "
                         "probe renders) get N samples per step, the others --spp")
-    r.add_argument("--seed", type=num(0, 2**31 - 1, integer=True), default=0, help="sampler seed, and the pixel model's (mismatch, noise) unless --pixel seed=N names "
+    r.add_argument("--seed", type=num(0, MAX_SEED, integer=True), default=0, help="sampler seed, and the pixel model's (mismatch, noise) unless --pixel seed=N names "
                    "another (default 0)")
     r.add_argument("--no-reuse", action="store_true",
                    help="render every pixel at every step (default: a static scene renders one scan period; a "
@@ -269,7 +271,7 @@ def run_info(a) -> int:
 
 def run_preview(a) -> int:
     from ..events.io import read_events
-    from ..events.preview import write_preview
+    from ..events.preview import window_outside, write_preview
     ev = read_events(a.file)
     t0 = None if a.t0 is None else int(round(a.t0 * 1e3))
     t1 = None if a.t1 is None else int(round(a.t1 * 1e3))
@@ -278,7 +280,7 @@ def run_preview(a) -> int:
                               "after t0")
     start = ev.start_us
     end = start + int(ev.duration_us)
-    if (t0 is not None and t0 > end) or (t1 is not None and t1 <= start):    # an empty picture, written as a result
+    if window_outside(ev, t0, t1):                                          # said with the options' names
         raise EventFieldError(f"{a.file}: the window {'' if a.t0 is None else f'--t0 {a.t0:g} '}"
                               f"{'' if a.t1 is None else f'--t1 {a.t1:g} '}is outside the stream, which covers "
                               f"{_ms(start)} to {_ms(end)} ms")

@@ -13,7 +13,8 @@ import numpy as np
 from ..errors import ConfigError, EventFieldError
 from ..focus.depth import DEFAULT_MEASURE
 from ..focus.galvo_periods import default_depth_range
-from ..lightfield.model import MIN_VIEWS
+from ..lightfield.reconstruct import MAX_CUTOFF_HZ
+from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import num, save_image, times_ms
@@ -66,7 +67,7 @@ def add_parsers(sub) -> None:
                          "default: the stream's start); the events up to it are in the frame, frames come after it")
     rc.add_argument("--contrast", help=CONTRAST_HELP)
     rc.add_argument("--optics", help=OPTICS_HELP + " (--method galvo)")
-    rc.add_argument("--cutoff", type=num(0, 1e6, lo_open=True),
+    rc.add_argument("--cutoff", type=num(0, MAX_CUTOFF_HZ, lo_open=True),
                     help="filter cutoff in Hz (highpass, complementary; default 5)")
 
     rf = sub.add_parser("refocus", parents=[lf_args], help="refocus the light field at one or more depths")
@@ -110,7 +111,7 @@ def _lightfield(a, ev, nearest: float | None = None):
     optics than this stream's is refused before any reconstruction). ``nearest``: the nearest depth the command
     needs (--near, the nearest --depth), searched by the per-period solver too."""
     from ..calibration import apply_to_lightfield, calibrated_events, check_optics, load_calibration, optics_record
-    from ..lightfield.model import PERIODS, default_method, from_events, methods
+    from ..lightfield.streams import PERIODS, default_method, from_events, methods
     if a.method is not None and a.method not in methods("galvo"):
         raise EventFieldError(f"--method {a.method!r}: allowed: {', '.join(methods('galvo'))}")
     calibration = load_calibration(a.calibration) if a.calibration else None

@@ -223,7 +223,7 @@ class _Scorer:
         """Median relative error of depth from focus (events' light field, 16 views) on confident textured
         pixels; 1.0 when no pixel is confident (the method refused everywhere)."""
         from ..focus.depth import depth_from_focus
-        from ..lightfield.model import from_events
+        from ..lightfield.streams import from_events
         lf = from_events(ev, period=0, views=self.VIEWS, log_start=self.start)
         near, far = self.spec.depth_range
         d = depth_from_focus(lf, near, far, 24, "tenengrad")
@@ -243,7 +243,7 @@ class _Scorer:
         if self.depth_truth is not None:
             out["depth_error"] = self._depth_error(ev)
         if self.refocus_ref is not None:
-            from ..lightfield.model import from_events
+            from ..lightfield.streams import from_events
             from .quality import psnr, white_level
             lf = from_events(ev, period=0, views=self.VIEWS, log_start=self.start)
             img = _refocused(lf, self.spec.refocus_depth)

@@ -39,6 +39,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..validate import DEFAULT_SPP
 from . import failure_scene as fs
 from .truth import centre_frame, textured, truth_depth
 
@@ -144,12 +145,13 @@ def refocus_sweep(speeds=(0, 0.5, 1, 1.5, 2, 3, 4, 8, 16), views: int = 24) -> F
 def depth_case(contrast: float, views: int = 24, card_depth: float = 0.5):
     """(light field from one scan period's events and a rendered frame at t = 0, Mitsuba's z depth, number of
     events) with texture ``contrast``."""
-    from ..lightfield.model import from_events, galvo_steps_per_period
+    from ..lightfield.model import galvo_steps_per_period
+    from ..lightfield.streams import from_events
     from ..simulate.render import render_events, render_frames
     timed = fs.card_scene(card_depth, contrast=contrast)
     optics = timed.sensor.optics_metadata()
     events = render_events(timed, fs.period(), steps=galvo_steps_per_period(optics, fs.WIDTH, fs.HEIGHT))
-    lf = from_events(events, views=views, log_start=render_frames(timed, [0.0])[0])
+    lf = from_events(events, views=views, log_start=render_frames(timed, [0.0], spp=DEFAULT_SPP)[0])
     return lf, truth_depth(timed, 0.0), len(events)
 
 
@@ -231,7 +233,7 @@ def calibration_point(rate: float, seed: int = 0, views: int = 24, depth: float 
     rows = []
     for source, kw in (("events only", {"method": "galvo"}),
                        ("events + start frame", {"method": "direct",
-                                                 "log_start": render_frames(timed, [0.0])[0]})):
+                                                 "log_start": render_frames(timed, [0.0], spp=DEFAULT_SPP)[0]})):
         frames = reconstruct(events, times, t_start=0.0, **kw)
         row = {"value": float(rate), "seed": int(seed), "frames": source}
         try:

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events, render_frames
+from ..validate import DEFAULT_SPP
 
 # frame: mean relative difference and its 99th percentile; events: total count and per-pixel net count
 FRAME_MEAN_TOL, FRAME_P99_TOL = 0.005, 0.05
@@ -58,7 +59,7 @@ def render_case(case: Case, scene_path: str | None = None, shift_s: float = 0.0,
     """(frame (H, W) linear radiance, net event counts (H, W)) of a case; ``shift_s`` moves every instant
     (the tolerances' test: a stand-in for another backend's rounding of the scan angle)."""
     timed = load_scene(scene_path or bundled_scene(case.scene), **dict(case.defines, **extra_defines))
-    frame = render_frames(timed, [case.frame_time + shift_s], log=False)[0]
+    frame = render_frames(timed, [case.frame_time + shift_s], spp=DEFAULT_SPP, log=False)[0]   # the references'
     events = render_events(timed, case.duration, steps=case.steps, t_start=shift_s)
     return frame.astype(np.float32), events.signed_counts()
 

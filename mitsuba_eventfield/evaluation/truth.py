@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..optics.galvo import pixel_ray_slopes
 from ..simulate.render import render_frames
 
@@ -21,7 +22,7 @@ def centre_pinhole(timed, spp: int = 1, scale: int = 1):
     sensor = timed.sensor
     optics = sensor.optics_metadata()
     if "fov_x_deg" not in optics:
-        raise ValueError(f"a centre pinhole needs a sensor with a field of view (fov_x_deg); got "
+        raise ConfigError(f"a centre pinhole needs a sensor with a field of view (fov_x_deg); got "
                          f"{optics.get('design')}")
     size = [int(v) * int(scale) for v in sensor.film().size()]
     return mi.load_dict({
@@ -37,7 +38,7 @@ def truth_depth(timed, t: float, spp: int = 1, scale: int = 1) -> np.ndarray:
     ``scale``, of a ``scale`` times finer grid: (H scale, W scale)); inf where the ray hits nothing."""
     import mitsuba as mi
     if isinstance(scale, bool) or not isinstance(scale, int) or scale < 1:
-        raise ValueError(f"truth_depth: scale = {scale!r}: expected a whole number >= 1")
+        raise ConfigError(f"truth_depth: scale = {scale!r}: expected a whole number >= 1")
     timed.set_time(t)
     pinhole = centre_pinhole(timed, spp, scale)
     w, h = (int(v) for v in pinhole.film().size())
@@ -55,7 +56,6 @@ def check_planes_seen(timed, planes: dict, times, tolerance: float, where: str, 
     Mitsuba's depth): its scores came out NaN after the whole render (``highspeed --plane fan=0.05``).
     ``depth_at(t)``: the depth map at time t where the centre pinhole (``truth_depth``) does not apply, e.g. a
     kaleidoscope's centre view."""
-    from ..errors import ConfigError
     times = np.atleast_1d(np.asarray(times, np.float64))
     zs = [(depth_at or (lambda t: truth_depth(timed, t)))(float(t)) for t in times]
     for name, depth in planes.items():
@@ -87,7 +87,7 @@ def conventional_frame(timed, t_mid: float, fps: float = 60.0, samples: int = 16
     averaged over one exposure of 1 / ``fps`` seconds centred on ``t_mid`` (``samples`` instants): motion blurs.
     The camera itself stays at its pose at ``t_mid``."""
     if not (fps > 0 and samples >= 1):
-        raise ValueError(f"fps = {fps}, samples = {samples}: need fps > 0 and samples >= 1")
+        raise ConfigError(f"fps = {fps}, samples = {samples}: need fps > 0 and samples >= 1")
     times = t_mid + ((np.arange(samples) + 0.5) / samples - 0.5) / fps
     timed.set_time(t_mid)
     return render_frames(timed, times, spp=spp, log=False, sensor=centre_pinhole(timed)).mean(axis=0)

@@ -17,6 +17,13 @@ def _check_window(events, t0_us, t1_us, where: str) -> None:
         raise ConfigError(f"{where}: t1_us = {t1_us!r} is before t0_us = {t0_us!r}: the window must have t0 <= t1")
 
 
+def window_outside(events: EventStream, t0_us=None, t1_us=None) -> bool:
+    """Whether the window [t0, t1) lies wholly outside the stream's span (its picture would be empty, written
+    as if it were a result)."""
+    end = events.start_us + int(events.duration_us)
+    return (t0_us is not None and t0_us > end) or (t1_us is not None and t1_us <= events.start_us)
+
+
 def event_frame_rgb(events: EventStream, t0_us=None, t1_us=None, saturation: int | None = None) -> np.ndarray:
     """(H, W, 3) uint8 RGB image of the events in [t0, t1): net ON red, net OFF blue, on white.
 
@@ -48,6 +55,9 @@ def write_preview(path: str, events: EventStream, t0_us=None, t1_us=None, scale:
         raise EventFieldError(f"{path}: preview must be a .png file")
     scale = number(scale, "scale", 1, 64, integer=True)
     _check_window(events, t0_us, t1_us, "write_preview")
+    if window_outside(events, t0_us, t1_us):
+        raise EventFieldError(f"{path}: the window t0_us = {t0_us!r}, t1_us = {t1_us!r} is outside the stream, which "
+                              f"covers {events.start_us} to {events.start_us + int(events.duration_us)} us")
     if events.width == 0 or events.height == 0:
         raise EventFieldError(f"{path}: cannot preview a {events.width}x{events.height} sensor")
     # the float working image (24 bytes a pixel) and the upscaled one (3 bytes a pixel): a 65536 x 65536

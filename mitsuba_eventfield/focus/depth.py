@@ -216,6 +216,8 @@ def depth_from_focus(lf: LightField, near: float, far: float, planes: int = 32, 
         raise ConfigError(f"depth_from_focus: unknown focus measure {measure!r}; allowed: {', '.join(MEASURES)}")
     window = check_window(window, "depth_from_focus")
     zs = depth_planes(near, far, planes)
+    for value, name in ((near, "near"), (far, "far")):       # named as given (a near one said "refocus: depth")
+        lf.check_depth(value, f"depth_from_focus: {name}")
     check_plane_step(lf, zs)
     inv = 1.0 / zs
     textures = []

@@ -130,7 +130,7 @@ def solved_lightfields(events: EventStream, views: int, periods: list, solver_kw
 
 
 def _register():
-    from ..lightfield.model import PERIODS, register_galvo_solver
+    from ..lightfield.streams import PERIODS, register_galvo_solver
     register_galvo_solver(PERIODS, solved_lightfields)
 
 

@@ -44,7 +44,7 @@ def thresholds(events: EventStream, c_on=None, c_off=None):
     c_on = c_on if c_on is not None else pm.get("threshold_on")
     c_off = c_off if c_off is not None else pm.get("threshold_off")
     if c_on is None or c_off is None:
-        raise ValueError("contrast thresholds unknown: the stream has no pixel_model metadata; pass c_on/c_off")
+        raise ConfigError("contrast thresholds unknown: the stream has no pixel_model metadata; pass c_on/c_off")
     # the render's own range: a 0 (a damaged file) divided every level by zero, a negative one inverted them
     return tuple(number(c, f"contrast threshold {name}", 0, MAX_THRESHOLD, lo_open=True)
                  for name, c in (("c_on", c_on), ("c_off", c_off)))
@@ -59,10 +59,22 @@ def _pixel_index(events):
 
 
 def _check_times(times):
-    times = np.asarray(times, dtype=np.float64)
-    if times.ndim != 1 or len(times) == 0 or np.any(np.diff(times) < 0) or not np.all(np.isfinite(times)):
-        raise ValueError("times must be a non-empty increasing 1-D array of seconds")
-    return times
+    try:
+        arr = np.asarray(times, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.ndim != 1 or len(arr) == 0 or np.any(np.diff(arr) < 0) or not np.all(np.isfinite(arr)):
+        shown = np.array2string(np.asarray(arr if arr is not None else times), threshold=6)
+        raise ConfigError(f"reconstruct: times = {shown}: expected a non-empty, non-decreasing 1-D array of finite "
+                          "seconds")
+    return arr
+
+
+MAX_CUTOFF_HZ = 1e6       # the filters' cutoff (highpass, complementary), as --cutoff takes it
+
+
+def _cutoff(cutoff_hz) -> float:
+    return number(cutoff_hz, "reconstruct: cutoff_hz", 0, MAX_CUTOFF_HZ, lo_open=True, strict=True)
 
 
 def direct(events: EventStream, times, log_start=None, t_start: float | None = None, c_on=None, c_off=None):
@@ -128,15 +140,16 @@ def _filtered(events, times, cutoff_hz, c_on, c_off, frames=None, frame_times=No
 
 def highpass(events: EventStream, times, cutoff_hz: float = 5.0, c_on=None, c_off=None):
     c_on, c_off = thresholds(events, c_on, c_off)
-    return _filtered(events, times, cutoff_hz, c_on, c_off)
+    return _filtered(events, times, _cutoff(cutoff_hz), c_on, c_off)
 
 
 def complementary(events: EventStream, times, frames, frame_times, cutoff_hz: float = 5.0, c_on=None, c_off=None):
     """Events between frames, pulled towards the latest frame (log intensity) at ``cutoff_hz``."""
     c_on, c_off = thresholds(events, c_on, c_off)
     if frames is None or frame_times is None or len(frame_times) == 0:
-        raise ValueError("the complementary filter needs frames and their times")
-    return _filtered(events, times, cutoff_hz, c_on, c_off, frames=frames, frame_times=frame_times)
+        raise ConfigError("reconstruct: method 'complementary' needs frames and frame_times (log frames to pull "
+                          "towards, and their times in seconds)")
+    return _filtered(events, times, _cutoff(cutoff_hz), c_on, c_off, frames=frames, frame_times=frame_times)
 
 
 def galvo_start_image(events: EventStream, t_start: float, samples: int = 16, depth=math.inf,
@@ -163,6 +176,13 @@ def reconstruct(events: EventStream, times, method: str = "direct", **kw):
     from ..validate import check_allocation
     if method not in _METHODS:
         raise ConfigError(f"unknown reconstruction method {method!r}; available: {', '.join(methods())}")
+    import inspect
+    try:            # a keyword the method does not take (cutoff_hz for direct) was a raw TypeError inside it
+        inspect.signature(_METHODS[method]).bind(events, times, **kw)
+    except TypeError as e:
+        params = [p for p in inspect.signature(_METHODS[method]).parameters][2:]
+        raise ConfigError(f"reconstruct: method {method!r}: {e}; it takes {', '.join(params) or 'nothing more'}") \
+            from None
     n = np.size(times)
     # a few float64 frames per requested time (the result plus the methods' working copies)
     check_allocation(3 * 8.0 * n * events.width * events.height,

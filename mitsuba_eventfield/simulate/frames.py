@@ -10,7 +10,7 @@ import numpy as np
 from .. import backend
 from ..errors import EventFieldError
 from ..scene.timed import load_scene
-from ..validate import positive
+from ..validate import FRAME_SPP, MAX_SEED, MAX_SPP, number
 
 mi, dr = backend.mi, backend.dr
 
@@ -69,7 +69,7 @@ class FrameRenderer:
         return mi.render(timed.scene, sensor=timed.sensor, integrator=self.inner, seed=seed, spp=self.spp)
 
 
-def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
+def render_frames(scene, times, spp: int = FRAME_SPP, seed: int = 0, log: bool = True,
                   linlog_threshold: float | None = None, rgb: bool = False, sensor=None) -> np.ndarray:
     """Frames of the scene at the given times (seconds): (T, H, W) log brightness exactly as the event pixel
     sees it (lin-log, fixed seed), or linear radiance with ``log=False``. Ground truth for reconstruction, and
@@ -81,7 +81,8 @@ def render_frames(scene, times, spp: int = 4, seed: int = 0, log: bool = True,
     from ..plugins import pixel_model
     from ..plugins.event_integrator import DEFAULT_LINLOG, is_event_integrator
     timed = load_scene(scene)
-    spp = positive(spp, "spp", integer=True)
+    spp = int(number(spp, "render_frames: spp", 1, MAX_SPP, integer=True, strict=True))
+    seed = int(number(seed, "render_frames: seed", 0, MAX_SEED, integer=True, strict=True))
     integ = timed.scene.integrator()
     if linlog_threshold is None:
         linlog_threshold = (pixel_model.pixel_config(integ.scene_preset, **integ.scene_overrides).linlog_threshold

@@ -20,7 +20,7 @@ from ..errors import ConfigError, EventFieldError, raise_if_stopped
 from ..events.io import format_of
 from ..plugins.event_fill import film_limit_error
 from ..scene.timed import TimedScene, load_scene
-from ..validate import MAX_THRESHOLD, available_memory, flag, instance, number
+from ..validate import DEFAULT_SPP, MAX_THRESHOLD, available_memory, flag, instance, number
 from .periodic import period_blocks, phase_grid, reuse_plan
 from . import sample_allocation, static_pixels, step_batch
 from .frames import FrameRenderer, frozen_render, render_frames  # noqa: F401  (render_frames: re-exported)
@@ -353,7 +353,7 @@ def _steps_and_samples(timed, st: Stepping, integ, spp_changing):
 
 def render_events(scene, duration: float | None = None, *, steps: int | None = None, adaptive=False,
                   max_log_change: float = 0.5, min_step: float | None = None, max_step: float | None = None,
-                  spp: int = 4, seed: int = 0, seed_mode: str = "fixed", threshold: float | None = None,
+                  spp: int = DEFAULT_SPP, seed: int = 0, seed_mode: str = "fixed", threshold: float | None = None,
                   threshold_on: float | None = None, threshold_off: float | None = None,
                   linlog_threshold: float | None = None, output: str | None = None, fmt: str | None = None,
                   progress: bool = False, t_start: float = 0.0, reuse: bool = True, preset: str | None = None,

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import EventFieldError
-from ..validate import MAX_DURATION_S, MAX_STEPS, finite, number, positive
+from ..validate import MAX_DURATION_S, MAX_SEED, MAX_SPP, MAX_STEPS, finite, number, positive
 
 SEED_MODES = ("fixed", "independent")
 
@@ -139,12 +139,10 @@ def stepping(timed, duration, steps, adaptive, max_log_change, min_step, max_ste
                 raise EventFieldError(f"adaptive by image motion needs {len(schedule) - 1} steps of at most "
                                       f"{px_per_step:g} px: allowed at most {MAX_STEPS} (raise px_per_step or "
                                       "shorten the render)")
-    elif steps is not None:
-        steps = positive(steps, "steps", integer=True)
-        if steps > MAX_STEPS:
-            raise EventFieldError(f"steps = {steps}: allowed range is [1, {MAX_STEPS}] (each step renders the film)")
-    return Stepping(duration, t_start, positive(spp, "spp", integer=True),
-                    number(seed, "seed", 0, integer=True, strict=True), seed_mode,
+    elif steps is not None:       # (each step renders the film)
+        steps = int(number(steps, "steps", 1, MAX_STEPS, integer=True, strict=True))
+    return Stepping(duration, t_start, int(number(spp, "spp", 1, MAX_SPP, integer=True, strict=True)),
+                    int(number(seed, "seed", 0, MAX_SEED, integer=True, strict=True)), seed_mode,
                     bool(adaptive) and schedule is None, steps, max_log_change, min_step, max_step,
                     tuple(schedule) if schedule is not None else None, px_per_step if schedule is not None else None)
 

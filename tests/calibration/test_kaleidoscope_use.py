@@ -135,7 +135,7 @@ def test_view_offsets_belong_to_spatial_light_fields_and_follow_subsets(renders)
 
 def test_a_light_field_knows_where_its_levels_come_from(renders):
     """The flat field divides only frame levels (``meta['levels']``): from_events labels each method."""
-    from mitsuba_eventfield.lightfield.model import from_events
+    from mitsuba_eventfield.lightfield.streams import from_events
     scene, optics, _, _, _ = renders
     t = np.arange(0, 2000, 20)
     ev = ef.EventStream(t % (N * TILE), (t // 7) % (N * TILE), t, np.where(t % 40, 1, -1), N * TILE, N * TILE,

@@ -39,7 +39,8 @@ def _run(args, capsys):
 def test_each_light_field_knows_the_depths_it_refocuses_at(captures):
     """A galvo light field refocuses beyond its farther mirror pivot; a kaleidoscope's where no view moves by
     more than its own size (at 1e-5 it asked for 1 TiB of padding; a galvo at 1e308 made a constant image)."""
-    from mitsuba_eventfield.lightfield.model import MAX_DEPTH, from_events
+    from mitsuba_eventfield.lightfield.model import MAX_DEPTH
+    from mitsuba_eventfield.lightfield.streams import from_events
     _, ev, kal = captures
     galvo = from_events(ev, views=8)
     optics = ev.meta["optics"]
@@ -216,7 +217,7 @@ def test_options_of_the_other_design_and_kaleidoscope_calibrations_refused(captu
 def test_a_kaleidoscope_light_field_only_at_times_the_stream_covers(captures):
     """from_events(time=...) past the stream's end (or before its start) reconstructed on no data; the CLI
     checked it, the API did not."""
-    from mitsuba_eventfield.lightfield.model import from_events
+    from mitsuba_eventfield.lightfield.streams import from_events
     _, _, kal = captures
     end = kal.meta.get("t_start_us", 0) * 1e-6 + kal.duration_us * 1e-6
     assert from_events(kal, time=end).views.shape[0] == 9

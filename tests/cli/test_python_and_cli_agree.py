@@ -10,7 +10,7 @@ from conftest import ROOT
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.cli.main import main as cli
 from mitsuba_eventfield.images import read_exr
-from mitsuba_eventfield.lightfield.model import from_events
+from mitsuba_eventfield.lightfield.streams import from_events
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
 KALEIDO = os.path.join(ROOT, "scenes", "moving_grid", "kaleidoscope.xml")
@@ -85,3 +85,81 @@ def test_a_galvo_light_field_refuses_what_the_command_refuses(streams, kwargs, w
 def test_a_kaleidoscope_light_field_refuses_galvo_arguments(streams, kwargs, words):
     with pytest.raises(ef.ConfigError, match=words):
         from_events(streams[2], **kwargs)
+
+
+def test_a_frame_is_rendered_alike(tmp_path):
+    """``eventfield frame`` rendered 16 spp, ``ef.render_frames`` 4: the README's Python start frame refocused
+    28 % away from the command's. Both take ``FRAME_SPP`` now."""
+    from mitsuba_eventfield.validate import FRAME_SPP
+    out = tmp_path / "f.exr"
+    assert cli(["frame", GALVO, "-D", "width=32", "-D", "height=24", "--times", "0", "-o", str(out)]) == 0
+    mine = ef.render_frames(ef.load_scene(GALVO, width=32, height=24), [0.0], log=False)[0]
+    assert np.array_equal(mine.astype(np.float32), _exr(out, "Y"))
+    assert read_exr(str(out))[1]["spp"] == FRAME_SPP == 16
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    (dict(seed=2**32), r"seed = 4294967296: allowed range is \[0, 4294967295\]"),   # a Dr.Jit error inside
+    (dict(spp=100_000), r"spp = 100000: allowed range is \[1, 65536\]"),            # was rendered
+    (dict(spp=0), r"spp = 0: allowed range is \[1, 65536\]"),                       # said (0, inf)
+    (dict(steps=0), r"steps = 0: allowed range is \[1, 1e\+07\]"),
+])
+def test_a_render_refuses_what_the_command_refuses(kwargs, words):
+    with pytest.raises(ef.ConfigError, match=words):
+        ef.render_events(ef.load_scene(GALVO, width=8, height=6), 0.001, **kwargs)
+
+
+def test_the_largest_seed_renders():
+    ev = ef.render_events(ef.load_scene(GALVO, width=8, height=6), 0.001, steps=2, seed=2**32 - 1)
+    assert ev.meta["seed"] == 2**32 - 1
+
+
+def test_a_stuck_pixel_is_left_out_in_python_as_by_the_command(streams):
+    """One pixel firing ON at 250 kHz (a 4 ms capture: 1000 events, past 140 dB): the command leaves it out with
+    a warning; a script's refocused image kept it (an audit's 50 kHz pixel over 8 ms: maximum 918,620 against the
+    command's 3.18). ``from_events`` now leaves it out too, and says so."""
+    d, ev, _ = streams
+    n = int(ev.duration_us * 0.25)
+    t = np.linspace(ev.start_us, ev.start_us + ev.duration_us - 1, n).astype(np.int64)
+    order = np.argsort(np.concatenate([ev.t, t]), kind="stable")
+    join = lambda a, b: np.concatenate([a, b])[order]  # noqa: E731
+    stuck = ef.EventStream(join(ev.x, np.full(n, 20)), join(ev.y, np.full(n, 10)), join(ev.t, t),
+                           join(ev.p, np.ones(n, np.int8)), ev.width, ev.height,
+                           dict(ev.meta, t_start_us=ev.start_us, duration_us=ev.duration_us))
+    ef.write_events(str(d / "stuck.h5"), stuck)
+    out = d / "stuck.png"
+    assert cli(["refocus", str(d / "stuck.h5"), "--depth", "0.5", "--views", "8", "--method", "galvo",
+                "-o", str(out)]) == 0
+    with pytest.warns(UserWarning, match=r"from_events: 1 stuck or hot pixel left out.*\(20, 10\) ON"):
+        lf = from_events(ef.read_events(str(d / "stuck.h5")), views=8, method="galvo")
+    mine, theirs = ef.refocus(lf, 0.5), _exr(out.with_suffix(".exr"), "Y")
+    assert np.abs(mine - theirs).max() <= 1e-5 * np.abs(theirs).max() and np.abs(theirs).max() < 100
+
+
+@pytest.mark.parametrize("times, kwargs, words", [
+    ([0.003, 0.001], {}, r"reconstruct: times = \[0.003 0.001\]: expected a non-empty, non-decreasing"),
+    ([0.001], dict(method="highpass", cutoff_hz=0), r"reconstruct: cutoff_hz = 0: allowed range is \(0, 1e\+06\]"),
+    ([0.001], dict(method="direct", cutoff_hz=5), r"method 'direct': got an unexpected keyword argument 'cutoff_hz'; "
+                                                  "it takes log_start, t_start, c_on, c_off"),
+    ([0.001], dict(method="complementary"), r"method 'complementary': missing a required argument: 'frames'"),
+])
+def test_reconstruct_refuses_in_one_line_naming_the_argument(streams, times, kwargs, words):
+    """Decreasing times were a ValueError naming no value, a cutoff for the direct method or the complementary
+    filter without frames a raw TypeError from inside the method, and cutoff 0 was taken."""
+    with pytest.raises(ef.ConfigError, match=words):
+        ef.reconstruct.reconstruct(streams[1], times, **kwargs)
+
+
+def test_other_refusals_of_the_python_api_are_one_line_errors(streams, tmp_path):
+    _, ev, _ = streams
+    with pytest.raises(ef.EventFieldError, match=r"p.png: the window t0_us = 10000000, t1_us = 20000000 is outside "
+                                                 r"the stream, which covers 0 to 4000 us"):
+        ef.write_preview(str(tmp_path / "p.png"), ev, 10**7, 2 * 10**7)      # a blank PNG was written
+    assert not os.listdir(tmp_path)
+    with pytest.raises(ef.ConfigError, match=r"depth_from_focus: near = 0.001: this galvo light field refocuses"):
+        ef.depth_from_focus(from_events(ev, views=8, method="galvo"), 0.001, 4.0)     # said "refocus: depth"
+    from mitsuba_eventfield.apps import highspeed, scanrate
+    with pytest.raises(ef.ConfigError, match="min_confidence = 2: must be in"):     # a bare ValueError before
+        scanrate.run(GALVO, min_confidence=2)
+    with pytest.raises(ef.ConfigError, match="need 0 < near < far"):
+        highspeed.track_focus_depth(GALVO, (0.1, 0.1, 0.5, 0.5), 1.5, 0.6, 1.6)

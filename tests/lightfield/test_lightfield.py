@@ -8,6 +8,7 @@ from lf_scenes import FAR, NEAR, kaleido_sensor, two_planes, view_fov_deg
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.lightfield import reconstruct
+from mitsuba_eventfield.validate import DEFAULT_SPP
 
 
 def _mi():
@@ -20,14 +21,15 @@ def test_reconstruction_methods_against_rendered_frames(capsys):
     timed = ef.load_scene(DEMO, width=64, height=48)
     ev = ef.render_events(timed, 0.02, steps=40)
     times = np.linspace(0.0025, 0.02, 8)
-    truth = ef.render_frames(timed, times)                      # what the pixel saw: lin-log, same seed
-    start = ef.render_frames(timed, [0.0])[0]
+    truth = ef.render_frames(timed, times, spp=DEFAULT_SPP)     # what the pixel saw: lin-log, same seed
+    start = ef.render_frames(timed, [0.0], spp=DEFAULT_SPP)[0]
     c = ev.meta["pixel_model"]["threshold_on"]
     err = {"direct": np.abs(reconstruct.direct(ev, times, start) - truth)}
     change = truth - start                                      # the high-pass filter sees changes only
     err["highpass"] = np.abs(reconstruct.highpass(ev, times, cutoff_hz=20.0) - change)
     ft = np.array([0.0, 0.01, 0.02])
-    err["complementary"] = np.abs(reconstruct.complementary(ev, times, ef.render_frames(timed, ft), ft, 20.0) - truth)
+    frames = ef.render_frames(timed, ft, spp=DEFAULT_SPP)
+    err["complementary"] = np.abs(reconstruct.complementary(ev, times, frames, ft, 20.0) - truth)
     with capsys.disabled():
         print("\n[reconstruction, C = 0.2] mean / p99 |log error|: "
               + "; ".join(f"{k} {v.mean():.4f} / {np.percentile(v, 99):.3f}" for k, v in err.items()))

@@ -7,6 +7,7 @@ import pytest
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.cli.main import main as cli
+from mitsuba_eventfield.validate import DEFAULT_SPP
 
 C = 0.2
 
@@ -46,7 +47,7 @@ def test_same_events_as_a_render_fed_the_same_frames(demo_small, pixel):
     exp(log) of it."""
     from mitsuba_eventfield.plugins.event_batch import one_frame_a_step
     times = np.linspace(0.0, 0.01, 11)
-    radiance = ef.render_frames(demo_small, times, log=False)
+    radiance = ef.render_frames(demo_small, times, spp=DEFAULT_SPP, log=False)   # the render's
     rendered = ef.render_events(demo_small, 0.01, steps=10, reuse=False, pixel=pixel)
     converted = ef.events_from_frames(radiance, times, pixel=pixel)
     assert len(rendered) > 300 and converted.equals(rendered)
