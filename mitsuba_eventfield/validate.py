@@ -183,3 +183,17 @@ def check_allocation(nbytes: float, what: str, fraction: float = 0.5) -> None:
     if nbytes > fraction * avail:
         raise EventFieldError(f"{what} needs about {nbytes / 2**30:.3g} GiB, more than {fraction:.0%} of the "
                               f"{avail / 2**30:.1f} GiB available; ask for fewer")
+
+
+def keywords(fn, given: dict, where: str, bound: int = 0, error=ConfigError) -> None:
+    """Refuse the keywords of ``given`` that ``fn`` does not take after its first ``bound`` parameters (which
+    the caller passes itself), in one line naming them and what it takes: a keyword handed on to a method a
+    generator runs later surfaced as a TypeError at its first step."""
+    import inspect
+    params = dict(list(inspect.signature(fn).parameters.items())[bound:])
+    if any(p.kind == p.VAR_KEYWORD for p in params.values()):
+        return
+    unknown = [k for k in given if k not in params]
+    if unknown:
+        takes = [k for k, p in params.items() if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+        raise error(f"{where}: {', '.join(unknown)}: not a keyword it takes ({', '.join(takes)})")

@@ -40,7 +40,8 @@ def _free_bytes(path: str) -> int | None:
 
 
 def _disk_full(path: str, free: int | None, need: int, cause: BaseException | None = None) -> EventFieldError:
-    """The one-line error of a write the file system refused (``cause``, when known, says which refusal)."""
+    """The one-line error of a write of about ``need`` bytes the file system refused (``cause``, when known, says
+    which refusal); a full disk's names the free space asked for, DISK_MARGIN included."""
     code = getattr(cause, "errno", None)
     if code == errno.EDQUOT or "quota exceeded" in str(cause or "").lower():
         return EventFieldError(f"{path}: disk quota exceeded: the file system refused about {_size(need)} more "
@@ -49,14 +50,14 @@ def _disk_full(path: str, free: int | None, need: int, cause: BaseException | No
         return EventFieldError(f"{path}: file too large: the file system or the process's file-size limit "
                                f"(ulimit -f) refused about {_size(need)} more")
     have = "unknown" if free is None else _size(free)
-    return EventFieldError(f"{path}: disk full: {have} free, need about {_size(need)}")
+    return EventFieldError(f"{path}: disk full: {have} free, need about {_size(need + DISK_MARGIN)}")
 
 
 def check_space(path: str, need: int) -> None:
     """Refuse a write of about ``need`` bytes beside ``path`` unless that much (plus DISK_MARGIN) is free, before
     HDF5 or dv-processing meet ENOSPC: neither recovers from it (segfault, abort)."""
-    free, need = _free_bytes(path), int(need) + DISK_MARGIN
-    if free is not None and free < need:
+    free, need = _free_bytes(path), int(need)
+    if free is not None and free < need + DISK_MARGIN:
         raise _disk_full(path, free, need)
 
 
@@ -135,7 +136,7 @@ def disk_errors(path: str, need: int):
     except Exception as e:
         if not _no_space(e):
             raise
-        raise _disk_full(path, _free_bytes(path), int(need) + DISK_MARGIN, e) from None
+        raise _disk_full(path, _free_bytes(path), int(need), e) from None
 
 
 class GuardedFile(io.FileIO):

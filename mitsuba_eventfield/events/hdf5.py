@@ -14,7 +14,7 @@ import numpy as np
 from ..atomic import check_writable, remove_stale_partials, temporary_name
 from ..errors import ConfigError, EventFieldError
 from ..validate import number, usable_cores
-from .disk import DISK_MARGIN, HEADER_BYTES, GuardedFile, _disk_full, _free_bytes, _no_space, check_space
+from .disk import HEADER_BYTES, GuardedFile, _disk_full, _free_bytes, _no_space, check_space
 from .stream import MAX_SENSOR, EventStream, chunk_columns, first_out_of_order
 
 try:    # ISA-L's deflate: a zlib stream like zlib's, 5.8x its speed at level 1 on the fan's events, same size
@@ -202,7 +202,7 @@ class H5EventWriter:
             if not (self._io is not None and self._io.failed):
                 return
         cause = (self._io.failed if self._io is not None else None) or cause    # the write the disk refused
-        raise _disk_full(self.path, _free_bytes(self.path), int(need) + DISK_MARGIN, cause)
+        raise _disk_full(self.path, _free_bytes(self.path), int(need), cause)
 
     def _offset(self, first_us: int) -> int:
         """/t_offset, fixed by the first event or promise (``first_us``): events and promises never go back."""

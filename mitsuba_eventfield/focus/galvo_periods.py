@@ -118,8 +118,22 @@ class SolverWarning(UserWarning):
 
 def solved_lightfields(events: EventStream, views: int, periods: list, solver_kw: dict):
     """``lightfield.galvo_lightfields``' ``periods`` method: the light field of each of ``periods`` (checked
-    indices) from :func:`reconstruct_periods` with ``solver_kw``, each with a ``SolverWarning`` where the
-    solver's robust weights turned down more than ``MAX_OUTLIERS`` of its equations."""
+    indices) from :func:`reconstruct_periods` with ``solver_kw`` (its depth range checked here, at the call),
+    each with a ``SolverWarning`` where the solver's robust weights turned down more than ``MAX_OUTLIERS`` of
+    its equations."""
+    near_far = solver_kw.get("depth_range")
+    if near_far is not None:
+        try:
+            near, far = (float(v) for v in near_far)
+        except (TypeError, ValueError):
+            near = far = math.nan
+        if not 0 < near < far:
+            raise ConfigError(f"galvo_lightfields: depth_range = {near_far!r}: need (near, far) with 0 < near < far "
+                              "(scene units)")
+    return _solved(events, views, periods, solver_kw)
+
+
+def _solved(events, views, periods, solver_kw):
     import warnings
     for lf, solved in reconstruct_periods(events, views, periods=periods, **solver_kw):
         if not solved.reliable:
@@ -131,7 +145,7 @@ def solved_lightfields(events: EventStream, views: int, periods: list, solver_kw
 
 def _register():
     from ..lightfield.streams import PERIODS, register_galvo_solver
-    register_galvo_solver(PERIODS, solved_lightfields)
+    register_galvo_solver(PERIODS, solved_lightfields, reconstruct_periods)
 
 
 _register()

@@ -171,6 +171,13 @@ def galvo(events: EventStream, times, t_start: float | None = None, samples: int
     return direct(events, times, start, t0, c_on, c_off)
 
 
+def method_function(method: str):
+    """The function registered as ``method`` (its signature: the method's keywords)."""
+    if method not in _METHODS:
+        raise ConfigError(f"unknown reconstruction method {method!r}; available: {', '.join(methods())}")
+    return _METHODS[method]
+
+
 def reconstruct(events: EventStream, times, method: str = "direct", **kw):
     """Log-intensity frames of ``events`` at ``times`` (seconds) by a registered method."""
     from ..validate import check_allocation

@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..events.stream import EventStream
 from ..optics.galvo import VIEWS_PER_PERIOD
-from ..validate import MAX_VIEWS, finite, instance, number
+from ..validate import MAX_VIEWS, finite, instance, keywords, number
 from . import reconstruct
 from .model import LightField, _galvo_scan, from_galvo, from_spatial, galvo_period_starts, galvo_view_times
 
@@ -22,23 +22,33 @@ MIN_VIEWS = 2           # one view has no parallax: refocus and depth from it ar
 _SOLVERS: dict = {}
 
 
-def _without_stuck_pixels(events, where: str):
+def _without_stuck_pixels(events, where: str, kw: dict):
     """``events`` without its stuck or hot pixels, with the warning that names them, as the commands read a file
     (``events.stuck_pixels``; one pixel stuck ON at 50 kHz took a script's refocused maximum to 918,620 where the
-    command's was 3.18). A stream without contrast thresholds, or already filtered, is taken as it is."""
+    command's was 3.18), at the stream's contrast thresholds or the ``c_on`` / ``c_off`` of ``kw`` (a recording's,
+    as the commands' --contrast). Without thresholds, or already filtered, the stream is taken as it is."""
     from ..events.stuck_pixels import without_stuck_pixels
     pm = events.meta.get("pixel_model") or {}
-    if "stuck_pixels_left_out" in events.meta or pm.get("threshold_on") is None or pm.get("threshold_off") is None:
+    on, off = (kw.get(k) if kw.get(k) is not None else pm.get(t)
+               for k, t in (("c_on", "threshold_on"), ("c_off", "threshold_off")))
+    if "stuck_pixels_left_out" in events.meta or on is None or off is None:
         return events
-    kept = without_stuck_pixels(events, where)
-    if not len(kept) and len(events):
+    given = events if (on, off) == (pm.get("threshold_on"), pm.get("threshold_off")) else \
+        EventStream(events.x, events.y, events.t, events.p, events.width, events.height,
+                    dict(events.meta, pixel_model=dict(pm, threshold_on=on, threshold_off=off)))
+    kept = without_stuck_pixels(given, where)
+    if kept is given:
+        return events
+    if not len(kept):
         raise ConfigError(f"{where}: no events once its stuck pixels are left out: nothing to reconstruct")
+    kept.meta["pixel_model"] = pm          # (the thresholds given stay arguments, as they came)
     return kept
 
 
-def register_galvo_solver(name: str, maker) -> None:
-    """Make ``maker`` the galvo light fields of method ``name`` (``galvo_lightfields``, ``from_events``)."""
-    _SOLVERS[name] = maker
+def register_galvo_solver(name: str, maker, takes) -> None:
+    """Make ``maker`` the galvo light fields of method ``name`` (``galvo_lightfields``, ``from_events``); its
+    keywords are those of the function ``takes`` (checked at the call)."""
+    _SOLVERS[name] = (maker, takes)
 
 
 def methods(design: str | None) -> tuple:
@@ -65,7 +75,7 @@ def galvo_lightfields(events, views: int = VIEWS_PER_PERIOD, method: str | None 
     instance(events, EventStream, "galvo_lightfields: events", "ef.read_events, ef.render_events")
     optics = events.meta.get("optics", {})
     _galvo_scan(optics, "galvo_lightfields")
-    events = _without_stuck_pixels(events, "galvo_lightfields")
+    events = _without_stuck_pixels(events, "galvo_lightfields", method_kw)
     views = int(number(views, "galvo_lightfields: views", MIN_VIEWS, MAX_VIEWS, integer=True, strict=True))
     if method is None:
         method = default_method("galvo", method_kw.get("log_start") is not None)
@@ -74,12 +84,16 @@ def galvo_lightfields(events, views: int = VIEWS_PER_PERIOD, method: str | None 
     if method == PERIODS and method_kw.get("log_start") is not None:
         raise ConfigError("galvo_lightfields: method 'periods' reconstructs from the events alone: a start frame "
                           "(log_start) is used by the direct and complementary methods")
+    if method in _SOLVERS:          # (the solver is given the events, views and periods; a method events, times)
+        keywords(_SOLVERS[method][1], method_kw, f"galvo_lightfields: method {method!r}", bound=3)
+    else:
+        keywords(reconstruct.method_function(method), method_kw, f"galvo_lightfields: method {method!r}", bound=2)
     starts = galvo_period_starts(events, periods)
     if not starts:
         raise ConfigError(f"galvo_lightfields: no scan period to reconstruct (the stream lasts "
                           f"{events.duration_us * 1e-3:g} ms, periods = {periods!r})")
     if method in _SOLVERS:
-        return _SOLVERS[method](events, views, list(starts), method_kw)
+        return _SOLVERS[method][0](events, views, list(starts), method_kw)
     return _galvo_lightfields(events, optics, starts, views, method, method_kw)
 
 
@@ -120,7 +134,7 @@ def from_events(events, period: int | None = None, views: int | None = None, tim
     if given:
         raise ConfigError(f"from_events: {' and '.join(given)} {'is' if len(given) == 1 else 'are'} for "
                           f"{'a kaleidoscope' if design == 'galvo' else 'a galvo'} stream; this one is {design}")
-    events = _without_stuck_pixels(events, "from_events")
+    events = _without_stuck_pixels(events, "from_events", method_kw)
     t0 = events.start_s
     method = default_method(design, log_start is not None) if method is None else method
     if method not in methods(design):

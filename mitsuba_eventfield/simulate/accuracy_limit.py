@@ -69,6 +69,12 @@ def event_median(values: np.ndarray, weights: np.ndarray) -> float:
     return _sorted_median(values, weights)
 
 
+def other_seed(seed: int) -> int:
+    """The second seed of a noise measurement: the next one, within the sampler's 32 bits (the largest seed's
+    next, 2^32, crashed in Dr.Jit)."""
+    return (int(seed) + 1) & 0xFFFFFFFF
+
+
 def noise_map(timed, spp: int, seed: int, t: float, integ=None, frozen=None):
     """Per-pixel Monte-Carlo noise in log brightness at time ``t``: two seeds' renders (``seed``, ``seed + 1``)
     differ by |a - b|, sqrt 2 times one render's spread.
@@ -80,7 +86,7 @@ def noise_map(timed, spp: int, seed: int, t: float, integ=None, frozen=None):
     its two recordings (a freshly loaded scene records twice), so the loop replays it from its first step on."""
     if integ is None:
         from .render import render_frames
-        a, b = (render_frames(timed, [t], spp=spp, seed=s)[0] for s in (seed, seed + 1))
+        a, b = (render_frames(timed, [t], spp=spp, seed=s)[0] for s in (seed, other_seed(seed)))
         return np.abs(a - b) / math.sqrt(2)
     from .. import backend
     mi, dr = backend.mi, backend.dr
@@ -91,7 +97,7 @@ def noise_map(timed, spp: int, seed: int, t: float, integ=None, frozen=None):
         return mi.render(timed.scene, sensor=timed.sensor, integrator=integ.inner, seed=s, spp=spp)
     timed.set_time(t)
     frames, logs = [], []
-    for s in (seed, seed + 1):
+    for s in (seed, other_seed(seed)):
         frames.append(render(s))
         integ.stage(frames[-1])
         logs.append(integ.staged.numpy())
@@ -141,7 +147,7 @@ class AccuracyLimit:
             self.sigma = self.probed
             return
         loop.timed.set_time(t_start)
-        loop.render_frame(st.seed + 1, once=True)
+        loop.render_frame(other_seed(st.seed), once=True)
         self.other = integ.staged            # sigma from it at the end (:meth:`estimate`): no read-back now,
         backend.dr.eval(self.other)          # only queued: the rendered image it reads is released
         integ.staged = integ.staged_intensity = None          # not a step: nothing is committed

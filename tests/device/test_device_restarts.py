@@ -178,3 +178,39 @@ def test_device_stop_switches_off_a_channel_whose_output_state_is_unreadable(mon
                             else real(ch))
         assert ramp_off(c, sleep=NO_SLEEP) == "channel 1: settings unreadable, switched off without a ramp; outputs off"
     assert not g.state[1]["output"] and _on_levels(g.history, 1, "vpp") == []
+
+
+RUNNING = {"function": "SIN", "frequency": 500.0, "vpp": 2.0, "offset": 1.0, "high_z": True, "output": True}
+
+
+@pytest.mark.parametrize("cmd", ["SOUR1:VOLT 2.2", "SOUR1:VOLT:OFFS 1.2", "SOUR1:VOLT:OFFS -1.2", "SOUR1:FREQ 600"])
+def test_the_recovery_exception_lets_only_a_descent_through(cmd):
+    """The guard takes a recovery step beyond the galvo's derated amplitude only where it comes down from what
+    the channel runs: more amplitude or offset, or another frequency, is checked against the limits as ever,
+    and each of these is beyond them."""
+    from mitsuba_eventfield.device import SafetyError
+    from mitsuba_eventfield.device.recovery import _coming_down
+    g = simulated("keysight", preset={1: RUNNING})
+    with GalvoController(g, "keysight", GalvoSpec(), ramp_steps=5, ramp_time=0) as c:
+        running = {1: dict(RUNNING)}
+        c._commanded = {1: {k: RUNNING[k] for k in ("function", "frequency", "vpp", "offset")}, 2: {}}
+        c._guard("SOUR1:VOLT 1.6", descent=_coming_down(c, running))        # a step down: taken
+        c._guard("SOUR1:VOLT:OFFS -0.8", descent=_coming_down(c, running))  # |offset| down: taken
+        with pytest.raises(SafetyError):
+            c._guard(cmd, descent=_coming_down(c, running))
+        with pytest.raises(SafetyError):
+            c._guard("SOUR1:VOLT 1.6")                   # without the exception, the same step is refused
+        c.outputs_off()
+
+
+def test_a_generator_that_refuses_vpp_units_goes_off_without_a_ramp():
+    """A channel in dBm whose switch to Vpp the instrument refuses is never ramped in dBm figures: it goes
+    off as it is, and the line says so."""
+    from mitsuba_eventfield.device.recovery import ramp_off
+    g = simulated("keysight", preset={1: {"function": "SIN", "frequency": 20.0, "vpp": 1.0, "unit": "DBM",
+                                          "offset": 0.0, "high_z": True, "output": True}},
+                  refuse=lambda cmd: cmd.endswith("VOLT:UNIT VPP"))
+    with GalvoController(g, "keysight", GalvoSpec(), ramp_steps=5, ramp_time=0) as c:
+        said = ramp_off(c, sleep=NO_SLEEP)
+    assert said == "channel 1: settings unreadable, switched off without a ramp; outputs off"
+    assert not g.state[1]["output"] and _on_levels(g.history, 1, "vpp") == [1.0]

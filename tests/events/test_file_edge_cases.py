@@ -313,3 +313,47 @@ def test_the_room_probe_meets_the_kernels_refusal(tmp_path):
     assert r.stdout.splitlines() == ["granted", f"EventFieldError {path}: file too large: the file system or the "
                                      "process's file-size limit (ulimit -f) refused about 4 MiB more"], r.stdout
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("ext", [".npz", ".txt", ".h5"])
+def test_a_refused_write_names_what_it_needed(tmp_path, ext):
+    """100 events (a few kB) under a 1000-byte file-size limit: the line said "refused about 1.06 MiB more",
+    the free-space margin added to what the write needed. Now the write's own size, headers included."""
+    import resource
+    import subprocess
+    import sys
+    script = ("import sys, numpy as np, mitsuba_eventfield as ef\n"
+              "ev = ef.EventStream(np.arange(100) % 64, np.arange(100) % 48, np.arange(100) * 10,\n"
+              "                    np.where(np.arange(100) % 2, 1, -1), 64, 48)\n"
+              "try:\n"
+              "    ef.write_events(sys.argv[1], ev)\n"
+              "except ef.EventFieldError as e:\n"
+              "    print(e)\n")
+
+    def limited():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (1000, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+    out = tmp_path / "out"
+    out.mkdir()
+    r = subprocess.run([sys.executable, "-c", script, str(out / f"e{ext}")], capture_output=True, text=True,
+                       preexec_fn=limited, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "file too large" in r.stdout and "KiB more" in r.stdout and "MiB" not in r.stdout, r.stdout
+    assert os.listdir(out) == []
+
+
+def test_the_room_asked_for_holds_the_chunk_still_in_dv_processings_thread(tmp_path, monkeypatch):
+    """dv-processing writes on a thread of its own: the chunk handed over last may not be in the file yet, so
+    each chunk's reservation holds it too (after the header's, the chunks' 16 bytes an event plus headers)."""
+    pytest.importorskip("dv_processing")
+    from mitsuba_eventfield.events import disk
+    from mitsuba_eventfield.events.streaming import AEDAT4_BYTES_PER_EVENT
+    reserved = []
+    monkeypatch.setattr(disk, "_reserve", lambda fd, size: reserved.append(size) or 0)
+    n = disk.WRITE_CHUNK
+    from mitsuba_eventfield.events.streaming import open_writer
+    with open_writer(str(tmp_path / "o.aedat4"), "aedat4", 64, 48) as w:
+        for k in range(3):
+            t = np.arange(k * n, (k + 1) * n)
+            w.append(t % 64, t % 48, t, np.where(t % 2, 1, -1))
+    need = AEDAT4_BYTES_PER_EVENT * n + disk.HEADER_BYTES
+    assert reserved == [disk.HEADER_BYTES, need, 2 * need, 2 * need]

@@ -102,7 +102,7 @@ def test_a_refocus_of_a_recording_leaves_its_stuck_pixels_out(stuck_recording, c
     assert "3 stuck or hot pixels left out" in said and all(f"({x}, {y})" in said for x, y in hot), said
     from mitsuba_eventfield.lightfield import streams       # (the light field leaves them out too: Python's path)
     monkeypatch.setattr(inputs, "without_stuck_pixels", lambda ev, where: ev)
-    monkeypatch.setattr(streams, "_without_stuck_pixels", lambda ev, where: ev)
+    monkeypatch.setattr(streams, "_without_stuck_pixels", lambda ev, where, kw: ev)
     kept, _ = refocused("stuck", "kept")
     off = {name: np.abs(img / clean - 1) for name, img in (("left out", left_out), ("kept", kept))}
     assert np.median(off["left out"]) < 0.04 and np.percentile(off["left out"], 99) < 0.15
