@@ -11,6 +11,16 @@ import numpy as np
 from .atomic import atomic_output
 from .errors import EventFieldError
 
+
+# Rec. 709 / sRGB primaries, as Mitsuba's mi.luminance: what a mono event pixel sees of a colour image
+LUMA = np.array([0.212671, 0.715160, 0.072169], np.float32)
+
+
+def luminance(r, g, b):
+    """Luminance of linear R, G, B (arrays or numbers), with the event pixel's weights (``LUMA``)."""
+    return r * LUMA[0] + g * LUMA[1] + b * LUMA[2]
+
+
 # OpenCV decodes only the channels named Y, R, G, B (and A) of an EXR; a file with none of them is unreadable to
 # cv2.imread. So the primary channel of a file without one is stored as Y, and its own name (depth, log, ...)
 # kept in this header attribute, from which read_exr restores it. (OpenCV also needs OPENCV_IO_ENABLE_OPENEXR=1

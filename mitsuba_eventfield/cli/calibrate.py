@@ -157,7 +157,10 @@ def _kaleidoscope(a) -> None:
         if flat.shape != frame.shape:
             raise EventFieldError(f"{a.flat}: flat frame is {flat.shape[1]}x{flat.shape[0]}, the frame "
                                   f"{a.frame} is {frame.shape[1]}x{frame.shape[0]}: they must match")
-        cal.flat_field(result, flat)
+        try:
+            cal.flat_field(result, flat)
+        except cal.CalibrationError as e:        # (it named no file)
+            raise EventFieldError(f"{a.flat}: {e}") from None
     cal.save_calibration(a.output, optics, kaleidoscope=result)
     worst = max(abs(c) for v in result.views for c in v["offset"])
     print(f"kaleidoscope: {result.n}x{result.n} views of {result.tile[0]}x{result.tile[1]} px, largest "

@@ -53,13 +53,18 @@ def with_contrast(ev, contrast, where: str):
 
 
 def luminance_channel(path):
-    """The Y (or else R) channel of an EXR frame, with a named error when it has neither."""
-    from ..images import read_exr
+    """The luminance of an EXR frame: its Y channel, or of its R, G, B (a colour camera's frame: its red channel
+    alone was taken, and a depth from it read 3.9 % off against 1.8 %), or a single R; a named error without."""
+    from ..images import luminance, read_exr
     channels, _ = read_exr(path)
-    img = channels.get("Y", channels.get("R"))
-    if img is None:
-        raise EventFieldError(f"{path}: needs a Y (or R) channel; it has {', '.join(sorted(channels)) or 'none'}")
-    return img
+    if "Y" in channels:
+        return channels["Y"]
+    if all(c in channels for c in "RGB"):
+        return luminance(channels["R"], channels["G"], channels["B"])
+    if "R" in channels and not ({"G", "B"} & set(channels)):
+        return channels["R"]
+    raise EventFieldError(f"{path}: needs a Y channel, or R, G and B (linear, for their luminance); it has "
+                          f"{', '.join(sorted(channels)) or 'none'}")
 
 
 def start_log(path, events):
@@ -69,8 +74,8 @@ def start_log(path, events):
         return None
     img = luminance_channel(path)
     if img.shape != (events.height, events.width):
-        raise EventFieldError(f"{path}: needs a Y (or R) channel of {events.width}x{events.height}, got "
-                              f"{img.shape[::-1]}")
+        raise EventFieldError(f"{path}: a frame of {img.shape[1]}x{img.shape[0]}; the stream's sensor is "
+                              f"{events.width}x{events.height}")
     return linlog_np(img, stream_linlog_threshold(events.meta))
 
 

@@ -143,7 +143,10 @@ def _lightfield(a, ev, nearest: float | None = None):
     except (ValueError, KeyError, StopIteration) as e:
         raise EventFieldError(f"{a.file}: {e}") from None
     calibrated = calibration is not None and not lf.meta.get("calibrated")     # not through the events
-    return apply_to_lightfield(lf, calibration, optics) if calibrated else lf
+    try:
+        return apply_to_lightfield(lf, calibration, optics) if calibrated else lf
+    except ConfigError as e:             # a calibration's own refusal named no file
+        raise EventFieldError(f"{a.calibration}: {e}") from None
 
 
 @contextlib.contextmanager

@@ -17,6 +17,7 @@ from typing import Iterator
 
 import numpy as np
 
+from ..images import LUMA
 from ..errors import EventFieldError
 from ..validate import available_memory
 from .frame_times import (  # noqa: F401  (check_span, read_times: re-exported)
@@ -24,7 +25,6 @@ from .frame_times import (  # noqa: F401  (check_span, read_times: re-exported)
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr", ".pgm", ".ppm")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg")
-LUMA = np.array([0.212671, 0.715160, 0.072169], np.float32)   # Rec. 709 / sRGB primaries, as mi.luminance
 
 
 @dataclass

@@ -9,6 +9,7 @@ import numpy as np
 
 from .. import backend
 from ..errors import EventFieldError
+from ..images import luminance
 from ..scene.timed import load_scene
 from ..validate import FRAME_SPP, MAX_SEED, MAX_SPP, number
 
@@ -105,6 +106,6 @@ def render_frames(scene, times, spp: int = FRAME_SPP, seed: int = 0, log: bool =
             frames.append(arr[..., :3])
             continue
         lum = arr[..., 0] if arr.shape[-1] == 1 else \
-            arr[..., 0] * 0.212671 + arr[..., 1] * 0.715160 + arr[..., 2] * 0.072169
+            luminance(arr[..., 0], arr[..., 1], arr[..., 2])
         frames.append(pixel_model.linlog_np(lum, linlog_threshold) if log else lum)
     return np.stack(frames)

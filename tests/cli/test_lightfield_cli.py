@@ -92,13 +92,13 @@ def test_reconstruct_refocus_depth_outputs(galvo_capture):
      "--method 'foo': allowed: complementary, direct, galvo, highpass, periods"),
     (["reconstruct", "{d}/g.h5", "-o", "{d}/rec3", "--method", "complementary"], "needs --start-frame"),
     (["refocus", "{d}/g.h5", "-o", "{d}/x.png", "--depth", "1", "--start-frame", "{d}/small.exr"],
-     "small.exr: needs a Y (or R) channel of 120x90"),
+     "small.exr: a frame of 60x45; the stream's sensor is 120x90"),
     (["refocus", "{d}/g.h5", "-o", "{d}/x.png", "--depth", "1", "--period", "9"],
      "scan period 9 is not in the stream: allowed 0..0"),
     (["calibrate", "galvo", "{d}/g.h5", "--patch", "30,30", "--period", "-1", "-o", "{d}/x.json"],
      "argument --period: '-1': allowed range is [0, inf)"),
     (["calibrate", "kaleidoscope", "{d}/depth_only.exr", "-o", "{d}/x.json"],
-     "depth_only.exr: needs a Y (or R) channel; it has Z"),
+     "depth_only.exr: needs a Y channel, or R, G and B (linear, for their luminance); it has Z"),
 ])
 def test_bad_input(galvo_capture, args, message):
     d = galvo_capture

@@ -309,7 +309,9 @@ def test_every_exr_kind_reads_in_opencv(exr_files):
 def test_cli_luminance_reader_on_each_kind(exr_files):
     from mitsuba_eventfield.cli.inputs import luminance_channel as _luminance_channel
     np.testing.assert_array_equal(_luminance_channel(exr_files["image"]), _exr_kinds()["image"]["Y"])
-    np.testing.assert_array_equal(_luminance_channel(exr_files["rgb"]), _exr_kinds()["rgb"]["R"])
+    rgb = _exr_kinds()["rgb"]                        # a colour frame: its luminance (it was its red channel)
+    np.testing.assert_allclose(_luminance_channel(exr_files["rgb"]),
+                               0.212671 * rgb["R"] + 0.715160 * rgb["G"] + 0.072169 * rgb["B"], rtol=1e-6)
     with pytest.raises(ef.EventFieldError, match="needs a Y .* it has confidence, depth"):
         _luminance_channel(exr_files["depth"])       # a depth map is not a frame, Y on disk or not
 
