@@ -71,16 +71,21 @@ def _size_of(header: str):
     """(width, height) from a Prophesee header, or None when it gives none. Width and height are read each on
     its own, in either order: Metavision writes ``format EVT3;height=720;width=1280`` and a DAT header
     ``% Height`` before ``% Width`` (read in one order only, such files took the events' extent as the sensor:
-    a 96x72 recording read 94x71, and its depth came out 10 % far)."""
+    a 96x72 recording read 94x71, and its depth came out 10 % far). A header whose ``geometry`` and width /
+    height disagree is refused (the geometry was taken without a word: which one the sensor is, no reader can
+    tell)."""
     m = re.search(r"geometry\s+(\d+)x(\d+)", header, re.I)
-    if m:
-        return int(m[1]), int(m[2])
+    geometry = (int(m[1]), int(m[2])) if m else None
     found = {}
     for key in ("width", "height"):
         m = re.search(rf"(?:^%\s*|[;,:\s]){key}(?:\s*=\s*|\s+)(\d+)", header, re.M | re.I)
         if m:
             found[key] = int(m[1])
-    return (found["width"], found["height"]) if len(found) == 2 else None
+    named = (found["width"], found["height"]) if len(found) == 2 else None
+    if geometry and named and geometry != named:
+        raise BadFile(f"its header gives two sensor sizes: geometry {geometry[0]}x{geometry[1]} and width / height "
+                      f"{named[0]}x{named[1]}")
+    return geometry or named
 
 
 def check_recording(path: str, fmt: str) -> dict:

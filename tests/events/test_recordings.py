@@ -245,6 +245,8 @@ def test_a_recording_with_its_nominal_optics(galvo_recording, tmp_path):
     ("mv.raw", "evt3", "% evt 3.0\n% format EVT3;height=480;width=640\n% t0 5", (640, 480)),     # Metavision's order
     ("mv.dat", "dat2", "% Version 2\n% Height 480\n% Width 640\n% T0 5", (640, 480)),
     ("bare.raw", "evt3", "% evt 3.0\n% t0 5", (50, 20)),                                      # no size: said
+    ("both.raw", "evt3", "% evt 3.0\n% format EVT3;width=640;height=480\n% geometry 640x480", (640, 480)),
+    ("two.raw", "evt3", "% evt 3.0\n% format EVT3;width=64;height=64\n% geometry 640x480", None),   # refused
 ])
 def test_the_sensor_size_is_read_in_either_order_and_a_guess_is_said(tmp_path, name, version, header, size):
     """Headers that give the height before the width (Metavision's ``format EVT3;height=..;width=..``, a DAT's
@@ -259,6 +261,11 @@ def test_the_sensor_size_is_read_in_either_order_and_a_guess_is_said(tmp_path, n
     with open(written, "rb") as f:
         body = f.read()[end:]
     (tmp_path / name).write_bytes(header.encode() + b"\n" + body)
+    if size is None:          # a header that contradicts itself: which size the sensor is, no reader can tell
+        with pytest.raises(ef.EventFieldError, match=r"two.raw.*two sensor sizes: geometry 640x480 and width / "
+                                                     r"height 64x64"):
+            ef.read_events(str(tmp_path / name))
+        return
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         back = ef.read_events(str(tmp_path / name))
