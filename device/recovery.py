@@ -73,13 +73,14 @@ def ramp_off(ctl, sleep=time.sleep) -> str:
             # the guard checks each step against the state the instrument holds, as if this process had sent it
             ctl._commanded = {ch: {k: running[ch][k] for k in SETTINGS if k in running[ch]} if ch in running else {}
                               for ch in (1, 2)}
+            descent = _coming_down(ctl, running)
             for k in range(ctl.ramp_steps - 1, 0, -1) if running else ():
                 fraction = k / ctl.ramp_steps
                 for ch, got in running.items():
                     cmds = [] if got["function"] == "DC" else \
                         list(ctl.d.amplitude(ch, toward_zero(got["vpp"] * fraction)))
                     ctl._send(cmds + (list(ctl.d.offset(ch, toward_zero(got["offset"] * fraction)))
-                                      if got["offset"] else []), descent=_coming_down(ctl, running))
+                                      if got["offset"] else []), descent=descent)
                 sleep(ctl.ramp_time / ctl.ramp_steps)
         except SafetyError as e:
             refused = " ".join(str(e).split())

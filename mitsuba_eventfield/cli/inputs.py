@@ -4,7 +4,7 @@ galvo period's frames, and the optics of a recording that carries none."""
 from __future__ import annotations
 
 from ..errors import EventFieldError
-from ..events.stuck_pixels import without_stuck_pixels
+from ..events.stuck_pixels import nonempty, without_stuck_pixels
 from ..validate import MAX_THRESHOLD, number_list
 
 
@@ -24,13 +24,6 @@ def read_input(a, needs_optics: bool = False):
             raise EventFieldError(f"{e}; nor optics: pass {_optics_options()}") from None
         raise
     return nonempty(kept, a.file)
-
-
-def nonempty(ev, where: str):
-    """``ev``, refused in one line when its stuck pixels held every event (a flat image written as done)."""
-    if not len(ev):
-        raise EventFieldError(f"{where}: no events once its stuck pixels are left out: nothing to reconstruct")
-    return ev
 
 
 def with_contrast(ev, contrast, where: str):

@@ -79,3 +79,12 @@ def without_stuck_pixels(ev, where: str):
     return type(ev)(ev.x[keep], ev.y[keep], ev.t[keep], ev.p[keep], ev.width, ev.height,
                     dict(ev.meta, t_start_us=ev.start_us, duration_us=ev.duration_us,
                          stuck_pixels_left_out=[list(p) for p in worst]))
+
+
+def nonempty(ev, where: str):
+    """``ev``, refused in one line when its stuck pixels held every event (a flat image written as done): what
+    the commands and ``lightfield.streams`` read after :func:`without_stuck_pixels`."""
+    from ..errors import ConfigError
+    if not len(ev):
+        raise ConfigError(f"{where}: no events once its stuck pixels are left out: nothing to reconstruct")
+    return ev

@@ -27,7 +27,7 @@ def _without_stuck_pixels(events, where: str, kw: dict):
     (``events.stuck_pixels``; one pixel stuck ON at 50 kHz took a script's refocused maximum to 918,620 where the
     command's was 3.18), at the stream's contrast thresholds or the ``c_on`` / ``c_off`` of ``kw`` (a recording's,
     as the commands' --contrast). Without thresholds, or already filtered, the stream is taken as it is."""
-    from ..events.stuck_pixels import without_stuck_pixels
+    from ..events.stuck_pixels import nonempty, without_stuck_pixels
     pm = events.meta.get("pixel_model") or {}
     on, off = (kw.get(k) if kw.get(k) is not None else pm.get(t)
                for k, t in (("c_on", "threshold_on"), ("c_off", "threshold_off")))
@@ -39,8 +39,7 @@ def _without_stuck_pixels(events, where: str, kw: dict):
     kept = without_stuck_pixels(given, where)
     if kept is given:
         return events
-    if not len(kept):
-        raise ConfigError(f"{where}: no events once its stuck pixels are left out: nothing to reconstruct")
+    nonempty(kept, where)
     kept.meta["pixel_model"] = pm          # (the thresholds given stay arguments, as they came)
     return kept
 
@@ -73,9 +72,15 @@ def galvo_lightfields(events, views: int = VIEWS_PER_PERIOD, method: str | None 
     ...) and warns (``SolverWarning``) for a period whose events do not fit a static scene. Yields LightField
     objects; bad arguments are refused at the call, before the first one is asked for."""
     instance(events, EventStream, "galvo_lightfields: events", "ef.read_events, ef.render_events")
+    _galvo_scan(events.meta.get("optics", {}), "galvo_lightfields")
+    return _sliding(_without_stuck_pixels(events, "galvo_lightfields", method_kw), views, method, periods,
+                    method_kw)
+
+
+def _sliding(events, views, method, periods, method_kw):
+    """:func:`galvo_lightfields` of a stream whose stuck pixels are out already (``from_events`` filters its
+    own: the search ran twice)."""
     optics = events.meta.get("optics", {})
-    _galvo_scan(optics, "galvo_lightfields")
-    events = _without_stuck_pixels(events, "galvo_lightfields", method_kw)
     views = int(number(views, "galvo_lightfields: views", MIN_VIEWS, MAX_VIEWS, integer=True, strict=True))
     if method is None:
         method = default_method("galvo", method_kw.get("log_start") is not None)
@@ -153,7 +158,8 @@ def from_events(events, period: int | None = None, views: int | None = None, tim
     if design == "galvo":
         period = 0 if period is None else int(number(period, "from_events: period", 0, integer=True, strict=True))
         views = VIEWS_PER_PERIOD if views is None else views
-        return next(galvo_lightfields(events, views, method, periods=[period], **kw))
+        _galvo_scan(optics, "galvo_lightfields")
+        return next(_sliding(events, views, method, [period], kw))
     if design in ("kaleidoscope", "microlens"):
         t1 = events.end_s
         t = t1 if time is None else finite(time, "from_events: time")
