@@ -27,6 +27,7 @@ import numpy as np
 from mitsuba_eventfield.errors import ConfigError
 
 from .galvo import CalibrationError
+from .targets import quarter_spread, warn_flat_texture, warn_not_flat
 
 # Below this gain a view sees less than a twentieth of the light the centre view sees there (the relay pupil at a
 # seam): dividing by it would raise the pixel's noise twentyfold, so a flat-fielded view is divided by at least this
@@ -100,6 +101,36 @@ def _check_view(v, n: int, tile: tuple, where: str) -> None:
                           f"tile ({tile[0] / 2:g} x {tile[1] / 2:g} px)")
 
 
+def _check_layout(v: dict, layout: dict, where: str) -> None:
+    """A view's ``tile``, ``flip_x`` and ``flip_y``, recorded for readers, against the sensor's layout, which is
+    what every reader uses (``kaleido_optics.tiles``): a hand-edited value was never read, so never refused."""
+    for key in ("tile", "flip_x", "flip_y"):
+        if key in v and not _same_value(v[key], layout[key]):
+            raise ConfigError(f"{where}: view ({v['i']}, {v['j']}): {key} = {v[key]!r}: the {layout['tile'][2]}x"
+                              f"{layout['tile'][3]} px tiles' layout has {layout[key]!r} (the sensor's, recorded "
+                              "for readers: re-run eventfield calibrate kaleidoscope rather than editing it)")
+
+
+def _checked_crop(crop, n: int, tile: tuple, where: str) -> dict:
+    """The crop record of a calibration made from a window of a larger sensor: the window, of the tiles' size,
+    inside the sensor (``validate.crop_window``)."""
+    from mitsuba_eventfield.validate import crop_window
+    sensor = crop.get("sensor") if isinstance(crop, dict) else None
+    if not (isinstance(sensor, (list, tuple)) and len(sensor) == 2 and all(_whole(v, 1) for v in sensor)):
+        raise ConfigError(f"{where}: crop = {crop!r}: expected {{\"window\": [x0, y0, w, h], \"sensor\": [w, h]}}")
+    window = crop_window(crop.get("window") or (), *sensor, f"{where}: crop window")
+    if tuple(window[2:]) != (n * tile[0], n * tile[1]):
+        raise ConfigError(f"{where}: crop window {list(window)}: its {window[2]}x{window[3]} px are not the "
+                          f"{n}x{n} tiles' {n * tile[0]}x{n * tile[1]}")
+    return {"window": list(window), "sensor": [int(v) for v in sensor]}
+
+
+def _same_value(a, b) -> bool:
+    if isinstance(b, bool):
+        return isinstance(a, bool) and a == b
+    return isinstance(a, (list, tuple)) and list(a) == list(b) and not any(isinstance(c, bool) for c in a)
+
+
 def known_tiles(n: int, width: int, height: int) -> dict:
     """The tiles of an n x n kaleidoscope on a ``width`` x ``height`` film, for a frame whose sensor metadata
     says n: equal tiles, no search. The seam search needs mirror symmetry at every seam, which a misaligned tube
@@ -121,6 +152,7 @@ class KaleidoscopeCalibration:
     target_depth: float | None = None      # scene units: depth of the registered target; None: the focus distance
     flat_map: dict | None = None           # the flat field's gain over the film (``_encode_map``): float16, base64
     registration: str | None = None        # how the offsets were measured (``REGISTRATION``; None: before it)
+    crop: dict | None = None               # the frame's window of a larger sensor ("window" x0, y0, w, h; "sensor")
 
     def __post_init__(self):
         """Every field checked, as a hand-edited file is read (a bad offset was a raw ValueError deep in refocus,
@@ -134,14 +166,21 @@ class KaleidoscopeCalibration:
         self.tile = tuple(int(v) for v in tile)
         if not isinstance(self.views, list) or len(self.views) != n * n:
             raise ConfigError(f"{where}: views must list the {n * n} views of {n}x{n} tiles")
+        from mitsuba_eventfield.plugins.kaleido_optics import tiles
+        layout = {(v["i"], v["j"]): v for v in tiles(n, n * self.tile[0], n * self.tile[1])}
         for v in self.views:
             _check_view(v, n, self.tile, where)
+            _check_layout(v, layout[(v["i"], v["j"])], where)
+        if len({(v["i"], v["j"]) for v in self.views}) != n * n:
+            raise ConfigError(f"{where}: views must list each of the {n * n} views of {n}x{n} tiles once")
         if self.target_depth is not None:
             z = self.target_depth
             if isinstance(z, bool) or not isinstance(z, (int, float)) or not math.isfinite(z) or z <= 0:
                 raise ConfigError(f"{where}: target_depth = {z!r}: must be a number > 0 (scene units), or absent "
                                   "for a target at the focus distance")
             self.target_depth = float(z)
+        if self.crop is not None:
+            self.crop = _checked_crop(self.crop, n, self.tile, where)
         if self.flat_map is not None:
             gain = _decode_map(self.flat_map)
             tw, th = self.tile
@@ -154,7 +193,8 @@ class KaleidoscopeCalibration:
     def quality(self) -> dict:
         """How well the views agree once registered (``MIN_VIEW_CONSISTENCY``), the seams' symmetry, views used."""
         c = [v["consistency"] for v in self.views if "consistency" in v and (v["i"], v["j"]) != (0, 0)]
-        return {"min_view_consistency": min(c) if c else None,
+        spread = [v["quarter_spread_px"] for v in self.views if "quarter_spread_px" in v]
+        return {"min_view_consistency": min(c) if c else None, "max_quarter_spread_px": max(spread, default=None),
                 "median_view_consistency": float(np.median(c)) if c else None,
                 "seam_scores": self.seam_scores, "samples": len(self.views)}
 
@@ -192,11 +232,6 @@ class KaleidoscopeCalibration:
         tw, th = self.tile
         gains = {(i, j): g for i, j, _, _, _, g in _unflipped(_decode_map(self.flat_map), self.n, tw, th)}
         return np.maximum(np.stack([gains[tuple(k)] for k in ij]), GAIN_FLOOR)
-
-    def optics_views(self) -> list:
-        """View list in the layout of the sensor metadata (for views.extract_views)."""
-        return [{k: v[k] for k in ("i", "j", "tile", "flip_x", "flip_y")} | {"subaperture": [0.0, 0.0]}
-                for v in self.views]
 
 
 def _unflipped(frame, n, tw, th):
@@ -288,12 +323,14 @@ def register(frame: np.ndarray, tiles: dict | None = None, margin: int = 2) -> K
         offset, error = _offset(prep(centre), img, margin, prep)
         v = img[margin:th - margin, margin:tw - margin]
         views.append({"i": i, "j": j, "tile": rect, "flip_x": fx, "flip_y": fy, "offset": offset,
-                      "error": error, "consistency": _consistency(centre, v, offset)})
+                      "error": error, "consistency": _consistency(centre, v, offset),
+                      "quarter_spread_px": quarter_spread(centre, v, offset)})
     worst = min((v for v in views if (v["i"], v["j"]) != (0, 0)), key=lambda v: v["consistency"])
     if worst["consistency"] < MIN_VIEW_CONSISTENCY:
         raise CalibrationError(f"not a kaleidoscope frame: registered view ({worst['i']}, {worst['j']}) agrees with "
                                f"the centre view to {worst['consistency']:.2f} (< {MIN_VIEW_CONSISTENCY}): its "
                                f"{n}x{n} tiles do not show one scene (a galvo, blank or noise frame?)")
+    warn_not_flat(views)
     seams = {axis: tiles[axis]["score"] for axis in ("x", "y") if "score" in tiles[axis]}
     return KaleidoscopeCalibration(n=n, tile=(tw, th), views=views, seam_scores=seams, registration=REGISTRATION)
 
@@ -324,6 +361,7 @@ def flat_field(calibration: KaleidoscopeCalibration, flat_frame: np.ndarray) -> 
                                f"covering the {n}x{n} tiles of {tw}x{th} px, like the registered frame")
     flat = flat[:n * th, :n * tw]            # a bare frame's tiles are its size over n, rounded down
     parts = _unflipped(flat, n, tw, th)
+    warn_flat_texture([p[5] for p in parts])
     maps = np.stack([p[5] for p in parts])
     ref = maps[len(maps) // 2].mean()
     if ref <= 0:

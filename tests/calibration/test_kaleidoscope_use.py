@@ -165,6 +165,12 @@ def _negative_map() -> str:
     (lambda k: k.update(target_depth=-1), "target_depth = -1: must be a number > 0"),
     (lambda k: k["flat_map"].update(shape=[57600]), "flat_map must be a finite, non-negative 240x240 gain map"),
     (lambda k: k["flat_map"].update(base64=_negative_map()), "flat_map must be a finite, non-negative"),
+    # the recorded layout, never read before: refused where it is not the sensor's (view (0, -1) is flipped in y)
+    (lambda k: k["views"][1].update(flip_y=False), r"view \(0, -1\): flip_y = False: the 80x80 px tiles' layout "
+                                                   r"has True \(the sensor's"),
+    (lambda k: k["views"][1].update(flip_x=1), r"view \(0, -1\): flip_x = 1: .* has False"),
+    (lambda k: k["views"][0].update(tile=[0, 0, 80, 79]), r"view \(-1, -1\): tile = \[0, 0, 80, 79\]"),
+    (lambda k: k["views"][1].update(k["views"][0], offset=[0, 0]), r"views must list each of the 9 views of 3x3 tiles once"),
 ])
 def test_a_hand_edited_calibration_is_refused_in_one_line(renders, tmp_path, edit, message):
     import json
@@ -196,3 +202,35 @@ def test_old_or_twice_applied_calibrations_are_refused(renders, tmp_path):
     cal.optics, cal.flat_gain = record, [1.0] * 9        # mean gains without the map: an older --flat file
     with pytest.raises(ef.ConfigError, match="mean gains but not its map"):
         apply_to_lightfield(lf, {"kaleidoscope": cal}, record)
+
+
+def test_a_target_that_is_not_flat_is_warned_about(renders):
+    """Registered in quarters, a flat target's views agree on one shift; the two planes (NEAR and FAR: depth
+    varies across the views) do not, by about their parallax difference, and the calibration warns (its one
+    shift per view would be that parallax averaged, read as misalignment). Oracle: the thin-lens disparity of
+    the two planes (``Disparity.for_spatial``, which the registration is not given)."""
+    import warnings
+    frame, optics, targets, _, _ = renders
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                                   # a flat target: no warning
+        flat = register(np.log(targets[FAR]), known_tiles(N, N * TILE, N * TILE))
+    assert flat.quality["max_quarter_spread_px"] < 0.1
+    with pytest.warns(UserWarning, match=r"quarters register .* px apart \(a flat target: under 0\.25\): the target is "
+                                         r"not flat"):
+        planes = register(np.log(frame), known_tiles(N, N * TILE, N * TILE))
+    lf = ef.from_spatial(frame, optics)
+    parallax = np.hypot(*(lf.shifts(NEAR) - lf.shifts(FAR)).T).max()      # px, the view farthest from the centre
+    assert 0.8 * parallax < planes.quality["max_quarter_spread_px"] < 1.2 * parallax       # 3.32 and 3.48 px
+
+
+def test_a_textured_frame_given_as_the_flat_field_is_warned_about(renders):
+    """A uniform white target's views vary only by the relay's vignetting, smooth inside them; the textured card
+    given as the flat field would divide its texture into every view (``calibration.targets``)."""
+    import warnings
+    _, _, targets, _, flat = renders
+    cal = register(np.log(targets[1.0]), known_tiles(N, N * TILE, N * TILE))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        flat_field(cal, flat)                                        # vignetted, uniform: no warning
+    with pytest.warns(UserWarning, match=r"flat field: the frame has detail inside its views \(0\.0[78]\d in log"):
+        flat_field(cal, targets[1.0])
