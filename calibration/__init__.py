@@ -6,7 +6,9 @@
 * ``kaleidoscope``: tile seams, flips, sub-pixel view registration, flat-field;
 * ``optics``: the optics a calibration was made for, and the check that refuses one made for other optics;
 * ``nominal``: the optics of data that carries none (a nominal optics file; a recording's from its calibration);
-* ``store``: save / load calibration files (JSON) and apply them to light fields.
+* ``store``: save / load calibration files (JSON) and apply them to light fields;
+* ``recording``: a camera recording's optics (nominal, or its calibration's) and a calibrated light field, in
+  Python as the commands make them.
 """
 from .depth import DepthCalibration, fit_depth, fit_depth_from_tracks  # noqa: F401
 from .galvo import (CalibrationError, GalvoCalibration, PatchTrack, capture_of, fit_galvo, fit_galvo_consistent,
@@ -17,3 +19,4 @@ from .kaleidoscope import KaleidoscopeCalibration, find_tiles, flat_field, known
 from .optics import check_optics, kaleidoscope_record, optics_difference, optics_record, same_optics
 from .store import save_calibration  # noqa: F401,E402
 from .store import CalibrationFile, apply_to_lightfield, calibrated_events, calibrated_optics, load_calibration
+from .recording import calibrated_lightfield, with_optics  # noqa: F401,E402

@@ -11,16 +11,19 @@ LIGHTFIELD_FIELDS = {"galvo": ("scan", "fov_x_deg", "mirror_distance", "mirror_s
                      "microlens": ("n", "views", "lens_to_image_plane", "image_plane_size", "focus_distance")}
 
 
-def nominal_optics(path: str, width: int, height: int, design: str | None = "galvo") -> dict:
-    """A set-up's nominal optics from a JSON file (``--optics``), for a camera recording or frame that carries
-    none, as a render records them in ``meta["optics"]``; ``design`` is the one the command takes (None: the
-    file's own, any light-field design). Galvo: the fields a render records (fov_x_deg, mirror_distance,
-    mirror_separation, scan), each checked, and no others. Kaleidoscope (or microlens): the sensor plugin's
-    own parameters (focal_length, focus_distance, tube_width, ...), from which the sensor itself, on this
+def nominal_optics(path, width: int, height: int, design: str | None = "galvo") -> dict:
+    """A set-up's nominal optics from a JSON file (``--optics``) or a dict of its fields (Python's ``optics=``), for a
+    camera recording or frame that carries none, as a render records them in ``meta["optics"]``; ``design`` is the one
+    the command takes (None: the file's own, any light-field design). Galvo: the fields a render records (fov_x_deg,
+    mirror_distance, mirror_separation, scan), each checked, and no others. Kaleidoscope (or microlens): the sensor
+    plugin's own parameters (focal_length, focus_distance, tube_width, ...), from which the sensor itself, on this
     ``width`` x ``height`` film, gives the views, tiles and sub-apertures (``kaleidoscope_sensor.optics_of``).
     Calibrating needs them to start from; the calibration then records them for the light-field commands."""
     from mitsuba_eventfield.validate import json_file
-    optics = json_file(path, "optics file")
+    if isinstance(path, dict):                  # Python's optics= as a record: checked as a file's would be
+        optics, path = dict(path), "optics"
+    else:
+        optics = json_file(path, "optics file")
     found = optics.get("design") if isinstance(optics, dict) else None
     if design is None:
         if found not in LIGHTFIELD_FIELDS:
@@ -91,6 +94,7 @@ def recording_optics(calibration, ev, where) -> dict:
         raise EventFieldError(f"{source}: cannot give optics to {where}, which carries none: the calibration is for "
                               f"{' and '.join(map(str, designs)) or 'no'} optics, it must be for one design")
     record = next(r for r in records if r.get("design") == designs[0])
+    _check_crop(calibration, ev, where, source)
     if (record.get("width"), record.get("height")) != (ev.width, ev.height):
         raise EventFieldError(f"{source}: made for a {record.get('width')}x{record.get('height')} film, the "
                               f"recording {where} is {ev.width}x{ev.height}")
@@ -102,3 +106,21 @@ def recording_optics(calibration, ev, where) -> dict:
         raise EventFieldError(f"{source}: its {designs[0]} optics record lacks {', '.join(missing)}, which the light "
                               f"field of {where} (a recording without optics) needs{hint}")
     return {k: v for k, v in record.items() if k not in ("width", "height")}
+
+
+def _check_crop(calibration, ev, where, source) -> None:
+    """A calibration made from a window of a larger sensor (``calibrate kaleidoscope --crop``) takes recordings
+    cut to that window: one of the whole sensor is told the window, one cut elsewhere is refused (its views
+    would be other pixels' than the calibration registered)."""
+    crops = [part.crop for part in calibration.values() if getattr(part, "crop", None)]
+    if not crops:
+        return
+    window, sensor = crops[0]["window"], crops[0]["sensor"]
+    given = (ev.meta.get("crop") or {}).get("window")
+    if given is None and [ev.width, ev.height] == list(sensor):
+        raise EventFieldError(f"{source}: made from the window {','.join(map(str, window))} of the "
+                              f"{sensor[0]}x{sensor[1]} sensor: cut the recording {where} to it (--crop "
+                              f"{','.join(map(str, window))}; in Python, events.crop(*window))")
+    if given is not None and list(given) != list(window):
+        raise EventFieldError(f"{source}: made from the window {','.join(map(str, window))} of the sensor; the "
+                              f"recording {where} is cut to {','.join(map(str, given))}")

@@ -57,6 +57,20 @@ def number(value, name: str, lo=None, hi=None, *, integer: bool = False, lo_open
     return v
 
 
+def crop_window(window, width: int, height: int, name: str = "crop", error=ConfigError) -> tuple:
+    """(x0, y0, w, h) of a window of whole pixels, at least one a side, inside a ``width`` x ``height`` sensor;
+    else ``error`` naming ``name``, the window and the sensor."""
+    parts = ("x0", "y0", "width", "height")
+    if isinstance(window, (str, bytes)) or not hasattr(window, "__len__") or len(window) != 4:
+        raise error(f"{name} = {window!r}: expected x0, y0, width, height in pixels")
+    x0, y0, w, h = (number(v, f"{name} {part}", lo=0 if part in parts[:2] else 1, integer=True,
+                           strict=not isinstance(v, str), error=error) for part, v in zip(parts, window))
+    if x0 + w > width or y0 + h > height:
+        raise error(f"{name} = {x0},{y0},{w},{h}: the window (x0, y0, width, height) must lie inside the "
+                    f"{width}x{height} sensor (x0 + width <= {width}, y0 + height <= {height})")
+    return x0, y0, w, h
+
+
 def flag(value, name: str, error=ConfigError) -> bool:
     """True or False (NumPy's too); anything else refused in one line naming ``name`` ("maybe" read as true)."""
     import numpy as np

@@ -11,7 +11,8 @@ from ..errors import EventFieldError
 from ..events.stuck_pixels import without_stuck_pixels
 from ..validate import MAX_VIEWS, number_list
 from .args import num
-from .inputs import galvo_frames, galvo_scan, give_optics, luminance_channel, nonempty, start_log, with_contrast
+from .inputs import (CROP_HELP, crop_option, galvo_frames, galvo_scan, give_optics, luminance_channel, nonempty,
+                     start_log, with_contrast)
 
 OPTICS_HELP = ("JSON of the set-up's nominal galvo optics (design, fov_x_deg, mirror_distance, mirror_separation, "
                "scan), for a camera recording that carries none")
@@ -44,6 +45,7 @@ def add_parsers(sub) -> None:
                     help="the target's depth (scene units), when it is not at the focus distance: its parallax is "
                     "taken out of the registration")
     ck.add_argument("--flat", help="EXR (linear) of a uniform white target, for the flat-field")
+    ck.add_argument("--crop", metavar="X,Y,W,H", help=CROP_HELP + "; the recordings then take the same --crop")
     from ..plugins.kaleido_optics import SETUP_PARAMETERS      # pure (no Mitsuba): --help stays quick
     ck.add_argument("--optics", help="JSON of the set-up's nominal kaleidoscope optics, for a camera frame that "
                                      "carries none: \"design\": \"kaleidoscope\" and the sensor's parameters "
@@ -58,7 +60,7 @@ def _capture(path: str, a):
     carries none (a camera recording: refused in one line without them)."""
     from ..events.io import read_events
     ev = read_events(path)
-    give_optics(ev, path, a.optics, design="galvo", takes_calibration=False)
+    ev = give_optics(ev, path, a.optics, design="galvo", takes_calibration=False)
     return nonempty(without_stuck_pixels(with_contrast(ev, a.contrast, path), path), path)
 
 
@@ -138,6 +140,12 @@ def _kaleidoscope(a) -> None:
     from ..images import read_exr
     frame = luminance_channel(a.frame)
     meta = read_exr(a.frame)[1].get("optics")
+    window, sensor = crop_option(a, frame.shape[1], frame.shape[0]), frame.shape
+    if window is not None:
+        if isinstance(meta, dict) and meta.get("design"):
+            raise EventFieldError(f"--crop {a.crop}: the frame {a.frame} carries its own ({meta['design']}) optics, "
+                                  "which describe its whole film; --crop is for a camera frame")
+        frame = _cut(frame, window)
     if a.optics:
         if isinstance(meta, dict) and meta.get("design"):
             raise EventFieldError(f"--optics {a.optics}: the frame {a.frame} carries its own ({meta['design']}) "
@@ -151,9 +159,12 @@ def _kaleidoscope(a) -> None:
     except cal.CalibrationError as e:
         raise EventFieldError(f"{a.frame}: {e}") from None
     result.target_depth = a.target_depth
+    if window is not None:       # recorded, so a recording of the whole sensor is told the window to cut
+        result.crop = {"window": list(window), "sensor": [sensor[1], sensor[0]]}
     optics = cal.kaleidoscope_record(frame.shape[1], frame.shape[0], result.n, meta, where=a.frame)
     if a.flat:
         flat = luminance_channel(a.flat)
+        flat = _cut(flat, window) if window is not None and flat.shape == sensor else flat     # the whole sensor
         if flat.shape != frame.shape:
             raise EventFieldError(f"{a.flat}: flat frame is {flat.shape[1]}x{flat.shape[0]}, the frame "
                                   f"{a.frame} is {frame.shape[1]}x{frame.shape[0]}: they must match")
@@ -166,6 +177,11 @@ def _kaleidoscope(a) -> None:
     print(f"kaleidoscope: {result.n}x{result.n} views of {result.tile[0]}x{result.tile[1]} px, largest "
           f"offset {worst:.3f} px (target at {'the focus distance' if a.target_depth is None else a.target_depth})"
           f"{', flat field' if a.flat else ''} -> {a.output}")
+
+
+def _cut(frame, window):
+    x0, y0, w, h = window
+    return frame[y0:y0 + h, x0:x0 + w]
 
 
 def run_calibrate(a) -> int:

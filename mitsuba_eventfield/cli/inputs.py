@@ -13,7 +13,7 @@ def read_input(a, needs_optics: bool = False):
     none (a camera recording) and no ``--contrast`` is refused in one line, which also names the optics where
     the command ``needs_optics`` and the recording has none (it named one missing option a run)."""
     from ..events.io import read_events
-    ev = read_events(a.file)
+    ev = cropped(read_events(a.file), a, a.file)
     if not len(ev):        # refocused, a flat image; as a depth map, no confident pixel: both written as done
         raise EventFieldError(f"{a.file}: no events: nothing to reconstruct")
     try:
@@ -21,9 +21,35 @@ def read_input(a, needs_optics: bool = False):
     except EventFieldError as e:
         if needs_optics and not ev.meta.get("optics") and not (getattr(a, "optics", None)
                                                                or getattr(a, "calibration", None)):
-            raise EventFieldError(f"{e}; nor optics: pass {_optics_options()}") from None
+            from ..calibration.recording import COMMAND_NAMES, optics_options
+            raise EventFieldError(f"{e}; nor optics: pass {optics_options(COMMAND_NAMES)}") from None
         raise
     return nonempty(kept, a.file)
+
+
+CROP_HELP = ("X,Y,W,H: the window of the sensor that the kaleidoscope's tube image covers, in pixels from the "
+             "top-left (a camera recording on a larger sensor: its views are tiles of the window; frames of the "
+             "whole sensor are cut to it)")
+
+
+def crop_option(a, width: int, height: int):
+    """``--crop X,Y,W,H`` checked against a ``width`` x ``height`` sensor; None when not given."""
+    from ..validate import crop_window
+    if not getattr(a, "crop", None):
+        return None
+    return crop_window(number_list(a.crop, "--crop"), width, height, "--crop")
+
+
+def cropped(ev, a, where: str):
+    """``ev`` cut to ``--crop`` (``EventStream.crop``) when given; a stream with its own optics is refused (they
+    describe its whole film)."""
+    if not getattr(a, "crop", None):
+        return ev
+    if ev.meta.get("optics"):
+        raise EventFieldError(f"--crop {a.crop}: {where} carries its own ({ev.meta['optics'].get('design')}) optics, "
+                              f"which describe its whole {ev.width}x{ev.height} film; --crop is for a camera "
+                              "recording whose tube image covers part of the sensor")
+    return ev.crop(*crop_option(a, ev.width, ev.height))
 
 
 def with_contrast(ev, contrast, where: str):
@@ -65,10 +91,7 @@ def start_log(path, events):
     from ..plugins.pixel_model import linlog_np, stream_linlog_threshold
     if path is None:
         return None
-    img = luminance_channel(path)
-    if img.shape != (events.height, events.width):
-        raise EventFieldError(f"{path}: a frame of {img.shape[1]}x{img.shape[0]}; the stream's sensor is "
-                              f"{events.width}x{events.height}")
+    img = events.crop_frame(luminance_channel(path), path)        # a frame of the whole sensor, cut as it was
     return linlog_np(img, stream_linlog_threshold(events.meta))
 
 
@@ -98,28 +121,10 @@ def galvo_frames(ev, period, views, start_frame_log=None):
 
 
 def give_optics(ev, where: str, optics_file: str | None, calibration=None, design: str | None = None,
-                takes_calibration: bool = True) -> None:
-    """The optics of a stream that carries none (a camera recording), into its metadata: the set-up's nominal
-    ones (``--optics``: any light-field design, or ``design``) or those of the calibration made for it
-    (``--calibration``). A stream that carries its own refuses ``--optics`` (it would be ignored); one without
-    either is refused, saying what the command takes."""
-    from ..calibration.nominal import nominal_optics, recording_optics
-    if ev.meta.get("optics"):
-        if optics_file:
-            raise EventFieldError(f"--optics {optics_file}: {where} carries its own "
-                                  f"({ev.meta['optics'].get('design')}) optics; --optics is for a camera recording "
-                                  "without them")
-        return
-    if optics_file:
-        ev.meta["optics"] = nominal_optics(optics_file, ev.width, ev.height, design=design)
-    elif calibration is not None:
-        ev.meta["optics"] = recording_optics(calibration, ev, where)
-    else:
-        raise EventFieldError(f"{where}: the recording carries no optics (no light-field metadata): pass "
-                              f"{_optics_options(takes_calibration, design)}")
-
-
-def _optics_options(takes_calibration: bool = True, design: str | None = None) -> str:
-    """What a recording without optics is told to pass (the one wording of both refusals)."""
-    return ("--calibration (a calibration file made for its set-up) or " if takes_calibration else "") + \
-        f"--optics FILE.json (the set-up's nominal {design or 'light-field'} optics)"
+                takes_calibration: bool = True):
+    """``ev`` with the optics of a recording that carries none (``calibration.recording.with_optics``, as
+    Python gives them, spelled as options): the set-up's nominal ones (``--optics``: any light-field design, or
+    ``design``) or those of the calibration made for it (``--calibration``)."""
+    from ..calibration.recording import COMMAND_NAMES, with_optics
+    return with_optics(ev, optics_file, calibration, design=design, where=where, names=COMMAND_NAMES,
+                       takes_calibration=takes_calibration)

@@ -18,7 +18,7 @@ from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import num, save_image, times_ms
-from .inputs import give_optics, read_input, start_log
+from .inputs import CROP_HELP, give_optics, read_input, start_log
 
 
 CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a recording that carries none "
@@ -51,6 +51,7 @@ def add_parsers(sub) -> None:
                                                "recording (.raw, .dat, .aedat4) takes its optics from it")
     lf_args.add_argument("--contrast", help=CONTRAST_HELP)
     lf_args.add_argument("--optics", help=OPTICS_HELP)
+    lf_args.add_argument("--crop", metavar="X,Y,W,H", help=CROP_HELP)
 
     rc = sub.add_parser("reconstruct", help="log-intensity frames from events: EXR + PNG per frame")
     rc.add_argument("file")
@@ -67,6 +68,7 @@ def add_parsers(sub) -> None:
                          "default: the stream's start); the events up to it are in the frame, frames come after it")
     rc.add_argument("--contrast", help=CONTRAST_HELP)
     rc.add_argument("--optics", help=OPTICS_HELP + " (--method galvo)")
+    rc.add_argument("--crop", metavar="X,Y,W,H", help=CROP_HELP)
     rc.add_argument("--cutoff", type=num(0, MAX_CUTOFF_HZ, lo_open=True),
                     help="filter cutoff in Hz (highpass, complementary; default 5)")
 
@@ -103,50 +105,49 @@ def _out_meta(a, events, lf=None, **extra):
     return dict({"package_version": __version__, "command": a.command, "source": os.path.abspath(a.file),
                  "inputs": _inputs(a), "method": getattr(a, "method", None) or "default",
                  "optics": events.meta.get("optics"), "pixel_model": events.meta.get("pixel_model"),
+                 "crop": events.meta.get("crop"),
                  "calibration": calibration}, **extra)
 
 
 def _lightfield(a, ev, nearest: float | None = None):
-    """The light field the light-field commands share, calibrated when asked (a calibration made for other
-    optics than this stream's is refused before any reconstruction). ``nearest``: the nearest depth the command
-    needs (--near, the nearest --depth), searched by the per-period solver too."""
-    from ..calibration import apply_to_lightfield, calibrated_events, check_optics, load_calibration, optics_record
+    """The light field the light-field commands share, calibrated when asked (``calibration.recording``, as
+    Python makes it; a calibration made for other optics than this stream's is refused before any
+    reconstruction). ``nearest``: the nearest depth the command needs (--near, the nearest --depth), searched by
+    the per-period solver too."""
+    from ..calibration import calibrated_lightfield, check_optics, load_calibration, optics_record
     from ..lightfield.streams import PERIODS, default_method, from_events, methods
     if a.method is not None and a.method not in methods("galvo"):
         raise EventFieldError(f"--method {a.method!r}: allowed: {', '.join(methods('galvo'))}")
     calibration = load_calibration(a.calibration) if a.calibration else None
-    give_optics(ev, a.file, a.optics, calibration)
-    optics = None
-    if calibration is not None:
-        optics = optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file)
-        check_optics(calibration, optics)
-        # a galvo stream's calibration goes into its optics, so the solvers use the calibrated views too
-        ev = calibrated_events(ev, calibration, optics)
+    ev = give_optics(ev, a.file, a.optics, calibration)
+    if calibration is not None:          # refused before the options' checks, as before any reconstruction
+        check_optics(calibration, optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file))
     period, views = _design_options(a, ev)
     design = (ev.meta.get("optics") or {}).get("design")
+    if a.crop and design == "galvo":       # its optics (field of view, axis at the centre) are the whole film's
+        raise EventFieldError(f"--crop {a.crop}: for a kaleidoscope's tube image on part of the sensor; a galvo's "
+                              "optics describe the whole film")
     if a.method is None:         # named, so that the outputs' metadata says which (it said "default")
         a.method = default_method(design, bool(a.start_frame))
     _warn_coarse_steps(a.file, ev)
     galvo = design == "galvo"
+    if a.method == PERIODS:
+        _check_periods(a, design)
+        # the nearer depths the command needs are searched by the solver too
+        kw = dict(period=period, views=views, method=PERIODS,
+                  depth_range=default_depth_range(ev.meta["optics"], nearest))
+    else:
+        kw = dict(period=period if galvo else None, views=views if galvo else None,
+                  time=None if a.time is None else a.time * 1e-3, method=a.method,
+                  log_start=start_log(a.start_frame, ev))
     try:
         with _solver_warnings_held() as held:
-            if a.method == PERIODS:
-                _check_periods(a, design)
-                # the nearer depths the command needs are searched by the solver too
-                lf = from_events(ev, period, views, method=PERIODS,
-                                 depth_range=default_depth_range(ev.meta["optics"], nearest))
-            else:
-                lf = from_events(ev, period if galvo else None, views if galvo else None,
-                                 time=None if a.time is None else a.time * 1e-3, method=a.method,
-                                 log_start=start_log(a.start_frame, ev))
+            lf = calibrated_lightfield(ev, calibration, where=a.file, **kw) if calibration is not None else \
+                from_events(ev, **kw)
         lf.meta["warnings"] = [f"{a.file}: {w}" for w in held]
     except (ValueError, KeyError, StopIteration) as e:
         raise EventFieldError(f"{a.file}: {e}") from None
-    calibrated = calibration is not None and not lf.meta.get("calibrated")     # not through the events
-    try:
-        return apply_to_lightfield(lf, calibration, optics) if calibrated else lf
-    except ConfigError as e:             # a calibration's own refusal named no file
-        raise EventFieldError(f"{a.calibration}: {e}") from None
+    return lf
 
 
 @contextlib.contextmanager
@@ -332,7 +333,7 @@ def run_reconstruct(a) -> int:
     from ..lightfield.reconstruct import reconstruct
     ev = read_input(a)
     if a.method == "galvo" or a.optics:       # the galvo solve reads the scan; other methods need no optics
-        give_optics(ev, a.file, a.optics, takes_calibration=False)
+        ev = give_optics(ev, a.file, a.optics, takes_calibration=False)
     t_frame = _start_time(a, ev)
     times = _reconstruct_times(a, ev, t_frame)
     try:

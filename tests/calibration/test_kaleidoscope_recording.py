@@ -179,3 +179,102 @@ def test_a_start_frame_taken_during_the_recording(capture, tmp_path):
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1 and "--method highpass reconstructs from the events alone" in err[0]
     assert not (tmp_path / "hp").exists()
+
+
+def test_the_python_path_of_a_recording(capture, tmp_path):
+    """A script gets the light field the commands get (``calibration.recording``, which the commands call): the
+    recording with its calibration's optics or the nominal ones as a dict, against the render with its own
+    metadata, view for view; the calibration's kaleidoscope part is applied (and said); what is missing or
+    would be ignored is refused in Python's spelling."""
+    from mitsuba_eventfield import calibration
+    d, events = capture
+    r = _cli("calibrate", "kaleidoscope", d / "bare.exr", "--optics", d / "nominal.json", "-o", tmp_path / "k.json")
+    assert r.returncode == 0, r.stderr
+    cal = calibration.load_calibration(str(tmp_path / "k.json"))
+    recording = ef.read_events(str(d / "rec.aedat4"))
+    reference = ef.lightfield.from_events(events)
+    from_cal = calibration.calibrated_lightfield(calibration.with_optics(recording, calibration=cal), cal,
+                                                 c_on=0.2, c_off=0.2)
+    from_path = calibration.calibrated_lightfield(calibration.with_optics(recording, calibration=str(tmp_path /
+                                                                                                      "k.json")),
+                                                  str(tmp_path / "k.json"), c_on=0.2, c_off=0.2)
+    nominal = ef.lightfield.from_events(calibration.with_optics(recording, optics=NOMINAL), c_on=0.2, c_off=0.2)
+    assert reference.views.std() > 0.01
+    for lf in (from_cal, from_path, nominal):
+        assert np.array_equal(lf.views, reference.views) and np.array_equal(lf.positions, reference.positions)
+    assert from_cal.meta["calibrated"] == ["kaleidoscope"] and not nominal.meta.get("calibrated")
+    assert "optics" not in recording.meta                     # the caller's stream is left as it was
+    with pytest.raises(ef.EventFieldError, match=r"^the events: the recording carries no optics .*: pass "
+                                                 r"calibration= \(a calibration file made for its set-up\) or optics= "
+                                                 r"FILE\.json or a dict \(the set-up's nominal light-field optics\)$"):
+        calibration.with_optics(recording)
+    with pytest.raises(ef.EventFieldError, match=r"carries its own \(kaleidoscope\) optics; optics= is for a camera"):
+        calibration.with_optics(events, optics=NOMINAL)
+    with pytest.raises(ef.EventFieldError, match=r"^optics: tube_width = 'wide': expected a finite number"):
+        calibration.with_optics(recording, optics=dict(NOMINAL, tube_width="wide"))
+    other = json.load(open(tmp_path / "k.json"))
+    other["kaleidoscope"]["optics"]["focus_distance"] = 2.0                  # made for another set-up
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    with pytest.raises(ef.EventFieldError, match=r"other\.json: .*focus_distance"):       # before any work
+        calibration.calibrated_lightfield(calibration.with_optics(recording, calibration=cal),
+                                          str(tmp_path / "other.json"), c_on=0.2, c_off=0.2)
+
+
+CROP = (25, 10, 120, 120)           # where the tube's 120x120 image lies on a 160x140 sensor
+
+
+def test_a_tube_image_on_part_of_a_larger_sensor(capture, tmp_path):
+    """``--crop`` (``EventStream.crop``): the render's events and frame placed at CROP on a larger sensor, as a
+    camera whose sensor is larger than the tube's image records them; calibrated and refocused with the window,
+    they give the render's own refocused image value for value. The calibration records the window, so a
+    recording of the whole sensor is told it, and one cut elsewhere is refused; a stream with optics (they
+    describe its whole film) or a galvo set-up refuses a crop."""
+    d, events = capture
+    x0, y0, w, h = CROP
+    big = ef.EventStream(events.x + x0, events.y + y0, events.t, events.p, 160, 140, {})
+    ef.write_events(str(tmp_path / "big.aedat4"), big)
+    frame = np.full((140, 160), 0.3, np.float32)
+    frame[y0:y0 + h, x0:x0 + w] = read_exr(str(d / "bare.exr"))[0]["Y"]
+    write_exr(str(tmp_path / "big.exr"), {"Y": frame})
+    window = ",".join(map(str, CROP))
+    r = _cli("calibrate", "kaleidoscope", tmp_path / "big.exr", "--optics", d / "nominal.json", "--crop", window,
+             "-o", tmp_path / "big.json")
+    assert r.returncode == 0 and "3x3 views of 40x40 px" in r.stdout, r.stderr
+    assert json.load(open(tmp_path / "big.json"))["kaleidoscope"]["crop"] == {"window": list(CROP),
+                                                                              "sensor": [160, 140]}
+    r = _cli("refocus", tmp_path / "big.aedat4", "--calibration", tmp_path / "big.json", "--contrast", "0.2",
+             "--crop", window, "--depth", "1.0", "-o", tmp_path / "rf.png")
+    assert r.returncode == 0, r.stderr
+    reference = ef.refocus(ef.lightfield.from_events(events), 1.0)
+    assert reference.std() > 0.01 and np.allclose(read_exr(str(tmp_path / "rf.exr"))[0]["Y"], reference,
+                                                  rtol=1e-6, atol=1e-7)
+    # in Python: the same window, the same light field
+    from mitsuba_eventfield import calibration
+    cut = ef.read_events(str(tmp_path / "big.aedat4")).crop(*CROP)
+    assert cut.equals(events) and cut.meta["crop"] == {"window": list(CROP), "sensor": [160, 140]}
+    lf = calibration.calibrated_lightfield(calibration.with_optics(cut, calibration=str(tmp_path / "big.json")),
+                                           str(tmp_path / "big.json"), c_on=0.2, c_off=0.2)
+    assert np.array_equal(lf.views, ef.lightfield.from_events(events).views)
+    # a frame of the whole sensor is cut as the events were
+    r = _cli("reconstruct", tmp_path / "big.aedat4", "--crop", window, "--contrast", "0.2", "--start-frame",
+             tmp_path / "big.exr", "--times", "9", "-o", tmp_path / "rc")
+    r0 = _cli("reconstruct", d / "rec.aedat4", "--contrast", "0.2", "--start-frame", d / "bare.exr", "--times", "9",
+              "-o", tmp_path / "rc0")
+    assert r.returncode == 0 and r0.returncode == 0, r.stderr + r0.stderr
+    assert np.array_equal(*(read_exr(str(tmp_path / n / "frame_0000.exr"))[0]["Y"] for n in ("rc", "rc0")))
+    for args, message in (
+            ([], r"big\.json: made from the window 25,10,120,120 of the 160x140 sensor: cut the recording .* to it "
+                 r"\(--crop 25,10,120,120; in Python, events\.crop\(\*window\)\)$"),
+            (["--crop", "20,10,120,120"], r"big\.json: made from the window 25,10,120,120 of the sensor; the recording "
+                                          r".* is cut to 20,10,120,120$"),
+            (["--crop", "100,10,120,120"], r"^eventfield: error: --crop = 100,10,120,120: the window .* must lie inside "
+                                           r"the 160x140 sensor")):
+        r = _cli("refocus", tmp_path / "big.aedat4", "--calibration", tmp_path / "big.json", "--contrast", "0.2",
+                 "--depth", "1", "-o", tmp_path / "bad.png", *args)
+        err = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(err) == 1 and __import__("re").search(message, err[0]), err
+    r = _cli("refocus", d / "rec.h5", "--crop", "0,0,60,60", "--depth", "1", "-o", tmp_path / "bad.png")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "carries its own (kaleidoscope) optics, which describe its whole" \
+        in err[0], err
+    assert not (tmp_path / "bad.png").exists()

@@ -333,3 +333,20 @@ def test_the_default_solver_searches_the_depths_the_command_asks_for(captures, c
     assert cli(["depth", str(d / "g.h5"), "-o", str(tmp_path / "b.png"), "--near", "0.15", "--far", "3", *args]) == 0
     assert cli(["refocus", str(d / "g.h5"), "-o", str(tmp_path / "r.png"), "--depth", "0.13,inf", "--views", "8"]) == 0
     assert [r[0] for r in ranges] == pytest.approx([0.22, 0.15, 0.13]) and all(r[1] == 1000.0 for r in ranges)
+
+
+def test_a_galvo_recording_is_not_cropped(captures, capsys, tmp_path):
+    """``--crop`` cuts a kaleidoscope's tube image out of a larger sensor; a galvo's optics (its field of view,
+    its axis at the film's centre) are the whole film's, so a galvo recording refuses it, before any work."""
+    import json
+    d, ev, _ = captures
+    bare = ef.EventStream(ev.x, ev.y, ev.t, ev.p, ev.width, ev.height, {})
+    ef.write_events(str(tmp_path / "g.aedat4"), bare)
+    optics = {k: ev.meta["optics"][k] for k in ("design", "scan", "fov_x_deg", "mirror_distance",
+                                               "mirror_separation")}
+    (tmp_path / "o.json").write_text(json.dumps(optics))
+    code, err = _run(["refocus", tmp_path / "g.aedat4", "--optics", tmp_path / "o.json", "--contrast", "0.2",
+                      "--crop", "0,0,40,30", "--depth", "1", "-o", tmp_path / "rf.png"], capsys)
+    assert code == 2 and err == "eventfield: error: --crop 0,0,40,30: for a kaleidoscope's tube image on part of " \
+                               "the sensor; a galvo's optics describe the whole film", err
+    assert not (tmp_path / "rf.png").exists()

@@ -177,3 +177,33 @@ def test_a_streams_start_and_end_have_one_reading():
         frame, meta = read_exr(os.path.join(d, "f", "frame_0001.exr"))
         assert meta["time_s"] == pytest.approx(5.002)
         assert frame["Y"][1, 1:4] == pytest.approx(np.exp([0.2, -0.2, 0.2]), rel=1e-3)
+
+
+def test_a_crop_keeps_the_window_and_says_where_it_was():
+    """``EventStream.crop``: exactly the events inside the window, from its corner, against a brute-force
+    selection; a crop of a crop is the composed window on the whole sensor, which ``crop_frame`` cuts a
+    frame of the sensor to (a frame of the window's size is taken as it is, any other refused)."""
+    from mitsuba_eventfield.events.stream import EventStream
+    rng = np.random.default_rng(3)
+    n = 5000
+    ev = EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 10_000, n)),
+                     rng.choice([-1, 1], n), 64, 48, {"duration_us": 10_000})
+    cut = ev.crop(10, 5, 30, 20).crop(4, 3, 16, 12)            # the window 14..29 x 8..19 of the sensor
+    inside = [(x - 14, y - 8, t, p) for x, y, t, p in zip(ev.x, ev.y, ev.t, ev.p) if 14 <= x < 30 and 8 <= y < 20]
+    assert (cut.width, cut.height) == (16, 12) and len(cut) == len(inside) > 100
+    assert list(zip(cut.x, cut.y, cut.t, cut.p)) == inside
+    assert cut.meta["crop"] == {"window": [14, 8, 16, 12], "sensor": [64, 48]} and cut.duration_us == 10_000
+    frame = np.arange(64 * 48).reshape(48, 64)
+    assert np.array_equal(cut.crop_frame(frame), frame[8:20, 14:30])
+    assert np.array_equal(cut.crop_frame(frame[8:20, 14:30]), frame[8:20, 14:30])
+    with pytest.raises(ef.ConfigError, match=r"^f\.exr: a frame of 30x20; the stream's sensor is 16x12 or the "
+                                             r"whole 64x48 sensor it was cropped from$"):
+        cut.crop_frame(frame[:20, :30], "f.exr")
+    for window, message in (((0, 0, 65, 48), r"crop = 0,0,65,48: the window .* inside the 64x48 sensor"),
+                            ((-1, 0, 4, 4), r"crop x0 = -1: allowed range is \[0, inf\)"),
+                            ((0, 0, 0, 4), r"crop width = 0: allowed range is \[1, inf\)"),
+                            ((0.5, 0, 4, 4), r"crop x0 = 0\.5: must be a whole number")):
+        with pytest.raises(ef.ConfigError, match=message):
+            ev.crop(*window)
+    with pytest.raises(ef.ConfigError, match=r"^crop: the stream carries galvo optics, which describe its whole"):
+        EventStream(ev.x, ev.y, ev.t, ev.p, 64, 48, {"optics": {"design": "galvo"}}).crop(0, 0, 8, 8)

@@ -1,0 +1,90 @@
+"""The light field of data made with a calibrated or nominal set-up, in Python as the commands make it.
+
+A camera recording carries no optics: :func:`with_optics` gives it the set-up's nominal optics (a JSON file or a
+dict, the commands' ``--optics``) or those of the calibration made for the set-up (``--calibration``), and
+:func:`calibrated_lightfield` makes the light field with every part of a calibration applied (a galvo's phase
+and depth model through the events, so the solvers use the calibrated views; a kaleidoscope's registration and
+flat field on the light field). The commands call both (``cli.inputs.give_optics``, ``cli.lightfield``), so a
+script and a command given the same files get the same light field. Contrast thresholds, which a recording
+lacks too, are ``from_events``' ``c_on`` / ``c_off``.
+
+    import mitsuba_eventfield as ef
+    from mitsuba_eventfield import calibration
+    cal = calibration.load_calibration("kcal.json")
+    rec = calibration.with_optics(ef.read_events("capture.aedat4"), calibration=cal)
+    lf = calibration.calibrated_lightfield(rec, cal, c_on=0.2, c_off=0.2)
+"""
+from __future__ import annotations
+
+from mitsuba_eventfield.errors import ConfigError, EventFieldError
+
+PYTHON_NAMES = {"optics": "optics=", "calibration": "calibration=", "file": "FILE.json or a dict"}
+COMMAND_NAMES = {"optics": "--optics", "calibration": "--calibration", "file": "FILE.json"}
+
+
+def with_optics(events, optics=None, calibration=None, *, design: str | None = None, where: str = "the events",
+                names: dict = PYTHON_NAMES, takes_calibration: bool = True):
+    """``events`` (a camera recording, which carries no optics) with the set-up's optics in its metadata: the
+    nominal ones of ``optics`` (a JSON file's path or a dict: ``design`` galvo with fov_x_deg, mirror_distance,
+    mirror_separation and the scan record, or kaleidoscope / microlens with the sensor's parameters in metres;
+    ``design``: the one the caller takes, None for any) or those recorded by ``calibration`` (a loaded
+    calibration file or its path). A stream that carries its own optics is returned as it is, and refuses
+    ``optics`` (it would be ignored); one with neither is refused, saying what to pass. ``names``: how the
+    caller spells the two (the commands pass ``COMMAND_NAMES``); ``takes_calibration``: whether the refusal
+    offers a calibration (``eventfield calibrate`` makes one)."""
+    from mitsuba_eventfield.events.stream import EventStream
+
+    from .nominal import nominal_optics, recording_optics
+    from .store import load_calibration
+    if not isinstance(events, EventStream):
+        raise ConfigError(f"with_optics: events: expected an EventStream (ef.read_events), got "
+                          f"{type(events).__name__}")
+    if events.meta.get("optics"):
+        if optics is not None:
+            shown = optics if isinstance(optics, str) else "(a dict)"
+            raise EventFieldError(f"{names['optics']} {shown}: {where} carries its own "
+                                  f"({events.meta['optics'].get('design')}) optics; {names['optics']} is for a "
+                                  "camera recording without them")
+        return events
+    if optics is not None:
+        if not isinstance(optics, (str, dict)):
+            raise ConfigError(f"{names['optics']} {type(optics).__name__}: expected {names['file']}")
+        record = nominal_optics(optics, events.width, events.height, design=design)
+    elif calibration is not None:
+        loaded = load_calibration(calibration) if isinstance(calibration, str) else calibration
+        record = recording_optics(loaded, events, where)
+    else:
+        raise EventFieldError(f"{where}: the recording carries no optics (no light-field metadata): pass "
+                              f"{optics_options(names, design, takes_calibration)}")
+    return EventStream(events.x, events.y, events.t, events.p, events.width, events.height,
+                       dict(events.meta, optics=record))
+
+
+def optics_options(names: dict = PYTHON_NAMES, design: str | None = None, takes_calibration: bool = True) -> str:
+    """What a recording without optics is told to pass (the one wording of every such refusal)."""
+    return (f"{names['calibration']} (a calibration file made for its set-up) or " if takes_calibration else "") + \
+        f"{names['optics']} {names['file']} (the set-up's nominal {design or 'light-field'} optics)"
+
+
+def calibrated_lightfield(events, calibration, *, where: str = "the events", **from_events_kw):
+    """The light field of ``events`` (``lightfield.streams.from_events`` and its keywords) with every part of
+    ``calibration`` (a loaded file or its path) applied: a calibration made for other optics than the stream's
+    is refused before any reconstruction; a galvo stream's phase and depth model go into its optics first
+    (``calibrated_events``: the events-only solvers then use the calibrated views), the rest (a kaleidoscope's
+    registration and flat field) onto the light field (``apply_to_lightfield``). The light field's
+    ``meta["calibrated"]`` lists the parts applied; ``where``: what the refusals call the events."""
+    from mitsuba_eventfield.lightfield.streams import from_events
+
+    from .optics import check_optics, optics_record
+    from .store import apply_to_lightfield, calibrated_events, load_calibration
+    loaded = load_calibration(calibration) if isinstance(calibration, str) else calibration
+    source = getattr(loaded, "path", "calibration")
+    record = optics_record(events.meta.get("optics", {}), events.width, events.height, where=where)
+    check_optics(loaded, record)
+    lf = from_events(calibrated_events(events, loaded, record), **from_events_kw)
+    if lf.meta.get("calibrated"):                  # applied through the events
+        return lf
+    try:
+        return apply_to_lightfield(lf, loaded, record)
+    except ConfigError as e:                       # a calibration's own refusal names no file
+        raise EventFieldError(f"{source}: {e}") from None
