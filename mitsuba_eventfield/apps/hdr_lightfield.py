@@ -50,7 +50,7 @@ from ..scene import bundled_scene
 from ..simulate.render import render_events, render_frames
 from ..validate import MAX_SPP, MAX_STEPS, MAX_VIEWS, number
 from .hdr import LDR_BITS, WELL_EXPOSED, ldr_codes, ldr_exposures, ldr_to_linear, load_static_scan, scene_argument
-from .result import AppResult, time_split_line
+from .result import AppResult, focus_check_failures, time_split_line
 
 DEFAULT_SCENE = bundled_scene("hdr_depth/hdr_depth.xml")
 DEFAULT_DEPTHS = (0.6, 1.5)          # scenes/hdr_depth: the card with its LEDs, the wall with its LEDs
@@ -89,6 +89,9 @@ class HDRLightField(AppResult):
             + f"{r['pixels']} px)" for r in self.focus["regions"]))
         lines.append(time_split_line(m["time_split_s"]))
         return "\n".join(lines)
+
+    def failed_checks(self) -> list:
+        return focus_check_failures(self.focus["regions"], "HDR light field")
 
     def write(self, out_dir: str) -> dict:
         return write_outputs(self, out_dir)

@@ -68,7 +68,7 @@ from ..errors import ConfigError
 from ..evaluation.truth import check_planes_seen
 from ..scene import bundled_scene, load_scene
 from ..simulate.render import render_events, render_frames
-from .result import AppResult, time_split_line
+from .result import AppResult, focus_check_failures, time_split_line
 from .slomorf_outputs import figure, to_display, write_outputs  # noqa: F401  (the outputs: their own module)
 
 DEFAULT_SCENE = bundled_scene("falling/falling.xml")
@@ -117,6 +117,9 @@ class SloMoRFResult(AppResult):
             f"{c['pixels']} px)" for c in fc["regions"]))
         lines.append(time_split_line(self.meta["time_split_s"]))
         return "\n".join(lines)
+
+    def failed_checks(self) -> list:
+        return focus_check_failures(self.metrics["focus_check"]["regions"], "slomorf")
 
     def write(self, out_dir: str) -> dict:
         return write_outputs(self, out_dir)

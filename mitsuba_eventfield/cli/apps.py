@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 
 from ..errors import EventFieldError
 from ..scene.bundled import bundled_scene
@@ -119,6 +120,8 @@ def _application(run, output: str, wrote) -> int:
         raise EventFieldError(str(e)) from None
     print(result.report())
     print("wrote " + wrote(paths))
+    for line in result.failed_checks():          # the report says FAILED mid-table; said where it is seen
+        print(f"eventfield: warning: {line}", file=sys.stderr)
     return 0
 
 

@@ -94,6 +94,13 @@ def test_refocus_at_each_depth_is_sharpest_on_what_is_there(hdr_lf):
     assert fc["all_sharpest_at_own_depth"] and (card["depth"], wall["depth"]) == (0.6, 1.5)
     assert card["pixels"] > 1000 and wall["pixels"] > 4000            # measured 1553, 5359
     assert card["ratio_to_next_best"] > 1.8 and wall["ratio_to_next_best"] > 1.15
+    assert hdr_lf.failed_checks() == []
+    wall["sharpest_at_own_depth"] = False                              # as a failed check reads
+    try:
+        assert hdr_lf.failed_checks() == [f"HDR light field: focus check failed at 1.5: its region "
+                                          f"({wall['pixels']} px) is sharper refocused at another depth"]
+    finally:
+        wall["sharpest_at_own_depth"] = True
 
 
 def test_hdr_refocus_does_not_ring_next_to_an_led(hdr_lf):

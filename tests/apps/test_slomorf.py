@@ -87,6 +87,14 @@ def test_each_depth_brings_its_own_object_into_focus(result):
     for region in fc["regions"]:
         assert region["pixels"] > 1000
         assert region["ratio_to_next_best"] > 1.8, region
+    assert result.failed_checks() == []
+    result.metrics["focus_check"]["regions"][1]["sharpest_at_own_depth"] = False     # as a failed check reads
+    try:
+        assert result.failed_checks() == [f"slomorf: focus check failed at {fc['regions'][1]['depth']:g}: its "
+                                          f"region ({fc['regions'][1]['pixels']} px) is sharper refocused at "
+                                          "another depth"]
+    finally:
+        result.metrics["focus_check"]["regions"][1]["sharpest_at_own_depth"] = True
 
 
 def test_variant_is_restored(result):
