@@ -19,7 +19,9 @@ pixels that are confident).
 """
 from __future__ import annotations
 
+import math
 import os
+import textwrap
 import time
 from dataclasses import dataclass, field
 
@@ -107,11 +109,23 @@ def calibrate_depth(scene_path: str, defines: dict | None = None, depths=CALIBRA
                             fov=optics["fov_x_deg"], mirror_distance=optics["mirror_distance"],
                             mirror_separation=optics["mirror_separation"], frequency=scan["frequency"],
                             amplitude=scan["amplitude"], phase=scan["phase"])
-        events = render_events(led, curve.period, steps=4 * views, progress=progress)
+        events = render_events(led, curve.period, steps=_led_steps(led, curve.period, views), progress=progress)
         fits.append(fit_led(events, samples=views, scale_limit=limit))   # the LED's track from its events alone
     depth = fit_depth_from_tracks(list(depths), fits, GalvoGeometry.from_optics(record, w, h))
     depth.optics = record
     return {"depth": depth}
+
+
+def _led_steps(led, period: float, views: int) -> int:
+    """Steps of one scan period of the LED: four a view, and more where the scan moves the image more than
+    ``MAX_PX_PER_STEP`` a step (the point's events would be interpolated between rendered instants: at 160x120
+    and 24 views, 1.11 px a step, and the render warned under a command that chose its steps itself). Not the
+    default steps' 0.5 px: the LED fit's rms moves from render to render without a trend (160x120, runner's
+    galvo: 0.78 px/rad at 96 steps, 0.47 at 107, 1.07 at the default's 234), so the fewest within 1 px."""
+    from ..simulate.image_motion import MAX_PX_PER_STEP, scan_px_per_step
+    steps = 4 * views
+    px = scan_px_per_step(led, period, steps) or 0.0
+    return max(steps, math.ceil(steps * px / MAX_PX_PER_STEP))
 
 
 def _check_calibration(calibration: dict, scene_path: str, defines, captured):
@@ -222,8 +236,11 @@ def figure(result: ScanRateDepth, path: str, columns: int = 4) -> str:
                 depth_colourbar(fig, im, axes[i, j])
             elif j == len(pick) - 1:
                 fig.colorbar(im, ax=axes[i, j], fraction=0.046)
-    fig.suptitle(f"Depth at the scan rate: {result.meta['depth_maps_per_second']:g} metric depth maps per second "
-                 "(confident textured pixels; black: no estimate)", fontsize=9)
+    # wrapped to the figure's width (about 14 characters of 9 pt an inch): one line ran off both sides of a one-
+    # or two-period figure
+    title = (f"Depth at the scan rate: {result.meta['depth_maps_per_second']:g} metric depth maps per second "
+             "(confident textured pixels; black: no estimate)")
+    fig.suptitle(textwrap.fill(title, int(14 * 3.2 * len(pick))), fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path)
 

@@ -110,9 +110,9 @@ def parabola_vertex(x, y):
 
 def refine_peak(x, scores, k):
     """Sub-step position (in x units) of the maximum of ``scores`` at index ``k`` (the parabola through it and
-    its neighbours; the end samples are not refined)."""
+    its neighbours, at their own positions: ``track_focus`` takes a caller's depths, whose inverses need not be
+    evenly spaced, and the offset of even steps scaled by one side's step missed the vertex there; the end
+    samples are not refined)."""
     if k <= 0 or k >= len(scores) - 1:
         return x[k]
-    off = parabola_offset(scores[k - 1], scores[k], scores[k + 1])
-    step = x[k + 1] - x[k] if off > 0 else x[k] - x[k - 1]
-    return x[k] + off * step
+    return parabola_vertex(x[k - 1:k + 2], scores[k - 1:k + 2])

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
+import mitsuba_eventfield as ef
 from mitsuba_eventfield.apps import highspeed, scanrate
 from mitsuba_eventfield.images import read_exr
 
@@ -47,6 +48,25 @@ def test_depth_maps_with_the_calibration_from_led_captures(runner_capture):
     assert r.meta["calibrated"] == ["depth"]
     for e in r.errors:                                  # measured: near 0.018-0.020, far 0.043-0.046
         assert e["near"] < 0.035 and e["far"] < 0.07
+
+
+def test_the_led_calibration_renders_within_a_pixel_a_step():
+    """Four steps a view, and more where the scan moves the LED more than a pixel a step: at the runner's
+    160x120 (its default film) the 96 steps of 24 views moved it 1.11 px, and the calibration's own renders
+    warned its user."""
+    from mitsuba_eventfield.apps.scanrate import LED_SCENE, _led_steps
+    from mitsuba_eventfield.scene.bundled import bundled_scene
+    from mitsuba_eventfield.simulate.image_motion import scan_px_per_step
+    for size, expected in (((160, 120), 107), ((128, 96), 96)):
+        target = ef.load_scene(RUNNER, width=size[0], height=size[1])
+        o = target.sensor.optics_metadata()
+        led = ef.load_scene(bundled_scene(LED_SCENE), width=size[0], height=size[1], depth=1.0, fov=o["fov_x_deg"],
+                            mirror_distance=o["mirror_distance"], mirror_separation=o["mirror_separation"],
+                            frequency=o["scan"]["frequency"], amplitude=o["scan"]["amplitude"])
+        period = 1.0 / o["scan"]["frequency"]
+        steps = _led_steps(led, period, 24)
+        assert steps == expected and scan_px_per_step(led, period, steps) <= 1.0
+        assert steps == 96 or scan_px_per_step(led, period, steps - 1) > 1.0       # the fewest that keep it
 
 
 def test_scanrate_cli_outputs_and_errors(tmp_path):

@@ -65,7 +65,8 @@ def test_calibrated_optics_place_the_views_where_the_calibration_does(cards):
     want = depth.geometry(GalvoGeometry.from_optics(recording.meta["optics"], W, H))
     fields = ("focal_px", "pivot_x", "pivot_y", "gain_x", "gain_y")
     assert [getattr(geometry, k) for k in fields] == pytest.approx([getattr(want, k) for k in fields], rel=1e-12)
-    assert (geometry.pivot_x, geometry.pivot_y, geometry.gain_x) == pytest.approx((0.15, 0.17, 0.98), rel=1e-6)
+    assert (geometry.pivot_x, geometry.pivot_y, geometry.gain_x, geometry.gain_y) == pytest.approx(
+        (0.15, 0.17, 0.98, 1.0), rel=1e-6)                      # the fits' own: S = 2 f g (1 - pivot / z) per axis
     assert placed["calibrated"] == ["galvo", "depth"]
     # the events' angles: the calibration's views as what the mirror did, the record's own scan as commanded
     stream = ef.EventStream(*(np.zeros(3, d) for d in (np.uint16, np.uint16)), np.array([0, 2500, 7000]),

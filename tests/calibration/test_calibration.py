@@ -216,6 +216,10 @@ def test_scan_scale_off_axis_is_the_ray_traced_one_and_the_depth_fit_uses_it():
         assert geometry.scan_scale(depth, *centre) == pytest.approx((a, b), rel=1e-6)
         sx, sy, pixels = sx + [a], sy + [b], pixels + [centre]
     assert geometry.field_factors(*pixels[0]) == pytest.approx((1.09, 1.04))
+    # an LED on the axis (the film's centre, W x H not square): the default reference pixel, k = 1 on both axes
+    a, b, centre = _ray_traced_scales((0.0, 0.0, 1.0), d1, sep, f, W, H)
+    assert centre == pytest.approx((W / 2, H / 2)) and W != H
+    assert geometry.field_factors() == (1.0, 1.0) and geometry.scan_scale(1.0) == pytest.approx((a, b), rel=1e-6)
     factors = [geometry.field_factors(*c) for c in pixels]
     for gain in (1.0, 0.97):                        # a mirror turning 3 % less than commanded
         fitted = fit_depth(z, gain * np.array(sx), gain * np.array(sy), field_factors=factors).geometry(geometry)

@@ -227,3 +227,32 @@ def test_a_daq_start_that_fails_after_the_fade_in_fades_back_to_rest(monkeypatch
     # back from the held sample (the period's last) by the next one, down to 0 V
     assert np.allclose(fade_in[:, -1], period[:, -1]) and np.allclose(fade_out[:, 0], period[:, 0], rtol=1e-4)
     assert fade_out[:, -1].tolist() == [0.0, 0.0]
+
+
+def test_an_offset_and_an_amplitude_together_stay_inside_the_travel():
+    """The mirror swings to |offset| + amplitude: each alone inside the travel (and the derating) is not
+    enough. gvs01x: +-12.5 mechanical deg, 0.8 V/deg, +-10 V input; at 30 Hz the derating allows the full
+    travel, so only the sum decides."""
+    spec = GalvoSpec()
+    spec.check_axis("x", 30.0, 6.0, 6.0)                                       # 12 deg: inside
+    with pytest.raises(SafetyError, match=r"axis x: \|offset\| \+ amplitude = 13 deg exceeds the mechanical travel "
+                                          r"of \+-12\.5 deg"):
+        spec.check_axis("x", 30.0, 6.5, -6.5)
+    # as a channel: a 10 Vpp sine (6.25 deg) around 4 V (5 deg) reaches 11.25 deg, inside; around 6 V, 13.75
+    spec.check_channel(1, "SIN", 30.0, 10.0, 4.0)
+    with pytest.raises(SafetyError, match=r"axis 1: \|offset\| \+ amplitude = 13\.75 deg exceeds"):
+        spec.check_channel(1, "SIN", 30.0, 10.0, 6.0)
+    narrow = GalvoSpec(max_volts=8.0)                                           # the input range decides
+    with pytest.raises(SafetyError, match=r"axis y: \|offset\| \+ amplitude = 8\.8 V exceeds the \+-8 V command"):
+        narrow.check_axis("y", 30.0, 5.5, 5.5)
+
+
+def test_a_generator_that_keeps_another_phase_never_switches_on():
+    """The read-back compares every setting before the outputs go on: a generator that takes the phase command
+    but keeps 0 deg on both channels would draw the circle as a diagonal line (x and y in phase)."""
+    g = simulated("keysight", refuse=lambda cmd: ":PHAS " in cmd and not cmd.endswith(" 0.0"))
+    c = GalvoController(g, "keysight", GalvoSpec(), ramp_steps=2, ramp_time=0)
+    with pytest.raises(SafetyError, match=r"channel 1 phase: requested 90\.0, instrument reports 0\.0"):
+        c.start(_circle(), sleep=NO_SLEEP)
+    assert not any(state[ch]["output"] for _, state in g.history for ch in (1, 2))
+    c.close()

@@ -327,6 +327,19 @@ def test_parabola_vertex_exact_on_parabolas_and_kept_between_neighbours():
     assert parabola_vertex((0.0, 1.0, 3.0), (0.0, -1.0, 0.0)) == 1.0                     # curves upwards
 
 
+def test_a_focus_peak_between_unevenly_spaced_planes():
+    """``refine_peak`` (track_focus's, on a caller's depths): the vertex of an exact parabola sampled at
+    unevenly spaced inverse depths, on either side of the best sample, is found to rounding (the offset of even
+    steps, scaled by one side's step, put it 0.04 off here); an end sample is not refined."""
+    from mitsuba_eventfield.focus.measures import refine_peak
+    inverse = 1.0 / np.array([0.5, 0.6, 0.8, 1.2, 2.0])              # steps 0.33, 0.42, 0.42, 0.33 in 1/m
+    for top in (1.45, 1.62, 1.1):                                    # left and right of a sample, and right of 0.8's
+        scores = -(inverse - top) ** 2
+        k = int(np.argmax(scores))
+        assert 0 < k < len(inverse) - 1 and refine_peak(inverse, scores, k) == pytest.approx(top, abs=1e-12)
+    assert refine_peak(inverse, -(inverse - 2.0) ** 2, 0) == inverse[0]
+
+
 def test_galvo_refocus_averages_only_the_views_that_see_a_pixel():
     """Each refocused pixel is the mean of the views whose sample falls inside their image; the mean over all
     views with reflected borders put mirrored copies of the cards into a band along the edges (the demo). With
@@ -397,3 +410,18 @@ def test_kaleidoscope_refocus_averages_only_the_views_that_see_a_pixel(kaleido_l
     assert band.mean() > 0.05
     np.testing.assert_allclose(img[band], expect[band], rtol=1e-4)
     np.testing.assert_allclose(img[~band], values.mean(), rtol=1e-4)   # the Fourier path inside
+
+
+@pytest.mark.parametrize("measure", ["sml", "tenengrad"])
+def test_focus_measures_see_detail_along_either_axis(measure):
+    """Both image measures respond to a texture that varies along y only as to the same texture along x:
+    transposing the image transposes the measure (the sum-modified Laplacian is |d2/dx2| + |d2/dy2|, Tenengrad
+    the squared gradient), and a flat image measures zero. Oracle: a sine of one period of 8 px, whose second
+    difference is 2 (1 - cos(2 pi / 8)) = 0.586 of its amplitude at its crest."""
+    from mitsuba_eventfield.focus.measures import focus_measure
+    stripes = np.tile(np.sin(2 * np.pi * np.arange(48) / 8.0)[:, None], (1, 40)).astype(np.float32)   # along y
+    m, m_t = focus_measure(stripes, measure, window=1), focus_measure(stripes.T.copy(), measure, window=1)
+    assert np.allclose(m, m_t.T, atol=1e-6) and m[2:-2].max() > 0.1
+    if measure == "sml":
+        assert m[2:-2].max() == pytest.approx(2 * (1 - np.cos(2 * np.pi / 8)), rel=1e-4)
+    assert np.all(focus_measure(np.full((20, 20), 0.7, np.float32), measure) == 0)

@@ -54,3 +54,24 @@ def test_each_event_draws_new_thresholds():
         means.append(held.mean())
     assert 0.8 * JITTER < np.mean(spreads) < 1.2 * JITTER, np.mean(spreads)     # ~0.04 within each pixel
     assert abs(np.mean(means) - C) < 0.01
+
+
+def test_the_on_and_off_thresholds_are_drawn_independently():
+    """A reset draws the ON and the OFF threshold from a normal pair: each with the jitter as its spread around
+    its own base, uncorrelated with the other (one draw for both made a pixel's ON and OFF thresholds move
+    together: correlation 1), and new for the next reset."""
+    import drjit as dr
+    import mitsuba as mi
+    from conftest import TEST_VARIANT
+
+    from mitsuba_eventfield.plugins import counter_rng
+    from mitsuba_eventfield.plugins.pixel_step import _jittered
+    ef.set_variant(TEST_VARIANT)
+    n = 65536
+    pixel, word = dr.arange(mi.UInt32, n), mi.UInt32(counter_rng.seed_word(4))
+    on, off = (np.array(a) for a in _jittered(mi.Float(0.2), mi.Float(0.3), JITTER, pixel, mi.UInt32(0), word))
+    on2, _ = (np.array(a) for a in _jittered(mi.Float(0.2), mi.Float(0.3), JITTER, pixel, mi.UInt32(1), word))
+    # sampling error of a correlation over 65536 pairs: 1 / sqrt(n) = 0.004; of a mean: 0.04 / 256 = 0.00016
+    assert abs(np.corrcoef(on, off)[0, 1]) < 0.02 and abs(np.corrcoef(on, on2)[0, 1]) < 0.02
+    assert on.mean() == pytest.approx(0.2, abs=0.001) and off.mean() == pytest.approx(0.3, abs=0.001)
+    assert on.std() == pytest.approx(JITTER, rel=0.02) and off.std() == pytest.approx(JITTER, rel=0.02)

@@ -173,6 +173,12 @@ def test_timestamp_clock_and_determinism():
     b = ef.render_events(timed, 0.004, steps=8, preset="davis346", pixel={"timestamp_resolution_us": 10})
     c = ef.render_events(timed, 0.004, steps=8, preset="davis346", pixel={"timestamp_resolution_us": 10, "seed": 9})
     assert np.all(a.t % 10 == 0) and a.is_sorted
+    # the clock floors each event's time to its tick, as a counter latched at the event reads it (a round half
+    # a tick ahead put events up to 5 us in the future): the same events on a 1 us clock, floored to 10 us
+    fine = ef.render_events(timed, 0.004, steps=8, preset="davis346", pixel={"timestamp_resolution_us": 1})
+    order = np.lexsort((fine.p, fine.x, fine.y, fine.t // 10))
+    mine = np.lexsort((a.p, a.x, a.y, a.t))
+    assert len(fine) == len(a) > 50 and np.array_equal((fine.t // 10 * 10)[order], a.t[mine])
     assert a.equals(b) and not a.equals(c)
     assert a.meta["pixel_model"]["preset"] == "davis346" and a.meta["pixel_model"]["refractory_s"] == 5e-4
 
