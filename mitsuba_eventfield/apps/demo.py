@@ -41,7 +41,7 @@ class DemoResult(AppResult):
                  f"light field of {self.meta['views']} views from the events alone"]
         for name, c in self.cards.items():
             lines.append(f"  {name}: depth from focus {c['measured_m']:.3f} m, Mitsuba's depth {c['true_m']:.3f} m "
-                         f"(error {100 * c['error']:.1f} %, {100 * c['confident']:.0f} % of its pixels confident)")
+                         f"(error {100 * c['error']:.1f} %, {_share(c['confident'])} of its pixels confident)")
         wrong = self.meta["confident_wrong"]
         lines.append(f"  confident but more than 10 % off every depth within the pixel: {wrong['pixels']} pixels "
                      f"({100 * wrong['share']:.1f} % of the confident ones), {wrong['near_edge']} of them within "
@@ -183,3 +183,12 @@ def paper_rows(result: DemoResult) -> list:
              "command": f"eventfield demo --width {m['width']} --height {m['height']} --views {m['views']}",
              "differs": "The paper scans at 1 Hz and reconstructs 100 views with E2VID; here one simulated period "
              "and the events-only galvo solver."}]
+
+
+def _share(fraction: float) -> str:
+    """A share in per cent, never rounded to 100 % or 0 % when it is not all or none (0.99923 printed 100 %)."""
+    for digits in range(4):
+        text = f"{100 * fraction:.{digits}f}"
+        if not (0 < fraction < 1 and float(text) in (0.0, 100.0)):
+            break
+    return f"{text} %"

@@ -11,7 +11,7 @@ from .args import add_defines, defines, num, pairs, save_image, times_ms
 PIXEL_INTEGERS = ("seed", "readout_cap_native_pixels")
 # the suffixes events.io.FORMATS writes (not imported here: it loads h5py, and --help should be quick)
 EVENT_FILE_HELP = ("event file: .h5 / .hdf5 (DSEC layout, streamed), .npz, .txt, .aedat4 (streamed); .raw / .evt "
-                   "(Prophesee EVT 3.0), .dat (written at the end)")
+                   "(Prophesee EVT 3.0, or 2.0 for spans over 16.8 s), .dat (written at the end)")
 CONVERT_DETAILS = (". Frames are linear intensity: floats as they are, 8- and 16-bit integers divided by 255 "
                    "and 65535 (--srgb decodes gamma-encoded ones first); colour frames become luminance. Times: "
                    "a video's own frame rate, or --fps, or --times FILE (seconds, one a frame); an image folder "

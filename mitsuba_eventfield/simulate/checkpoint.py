@@ -119,7 +119,10 @@ class Checkpoints:
         self.command = meta.get("command")
         path = os.path.join(self.folder, "checkpoint.json")
         if resume:
-            if not os.path.isfile(path):
+            if not os.path.isfile(path):       # a finished render removes its checkpoint: say which case this is
+                if os.path.exists(output):
+                    raise EventFieldError(f"{self.folder}: nothing to resume: no checkpoint, and {output} is there "
+                                          "(that render finished); render without --resume to render it again")
                 raise EventFieldError(f"{self.folder}: nothing to resume (no checkpoint here); render without --resume")
             with open(path) as f:
                 self.saved = json.load(f)

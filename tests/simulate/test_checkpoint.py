@@ -117,7 +117,12 @@ def test_resume_refusals_are_one_line(tmp_path, capsys):
     out = str(tmp_path / "r.h5")
     args = ["render", DEMO, "-D", "width=16", "-D", "height=12", "--duration", "0.002", "--steps", "4", "--quiet"]
     assert cli([*args, "-o", out, "--resume"]) == 2
-    assert "nothing to resume" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "nothing to resume (no checkpoint here); render without --resume" in err
+    assert cli([*args, "-o", out]) == 0 and os.path.exists(out)                  # finished: its output is there
+    capsys.readouterr()
+    assert cli([*args, "-o", out, "--resume"]) == 2
+    assert f"nothing to resume: no checkpoint, and {out} is there (that render finished)" in capsys.readouterr().err
     assert cli([*args, "-o", str(tmp_path / "r.npz"), "--checkpoint-every", "5"]) == 2
     assert "need an HDF5 output" in capsys.readouterr().err
     os.makedirs(out + ".resume")
