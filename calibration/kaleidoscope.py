@@ -27,7 +27,7 @@ import numpy as np
 from mitsuba_eventfield.errors import ConfigError
 
 from .galvo import CalibrationError
-from .targets import quarter_spread, warn_flat_texture, warn_not_flat
+from .targets import check_flat_texture, quarter_spread, warn_not_flat
 
 # Below this gain a view sees less than a twentieth of the light the centre view sees there (the relay pupil at a
 # seam): dividing by it would raise the pixel's noise twentyfold, so a flat-fielded view is divided by at least this
@@ -361,7 +361,7 @@ def flat_field(calibration: KaleidoscopeCalibration, flat_frame: np.ndarray) -> 
                                f"covering the {n}x{n} tiles of {tw}x{th} px, like the registered frame")
     flat = flat[:n * th, :n * tw]            # a bare frame's tiles are its size over n, rounded down
     parts = _unflipped(flat, n, tw, th)
-    warn_flat_texture([p[5] for p in parts])
+    check_flat_texture([p[5] for p in parts])
     maps = np.stack([p[5] for p in parts])
     ref = maps[len(maps) // 2].mean()
     if ref <= 0:

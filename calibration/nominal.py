@@ -116,11 +116,17 @@ def _check_crop(calibration, ev, where, source) -> None:
     if not crops:
         return
     window, sensor = crops[0]["window"], crops[0]["sensor"]
-    given = (ev.meta.get("crop") or {}).get("window")
-    if given is None and [ev.width, ev.height] == list(sensor):
-        raise EventFieldError(f"{source}: made from the window {','.join(map(str, window))} of the "
-                              f"{sensor[0]}x{sensor[1]} sensor: cut the recording {where} to it (--crop "
-                              f"{','.join(map(str, window))}; in Python, events.crop(*window))")
-    if given is not None and list(given) != list(window):
-        raise EventFieldError(f"{source}: made from the window {','.join(map(str, window))} of the sensor; the "
-                              f"recording {where} is cut to {','.join(map(str, given))}")
+    crop = ev.meta.get("crop") or {}
+    given, whole = crop.get("window"), crop.get("sensor") or [ev.width, ev.height]
+    shown = ",".join(map(str, window))
+    if given is None and [ev.width, ev.height] == list(window[2:]):
+        return                             # cut before it came here, where no record says from where
+    if list(whole) != list(sensor):        # a window of another sensor holds other pixels, whatever its place
+        raise EventFieldError(f"{source}: made on a {sensor[0]}x{sensor[1]} sensor (the window {shown}); {where} "
+                              f"was recorded on a {whole[0]}x{whole[1]} one")
+    if given is None:
+        raise EventFieldError(f"{source}: made from the window {shown} of the {sensor[0]}x{sensor[1]} sensor: cut "
+                              f"{where} to it (--crop {shown}; in Python, events.crop(*window))")
+    if list(given) != list(window):
+        raise EventFieldError(f"{source}: made from the window {shown} of the sensor; {where} is cut to "
+                              f"{','.join(map(str, given))}")

@@ -39,6 +39,9 @@ def with_optics(events, optics=None, calibration=None, *, design: str | None = N
     if not isinstance(events, EventStream):
         raise ConfigError(f"with_optics: events: expected an EventStream (ef.read_events), got "
                           f"{type(events).__name__}")
+    if optics is not None and calibration is not None:        # one would be ignored
+        raise EventFieldError(f"{names['optics']} and {names['calibration']}: give one (a calibration records the "
+                              "optics it was made for)")
     if events.meta.get("optics"):
         if optics is not None:
             shown = optics if isinstance(optics, str) else "(a dict)"
@@ -73,10 +76,14 @@ def calibrated_lightfield(events, calibration, *, where: str = "the events", **f
     (``calibrated_events``: the events-only solvers then use the calibrated views), the rest (a kaleidoscope's
     registration and flat field) onto the light field (``apply_to_lightfield``). The light field's
     ``meta["calibrated"]`` lists the parts applied; ``where``: what the refusals call the events."""
+    from mitsuba_eventfield.events.stream import EventStream
     from mitsuba_eventfield.lightfield.streams import from_events
 
     from .optics import check_optics, optics_record
     from .store import apply_to_lightfield, calibrated_events, load_calibration
+    if not isinstance(events, EventStream):
+        raise ConfigError(f"calibrated_lightfield: events: expected an EventStream (ef.read_events, then "
+                          f"with_optics for a recording), got {type(events).__name__}")
     loaded = load_calibration(calibration) if isinstance(calibration, str) else calibration
     source = getattr(loaded, "path", "calibration")
     record = optics_record(events.meta.get("optics", {}), events.width, events.height, where=where)

@@ -3,16 +3,18 @@ from __future__ import annotations
 
 import math
 import sys
+import warnings
 
 import numpy as np
 
 from ..calibration.nominal import nominal_optics
+from ..calibration.targets import warn_off_seams
 from ..errors import EventFieldError
 from ..events.stuck_pixels import without_stuck_pixels
 from ..validate import MAX_VIEWS, number_list
 from .args import num
-from .inputs import (CROP_HELP, crop_option, galvo_frames, galvo_scan, give_optics, luminance_channel, nonempty,
-                     start_log, with_contrast)
+from .inputs import (CROP_HELP, crop_option, film_hint, galvo_frames, galvo_scan, give_optics, luminance_channel,
+                     nonempty, start_log, with_contrast)
 
 OPTICS_HELP = ("JSON of the set-up's nominal galvo optics (design, fov_x_deg, mirror_distance, mirror_separation, "
                "scan), for a camera recording that carries none")
@@ -140,7 +142,7 @@ def _kaleidoscope(a) -> None:
     from ..images import read_exr
     frame = luminance_channel(a.frame)
     meta = read_exr(a.frame)[1].get("optics")
-    window, sensor = crop_option(a, frame.shape[1], frame.shape[0]), frame.shape
+    window, sensor, whole = crop_option(a, frame.shape[1], frame.shape[0]), frame.shape, frame
     if window is not None:
         if isinstance(meta, dict) and meta.get("design"):
             raise EventFieldError(f"--crop {a.crop}: the frame {a.frame} carries its own ({meta['design']}) optics, "
@@ -150,14 +152,22 @@ def _kaleidoscope(a) -> None:
         if isinstance(meta, dict) and meta.get("design"):
             raise EventFieldError(f"--optics {a.optics}: the frame {a.frame} carries its own ({meta['design']}) "
                                   "optics; --optics is for a camera frame without them")
-        meta = nominal_optics(a.optics, frame.shape[1], frame.shape[0], design="kaleidoscope")
+        try:
+            meta = nominal_optics(a.optics, frame.shape[1], frame.shape[0], design="kaleidoscope")
+        except EventFieldError as e:
+            raise EventFieldError(film_hint(e, window, frame.shape[1], frame.shape[0], a.frame)) from None
     # the tiles of a frame whose metadata says n are known; a bare frame's are found by their seams
     n = meta.get("n") if isinstance(meta, dict) and meta.get("design") == "kaleidoscope" else None
     try:
         tiles = cal.known_tiles(n, frame.shape[1], frame.shape[0]) if isinstance(n, int) and n > 0 else None
-        result = cal.register(np.log(np.maximum(frame, 1e-6)), tiles)
-    except cal.CalibrationError as e:
-        raise EventFieldError(f"{a.frame}: {e}") from None
+        with warnings.catch_warnings(record=True) as said:      # named with the frame, after the refusals
+            warnings.simplefilter("always")
+            result = cal.register(np.log(np.maximum(frame, 1e-6)), tiles)
+            if window is not None and a.target_depth is None:     # off the focus distance, parallax moves seams
+                warn_off_seams(np.log(np.maximum(whole, 1e-6)), window, result.n)
+    except cal.CalibrationError as e:      # n from --optics: the optics may be the thing that is wrong
+        told = f" (its {n}x{n} views are those of --optics {a.optics}: the tube's?)" if a.optics and n else ""
+        raise EventFieldError(f"{a.frame}: {e}{told}") from None
     result.target_depth = a.target_depth
     if window is not None:       # recorded, so a recording of the whole sensor is told the window to cut
         result.crop = {"window": list(window), "sensor": [sensor[1], sensor[0]]}
@@ -173,6 +183,8 @@ def _kaleidoscope(a) -> None:
         except cal.CalibrationError as e:        # (it named no file)
             raise EventFieldError(f"{a.flat}: {e}") from None
     cal.save_calibration(a.output, optics, kaleidoscope=result)
+    for w in said:                    # held until the checks passed: a refused command says one line
+        print(f"eventfield: warning: {a.frame}: {w.message}", file=sys.stderr)
     worst = max(abs(c) for v in result.views for c in v["offset"])
     print(f"kaleidoscope: {result.n}x{result.n} views of {result.tile[0]}x{result.tile[1]} px, largest "
           f"offset {worst:.3f} px (target at {'the focus distance' if a.target_depth is None else a.target_depth})"

@@ -27,9 +27,9 @@ def read_input(a, needs_optics: bool = False):
     return nonempty(kept, a.file)
 
 
-CROP_HELP = ("X,Y,W,H: the window of the sensor that the kaleidoscope's tube image covers, in pixels from the "
-             "top-left (a camera recording on a larger sensor: its views are tiles of the window; frames of the "
-             "whole sensor are cut to it)")
+CROP_HELP = ("the window of the sensor that the kaleidoscope's tube image covers, x0,y0,width,height in pixels "
+             "from the top-left (a camera recording on a larger sensor: its views are tiles of the window; frames of "
+             "the whole sensor are cut to it)")
 
 
 def crop_option(a, width: int, height: int):
@@ -38,6 +38,18 @@ def crop_option(a, width: int, height: int):
     if not getattr(a, "crop", None):
         return None
     return crop_window(number_list(a.crop, "--crop"), width, height, "--crop")
+
+
+def film_hint(e: Exception, window, width: int, height: int, where: str) -> str:
+    """``e`` (a refusal of nominal optics on this film) with what the film is, where it is about the film: all
+    of the frame or recording, or the ``--crop`` ``window`` (forgetting --crop on a larger sensor blamed the
+    optics file's aspect ratio, and said nothing of --crop)."""
+    if "film" not in str(e):
+        return str(e)
+    if window is not None:
+        return f"{e} (the film: the --crop window {','.join(map(str, window))}, {width}x{height})"
+    return (f"{e} (the film: all {width}x{height} of {where}; where the tube's image covers part of the sensor, "
+            "pass --crop X,Y,W,H)")
 
 
 def cropped(ev, a, where: str):
@@ -126,5 +138,11 @@ def give_optics(ev, where: str, optics_file: str | None, calibration=None, desig
     Python gives them, spelled as options): the set-up's nominal ones (``--optics``: any light-field design, or
     ``design``) or those of the calibration made for it (``--calibration``)."""
     from ..calibration.recording import COMMAND_NAMES, with_optics
-    return with_optics(ev, optics_file, calibration, design=design, where=where, names=COMMAND_NAMES,
-                       takes_calibration=takes_calibration)
+    try:
+        return with_optics(ev, optics_file, calibration, design=design, where=where, names=COMMAND_NAMES,
+                           takes_calibration=takes_calibration)
+    except EventFieldError as e:
+        if optics_file is None or ev.meta.get("optics"):
+            raise
+        window = (ev.meta.get("crop") or {}).get("window")
+        raise EventFieldError(film_hint(e, window, ev.width, ev.height, where)) from None

@@ -112,8 +112,9 @@ def _out_meta(a, events, lf=None, **extra):
 def _lightfield(a, ev, nearest: float | None = None):
     """The light field the light-field commands share, calibrated when asked (``calibration.recording``, as
     Python makes it; a calibration made for other optics than this stream's is refused before any
-    reconstruction). ``nearest``: the nearest depth the command needs (--near, the nearest --depth), searched by
-    the per-period solver too."""
+    reconstruction), and the stream with the optics a recording was given (the outputs' metadata records them).
+    ``nearest``: the nearest depth the command needs (--near, the nearest --depth), searched by the per-period
+    solver too."""
     from ..calibration import calibrated_lightfield, check_optics, load_calibration, optics_record
     from ..lightfield.streams import PERIODS, default_method, from_events, methods
     if a.method is not None and a.method not in methods("galvo"):
@@ -147,7 +148,7 @@ def _lightfield(a, ev, nearest: float | None = None):
         lf.meta["warnings"] = [f"{a.file}: {w}" for w in held]
     except (ValueError, KeyError, StopIteration) as e:
         raise EventFieldError(f"{a.file}: {e}") from None
-    return lf
+    return lf, ev
 
 
 @contextlib.contextmanager
@@ -358,7 +359,7 @@ def run_refocus(a) -> int:
     ev = read_input(a, needs_optics=True)
     depths = number_list(a.depth, "--depth", lo=0, lo_open=True, allow_inf=True)
     roots = _refocus_roots(a, depths)
-    lf = _lightfield(a, ev, nearest=min(depths))
+    lf, ev = _lightfield(a, ev, nearest=min(depths))     # ev: with the optics given to a recording
     try:                                   # every depth before the first image
         roots = [(lf.check_depth(z, "--depth"), root) for z, root in roots]
     except ConfigError as e:
@@ -382,7 +383,7 @@ def run_depth(a) -> int:
     if a.measure not in MEASURES:
         raise EventFieldError(f"--measure {a.measure!r}: allowed: {', '.join(MEASURES)}")
     check_writable(os.path.splitext(a.output)[0] + ".exr", "depth map")     # the PNG's sibling, before the solve
-    lf = _lightfield(a, ev, nearest=a.near)
+    lf, ev = _lightfield(a, ev, nearest=a.near)
     _unanchored_warning(a, lf)
     try:
         for value, name in ((a.near, "--near"), (a.far, "--far")):

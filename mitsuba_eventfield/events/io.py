@@ -223,8 +223,16 @@ def _read_npz(path):
         meta = json.loads(str(z["meta_json"])) if "meta_json" in z else {}
         if not isinstance(meta, dict):
             raise BadFile(f"meta_json holds a JSON {type(meta).__name__}, not an object")
-        w = int(z["width"]) if "width" in z else int(z["x"].max()) + 1
-        h = int(z["height"]) if "height" in z else int(z["y"].max()) + 1
+        if "width" in z and "height" in z:
+            w, h = int(z["width"]), int(z["height"])
+        else:    # a TimeLens / foreign npz keeps no sensor size: the data's, said (as the DSEC reader says it)
+            x, y = z["x"], z["y"]
+            if not len(x):
+                raise BadFile("no events and no width / height: the sensor's size is unknown")
+            w, h = int(x.max()) + 1, int(y.max()) + 1
+            warnings.warn(f"{path}: no sensor size in the file (no width / height): taken as {w}x{h} from its "
+                          "largest coordinates; light fields need the sensor's own", stacklevel=3)
+            meta["sensor_size"] = "from the largest coordinates"
         return EventStream(z["x"], z["y"], t, p, w, h, meta)
 
 

@@ -147,7 +147,9 @@ def from_events(events, period: int | None = None, views: int | None = None, tim
                           f"{', '.join(methods(design))}")
     kw = dict(method_kw)
     if method == "direct":
-        kw.update(log_start=log_start, t_start=t0)
+        # from the stream's start, its first microsecond's events included (reconstruct's default; t_start = t0
+        # took them as already in the frame: a recording, which starts at its first event, lost them)
+        kw.update(log_start=log_start)
     elif method == "complementary":          # anchored to the start frame (it needs one)
         if log_start is None:
             raise ConfigError("from_events: method 'complementary' needs log_start, a frame to anchor to")

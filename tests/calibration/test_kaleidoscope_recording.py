@@ -203,6 +203,13 @@ def test_the_python_path_of_a_recording(capture, tmp_path):
     for lf in (from_cal, from_path, nominal):
         assert np.array_equal(lf.views, reference.views) and np.array_equal(lf.positions, reference.positions)
     assert from_cal.meta["calibrated"] == ["kaleidoscope"] and not nominal.meta.get("calibrated")
+    # with a start frame: the recording starts at its first event, whose microsecond's events are integrated
+    # as the render's (which starts at 0) are; they were taken as already in the frame
+    log_start = np.log(np.maximum(read_exr(str(d / "bare.exr"))[0]["Y"], 1e-3))
+    assert recording.start_us == recording.t[0] > 0 and np.count_nonzero(recording.t == recording.t[0]) > 0
+    framed = [ef.lightfield.from_events(s, log_start=log_start, **kw) for s, kw in (
+        (calibration.with_optics(recording, optics=NOMINAL), dict(c_on=0.2, c_off=0.2)), (events, {}))]
+    assert np.array_equal(framed[0].views, framed[1].views)
     assert "optics" not in recording.meta                     # the caller's stream is left as it was
     with pytest.raises(ef.EventFieldError, match=r"^the events: the recording carries no optics .*: pass "
                                                  r"calibration= \(a calibration file made for its set-up\) or optics= "
@@ -210,6 +217,11 @@ def test_the_python_path_of_a_recording(capture, tmp_path):
         calibration.with_optics(recording)
     with pytest.raises(ef.EventFieldError, match=r"carries its own \(kaleidoscope\) optics; optics= is for a camera"):
         calibration.with_optics(events, optics=NOMINAL)
+    with pytest.raises(ef.EventFieldError, match=r"^optics= and calibration=: give one"):
+        calibration.with_optics(recording, optics=NOMINAL, calibration=cal)
+    with pytest.raises(ef.ConfigError, match=r"^calibrated_lightfield: events: expected an EventStream .* got "
+                                             r"LightField$"):
+        calibration.calibrated_lightfield(reference, cal)
     with pytest.raises(ef.EventFieldError, match=r"^optics: tube_width = 'wide': expected a finite number"):
         calibration.with_optics(recording, optics=dict(NOMINAL, tube_width="wide"))
     other = json.load(open(tmp_path / "k.json"))
@@ -239,15 +251,36 @@ def test_a_tube_image_on_part_of_a_larger_sensor(capture, tmp_path):
     window = ",".join(map(str, CROP))
     r = _cli("calibrate", "kaleidoscope", tmp_path / "big.exr", "--optics", d / "nominal.json", "--crop", window,
              "-o", tmp_path / "big.json")
-    assert r.returncode == 0 and "3x3 views of 40x40 px" in r.stdout, r.stderr
+    assert r.returncode == 0 and "3x3 views of 40x40 px" in r.stdout and "eventfield: warning" not in r.stderr, \
+        r.stderr
+    # a window one pixel off: its tiles are not the image's mirror seams (symmetry 1.00 a pixel to the left)
+    r = _cli("calibrate", "kaleidoscope", tmp_path / "big.exr", "--optics", d / "nominal.json", "--crop",
+             "26,10,120,120", "-o", tmp_path / "off.json")
+    said = [line for line in r.stderr.splitlines() if line.startswith("eventfield: warning")]
+    assert r.returncode == 0 and len(said) == 1 and f"{tmp_path / 'big.exr'}: the window 26,10,120,120: its 3x3 " \
+        "tiles' edges are not the image's mirror seams (symmetry along x " in said[0] and " 1 px left)" in said[0], said
     assert json.load(open(tmp_path / "big.json"))["kaleidoscope"]["crop"] == {"window": list(CROP),
                                                                               "sensor": [160, 140]}
+    (tmp_path / "n5.json").write_text(json.dumps(dict(NOMINAL, relay_distance=0.015)))     # a 5x5 tube
+    for args, message in ((["--optics", d / "nominal.json"], r"film 160x140 .* \(the film: all 160x140 of .*big\.exr; "
+                                                            r"where the tube's image covers part of the sensor, pass "
+                                                            r"--crop X,Y,W,H\)$"),
+                          (["--optics", d / "nominal.json", "--crop", "25,10,121,121"],
+                           r"\(the film: the --crop window 25,10,121,121, 121x121\)$"),
+                          (["--optics", tmp_path / "n5.json", "--crop", window],
+                           r"big\.exr: not a kaleidoscope frame: .* \(its 5x5 views are those of --optics "
+                           r".*n5\.json: the tube's\?\)$")):
+        r = _cli("calibrate", "kaleidoscope", tmp_path / "big.exr", *args, "-o", tmp_path / "no.json")
+        err = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(err) == 1 and __import__("re").search(message, err[0]), err
+        assert not (tmp_path / "no.json").exists()
     r = _cli("refocus", tmp_path / "big.aedat4", "--calibration", tmp_path / "big.json", "--contrast", "0.2",
              "--crop", window, "--depth", "1.0", "-o", tmp_path / "rf.png")
     assert r.returncode == 0, r.stderr
     reference = ef.refocus(ef.lightfield.from_events(events), 1.0)
-    assert reference.std() > 0.01 and np.allclose(read_exr(str(tmp_path / "rf.exr"))[0]["Y"], reference,
-                                                  rtol=1e-6, atol=1e-7)
+    image, meta = read_exr(str(tmp_path / "rf.exr"))
+    assert reference.std() > 0.01 and np.allclose(image["Y"], reference, rtol=1e-6, atol=1e-7)
+    assert meta["optics"]["design"] == "kaleidoscope" and meta["crop"] == {"window": list(CROP), "sensor": [160, 140]}
     # in Python: the same window, the same light field
     from mitsuba_eventfield import calibration
     cut = ef.read_events(str(tmp_path / "big.aedat4")).crop(*CROP)
@@ -263,18 +296,41 @@ def test_a_tube_image_on_part_of_a_larger_sensor(capture, tmp_path):
     assert r.returncode == 0 and r0.returncode == 0, r.stderr + r0.stderr
     assert np.array_equal(*(read_exr(str(tmp_path / n / "frame_0000.exr"))[0]["Y"] for n in ("rc", "rc0")))
     for args, message in (
-            ([], r"big\.json: made from the window 25,10,120,120 of the 160x140 sensor: cut the recording .* to it "
+            ([], r"big\.json: made from the window 25,10,120,120 of the 160x140 sensor: cut .*big\.aedat4 to it "
                  r"\(--crop 25,10,120,120; in Python, events\.crop\(\*window\)\)$"),
-            (["--crop", "20,10,120,120"], r"big\.json: made from the window 25,10,120,120 of the sensor; the recording "
-                                          r".* is cut to 20,10,120,120$"),
-            (["--crop", "100,10,120,120"], r"^eventfield: error: --crop = 100,10,120,120: the window .* must lie inside "
-                                           r"the 160x140 sensor")):
+            (["--crop", "20,10,120,120"], r"big\.json: made from the window 25,10,120,120 of the sensor; .*big\.aedat4 "
+                                          r"is cut to 20,10,120,120$"),
+            (["--crop", "100,10,120,120"], r"^eventfield: error: --crop = 100,10,120,120: the window .* must lie "
+                                           r"inside the 160x140 sensor")):
         r = _cli("refocus", tmp_path / "big.aedat4", "--calibration", tmp_path / "big.json", "--contrast", "0.2",
                  "--depth", "1", "-o", tmp_path / "bad.png", *args)
         err = r.stderr.strip().splitlines()
         assert r.returncode == 2 and len(err) == 1 and __import__("re").search(message, err[0]), err
+    other = ef.EventStream(events.x + x0, events.y + y0, events.t, events.p, 240, 180, {})   # another sensor
+    ef.write_events(str(tmp_path / "other.aedat4"), other)
+    r = _cli("refocus", tmp_path / "other.aedat4", "--calibration", tmp_path / "big.json", "--contrast", "0.2",
+             "--crop", window, "--depth", "1", "-o", tmp_path / "bad.png")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "big.json: made on a 160x140 sensor (the window 25,10,120,120); " \
+        in err[0] and "other.aedat4 was recorded on a 240x180 one" in err[0], err
     r = _cli("refocus", d / "rec.h5", "--crop", "0,0,60,60", "--depth", "1", "-o", tmp_path / "bad.png")
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1 and "carries its own (kaleidoscope) optics, which describe its whole" \
         in err[0], err
     assert not (tmp_path / "bad.png").exists()
+
+
+def test_a_target_that_is_not_flat_is_named_in_the_warning(tmp_path):
+    """scenes/falling (posts, block and wall at 0.55, 0.8 and 1.4 m) as the target: the calibration is written,
+    with one warning line naming the frame, after the checks (the quarters' spread, 0.36-0.40 px at 120 px
+    views, against a flat card's 0.00)."""
+    falling = os.path.join(ROOT, "scenes", "falling", "falling.xml")
+    r = _cli("frame", falling, "-o", tmp_path / "falling.exr", "-D", "views_px=120")
+    assert r.returncode == 0, r.stderr
+    r = _cli("calibrate", "kaleidoscope", tmp_path / "falling.exr", "-o", tmp_path / "k.json")
+    err = [line for line in r.stderr.strip().splitlines() if "WARN" not in line]
+    assert r.returncode == 0 and (tmp_path / "k.json").exists(), r.stderr
+    assert len(err) == 1 and err[0].startswith(f"eventfield: warning: {tmp_path / 'falling.exr'}: kaleidoscope "
+                                               "calibration: view (") and "the target is not flat" in err[0], err
+    spread = json.load(open(tmp_path / "k.json"))["kaleidoscope"]["quality"]["max_quarter_spread_px"]
+    assert 0.25 < spread < 0.6

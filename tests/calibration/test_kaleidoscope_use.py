@@ -223,14 +223,19 @@ def test_a_target_that_is_not_flat_is_warned_about(renders):
     assert 0.8 * parallax < planes.quality["max_quarter_spread_px"] < 1.2 * parallax       # 3.32 and 3.48 px
 
 
-def test_a_textured_frame_given_as_the_flat_field_is_warned_about(renders):
-    """A uniform white target's views vary only by the relay's vignetting, smooth inside them; the textured card
-    given as the flat field would divide its texture into every view (``calibration.targets``)."""
-    import warnings
+def test_a_textured_frame_given_as_the_flat_field_is_refused(renders):
+    """A uniform white target's views vary only by the relay's vignetting, smooth inside them, and camera noise
+    is finer than the detail measured; the textured card given as the flat field would divide its texture into
+    every view (``calibration.targets``), and is refused."""
+    from mitsuba_eventfield.calibration import CalibrationError
+    from mitsuba_eventfield.calibration.targets import flat_texture
     _, _, targets, _, flat = renders
     cal = register(np.log(targets[1.0]), known_tiles(N, N * TILE, N * TILE))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        flat_field(cal, flat)                                        # vignetted, uniform: no warning
-    with pytest.warns(UserWarning, match=r"flat field: the frame has detail inside its views \(0\.0[78]\d in log"):
+    noisy = flat * (1 + 0.05 * np.random.default_rng(2).standard_normal(flat.shape))     # 5 % camera noise
+    for frame in (flat, noisy):                                     # vignetted, uniform: taken
+        flat_field(cal, frame)
+    with pytest.raises(CalibrationError, match=r"^the flat-field frame has detail inside its views \(0\.0[6-9]\d in "
+                                               r"log; .* calibrate without a flat field$"):
         flat_field(cal, targets[1.0])
+    parts = [np.ones((TILE, TILE))] * 9
+    assert flat_texture(parts) == 0.0

@@ -41,3 +41,20 @@ def test_ssim_known_values_without_contrib(monkeypatch):
     expected = (2 * 5 * 10 + 6.5025) / (5 ** 2 + 10 ** 2 + 6.5025)
     assert float(quality.ssim_map(flat, flat + d).mean()) == pytest.approx(expected, rel=1e-5)
     assert 0.2 < quality.ssim(b.astype(float), a.astype(float), white=255.0) < 0.9
+
+
+def test_scores_against_their_definitions():
+    """``fit_gain``: the factor that takes the estimate to the truth (an estimate at twice the truth: 0.5, whatever
+    the pixels that are not positive); ``psnr``: 10 log10(1 / mse) of images scaled by the white level (a
+    uniform error of 1/255 of white: 48.13 dB); ``ssim``: codes rounded (an estimate less than half a code
+    from the truth at every pixel is the same 8-bit image: 1.0, where truncating moved every pixel a code)."""
+    from mitsuba_eventfield.evaluation.quality import fit_gain, psnr, ssim
+    rng = np.random.default_rng(5)
+    truth = rng.uniform(0.1, 1.0, (32, 32))
+    estimate = 2.0 * truth
+    estimate[0, :4] = 0.0                                       # not positive: left out of the fit
+    assert fit_gain(estimate, truth) == pytest.approx(0.5, rel=1e-12)
+    white = 1.0
+    assert psnr(np.clip(truth + 1 / 255, 0, None), truth, white) == pytest.approx(20 * np.log10(255), abs=0.05)
+    codes = np.rint(truth * 255) / 255                          # exactly on the codes
+    assert ssim(codes * (1 - 0.3 / 255), codes, white) == 1.0

@@ -357,3 +357,19 @@ def test_the_room_asked_for_holds_the_chunk_still_in_dv_processings_thread(tmp_p
             w.append(t % 64, t % 48, t, np.where(t % 2, 1, -1))
     need = AEDAT4_BYTES_PER_EVENT * n + disk.HEADER_BYTES
     assert reserved == [disk.HEADER_BYTES, need, 2 * need, 2 * need]
+
+
+def test_a_timelens_npz_is_read_with_its_size_said(tmp_path):
+    """A TimeLens-style npz (``timestamp`` in microseconds, ``polarity`` 0 / 1, no sensor size): times rounded
+    to the microsecond, the sensor taken from the largest coordinates (x up to 5, y up to 3: 6x4) with a
+    warning, as the DSEC reader says it; without events and size, one line."""
+    path = tmp_path / "tl.npz"
+    np.savez(path, x=np.array([0, 5], np.uint16), y=np.array([0, 3], np.uint16), timestamp=np.array([10.6, 20.4]),
+             polarity=np.array([0, 1]))
+    with pytest.warns(UserWarning, match=r"tl\.npz: no sensor size in the file \(no width / height\): taken as 6x4"):
+        ev = ef.read_events(str(path))
+    assert (ev.width, ev.height) == (6, 4) and list(ev.t) == [11, 20] and list(ev.p) == [-1, 1]
+    assert ev.meta["sensor_size"] == "from the largest coordinates"
+    np.savez(path, x=np.zeros(0, np.uint16), y=np.zeros(0, np.uint16), timestamp=np.zeros(0), polarity=np.zeros(0))
+    with pytest.raises(ef.EventFieldError, match=r"tl\.npz: .*no events and no width / height"):
+        ef.read_events(str(path))

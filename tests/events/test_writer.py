@@ -170,14 +170,15 @@ def test_a_failing_writer_with_borrowed_chunks_raises_in_the_caller_and_frees_th
 
         def append(self, x, y, t, p, complete_until_us=None):
             self.calls += 1
-            if self.calls == 2:
-                raise OSError("no space left on device")
+            if self.calls >= 2:                       # every chunk from the second on would fail
+                raise OSError(f"no space left on device (chunk {self.calls})")
 
         def abort(self):
             pass
 
-    freed, w = [], BackgroundWriter(Failing())
-    with pytest.raises(OSError, match="no space"):
+    freed, failing = [], Failing()
+    w = BackgroundWriter(failing)
+    with pytest.raises(OSError, match=r"no space left on device \(chunk 2\)"):     # the first error
         for i in range(50):
             cols = (np.full(3, i, np.uint16), np.full(3, i, np.uint16), np.full(3, i, np.int64), np.ones(3, np.int8))
             w.append_borrowed(*(np.asarray(FreedOn(c, freed)) for c in cols))
@@ -186,3 +187,21 @@ def test_a_failing_writer_with_borrowed_chunks_raises_in_the_caller_and_frees_th
     w.abort()
     assert not w.thread.is_alive() and not w.copier.is_alive() and not w._borrowed
     assert freed and len(freed) % 4 == 0 and set(freed) == {threading.get_ident()}
+    assert failing.calls == 2                         # the chunks queued after the failure were dropped, unwritten
+
+
+def test_a_write_needs_its_bytes_and_the_margin_free(tmp_path, monkeypatch):
+    """``disk.check_space``: a write of N bytes is refused unless N plus DISK_MARGIN are free (HDF5 and
+    dv-processing do not recover from ENOSPC), and taken with exactly that much."""
+    import pytest
+
+    import mitsuba_eventfield as ef
+    from mitsuba_eventfield.events import disk
+    need = 10_000_000
+    for free, refused in ((need + disk.DISK_MARGIN // 2, True), (need + disk.DISK_MARGIN, False)):
+        monkeypatch.setattr(disk, "_free_bytes", lambda path, free=free: free)
+        if refused:
+            with pytest.raises(ef.EventFieldError, match="disk full"):
+                disk.check_space(str(tmp_path / "e.h5"), need)
+        else:
+            disk.check_space(str(tmp_path / "e.h5"), need)

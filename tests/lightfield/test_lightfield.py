@@ -225,6 +225,11 @@ def test_galvo_depth_at_scan_rate_from_events(capsys):
                   f"far {zf:.3f} m (true {FAR})")
         assert abs(zn - NEAR) / NEAR < 0.03 and abs(zf - FAR) / FAR < 0.1
         assert np.all(np.isfinite(dm.depth))
+    # each light field sits at its own period's instants (the stream's clock: track_focus fits motion over them)
+    period = 1.0 / timed.sensor.optics_metadata()["scan"]["frequency"]
+    for p, lf in enumerate(lfs):
+        assert lf.meta["period_index"] == p
+        assert np.allclose(lf.times, ef.galvo_view_times(ev.meta["optics"], ev.start_s + p * period, 16), atol=1e-12)
 
 
 def test_galvo_motion_blur_degrades_gracefully(capsys):

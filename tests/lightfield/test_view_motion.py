@@ -49,3 +49,26 @@ def test_the_same_card_moving_is_still_measured(root):
     with pytest.warns(MotionBlurWarning, match="moves 4"):
         refocus(lf, 0.5)
     assert view_motion(lf, 0.5)["moving_share"] > 0.1              # the card: measured 26 % of the blocks
+
+
+def test_motion_shifts_are_relative_to_the_light_fields_mean_time():
+    """``motion_shifts``: an object at (vx, vy) px/s is displaced in each view by v (t_k - mean t): refocused
+    with them it sits where it was at the light field's mean time (views at 0, 1 and 5 ms; mean 2 ms)."""
+    import numpy as np
+
+    from mitsuba_eventfield.focus.refocus import motion_shifts
+    from mitsuba_eventfield.lightfield.model import Disparity, LightField
+    lf = LightField(np.zeros((3, 8, 8)), np.zeros((3, 2)), np.array([0.0, 1e-3, 5e-3]),
+                    Disparity((0.0, 0.0), (1.0, 1.0)), "kaleidoscope", {})
+    assert np.allclose(motion_shifts(lf, (1000.0, -500.0)), [[-2, 1], [-1, 0.5], [3, -1.5]], atol=1e-12)
+
+
+def test_a_spatial_light_fields_disparity_takes_each_axis_pixel_pitch():
+    """Thin lens: a point at depth z seen through a sub-aperture u metres off the axis lands D u (1/z - 1/S)
+    metres off on the image plane; in pixels, over that axis's pitch (a 0.012 x 0.006 m plane imaged on
+    40 x 20 px views has one pitch on both axes; over the x pitch the y disparity came out half)."""
+    from mitsuba_eventfield.lightfield.model import Disparity
+    optics = {"lens_to_image_plane": 0.05, "focus_distance": 1.0, "image_plane_size": [0.012, 0.006]}
+    ax, ay = Disparity.for_spatial(optics, 40, 20).alpha(0.5)
+    metres = 0.05 * (1 / 0.5 - 1 / 1.0)
+    assert (ax, ay) == pytest.approx((metres * 40 / 0.012, metres * 20 / 0.006), rel=1e-12)

@@ -170,6 +170,23 @@ def test_split_events_into_views(tmp_path):
     assert np.array_equal(np.sort(c.x.astype(int) + 32), np.sort(ev.x[sel].astype(int)))
 
 
+def test_each_views_events_are_that_views_pixels():
+    """``split_events`` against ``extract_views`` on the same pixels: one event at every pixel of the film, its
+    time the pixel's index; each view's events must sit, unflipped, where ``extract_views`` puts the image of
+    pixel indices (the centre view alone, unflipped, could not tell a flip or a view order wrong)."""
+    timed = _stripes_scene(KALEIDO, "vertical", 2.0)
+    optics = timed.sensor.optics_metadata()
+    w, h = (int(v) for v in timed.sensor.film().size())
+    yy, xx = np.mgrid[0:h, 0:w]
+    ids = (yy * w + xx).ravel()
+    ev = ef.EventStream(xx.ravel(), yy.ravel(), ids, np.ones(ids.size, np.int8), w, h, {"optics": optics})
+    images = ef.extract_views(ids.reshape(h, w), optics).images
+    views = ef.split_events(ev)
+    assert len(views) == len(images) == 9
+    for k, (v, image) in enumerate(zip(views, images)):
+        assert len(v) == image.size and np.array_equal(image[v.y, v.x], v.t), k
+
+
 @pytest.mark.parametrize("params, message", [
     ({"relay_distance": 0.025}, "must be an odd integer n"),
     ({"aperture_radius": 0.003}, "the main lens cuts the outer views"),

@@ -172,3 +172,34 @@ def test_a_stack_larger_than_memory_is_not_called_damaged(tmp_path, monkeypatch)
     monkeypatch.setattr(np.lib.npyio.NpzFile, "__getitem__", no_memory)
     with pytest.raises(ef.EventFieldError, match=r"big.npz: its frames \(0 MiB\) do not fit in the memory"):
         ef.events_from_frames(path)
+
+
+def test_what_each_input_holds_reaches_the_pixel(tmp_path):
+    """Each input's own conventions, against what the pixel must see:
+    - a folder of colour PNGs (OpenCV reads BGR) is the luminance of its RGB: a red image's level times the red
+      weight, a blue one's times the blue weight (a log pixel is scale-free, so the events alone could not tell);
+    - an npz's ``timestamps_us`` are microseconds (its span is 20 ms, not 20 s or 20 us);
+    - a start time off the millisecond grid in binary (1.001 s) is its microsecond rounded (1001000), not
+      truncated (1000999), so the file's index starts at its millisecond."""
+    import cv2
+
+    from mitsuba_eventfield.images import LUMA
+    from mitsuba_eventfield.simulate.frame_sources import from_folder
+    for channel, weight in ((2, LUMA[0]), (0, LUMA[2])):           # OpenCV's BGR order: 2 is red, 0 is blue
+        folder = tmp_path / f"c{channel}"
+        folder.mkdir()
+        for k, level in enumerate((50, 200)):
+            img = np.zeros((4, 6, 3), np.uint8)
+            img[..., channel] = level
+            cv2.imwrite(str(folder / f"f{k}.png"), img)
+        frames = [f for _, f in from_folder(str(folder), fps=1000).frames()]
+        assert np.allclose(frames, [np.full((4, 6), weight * level / 255) for level in (50, 200)], rtol=1e-6)
+    ramp = (np.exp(np.linspace(0, 1, 3))[:, None, None] * np.full((3, 4, 6), 0.2)).astype(np.float32)
+    np.savez(tmp_path / "us.npz", frames=ramp, timestamps_us=np.array([0, 10_000, 20_000]))
+    ev = ef.events_from_frames(str(tmp_path / "us.npz"), threshold=0.2)
+    assert ev.duration_us == 20_000 and len(ev) > 0
+    times = 1.001 + np.arange(3) * 1e-3
+    assert int(1.001 * 1e6) == 1000999                                   # the float's own truncation
+    ef.events_from_frames(ramp, times, threshold=0.2, output=str(tmp_path / "late.h5"))
+    back = ef.read_events(str(tmp_path / "late.h5"))
+    assert back.start_us == 1_001_000 and back.meta["t_start_us"] == 1_001_000

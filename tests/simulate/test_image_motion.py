@@ -30,6 +30,8 @@ def test_object_motion_matches_the_pinhole_projection():
     duration, steps = 0.02, 10
     expected = focal * 0.5 * (duration / steps) / 1.9
     assert object_px_per_step(timed, 0.0, duration, steps) == pytest.approx(expected, rel=0.02)
+    # more steps than the motion is sampled at (256): still the path of one step, a thousandth of it here
+    assert object_px_per_step(timed, 0.0, duration, 1000) == pytest.approx(expected * steps / 1000, rel=0.02)
     assert scan_px_per_step(timed, duration, steps) is None
 
 
