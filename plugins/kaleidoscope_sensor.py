@@ -239,7 +239,8 @@ def optics_of(layout: str, params: dict, width: int, height: int) -> dict:
         values[name] = int(v) if integer else float(v)
     try:
         sensor = mi.load_dict({"type": "kaleidoscope", "layout": layout, **values,
-                               "film": {"type": "hdrfilm", "width": int(width), "height": int(height)}})
+                               "film": {"type": "hdrfilm", "width": int(width), "height": int(height),
+                                        "pixel_format": "luminance"}})   # as mono expects: no warning
     except RuntimeError as e:
         raise ValueError(plugin_message(e) or " ".join(str(e).split())) from None
     optics = sensor.optics_metadata()
