@@ -3,6 +3,7 @@ import math
 import re
 
 import pytest
+from conftest import ROOT
 from traced_galvo import traced_scan_path_px
 
 import mitsuba_eventfield as ef
@@ -69,3 +70,17 @@ def test_the_coarse_step_warning_says_the_scan_and_objects_add_up():
     notes = _new_summary(timed, st, None).notes
     scan = float(notes[0].split("per step the scan ")[1].split(" px")[0])
     assert scan < 1 and "together 1.78 px" in notes[0]
+
+
+def test_a_moving_object_under_a_scan_moves_by_both():
+    """A point on the grid sliding under the galvo's circle moves on the image by the scan's path and the
+    grid's together (the circle's image speed is the same all round it, the slide's too): the largest image
+    speed of the scene is the scan's alone (the scene without its motion) plus the grid's (its path per step),
+    not the larger of the two (measured 2373 + 211 px/s)."""
+    from mitsuba_eventfield.simulate.image_motion import largest_image_speed
+    path, duration = f"{ROOT}/scenes/moving_grid/galvo.xml", 0.02
+    moving, still = ef.load_scene(path, views_px=96), ef.load_scene(path, views_px=96, motion=None)
+    scan = largest_image_speed(still, 0.0, duration)
+    slide = object_px_per_step(moving, 0.0, duration, 100) * 100 / duration
+    assert scan > 1000 and slide > 100
+    assert largest_image_speed(moving, 0.0, duration) == pytest.approx(scan + slide, rel=1e-6)
