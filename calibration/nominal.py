@@ -94,7 +94,7 @@ def recording_optics(calibration, ev, where) -> dict:
         raise EventFieldError(f"{source}: cannot give optics to {where}, which carries none: the calibration is for "
                               f"{' and '.join(map(str, designs)) or 'no'} optics, it must be for one design")
     record = next(r for r in records if r.get("design") == designs[0])
-    _check_crop(calibration, ev, where, source)
+    check_crop(calibration, ev, where, source)
     if (record.get("width"), record.get("height")) != (ev.width, ev.height):
         raise EventFieldError(f"{source}: made for a {record.get('width')}x{record.get('height')} film, the "
                               f"recording {where} is {ev.width}x{ev.height}")
@@ -108,7 +108,7 @@ def recording_optics(calibration, ev, where) -> dict:
     return {k: v for k, v in record.items() if k not in ("width", "height")}
 
 
-def _check_crop(calibration, ev, where, source) -> None:
+def check_crop(calibration, ev, where, source) -> None:
     """A calibration made from a window of a larger sensor (``calibrate kaleidoscope --crop``) takes recordings
     cut to that window: one of the whole sensor is told the window, one cut elsewhere is refused (its views
     would be other pixels' than the calibration registered)."""

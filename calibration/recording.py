@@ -34,8 +34,9 @@ def with_optics(events, optics=None, calibration=None, *, design: str | None = N
     offers a calibration (``eventfield calibrate`` makes one)."""
     from mitsuba_eventfield.events.stream import EventStream
 
+    import os
+
     from .nominal import nominal_optics, recording_optics
-    from .store import load_calibration
     if not isinstance(events, EventStream):
         raise ConfigError(f"with_optics: events: expected an EventStream (ef.read_events), got "
                           f"{type(events).__name__}")
@@ -50,15 +51,20 @@ def with_optics(events, optics=None, calibration=None, *, design: str | None = N
                                   "camera recording without them")
         return events
     if optics is not None:
-        if not isinstance(optics, (str, dict)):
+        if not isinstance(optics, (str, os.PathLike, dict)):
             raise ConfigError(f"{names['optics']} {type(optics).__name__}: expected {names['file']}")
-        record = nominal_optics(optics, events.width, events.height, design=design)
+        record = nominal_optics(optics if isinstance(optics, dict) else os.fspath(optics), events.width,
+                                events.height, design=design)
     elif calibration is not None:
-        loaded = load_calibration(calibration) if isinstance(calibration, str) else calibration
-        record = recording_optics(loaded, events, where)
+        record = recording_optics(_loaded(calibration, names["calibration"]), events, where)
     else:
         raise EventFieldError(f"{where}: the recording carries no optics (no light-field metadata): pass "
                               f"{optics_options(names, design, takes_calibration)}")
+    crop = (events.meta.get("crop") or {}).get("window")
+    if crop is not None and record.get("design") == "galvo":     # its field of view and axis: the whole film's
+        raise EventFieldError(f"{where}: cut to the window {','.join(map(str, crop))} of its sensor: a window is "
+                              "for a kaleidoscope's tube image on part of the sensor; galvo optics describe the "
+                              "whole film")
     return EventStream(events.x, events.y, events.t, events.p, events.width, events.height,
                        dict(events.meta, optics=record))
 
@@ -69,29 +75,56 @@ def optics_options(names: dict = PYTHON_NAMES, design: str | None = None, takes_
         f"{names['optics']} {names['file']} (the set-up's nominal {design or 'light-field'} optics)"
 
 
-def calibrated_lightfield(events, calibration, *, where: str = "the events", **from_events_kw):
+def calibrated_lightfield(events, calibration, *, where: str = "the events", nearest: float | None = None,
+                          **from_events_kw):
     """The light field of ``events`` (``lightfield.streams.from_events`` and its keywords) with every part of
-    ``calibration`` (a loaded file or its path) applied: a calibration made for other optics than the stream's
-    is refused before any reconstruction; a galvo stream's phase and depth model go into its optics first
-    (``calibrated_events``: the events-only solvers then use the calibrated views), the rest (a kaleidoscope's
-    registration and flat field) onto the light field (``apply_to_lightfield``). The light field's
-    ``meta["calibrated"]`` lists the parts applied; ``where``: what the refusals call the events."""
+    ``calibration`` (a loaded file or its path; None: none) applied: a calibration made for other optics, or
+    for another window of the sensor, than the stream's is refused before any reconstruction; a galvo stream's
+    phase and depth model go into its optics first (``calibrated_events``: the events-only solvers then use
+    the calibrated views and pivots), the rest (a kaleidoscope's registration and flat field) onto the light
+    field (``apply_to_lightfield``). ``nearest``: a nearer depth the caller needs (the commands' --near), which
+    the per-period solver then searches too when no ``depth_range`` is given (from the calibrated pivots:
+    ``galvo_periods.default_depth_range``). The light field's ``meta["calibrated"]`` lists the parts applied;
+    ``where``: what the refusals call the events."""
     from mitsuba_eventfield.events.stream import EventStream
-    from mitsuba_eventfield.lightfield.streams import from_events
+    from mitsuba_eventfield.focus.galvo_periods import default_depth_range
+    from mitsuba_eventfield.lightfield.streams import PERIODS, default_method, from_events
 
+    from .nominal import check_crop
     from .optics import check_optics, optics_record
-    from .store import apply_to_lightfield, calibrated_events, load_calibration
+    from .store import apply_to_lightfield, calibrated_events
     if not isinstance(events, EventStream):
         raise ConfigError(f"calibrated_lightfield: events: expected an EventStream (ef.read_events, then "
                           f"with_optics for a recording), got {type(events).__name__}")
-    loaded = load_calibration(calibration) if isinstance(calibration, str) else calibration
-    source = getattr(loaded, "path", "calibration")
-    record = optics_record(events.meta.get("optics", {}), events.width, events.height, where=where)
-    check_optics(loaded, record)
-    lf = from_events(calibrated_events(events, loaded, record), **from_events_kw)
-    if lf.meta.get("calibrated"):                  # applied through the events
+    loaded = None if calibration is None else _loaded(calibration, "calibrated_lightfield: calibration")
+    placed, record = events, None
+    if loaded is not None:
+        record = optics_record(events.meta.get("optics", {}), events.width, events.height, where=where)
+        check_optics(loaded, record)
+        check_crop(loaded, events, where, getattr(loaded, "path", "calibration"))
+        placed = calibrated_events(events, loaded, record)
+    optics = placed.meta.get("optics") or {}
+    method = from_events_kw.get("method") or default_method(optics.get("design"),
+                                                            from_events_kw.get("log_start") is not None)
+    if method == PERIODS and nearest is not None and from_events_kw.get("depth_range") is None:
+        from_events_kw["depth_range"] = default_depth_range(optics, nearest)
+    lf = from_events(placed, **from_events_kw)
+    if loaded is None or lf.meta.get("calibrated"):      # none, or applied through the events
         return lf
     try:
         return apply_to_lightfield(lf, loaded, record)
-    except ConfigError as e:                       # a calibration's own refusal names no file
-        raise EventFieldError(f"{source}: {e}") from None
+    except ConfigError as e:                             # a calibration's own refusal names no file
+        raise EventFieldError(f"{getattr(loaded, 'path', 'calibration')}: {e}") from None
+
+
+def _loaded(calibration, name: str):
+    """A calibration given as a loaded file (or a dict of its parts) or a path (str or path-like)."""
+    import os
+
+    from .store import load_calibration
+    if isinstance(calibration, (str, os.PathLike)):
+        return load_calibration(os.fspath(calibration))
+    if not isinstance(calibration, dict):
+        raise ConfigError(f"{name}: expected a calibration file's path or calibration.load_calibration(...), got "
+                          f"{type(calibration).__name__}")
+    return calibration

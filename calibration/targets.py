@@ -100,8 +100,10 @@ def seam_shift(frame: np.ndarray, window, n: int, half: int = 4) -> tuple:
     from .kaleidoscope import _symmetry_profile
     x0, y0, w, h = window
     shifts, scores = [], []
-    for axis, start, size in ((1, x0, w), (0, y0, h)):
-        prof = _symmetry_profile(frame, axis, half)
+    # each axis's seams on the window's own rows or columns: the edge of a dark surround, along a whole
+    # sensor's rows, outweighed every seam (windows 0, 2 and 5 px off all scored 0.93)
+    for axis, start, size, strip in ((1, x0, w, frame[y0:y0 + h]), (0, y0, h, frame[:, x0:x0 + w])):
+        prof = _symmetry_profile(strip, axis, half)
         edges = [start + k * size // n for k in range(1, n)]
         score = {s: float(np.mean([prof[c + s] for c in edges])) for s in range(-SEAM_SEARCH_PX, SEAM_SEARCH_PX + 1)
                  if all(half <= c + s <= len(prof) - 1 - half for c in edges)}

@@ -63,12 +63,18 @@ def crop_window(window, width: int, height: int, name: str = "crop", error=Confi
     parts = ("x0", "y0", "width", "height")
     if isinstance(window, (str, bytes)) or not hasattr(window, "__len__") or len(window) != 4:
         raise error(f"{name} = {window!r}: expected x0, y0, width, height in pixels")
-    x0, y0, w, h = (number(v, f"{name} {part}", lo=0 if part in parts[:2] else 1, integer=True,
-                           strict=not isinstance(v, str), error=error) for part, v in zip(parts, window))
+    x0, y0, w, h = (number(v, f"{name} {part}", lo=0 if part in parts[:2] else 1, integer=True, strict=True,
+                           error=error) for part, v in zip(parts, window))
     if x0 + w > width or y0 + h > height:
         raise error(f"{name} = {x0},{y0},{w},{h}: the window (x0, y0, width, height) must lie inside the "
                     f"{width}x{height} sensor (x0 + width <= {width}, y0 + height <= {height})")
     return x0, y0, w, h
+
+
+def cut_window(frame, window):
+    """The pixels of ``frame`` (H, W[, C]) inside ``window`` = (x0, y0, w, h) (``crop_window``)."""
+    x0, y0, w, h = window
+    return frame[y0:y0 + h, x0:x0 + w]
 
 
 def flag(value, name: str, error=ConfigError) -> bool:

@@ -190,5 +190,5 @@ def _share(fraction: float) -> str:
     for digits in range(4):
         text = f"{100 * fraction:.{digits}f}"
         if not (0 < fraction < 1 and float(text) in (0.0, 100.0)):
-            break
-    return f"{text} %"
+            return f"{text} %"
+    return "< 0.001 %" if fraction < 0.5 else "> 99.999 %"

@@ -11,7 +11,7 @@ from ..calibration.nominal import nominal_optics
 from ..calibration.targets import warn_off_seams
 from ..errors import EventFieldError
 from ..events.stuck_pixels import without_stuck_pixels
-from ..validate import MAX_VIEWS, number_list
+from ..validate import MAX_VIEWS, cut_window, number_list
 from .args import num
 from .inputs import (CROP_HELP, crop_option, film_hint, galvo_frames, galvo_scan, give_optics, luminance_channel,
                      nonempty, start_log, with_contrast)
@@ -137,17 +137,17 @@ def _depth(a) -> None:
           f"model rms {result.rms_linear:.3f} px/rad; best: {result.best} -> {a.output}")
 
 
-def _kaleidoscope(a) -> None:
-    from .. import calibration as cal
+def _kaleidoscope_frame(a) -> tuple:
+    """(the frame, cut to --crop; its optics metadata, or --optics'; the window; the whole sensor's frame)."""
     from ..images import read_exr
     frame = luminance_channel(a.frame)
     meta = read_exr(a.frame)[1].get("optics")
-    window, sensor, whole = crop_option(a, frame.shape[1], frame.shape[0]), frame.shape, frame
+    window, whole = crop_option(a, frame.shape[1], frame.shape[0]), frame
     if window is not None:
         if isinstance(meta, dict) and meta.get("design"):
             raise EventFieldError(f"--crop {a.crop}: the frame {a.frame} carries its own ({meta['design']}) optics, "
                                   "which describe its whole film; --crop is for a camera frame")
-        frame = _cut(frame, window)
+        frame = cut_window(frame, window)
     if a.optics:
         if isinstance(meta, dict) and meta.get("design"):
             raise EventFieldError(f"--optics {a.optics}: the frame {a.frame} carries its own ({meta['design']}) "
@@ -156,17 +156,34 @@ def _kaleidoscope(a) -> None:
             meta = nominal_optics(a.optics, frame.shape[1], frame.shape[0], design="kaleidoscope")
         except EventFieldError as e:
             raise EventFieldError(film_hint(e, window, frame.shape[1], frame.shape[0], a.frame)) from None
+    return frame, meta, window, whole
+
+
+def _said(held, where: str) -> None:
+    """Warnings held until a command's checks passed (a refused command says one line), named with ``where``."""
+    for w in held:
+        if issubclass(w.category, UserWarning):
+            print(f"eventfield: warning: {where}: {w.message}", file=sys.stderr)
+        else:                         # a library's own (deprecations): as it comes
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+
+
+def _kaleidoscope(a) -> None:
+    from .. import calibration as cal
+    frame, meta, window, whole = _kaleidoscope_frame(a)
+    sensor = whole.shape
     # the tiles of a frame whose metadata says n are known; a bare frame's are found by their seams
     n = meta.get("n") if isinstance(meta, dict) and meta.get("design") == "kaleidoscope" else None
     try:
         tiles = cal.known_tiles(n, frame.shape[1], frame.shape[0]) if isinstance(n, int) and n > 0 else None
         with warnings.catch_warnings(record=True) as said:      # named with the frame, after the refusals
-            warnings.simplefilter("always")
+            warnings.simplefilter("always", UserWarning)
             result = cal.register(np.log(np.maximum(frame, 1e-6)), tiles)
             if window is not None and a.target_depth is None:     # off the focus distance, parallax moves seams
                 warn_off_seams(np.log(np.maximum(whole, 1e-6)), window, result.n)
     except cal.CalibrationError as e:      # n from --optics: the optics may be the thing that is wrong
-        told = f" (its {n}x{n} views are those of --optics {a.optics}: the tube's?)" if a.optics and n else ""
+        told = f" (its {n}x{n} views are those of --optics {a.optics}: the tube's?)" \
+            if a.optics and n and str(e).startswith("not a kaleidoscope frame") else ""
         raise EventFieldError(f"{a.frame}: {e}{told}") from None
     result.target_depth = a.target_depth
     if window is not None:       # recorded, so a recording of the whole sensor is told the window to cut
@@ -174,7 +191,7 @@ def _kaleidoscope(a) -> None:
     optics = cal.kaleidoscope_record(frame.shape[1], frame.shape[0], result.n, meta, where=a.frame)
     if a.flat:
         flat = luminance_channel(a.flat)
-        flat = _cut(flat, window) if window is not None and flat.shape == sensor else flat     # the whole sensor
+        flat = cut_window(flat, window) if window is not None and flat.shape == sensor else flat   # whole sensor
         if flat.shape != frame.shape:
             raise EventFieldError(f"{a.flat}: flat frame is {flat.shape[1]}x{flat.shape[0]}, the frame "
                                   f"{a.frame} is {frame.shape[1]}x{frame.shape[0]}: they must match")
@@ -183,17 +200,11 @@ def _kaleidoscope(a) -> None:
         except cal.CalibrationError as e:        # (it named no file)
             raise EventFieldError(f"{a.flat}: {e}") from None
     cal.save_calibration(a.output, optics, kaleidoscope=result)
-    for w in said:                    # held until the checks passed: a refused command says one line
-        print(f"eventfield: warning: {a.frame}: {w.message}", file=sys.stderr)
+    _said(said, a.frame)
     worst = max(abs(c) for v in result.views for c in v["offset"])
     print(f"kaleidoscope: {result.n}x{result.n} views of {result.tile[0]}x{result.tile[1]} px, largest "
           f"offset {worst:.3f} px (target at {'the focus distance' if a.target_depth is None else a.target_depth})"
           f"{', flat field' if a.flat else ''} -> {a.output}")
-
-
-def _cut(frame, window):
-    x0, y0, w, h = window
-    return frame[y0:y0 + h, x0:x0 + w]
 
 
 def run_calibrate(a) -> int:

@@ -15,7 +15,8 @@ def read_input(a, needs_optics: bool = False):
     from ..events.io import read_events
     ev = cropped(read_events(a.file), a, a.file)
     if not len(ev):        # refocused, a flat image; as a depth map, no confident pixel: both written as done
-        raise EventFieldError(f"{a.file}: no events: nothing to reconstruct")
+        inside = f" inside the --crop window {a.crop}" if getattr(a, "crop", None) else ""
+        raise EventFieldError(f"{a.file}: no events{inside}: nothing to reconstruct")
     try:
         kept = without_stuck_pixels(with_contrast(ev, getattr(a, "contrast", None), a.file), a.file)
     except EventFieldError as e:
@@ -44,7 +45,8 @@ def film_hint(e: Exception, window, width: int, height: int, where: str) -> str:
     """``e`` (a refusal of nominal optics on this film) with what the film is, where it is about the film: all
     of the frame or recording, or the ``--crop`` ``window`` (forgetting --crop on a larger sensor blamed the
     optics file's aspect ratio, and said nothing of --crop)."""
-    if "film" not in str(e):
+    import re
+    if not re.search(r"\bfilm \d+x\d+", str(e)):      # a refusal of the film's size (aspect, views), no other
         return str(e)
     if window is not None:
         return f"{e} (the film: the --crop window {','.join(map(str, window))}, {width}x{height})"
@@ -53,15 +55,10 @@ def film_hint(e: Exception, window, width: int, height: int, where: str) -> str:
 
 
 def cropped(ev, a, where: str):
-    """``ev`` cut to ``--crop`` (``EventStream.crop``) when given; a stream with its own optics is refused (they
-    describe its whole film)."""
+    """``ev`` cut to ``--crop`` (``EventStream.crop``, which refuses a stream with its own optics) when given."""
     if not getattr(a, "crop", None):
         return ev
-    if ev.meta.get("optics"):
-        raise EventFieldError(f"--crop {a.crop}: {where} carries its own ({ev.meta['optics'].get('design')}) optics, "
-                              f"which describe its whole {ev.width}x{ev.height} film; --crop is for a camera "
-                              "recording whose tube image covers part of the sensor")
-    return ev.crop(*crop_option(a, ev.width, ev.height))
+    return ev.crop(*crop_option(a, ev.width, ev.height), where=f"--crop {a.crop}: {where}")
 
 
 def with_contrast(ev, contrast, where: str):

@@ -12,7 +12,6 @@ import numpy as np
 
 from ..errors import ConfigError, EventFieldError
 from ..focus.depth import DEFAULT_MEASURE
-from ..focus.galvo_periods import default_depth_range
 from ..lightfield.reconstruct import MAX_CUTOFF_HZ
 from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
@@ -116,7 +115,7 @@ def _lightfield(a, ev, nearest: float | None = None):
     ``nearest``: the nearest depth the command needs (--near, the nearest --depth), searched by the per-period
     solver too."""
     from ..calibration import calibrated_lightfield, check_optics, load_calibration, optics_record
-    from ..lightfield.streams import PERIODS, default_method, from_events, methods
+    from ..lightfield.streams import PERIODS, default_method, methods
     if a.method is not None and a.method not in methods("galvo"):
         raise EventFieldError(f"--method {a.method!r}: allowed: {', '.join(methods('galvo'))}")
     calibration = load_calibration(a.calibration) if a.calibration else None
@@ -125,26 +124,20 @@ def _lightfield(a, ev, nearest: float | None = None):
         check_optics(calibration, optics_record(ev.meta.get("optics", {}), ev.width, ev.height, where=a.file))
     period, views = _design_options(a, ev)
     design = (ev.meta.get("optics") or {}).get("design")
-    if a.crop and design == "galvo":       # its optics (field of view, axis at the centre) are the whole film's
-        raise EventFieldError(f"--crop {a.crop}: for a kaleidoscope's tube image on part of the sensor; a galvo's "
-                              "optics describe the whole film")
     if a.method is None:         # named, so that the outputs' metadata says which (it said "default")
         a.method = default_method(design, bool(a.start_frame))
     _warn_coarse_steps(a.file, ev)
     galvo = design == "galvo"
     if a.method == PERIODS:
         _check_periods(a, design)
-        # the nearer depths the command needs are searched by the solver too
-        kw = dict(period=period, views=views, method=PERIODS,
-                  depth_range=default_depth_range(ev.meta["optics"], nearest))
+        kw = dict(period=period, views=views, method=PERIODS)     # searching the nearer depths the command needs
     else:
         kw = dict(period=period if galvo else None, views=views if galvo else None,
                   time=None if a.time is None else a.time * 1e-3, method=a.method,
                   log_start=start_log(a.start_frame, ev))
     try:
         with _solver_warnings_held() as held:
-            lf = calibrated_lightfield(ev, calibration, where=a.file, **kw) if calibration is not None else \
-                from_events(ev, **kw)
+            lf = calibrated_lightfield(ev, calibration, where=a.file, nearest=nearest, **kw)
         lf.meta["warnings"] = [f"{a.file}: {w}" for w in held]
     except (ValueError, KeyError, StopIteration) as e:
         raise EventFieldError(f"{a.file}: {e}") from None

@@ -223,13 +223,12 @@ def _read_npz(path):
         meta = json.loads(str(z["meta_json"])) if "meta_json" in z else {}
         if not isinstance(meta, dict):
             raise BadFile(f"meta_json holds a JSON {type(meta).__name__}, not an object")
-        if "width" in z and "height" in z:
-            w, h = int(z["width"]), int(z["height"])
-        else:    # a TimeLens / foreign npz keeps no sensor size: the data's, said (as the DSEC reader says it)
+        w, h = (int(z[k]) if k in z else None for k in ("width", "height"))
+        if w is None or h is None:    # a TimeLens / foreign npz: the data's, said (as the DSEC reader says it)
             x, y = z["x"], z["y"]
             if not len(x):
                 raise BadFile("no events and no width / height: the sensor's size is unknown")
-            w, h = int(x.max()) + 1, int(y.max()) + 1
+            w, h = (int(x.max()) + 1 if w is None else w), (int(y.max()) + 1 if h is None else h)
             warnings.warn(f"{path}: no sensor size in the file (no width / height): taken as {w}x{h} from its "
                           "largest coordinates; light fields need the sensor's own", stacklevel=3)
             meta["sensor_size"] = "from the largest coordinates"

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
-from ..validate import crop_window, number
+from ..validate import crop_window, cut_window, number
 
 
 MAX_SENSOR = 65536         # x, y are uint16
@@ -157,19 +157,20 @@ class EventStream:
             meta.update(t_start_us=lo, duration_us=hi - lo)
         return EventStream(self.x[s], self.y[s], self.t[s], self.p[s], self.width, self.height, meta)
 
-    def crop(self, x0: int, y0: int, width: int, height: int) -> "EventStream":
+    def crop(self, x0: int, y0: int, width: int, height: int, where: str = "crop") -> "EventStream":
         """The events inside the window [x0, x0 + width) x [y0, y0 + height) of the sensor, with coordinates
         from its corner, as a sensor of that size: a kaleidoscope's tube image on part of a larger sensor (its
         views are tiles of the image, not of the sensor). ``meta["crop"]`` records the window on the whole sensor
         (an earlier crop's composed in), which :meth:`crop_frame` applies to the sensor's frames. A stream that
-        carries optics is refused: they describe its whole film."""
-        where = "crop"
+        carries optics is refused: they describe its whole film. ``where``: what the refusals call the call."""
         if self.meta.get("optics"):
-            raise ConfigError(f"{where}: the stream carries {self.meta['optics'].get('design')} optics, which describe "
-                              f"its whole {self.width}x{self.height} film: crop a camera recording, before its optics")
+            raise ConfigError(f"{where}: the stream carries {self.meta['optics'].get('design')} optics, which "
+                              f"describe its whole {self.width}x{self.height} film: crop a camera recording, before "
+                              "its optics")
         x0, y0, w, h = crop_window((x0, y0, width, height), self.width, self.height, where)
         keep = (self.x >= x0) & (self.x < x0 + w) & (self.y >= y0) & (self.y < y0 + h)
-        prior = self.meta.get("crop") or {"window": [0, 0, self.width, self.height], "sensor": [self.width, self.height]}
+        whole = [self.width, self.height]
+        prior = self.meta.get("crop") or {"window": [0, 0, *whole], "sensor": whole}
         window = [prior["window"][0] + x0, prior["window"][1] + y0, w, h]
         meta = dict(self.meta, crop={"window": window, "sensor": list(prior["sensor"])})
         return EventStream(self.x[keep] - x0, self.y[keep] - y0, self.t[keep], self.p[keep], w, h, meta)
@@ -182,8 +183,7 @@ class EventStream:
         if frame.shape[:2] == (self.height, self.width):
             return frame
         if crop and frame.shape[:2] == tuple(crop["sensor"][::-1]):
-            x0, y0, w, h = crop["window"]
-            return frame[y0:y0 + h, x0:x0 + w]
+            return cut_window(frame, crop["window"])
         sensor = f" or the whole {crop['sensor'][0]}x{crop['sensor'][1]} sensor it was cropped from" if crop else ""
         raise ConfigError(f"{where}: a frame of {frame.shape[1]}x{frame.shape[0]}; the stream's sensor is "
                           f"{self.width}x{self.height}{sensor}")

@@ -72,5 +72,5 @@ def test_depth_panels_share_depth_pngs_scale_without_warnings(tmp_path):
 def test_a_share_short_of_all_is_not_printed_as_all():
     """The demo's report said 100 % of a card's pixels confident for 0.99923."""
     from mitsuba_eventfield.apps.demo import _share
-    assert [_share(v) for v in (0.99923, 1.0, 0.0, 0.5, 0.0004, 0.9996)] == \
-        ["99.9 %", "100 %", "0 %", "50 %", "0.04 %", "99.96 %"]
+    assert [_share(v) for v in (0.99923, 1.0, 0.0, 0.5, 0.0004, 0.9996, 0.9999999, 1e-7)] == \
+        ["99.9 %", "100 %", "0 %", "50 %", "0.04 %", "99.96 %", "> 99.999 %", "< 0.001 %"]

@@ -2,6 +2,7 @@
 events-only solvers' equations too, not only the light field they return. Checked against the same stream with
 its true metadata, on the bundled offaxis_cards (two cards at 0.5 and 1.2 m), scored against Mitsuba's depth."""
 import copy
+import math
 import os
 
 import numpy as np
@@ -159,3 +160,32 @@ def test_a_galvo_recording_in_python_as_on_the_command_line(cards):
     assert lf.meta["calibrated"] == ["galvo"]
     assert np.allclose(lf.positions, reference.positions, atol=1e-9)
     assert np.allclose(lf.views, reference.views, rtol=1e-4, atol=1e-4)
+
+
+def test_the_solvers_default_range_starts_from_the_calibrated_pivots(cards, monkeypatch):
+    """A depth calibration moves the pivots (0.15 / 0.17 m here, nominal 0.2 / 0.21): the per-period solver's
+    default range, and the nearer depth a command asks for (``nearest``), start from the calibrated ones, as
+    the Python path's ``reconstruct_periods`` takes them (the command line searched from twice the nominal
+    pivot, 0.42 m, before). A calibration given as a path-like is loaded; anything else is one line."""
+    from pathlib import Path
+
+    from mitsuba_eventfield import calibration
+    from mitsuba_eventfield.lightfield import streams
+    events, _, tmp = cards
+    record = optics_record(events.meta["optics"], W, H)
+    f = focal_length_px(W, 40.0)
+    z = np.array([0.4, 0.6, 1.0, 2.0])
+    depth = fit_depth(z, 2 * f * (1 - 0.15 / z), 2 * f * (1 - 0.17 / z))
+    depth.optics = record
+    save_calibration(str(tmp / "depth_cal.json"), record, depth=depth)
+    asked = []
+    monkeypatch.setattr(streams, "from_events", lambda ev, **kw: asked.append(kw["depth_range"]) or 1 / 0)
+    for nearest, near in ((None, 0.34), (1.0, 0.34), (0.3, 0.3), (0.1, 0.17)):
+        with pytest.raises(ZeroDivisionError):                # stopped where the solver would start
+            calibration.calibrated_lightfield(events, Path(tmp / "depth_cal.json"), method="periods",
+                                              nearest=nearest or math.inf)
+        assert asked[-1] == pytest.approx((near, 1000.0), rel=1e-6), nearest
+    for bad in (42, None.__class__):
+        with pytest.raises(ef.ConfigError, match=r"^calibrated_lightfield: calibration: expected a calibration "
+                                                 r"file's path or calibration\.load_calibration\(\.\.\.\), got "):
+            calibration.calibrated_lightfield(events, bad)

@@ -315,8 +315,8 @@ def test_a_tube_image_on_part_of_a_larger_sensor(capture, tmp_path):
         in err[0] and "other.aedat4 was recorded on a 240x180 one" in err[0], err
     r = _cli("refocus", d / "rec.h5", "--crop", "0,0,60,60", "--depth", "1", "-o", tmp_path / "bad.png")
     err = r.stderr.strip().splitlines()
-    assert r.returncode == 2 and len(err) == 1 and "carries its own (kaleidoscope) optics, which describe its whole" \
-        in err[0], err
+    assert r.returncode == 2 and len(err) == 1 and "rec.h5: the stream carries kaleidoscope optics, which describe " \
+        "its whole 120x120 film" in err[0], err
     assert not (tmp_path / "bad.png").exists()
 
 

@@ -170,7 +170,8 @@ def _negative_map() -> str:
                                                    r"has True \(the sensor's"),
     (lambda k: k["views"][1].update(flip_x=1), r"view \(0, -1\): flip_x = 1: .* has False"),
     (lambda k: k["views"][0].update(tile=[0, 0, 80, 79]), r"view \(-1, -1\): tile = \[0, 0, 80, 79\]"),
-    (lambda k: k["views"][1].update(k["views"][0], offset=[0, 0]), r"views must list each of the 9 views of 3x3 tiles once"),
+    (lambda k: k["views"][1].update(k["views"][0], offset=[0, 0]),
+     r"views must list each of the 9 views of 3x3 tiles once"),
 ])
 def test_a_hand_edited_calibration_is_refused_in_one_line(renders, tmp_path, edit, message):
     import json
@@ -239,3 +240,16 @@ def test_a_textured_frame_given_as_the_flat_field_is_refused(renders):
         flat_field(cal, targets[1.0])
     parts = [np.ones((TILE, TILE))] * 9
     assert flat_texture(parts) == 0.0
+
+
+def test_a_crop_window_off_the_images_seams_is_found(renders):
+    """``targets.seam_shift``: the tube image (the far card at the focus distance, 240 px) placed at 60,40 on a
+    dark, noisy 400x320 sensor; a window there meets the image's mirror seams, one 2 px right or 3 px up does
+    not, and the seams are found where they are (the card's texture is not periodic)."""
+    from mitsuba_eventfield.calibration.targets import seam_shift
+    image = renders[2][1.0]
+    dark = 1e-3 * (1 + 0.5 * np.random.default_rng(3).random((320, 400)))
+    dark[40:40 + N * TILE, 60:60 + N * TILE] = image
+    log = np.log(dark)
+    for (x0, y0), shift in (((60, 40), (0, 0)), ((62, 40), (-2, 0)), ((60, 37), (0, 3))):
+        assert seam_shift(log, (x0, y0, N * TILE, N * TILE), N)[0] == shift

@@ -347,6 +347,10 @@ def test_a_galvo_recording_is_not_cropped(captures, capsys, tmp_path):
     (tmp_path / "o.json").write_text(json.dumps(optics))
     code, err = _run(["refocus", tmp_path / "g.aedat4", "--optics", tmp_path / "o.json", "--contrast", "0.2",
                       "--crop", "0,0,40,30", "--depth", "1", "-o", tmp_path / "rf.png"], capsys)
-    assert code == 2 and err == "eventfield: error: --crop 0,0,40,30: for a kaleidoscope's tube image on part of " \
-                               "the sensor; a galvo's optics describe the whole film", err
+    assert code == 2 and err == f"eventfield: error: {tmp_path / 'g.aedat4'}: cut to the window 0,0,40,30 of its " \
+                               "sensor: a window is for a kaleidoscope's tube image on part of the sensor; galvo " \
+                               "optics describe the whole film", err
+    code, err = _run(["reconstruct", tmp_path / "g.aedat4", "--method", "galvo", "--optics", tmp_path / "o.json",
+                      "--contrast", "0.2", "--crop", "0,0,40,30", "--times", "1", "-o", tmp_path / "rc"], capsys)
+    assert code == 2 and "cut to the window 0,0,40,30 of its sensor" in err and not (tmp_path / "rc").exists()
     assert not (tmp_path / "rf.png").exists()
