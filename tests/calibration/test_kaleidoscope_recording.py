@@ -233,86 +233,105 @@ def test_the_python_path_of_a_recording(capture, tmp_path):
 
 
 CROP = (25, 10, 120, 120)           # where the tube's 120x120 image lies on a 160x140 sensor
+WINDOW = ",".join(map(str, CROP))
 
 
-def test_a_tube_image_on_part_of_a_larger_sensor(capture, tmp_path):
-    """``--crop`` (``EventStream.crop``): the render's events and frame placed at CROP on a larger sensor, as a
-    camera whose sensor is larger than the tube's image records them; calibrated and refocused with the window,
-    they give the render's own refocused image value for value. The calibration records the window, so a
-    recording of the whole sensor is told it, and one cut elsewhere is refused; a stream with optics (they
-    describe its whole film) or a galvo set-up refuses a crop."""
+@pytest.fixture(scope="module")
+def larger_sensor(capture, tmp_path_factory):
+    """The render's events and bare frame placed at CROP on a 160x140 sensor (grey around the tube image), as a
+    camera whose sensor is larger than the tube's image records them, and the calibration made with the
+    window (``calibrate kaleidoscope --crop``)."""
     d, events = capture
+    t = tmp_path_factory.mktemp("larger_sensor")
     x0, y0, w, h = CROP
-    big = ef.EventStream(events.x + x0, events.y + y0, events.t, events.p, 160, 140, {})
-    ef.write_events(str(tmp_path / "big.aedat4"), big)
+    ef.write_events(str(t / "big.aedat4"), ef.EventStream(events.x + x0, events.y + y0, events.t, events.p, 160, 140,
+                                                          {}))
     frame = np.full((140, 160), 0.3, np.float32)
     frame[y0:y0 + h, x0:x0 + w] = read_exr(str(d / "bare.exr"))[0]["Y"]
-    write_exr(str(tmp_path / "big.exr"), {"Y": frame})
-    window = ",".join(map(str, CROP))
-    r = _cli("calibrate", "kaleidoscope", tmp_path / "big.exr", "--optics", d / "nominal.json", "--crop", window,
-             "-o", tmp_path / "big.json")
+    write_exr(str(t / "big.exr"), {"Y": frame})
+    r = _cli("calibrate", "kaleidoscope", t / "big.exr", "--optics", d / "nominal.json", "--crop", WINDOW,
+             "-o", t / "big.json")
     assert r.returncode == 0 and "3x3 views of 40x40 px" in r.stdout and "eventfield: warning" not in r.stderr, \
         r.stderr
-    # a window one pixel off: its tiles are not the image's mirror seams (symmetry 1.00 a pixel to the left)
-    r = _cli("calibrate", "kaleidoscope", tmp_path / "big.exr", "--optics", d / "nominal.json", "--crop",
-             "26,10,120,120", "-o", tmp_path / "off.json")
+    return d, events, t
+
+
+def test_a_tube_image_on_part_of_a_larger_sensor(larger_sensor, tmp_path):
+    """``--crop`` (``EventStream.crop``): calibrated and refocused with the window, the larger sensor's
+    recording gives the render's own refocused image value for value, in Python too; a frame of the whole
+    sensor is cut as the events were; the calibration and the outputs record the window."""
+    d, events, t = larger_sensor
+    assert json.load(open(t / "big.json"))["kaleidoscope"]["crop"] == {"window": list(CROP), "sensor": [160, 140]}
+    r = _cli("refocus", t / "big.aedat4", "--calibration", t / "big.json", "--contrast", "0.2", "--crop", WINDOW,
+             "--depth", "1.0", "-o", tmp_path / "rf.png")
+    assert r.returncode == 0, r.stderr
+    reference = ef.refocus(ef.lightfield.from_events(events), 1.0)
+    image, meta = read_exr(str(tmp_path / "rf.exr"))
+    assert reference.std() > 0.01 and np.allclose(image["Y"], reference, rtol=1e-6, atol=1e-7)
+    assert meta["optics"]["design"] == "kaleidoscope" and meta["crop"] == {"window": list(CROP), "sensor": [160, 140]}
+    from mitsuba_eventfield import calibration           # in Python: the same window, the same light field
+    cut = ef.read_events(str(t / "big.aedat4")).crop(*CROP)
+    assert cut.equals(events) and cut.meta["crop"] == {"window": list(CROP), "sensor": [160, 140]}
+    lf = calibration.calibrated_lightfield(calibration.with_optics(cut, calibration=str(t / "big.json")),
+                                           str(t / "big.json"), c_on=0.2, c_off=0.2)
+    assert np.array_equal(lf.views, ef.lightfield.from_events(events).views)
+    r = _cli("reconstruct", t / "big.aedat4", "--crop", WINDOW, "--contrast", "0.2", "--start-frame",
+             t / "big.exr", "--times", "9", "-o", tmp_path / "rc")
+    r0 = _cli("reconstruct", d / "rec.aedat4", "--contrast", "0.2", "--start-frame", d / "bare.exr", "--times", "9",
+              "-o", tmp_path / "rc0")
+    assert r.returncode == 0 and r0.returncode == 0, r.stderr + r0.stderr
+    assert np.array_equal(*(read_exr(str(tmp_path / n / "frame_0000.exr"))[0]["Y"] for n in ("rc", "rc0")))
+
+
+def test_a_calibration_on_part_of_a_sensor_says_what_is_wrong(larger_sensor, tmp_path):
+    """A window one pixel off is warned about (its tiles are not the image's mirror seams: symmetry 1.00 a
+    pixel to the left); the whole frame as the film, a window not of 3x3 tiles and an n from --optics that is
+    not the tube's are refused in one line naming --crop or --optics, and write nothing."""
+    import re
+    d, _, t = larger_sensor
+    r = _cli("calibrate", "kaleidoscope", t / "big.exr", "--optics", d / "nominal.json", "--crop", "26,10,120,120",
+             "-o", tmp_path / "off.json")
     said = [line for line in r.stderr.splitlines() if line.startswith("eventfield: warning")]
-    assert r.returncode == 0 and len(said) == 1 and f"{tmp_path / 'big.exr'}: the window 26,10,120,120: its 3x3 " \
-        "tiles' edges are not the image's mirror seams (symmetry along x " in said[0] and " 1 px left)" in said[0], said
-    assert json.load(open(tmp_path / "big.json"))["kaleidoscope"]["crop"] == {"window": list(CROP),
-                                                                              "sensor": [160, 140]}
+    assert r.returncode == 0 and len(said) == 1 and f"{t / 'big.exr'}: the window 26,10,120,120: its 3x3 tiles' " \
+        "edges are not the image's mirror seams (symmetry along x " in said[0] and " 1 px left)" in said[0], said
     (tmp_path / "n5.json").write_text(json.dumps(dict(NOMINAL, relay_distance=0.015)))     # a 5x5 tube
     for args, message in ((["--optics", d / "nominal.json"], r"film 160x140 .* \(the film: all 160x140 of .*big\.exr; "
                                                             r"where the tube's image covers part of the sensor, pass "
                                                             r"--crop X,Y,W,H\)$"),
                           (["--optics", d / "nominal.json", "--crop", "25,10,121,121"],
                            r"\(the film: the --crop window 25,10,121,121, 121x121\)$"),
-                          (["--optics", tmp_path / "n5.json", "--crop", window],
+                          (["--optics", tmp_path / "n5.json", "--crop", WINDOW],
                            r"big\.exr: not a kaleidoscope frame: .* \(its 5x5 views are those of --optics "
                            r".*n5\.json: the tube's\?\)$")):
-        r = _cli("calibrate", "kaleidoscope", tmp_path / "big.exr", *args, "-o", tmp_path / "no.json")
+        r = _cli("calibrate", "kaleidoscope", t / "big.exr", *args, "-o", tmp_path / "no.json")
         err = r.stderr.strip().splitlines()
-        assert r.returncode == 2 and len(err) == 1 and __import__("re").search(message, err[0]), err
+        assert r.returncode == 2 and len(err) == 1 and re.search(message, err[0]), err
         assert not (tmp_path / "no.json").exists()
-    r = _cli("refocus", tmp_path / "big.aedat4", "--calibration", tmp_path / "big.json", "--contrast", "0.2",
-             "--crop", window, "--depth", "1.0", "-o", tmp_path / "rf.png")
-    assert r.returncode == 0, r.stderr
-    reference = ef.refocus(ef.lightfield.from_events(events), 1.0)
-    image, meta = read_exr(str(tmp_path / "rf.exr"))
-    assert reference.std() > 0.01 and np.allclose(image["Y"], reference, rtol=1e-6, atol=1e-7)
-    assert meta["optics"]["design"] == "kaleidoscope" and meta["crop"] == {"window": list(CROP), "sensor": [160, 140]}
-    # in Python: the same window, the same light field
-    from mitsuba_eventfield import calibration
-    cut = ef.read_events(str(tmp_path / "big.aedat4")).crop(*CROP)
-    assert cut.equals(events) and cut.meta["crop"] == {"window": list(CROP), "sensor": [160, 140]}
-    lf = calibration.calibrated_lightfield(calibration.with_optics(cut, calibration=str(tmp_path / "big.json")),
-                                           str(tmp_path / "big.json"), c_on=0.2, c_off=0.2)
-    assert np.array_equal(lf.views, ef.lightfield.from_events(events).views)
-    # a frame of the whole sensor is cut as the events were
-    r = _cli("reconstruct", tmp_path / "big.aedat4", "--crop", window, "--contrast", "0.2", "--start-frame",
-             tmp_path / "big.exr", "--times", "9", "-o", tmp_path / "rc")
-    r0 = _cli("reconstruct", d / "rec.aedat4", "--contrast", "0.2", "--start-frame", d / "bare.exr", "--times", "9",
-              "-o", tmp_path / "rc0")
-    assert r.returncode == 0 and r0.returncode == 0, r.stderr + r0.stderr
-    assert np.array_equal(*(read_exr(str(tmp_path / n / "frame_0000.exr"))[0]["Y"] for n in ("rc", "rc0")))
-    for args, message in (
-            ([], r"big\.json: made from the window 25,10,120,120 of the 160x140 sensor: cut .*big\.aedat4 to it "
-                 r"\(--crop 25,10,120,120; in Python, events\.crop\(\*window\)\)$"),
-            (["--crop", "20,10,120,120"], r"big\.json: made from the window 25,10,120,120 of the sensor; .*big\.aedat4 "
-                                          r"is cut to 20,10,120,120$"),
-            (["--crop", "100,10,120,120"], r"^eventfield: error: --crop = 100,10,120,120: the window .* must lie "
-                                           r"inside the 160x140 sensor")):
-        r = _cli("refocus", tmp_path / "big.aedat4", "--calibration", tmp_path / "big.json", "--contrast", "0.2",
-                 "--depth", "1", "-o", tmp_path / "bad.png", *args)
+
+
+def test_a_recording_cut_otherwise_than_its_calibration_is_refused(larger_sensor, tmp_path):
+    """The calibration records the window: a recording of the whole sensor is told it, one cut elsewhere, or
+    recorded on another sensor, is refused, and a window outside the sensor too; a stream with its own optics
+    (they describe its whole film) refuses a crop. Each in one line, writing nothing."""
+    import re
+    d, events, t = larger_sensor
+    x0, y0, _, _ = CROP
+    ef.write_events(str(tmp_path / "other.aedat4"),                                       # another sensor
+                    ef.EventStream(events.x + x0, events.y + y0, events.t, events.p, 240, 180, {}))
+    for source, args, message in (
+            ("big", [], r"big\.json: made from the window 25,10,120,120 of the 160x140 sensor: cut .*big\.aedat4 to "
+                        r"it \(--crop 25,10,120,120; in Python, events\.crop\(\*window\)\)$"),
+            ("big", ["--crop", "20,10,120,120"], r"big\.json: made from the window 25,10,120,120 of the sensor; "
+                                                 r".*big\.aedat4 is cut to 20,10,120,120$"),
+            ("big", ["--crop", "100,10,120,120"], r"^eventfield: error: --crop = 100,10,120,120: the window .* must "
+                                                  r"lie inside the 160x140 sensor"),
+            ("other", ["--crop", WINDOW], r"big\.json: made on a 160x140 sensor \(the window 25,10,120,120\); "
+                                          r".*other\.aedat4 was recorded on a 240x180 one$")):
+        path = t / "big.aedat4" if source == "big" else tmp_path / "other.aedat4"
+        r = _cli("refocus", path, "--calibration", t / "big.json", "--contrast", "0.2", "--depth", "1", "-o",
+                 tmp_path / "bad.png", *args)
         err = r.stderr.strip().splitlines()
-        assert r.returncode == 2 and len(err) == 1 and __import__("re").search(message, err[0]), err
-    other = ef.EventStream(events.x + x0, events.y + y0, events.t, events.p, 240, 180, {})   # another sensor
-    ef.write_events(str(tmp_path / "other.aedat4"), other)
-    r = _cli("refocus", tmp_path / "other.aedat4", "--calibration", tmp_path / "big.json", "--contrast", "0.2",
-             "--crop", window, "--depth", "1", "-o", tmp_path / "bad.png")
-    err = r.stderr.strip().splitlines()
-    assert r.returncode == 2 and len(err) == 1 and "big.json: made on a 160x140 sensor (the window 25,10,120,120); " \
-        in err[0] and "other.aedat4 was recorded on a 240x180 one" in err[0], err
+        assert r.returncode == 2 and len(err) == 1 and re.search(message, err[0]), err
     r = _cli("refocus", d / "rec.h5", "--crop", "0,0,60,60", "--depth", "1", "-o", tmp_path / "bad.png")
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1 and "rec.h5: the stream carries kaleidoscope optics, which describe " \
