@@ -97,10 +97,14 @@ def write_png(path: str, img8: np.ndarray) -> str:
     return path
 
 
+DEPTH_PNG_MIN_HEIGHT = 120     # px: the scale bar's height; a smaller map is enlarged by a whole factor (up to 8)
+
+
 def depth_png(depth: np.ndarray, confidence: np.ndarray | None = None, near: float | None = None,
               far: float | None = None, min_confidence: float = 0.2, unit: str = "m") -> np.ndarray:
     """Colour-mapped depth (turbo, near = red) with low-confidence pixels greyed out and a labelled scale bar
-    on the right. Returns an RGB uint8 image."""
+    on the right; a map less than ``DEPTH_PNG_MIN_HEIGHT`` tall is shown enlarged by a whole factor, each pixel
+    a block (the EXR beside it holds the values). Returns an RGB uint8 image."""
     d = np.asarray(depth, dtype=np.float64)
     good = np.isfinite(d) & ((confidence >= min_confidence) if confidence is not None else True)
     near = float(np.percentile(d[good], 2)) if near is None and good.any() else (near or 0.1)
@@ -110,8 +114,11 @@ def depth_png(depth: np.ndarray, confidence: np.ndarray | None = None, near: flo
     t = (1 / np.clip(d, near, far) - 1 / far) / (1 / near - 1 / far)
     rgb = cv2.applyColorMap((np.clip(t, 0, 1) * 255).astype(np.uint8), cv2.COLORMAP_TURBO)[..., ::-1].copy()
     rgb[~good] = (96, 96, 96)
+    if rgb.shape[0] < DEPTH_PNG_MIN_HEIGHT:        # a small map, pixel for pixel, was a corner of its scale bar
+        k = min(8, -(-DEPTH_PNG_MIN_HEIGHT // rgb.shape[0]))
+        rgb = np.repeat(np.repeat(rgb, k, axis=0), k, axis=1)
     h = rgb.shape[0]
-    scale_h = max(h, 120)
+    scale_h = max(h, DEPTH_PNG_MIN_HEIGHT)
     bar_w, pad = 14, 56
     canvas = np.full((scale_h, rgb.shape[1] + bar_w + pad, 3), 255, np.uint8)
     canvas[:h, :rgb.shape[1]] = rgb

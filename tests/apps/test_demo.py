@@ -59,6 +59,9 @@ def test_depth_panels_share_depth_pngs_scale_without_warnings(tmp_path):
     assert np.allclose(cmap(norm(0.35))[:3], matplotlib.colormaps["turbo"](1.0)[:3])  # near: turbo's red end
     png = depth_png(np.full((4, 4), 0.35), None, 0.35, 3.0)
     assert png[0, 0, 0] > 100 and png[0, 0, 2] < 60                              # depth_png's near is red too
+    # a small map is enlarged by a whole factor to the scale bar's height (4 px: 8x, the most), each pixel a block
+    far = depth_png(np.array([[0.35, 3.0], [3.0, 3.0]]), None, 0.35, 3.0)
+    assert far.shape[0] == 120 and np.all(far[:8, :8] == far[0, 0]) and np.any(far[0, 8] != far[0, 0])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         fig, ax = plt.subplots()
