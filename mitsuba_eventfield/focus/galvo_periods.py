@@ -42,8 +42,9 @@ class PeriodReconstruction:
         self.reliable = bool(self.outliers <= MAX_OUTLIERS)
 
 
-def _depth_from_views(events, t_start, log_start, views, depth_range, planes):
-    """Depth per pixel from focus on the light field integrated onto ``log_start``; flat pixels -> median."""
+def _depth_from_views(events, t_start, log_start, views, depth_range, planes, c_on=None, c_off=None):
+    """Depth per pixel from focus on the light field integrated onto ``log_start`` at the thresholds ``c_on`` /
+    ``c_off`` (default: the stream's); flat pixels -> median."""
     import cv2
 
     from .depth import depth_from_focus
@@ -51,7 +52,7 @@ def _depth_from_views(events, t_start, log_start, views, depth_range, planes):
     from ..lightfield.reconstruct import direct
     from ..plugins.pixel_model import stream_linlog_threshold
     times = galvo_view_times(events.meta["optics"], t_start, views)
-    lf = from_galvo(direct(events, times, log_start, t_start), times, events.meta["optics"],
+    lf = from_galvo(direct(events, times, log_start, t_start, c_on, c_off), times, events.meta["optics"],
                     linear_below=stream_linlog_threshold(events.meta))
     dm = depth_from_focus(lf, depth_range[0], depth_range[1], planes, measure="variance")
     inv = 1.0 / dm.depth
@@ -98,13 +99,13 @@ def reconstruct_periods(events: EventStream, views: int = VIEWS_PER_PERIOD, peri
         if prev is None:        # first period: one plane, then alternate depth from focus and the solve
             log_s, weights = start_image(events, t_s, depth=math.sqrt(depth_range[0] * depth_range[1]), **kw)
             for _ in range(depth_iterations):
-                depth, conf = _depth_from_views(events, t_s, log_s, views, depth_range, depth_planes)
+                depth, conf = _depth_from_views(events, t_s, log_s, views, depth_range, depth_planes, c_on, c_off)
                 log_s, weights = start_image(events, t_s, depth=depth, **kw)
         else:                   # later periods: the previous one carried forward is the prior and the depth
             prior = direct(events, [t_s], prev.log_start, prev.t_start, c_on, c_off)[0]
             log_s, weights = start_image(events, t_s, depth=prev.depth, prior=prior, prior_weight=prior_weight,
                                          **kw)
-        depth, conf = _depth_from_views(events, t_s, log_s, views, depth_range, depth_planes)
+        depth, conf = _depth_from_views(events, t_s, log_s, views, depth_range, depth_planes, c_on, c_off)
         prev = PeriodReconstruction(p, t_s, log_s, depth, conf, float(np.mean(weights < 1)))
         times = galvo_view_times(optics, t_s, views)
         lf = from_galvo(direct(events, times, log_s, t_s, c_on, c_off), times, optics,

@@ -23,25 +23,25 @@ _SOLVERS: dict = {}
 
 
 def _without_stuck_pixels(events, where: str, kw: dict):
-    """``events`` without its stuck or hot pixels, with the warning that names them, as the commands read a file
-    (``events.stuck_pixels``; one pixel stuck ON at 50 kHz took a script's refocused maximum to 918,620 where the
-    command's was 3.18), at the stream's contrast thresholds or the ``c_on`` / ``c_off`` of ``kw`` (a recording's,
-    as the commands' --contrast). Without thresholds, or already filtered, the stream is taken as it is."""
+    """``events`` with the ``c_on`` / ``c_off`` of ``kw`` (when given: a recording's, as the commands'
+    --contrast) as its contrast thresholds in its metadata, so every reader of the stream takes them (the
+    per-period solver's depth-from-focus pass read the metadata's and refused a recording they were given
+    for), and without its stuck or hot pixels, with the warning that names them, as the commands read a file
+    (``events.stuck_pixels``; one pixel stuck ON at 50 kHz took a script's refocused maximum to 918,620 where
+    the command's was 3.18). Without thresholds, or already filtered, the stream is taken as it is."""
     from ..events.stuck_pixels import nonempty, without_stuck_pixels
     pm = events.meta.get("pixel_model") or {}
     on, off = (kw.get(k) if kw.get(k) is not None else pm.get(t)
                for k, t in (("c_on", "threshold_on"), ("c_off", "threshold_off")))
-    if "stuck_pixels_left_out" in events.meta or on is None or off is None:
+    if on is None or off is None:
         return events
     given = events if (on, off) == (pm.get("threshold_on"), pm.get("threshold_off")) else \
         EventStream(events.x, events.y, events.t, events.p, events.width, events.height,
                     dict(events.meta, pixel_model=dict(pm, threshold_on=on, threshold_off=off)))
+    if "stuck_pixels_left_out" in events.meta:
+        return given
     kept = without_stuck_pixels(given, where)
-    if kept is given:
-        return events
-    nonempty(kept, where)
-    kept.meta["pixel_model"] = pm          # (the thresholds given stay arguments, as they came)
-    return kept
+    return given if kept is given else nonempty(kept, where)
 
 
 def register_galvo_solver(name: str, maker, takes) -> None:

@@ -189,3 +189,18 @@ def test_the_solvers_default_range_starts_from_the_calibrated_pivots(cards, monk
         with pytest.raises(ef.ConfigError, match=r"^calibrated_lightfield: calibration: expected a calibration "
                                                  r"file's path or calibration\.load_calibration\(\.\.\.\), got "):
             calibration.calibrated_lightfield(events, bad)
+
+
+def test_a_recordings_thresholds_reach_the_default_solver(cards):
+    """``c_on`` / ``c_off`` given for a galvo recording (no pixel-model metadata) reach every pass of the
+    default per-period solver: its light field equals the render's with the thresholds in its metadata (the
+    solver's depth-from-focus pass read the metadata alone and refused the recording)."""
+    from mitsuba_eventfield import calibration
+    events, _, _ = cards
+    optics = {k: events.meta["optics"][k] for k in ("design", "scan", "fov_x_deg", "mirror_distance",
+                                                     "mirror_separation")}
+    bare = ef.EventStream(events.x, events.y, events.t, events.p, W, H, {"t_start_us": events.start_us})
+    recording = calibration.with_optics(bare, optics=optics)
+    lf = ef.lightfield.from_events(recording, views=16, c_on=0.1, c_off=0.1)          # the render's threshold
+    reference = ef.lightfield.from_events(events, views=16)
+    assert lf.meta.get("inputs") == "events only" and np.allclose(lf.views, reference.views, rtol=1e-5, atol=1e-6)
