@@ -45,6 +45,26 @@ class DepthCalibration:
     optics: dict = field(default_factory=dict)   # what it was made for (optics.optics_record), set when saved
     field_factors: list | None = None   # per capture (k_x, k_y) where its LED was (None: all on the axis)
 
+    def __post_init__(self):
+        """The models checked as a hand-edited file is read, by the fit's own rules (``_check_inverse``): a pivot
+        behind the camera (-0.2 m) was loaded and made depth maps."""
+        from mitsuba_eventfield.errors import ConfigError
+        z = np.asarray(self.depths, dtype=np.float64) if isinstance(self.depths, list) else np.zeros(0)
+        if z.size < 3 or not (np.all(np.isfinite(z)) and np.all(z > 0)):
+            raise ConfigError(f"depth calibration: depths = {self.depths!r}: expected three or more depths > 0")
+        for name, axis in (("inverse", "x"), ("inverse_y", "y")):
+            v = getattr(self, name)
+            if v is None and name == "inverse_y":
+                continue
+            if not (isinstance(v, (list, tuple)) and len(v) == 2 and all(
+                    isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)):
+                raise ConfigError(f"depth calibration: {name} = {v!r}: expected (p, q), two numbers")
+            setattr(self, name, tuple(float(c) for c in v))
+            try:
+                _check_inverse(*getattr(self, name), z, axis)
+            except CalibrationError as e:
+                raise ConfigError(f"depth calibration: {name}: {e}") from None
+
     @property
     def quality(self) -> dict:
         """How well the fit is determined: residual, pivot uncertainty, depths used."""

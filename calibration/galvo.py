@@ -343,8 +343,8 @@ def _check_fit(result: GalvoCalibration, max_phase_std_deg, max_scale_rel_std, s
             max(std["scale_x"] / max(abs(sx), 1e-9), std["scale_y"] / max(abs(sy), 1e-9)) > max_scale_rel_std:
         raise CalibrationError(f"the fit is too uncertain: phase {result.phase_deg:.2f} +- {phase_std:.2f} deg, "
                                f"scales {sx:.1f} +- {std['scale_x']:.1f}, {sy:.1f} +- {std['scale_y']:.1f} px/rad "
-                               f"(rms residual {result.rms_px:.2f} px): more frames, more patches or less noise are "
-                               "needed")
+                               f"(rms residual {result.rms_px:.2f} px): more frames, tracks or less noise are needed, "
+                               "or the scan's frequency in the optics is not the mirror's")
     if scale_limit is not None and max(sx, sy) > scale_limit:
         raise CalibrationError(f"absurd curve size: scales ({sx:.1f}, {sy:.1f}) px/rad, but these optics show at "
                                f"most {scale_limit:.1f} (2 f with keystone at the film's corner): the tracks do not "

@@ -139,7 +139,8 @@ def json_file(path: str, what: str):
     except FileNotFoundError:
         raise EventFieldError(f"{path}: {what} not found") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise EventFieldError(f"{path}: not a {what} (invalid JSON: {e})") from None
+        article = "an" if what[:1] in "aeiou" else "a"
+        raise EventFieldError(f"{path}: not {article} {what} (invalid JSON: {e})") from None
 
 
 def describe_range(lo, hi, lo_open=False, inf_ok=False) -> str:

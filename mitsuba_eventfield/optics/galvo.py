@@ -54,17 +54,22 @@ from ..errors import ConfigError  # noqa: E402
 from ..validate import number  # noqa: E402
 
 
+# metres (scene units): a galvo's mirrors sit centimetres in front of its lens; millimetres written as metres
+# (200 for 0.2) passed, and the light-field commands then refused every depth nearer than 200 m, naming --near
+MAX_MIRROR_DISTANCE = 10.0
+
+
 def checked_optics(fov_x_deg, mirror_distance, mirror_separation, where: str, error=ConfigError,
                    names=("fov_x_deg", "mirror_distance", "mirror_separation")) -> tuple:
     """The galvo's three geometric parameters, each checked against its one range (the ``galvo`` sensor plugin,
-    nominal optics files): fov in (0, ``MAX_FOV_DEG``) degrees, pivot distance and mirror separation >= 0 scene
-    units (0 separation: both mirrors at one pivot). ``error`` names ``where`` and the field as ``names`` has
-    it (the sensor's XML calls the first ``fov``)."""
+    nominal optics files): fov in (0, ``MAX_FOV_DEG``) degrees, pivot distance and mirror separation in
+    [0, ``MAX_MIRROR_DISTANCE``] scene units (0 separation: both mirrors at one pivot). ``error`` names ``where``
+    and the field as ``names`` has it (the sensor's XML calls the first ``fov``)."""
     fov = number(fov_x_deg, f"{where}: {names[0]}", 0, lo_open=True, strict=True, error=error)
     if fov >= MAX_FOV_DEG:
         raise error(f"{where}: {names[0]} = {fov_x_deg!r}: allowed range is (0, {MAX_FOV_DEG:g}) degrees")
-    return (fov, number(mirror_distance, f"{where}: {names[1]}", 0, strict=True, error=error),
-            number(mirror_separation, f"{where}: {names[2]}", 0, strict=True, error=error))
+    return (fov, *(number(v, f"{where}: {name}", 0, MAX_MIRROR_DISTANCE, strict=True, error=error)
+                   for name, v in ((names[1], mirror_distance), (names[2], mirror_separation))))
 
 
 # ------------------------------------------------------------------ ray optics (NumPy or Dr.Jit through ``xp``)

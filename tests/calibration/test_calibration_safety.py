@@ -52,6 +52,27 @@ def _depth_file(path, record):
 
 
 # --- fits that the geometry cannot produce ------------------------------------------------------------------
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d.update(inverse=[d["inverse"][0], -d["inverse"][1]]), r"inverse: scales along x: the fit puts the "
+                                                                      r"pivot at -0\.1 \(<= 0\)"),
+    (lambda d: d.update(inverse_y=[-1.0, 5.0]), r"inverse_y: scales along y: the fitted scale at infinity is -1"),
+    (lambda d: d.update(inverse=["a", 1]), r"inverse = \('a', 1\): expected \(p, q\), two numbers"),
+    (lambda d: d.update(depths=[0.5]), r"depths = \[0\.5\]: expected three or more depths > 0"),
+])
+def test_a_hand_edited_depth_model_is_refused_as_the_fit_would(galvo_stream, tmp_path, edit, message):
+    """A depth calibration file is read by the fit's own rules: a pivot behind the camera (which inverts depth
+    maps: one was loaded and made a map of 0.76 m), a negative scale at infinity, a malformed model, too few
+    depths; one line naming the file."""
+    _, record = galvo_stream
+    path = _depth_file(tmp_path / "d.json", record)
+    data = json.load(open(path))
+    edit(data["depth"])
+    json.dump(data, open(path, "w"))
+    with pytest.raises(ef.EventFieldError, match=message) as e:
+        load_calibration(path)
+    assert str(e.value).startswith(path) and "\n" not in str(e.value)
+
+
 def test_negative_pivot_fit_refused():
     assert fit_depth(Z, _exact_scales(0.1)).pivot == pytest.approx(0.1)
     # scales that shrink with depth: the fit puts the pivot behind the camera (-0.10 m for a nominal 0.1 m)

@@ -35,8 +35,14 @@ def test_galvo_optics_have_one_range_in_the_sensor_and_in_a_nominal_file(tmp_pat
     from mitsuba_eventfield.optics.galvo import checked_optics
     with pytest.raises(ValueError, match=r"sensor 'galvo': fov = 180\.0: allowed range is \(0, 180\) degrees"):
         checked_optics(180.0, 0.1, 0.0, "sensor 'galvo'", ValueError, ("fov", "mirror_distance", "mirror_separation"))
-    with pytest.raises(ef.EventFieldError, match=r"mirror_distance = -0\.1: allowed range is \[0, inf\)"):
+    with pytest.raises(ef.EventFieldError, match=r"mirror_distance = -0\.1: allowed range is \[0, 10\]"):
         nominal_optics(_nominal(tmp_path, mirror_distance=-0.1), 64, 48)
+    # millimetres written as metres: refused where they are written, not at the first depth searched
+    with pytest.raises(ef.EventFieldError, match=r"optics\.json: mirror_distance = 200(\.0)?: allowed range is "
+                                                 r"\[0, 10\]"):
+        nominal_optics(_nominal(tmp_path, mirror_distance=200.0), 64, 48)
+    with pytest.raises(ef.EventFieldError, match=r"mirror_distance = 200(\.0)?: allowed range is \[0, 10\]"):
+        ef.load_scene(GALVO, width=16, height=12, mirror_distance=200.0)
 
 
 def test_contrast_thresholds_have_the_renders_range_wherever_they_come_from(tmp_path, capsys):
