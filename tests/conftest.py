@@ -79,3 +79,20 @@ class FreedOn:
     def __del__(self):
         import threading
         self.freed.append(threading.get_ident())
+
+
+def refused_when_edited(path: str, part: str, edit, message: str) -> None:
+    """A calibration file with its ``part`` changed by ``edit`` (a hand edit) is refused on loading, in one line
+    that starts with the file's path and matches ``message``."""
+    import json
+
+    import mitsuba_eventfield as ef
+    from mitsuba_eventfield.calibration import load_calibration
+    with open(path) as f:
+        data = json.load(f)
+    edit(data[part])
+    with open(path, "w") as f:
+        json.dump(data, f)
+    with pytest.raises(ef.EventFieldError, match=message) as e:
+        load_calibration(path)
+    assert str(e.value).startswith(path) and "\n" not in str(e.value)

@@ -63,14 +63,9 @@ def test_a_hand_edited_depth_model_is_refused_as_the_fit_would(galvo_stream, tmp
     """A depth calibration file is read by the fit's own rules: a pivot behind the camera (which inverts depth
     maps: one was loaded and made a map of 0.76 m), a negative scale at infinity, a malformed model, too few
     depths; one line naming the file."""
+    from conftest import refused_when_edited
     _, record = galvo_stream
-    path = _depth_file(tmp_path / "d.json", record)
-    data = json.load(open(path))
-    edit(data["depth"])
-    json.dump(data, open(path, "w"))
-    with pytest.raises(ef.EventFieldError, match=message) as e:
-        load_calibration(path)
-    assert str(e.value).startswith(path) and "\n" not in str(e.value)
+    refused_when_edited(_depth_file(tmp_path / "d.json", record), "depth", edit, message)
 
 
 def test_negative_pivot_fit_refused():
