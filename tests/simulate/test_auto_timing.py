@@ -101,3 +101,26 @@ def test_an_unreachable_request_is_refused():
     path = bench.write_analytic_scene(tempfile.mkdtemp(), bench.analytic_velocity())
     with pytest.raises(ConfigError, match="cannot be met within 2 spp"):
         auto.plan(path, bench.ANALYTIC_DURATION, timing_accuracy=1e-6, max_spp=2)
+
+
+def test_the_automatic_choices_follow_their_laws(monkeypatch):
+    """Each rule of ``simulate.auto`` alone, where the scenes never reach it (the motion floor sets the fan's
+    steps, its probe noise is already under the target):
+    - Monte-Carlo noise falls as 1 / sqrt(spp): four times the target at 4 spp needs 16 times the samples, 64;
+    - a step's timing error grows as dt^2 (``s`` at the probe's dt): the fewest steps that leave the noise its
+      share are ceil(duration / (dt sqrt(left / s))), and one step fewer does not;
+    - past the last probe the timing model keeps its nearest piece's exponent within [0.25, 1.25]."""
+    import math
+
+    from mitsuba_eventfield.simulate import auto
+    monkeypatch.setattr(auto, "noise_std", lambda timed, spp: 0.4)
+    assert auto._noise_spp(None, threshold=0.2, noise_fraction=0.5, probe_spp=4, max_spp=4096, reasons={}) == 64
+    duration, dt = 0.1, 1e-3
+    steps, need, steps_us = auto._timing_steps({"noise_us": 0.6, "steps_us_at_probe": 4.0}, duration, dt, 1e-6,
+                                               floor_steps=1, max_steps=10**6)
+    left = math.sqrt(1.0 - 0.6 ** 2)                       # of a 1 us target, 0.8 us is the steps'
+    assert need == math.ceil(duration / (dt * math.sqrt(left / 4.0))) and steps_us <= left * (1 + 1e-9)
+    assert 4.0 * (duration / (need - 1) / dt) ** 2 > left
+    model = {"points": [(4, 8.0, 0.4, 0), (16, 1.0, 0.1, 0), (64, 0.1, 0.02, 0)], "slopes": [1.5, 1.66]}
+    assert auto._predict(model, 256)[0] == pytest.approx(0.1 * (64 / 256) ** 1.25)
+    assert auto._predict(model, 1)[0] == pytest.approx(8.0 * (4 / 1) ** 1.25)

@@ -23,7 +23,8 @@ def _same_file(a, b):
     """Same events, same millisecond index, same metadata apart from what says when and how it ran."""
     ea, eb = ef.read_events(a), ef.read_events(b)
     with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
-        same_index = np.array_equal(fa["ms_to_idx"][:], fb["ms_to_idx"][:])
+        same_index = np.array_equal(fa["ms_to_idx"][:], fb["ms_to_idx"][:]) and \
+            int(fa["t_offset"][()]) == int(fb["t_offset"][()])
     volatile = ("created_utc", "command", "render")
     meta_a = {k: v for k, v in ea.meta.items() if k not in volatile}
     meta_b = {k: v for k, v in eb.meta.items() if k not in volatile}
@@ -51,8 +52,10 @@ def _interrupt_at(monkeypatch, step):
     (DEMO, dict(duration=0.1)),                     # the default steps (placed by the motion), chosen again alike on resume
     # uniform steps through the step batches with every effect (generator, last emissions, readout cap saved)
     (DEMO, dict(duration=0.01, steps=20, preset="davis346", pixel={"shot_noise_hz": 200.0, "readout_cap": 1.5e6})),
+    # starting 12.5 ms in: the resumed file's segments keep the render's millisecond offset (/t_offset)
+    (DEMO, dict(duration=0.01, steps=20, t_start=0.0125)),
 ], ids=["uniform-ideal", "adaptive-davis346-noise", "adaptive-motion", "galvo-reuse", "default-steps",
-        "uniform-davis346-batched"])
+        "uniform-davis346-batched", "late-start"])
 def test_interrupted_render_resumes_to_the_uninterrupted_file(tmp_path, monkeypatch, capsys, scene, kw):
     timed = ef.load_scene(scene, width=48, height=36)
     ref, out = str(tmp_path / "ref.h5"), str(tmp_path / "out.h5")
