@@ -27,6 +27,9 @@ import numpy as np
 from .galvo import CalibrationError
 
 LINEAR_MODEL_TOLERANCE = 0.05     # relative depth error at which the linear model is said to break
+# a fitted pivot this many times the nominal mirror distance (or a this-many-th of it) is not a rig's tolerance
+# but another unit: LED depths in cm for optics in metres fitted a pivot of 19.96 against 0.2, without a word
+PIVOT_PLAUSIBLE = 3.0
 
 
 @dataclass
@@ -171,8 +174,13 @@ def fit_depth_from_tracks(depths, fits, geometry) -> DepthCalibration:
     (``led.fit_led``: its scales and its track's centre, ``patches[0]``), ``geometry`` the captures' nominal
     ``GalvoGeometry`` (its film and focal length give each centre's field factors)."""
     factors = [geometry.field_factors(*fit.patches[0]) for fit in fits]
-    return fit_depth(depths, [fit.scale_px_per_rad[0] for fit in fits], [fit.scale_px_per_rad[1] for fit in fits],
-                     field_factors=factors)
+    result = fit_depth(depths, [fit.scale_px_per_rad[0] for fit in fits], [fit.scale_px_per_rad[1] for fit in fits],
+                       field_factors=factors)
+    ratio = result.pivot / geometry.pivot_x if geometry.pivot_x > 0 else 1.0
+    if not 1 / PIVOT_PLAUSIBLE <= ratio <= PIVOT_PLAUSIBLE:     # the depths' unit, most likely (cm given for m)
+        warnings.warn(f"the fitted pivot, {result.pivot:.4g}, is {ratio:.3g} times the optics' mirror distance "
+                      f"{geometry.pivot_x:.4g}: are the capture depths in the optics' unit (metres)?", stacklevel=2)
+    return result
 
 
 def fit_depth(depths, scales, scales_y=None, field_factors=None) -> DepthCalibration:

@@ -68,6 +68,24 @@ def test_a_hand_edited_depth_model_is_refused_as_the_fit_would(galvo_stream, tmp
     refused_when_edited(_depth_file(tmp_path / "d.json", record), "depth", edit, message)
 
 
+def test_led_depths_in_another_unit_are_warned_about():
+    """LED captures at depths given in centimetres for optics in metres fit cleanly (the model is the same up
+    to scale) to a pivot 100 times the optics' mirror distance: warned, naming the unit; in metres, quiet."""
+    import warnings
+    from types import SimpleNamespace
+
+    from mitsuba_eventfield.calibration import fit_depth_from_tracks
+    geometry = galvo_optics.GalvoGeometry(W, H, galvo_optics.focal_length_px(W, 40.0), 0.1, 0.1)
+    scales = _exact_scales(0.1)
+    fits = [SimpleNamespace(patches=[(W / 2, H / 2)], scale_px_per_rad=(s, s)) for s in scales]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert fit_depth_from_tracks(Z, fits, geometry).pivot == pytest.approx(0.1)
+    with pytest.warns(UserWarning, match=r"the fitted pivot, 10, is 100 times the optics' mirror distance 0\.1: are "
+                                         r"the capture depths in the optics' unit \(metres\)\?"):
+        fit_depth_from_tracks(100 * Z, fits, geometry)
+
+
 def test_negative_pivot_fit_refused():
     assert fit_depth(Z, _exact_scales(0.1)).pivot == pytest.approx(0.1)
     # scales that shrink with depth: the fit puts the pivot behind the camera (-0.10 m for a nominal 0.1 m)

@@ -83,3 +83,18 @@ def test_reconstruction_flags_a_card_nearer_than_the_range_searched():
     assert near["status"] == "flagged" and near["outliers"] > 0.08      # measured 0.104
     assert near["card_depth_error"] > 1.0                                 # its depth map is wrong (3.3)
     assert near["error"] > 1.3 * inside["error"]                          # and so is its image (0.029)
+
+
+def test_a_row_returned_unflagged_without_a_measurable_error_is_silent():
+    """``FailureSweep.silent``: the rows a method returned as fine ("ok") whose error is beyond the tolerance,
+    and those whose error could not be measured (None, NaN: nothing to show it worked), for an error and for
+    a score (higher is better); a flagged or refused row is never silent."""
+    rows = [{"value": v, "error": e, "status": s} for v, e, s in (
+        (1, 0.01, "ok"), (2, 0.5, "ok"), (3, None, "ok"), (4, float("nan"), "ok"), (5, 0.5, "flagged"),
+        (6, None, "refused"))]
+    sweep = failure.FailureSweep("m", "knob", "", "error", 0.1, False, rows)
+    assert [r["value"] for r in sweep.silent] == [2, 3, 4] and sweep.as_dict()["silent"] == 3
+    scores = failure.FailureSweep("m", "knob", "", "PSNR", 20.0, True, [dict(r) for r in rows])
+    for r, psnr in zip(scores.rows, (30.0, 10.0, None, float("nan"), 10.0, None)):
+        r["error"] = psnr
+    assert [r["value"] for r in scores.silent] == [2, 3, 4]
