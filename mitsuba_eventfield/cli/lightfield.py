@@ -146,16 +146,18 @@ def _lightfield(a, ev, nearest: float | None = None):
 
 @contextlib.contextmanager
 def _solver_warnings_held():
-    """The solver's warnings (``SolverWarning``) of the light field made inside, held as texts in the list
-    yielded: the command says them after its own checks, so a refused command says one line. Any other warning
-    is shown as it comes."""
+    """The solver's and the scan lock's warnings (``SolverWarning``, ``ScanLockWarning``) of the light field made
+    inside, held as texts in the list yielded: the command says them after its own checks, so a refused command
+    says one line. Any other warning is shown as it comes."""
     from ..focus.galvo_periods import SolverWarning
+    from ..lightfield.model import ScanLockWarning
     held = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SolverWarning)
+        warnings.simplefilter("always", ScanLockWarning)
         yield held
     for w in caught:
-        if issubclass(w.category, SolverWarning):
+        if issubclass(w.category, (SolverWarning, ScanLockWarning)):
             held.append(str(w.message))
         else:
             warnings.showwarning(w.message, w.category, w.filename, w.lineno)

@@ -12,7 +12,8 @@ from ..events.stream import EventStream
 from ..optics.galvo import VIEWS_PER_PERIOD
 from ..validate import MAX_VIEWS, finite, instance, keywords, number
 from . import reconstruct
-from .model import LightField, _galvo_scan, from_galvo, from_spatial, galvo_period_starts, galvo_view_times
+from .model import (LightField, _galvo_scan, from_galvo, from_spatial, galvo_period_starts, galvo_view_times,
+                    warn_unlocked)
 
 PERIODS = "periods"     # the per-period galvo solver, each pixel at its own depth (focus.galvo_periods)
 MIN_VIEWS = 2           # one view has no parallax: refocus and depth from it are the image itself
@@ -94,6 +95,7 @@ def _sliding(events, views, method, periods, method_kw):
     else:
         keywords(reconstruct.method_function(method), method_kw, f"galvo_lightfields: method {method!r}", bound=2)
     starts = galvo_period_starts(events, periods)
+    warn_unlocked(events, "galvo_lightfields")
     if not starts:
         raise ConfigError(f"galvo_lightfields: no scan period to reconstruct (the stream lasts "
                           f"{events.duration_us * 1e-3:g} ms, periods = {periods!r})")

@@ -123,3 +123,32 @@ def test_blas_runs_on_one_thread_during_a_solve_and_comes_back_after_overlapping
         release[k].set()
         threads[k].join()
     assert galvo_solve._blas["solves"] == 0 and galvo_solve._blas["limiter"] is None and blas_threads() == before
+
+
+def test_events_that_do_not_follow_their_scan_are_warned_about():
+    """``lightfield.model.scan_lock``: a scanned scene fires the same pixels at the same point of every period
+    (galvo_static: counts one period apart correlate 1.00); the same events with a scan 2.5 times too fast in
+    their optics, or random events, do not (0.1-0.2, 0.00): their light fields warn (``ScanLockWarning``) where
+    they made confident, wrong depths without a word; the render's do not."""
+    import copy
+    import warnings
+
+    import mitsuba_eventfield as ef
+    from mitsuba_eventfield.lightfield.model import MIN_SCAN_LOCK, ScanLockWarning, scan_lock
+    events = ef.render_events(load_scene(os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"),
+                                         width=64, height=48), 0.02)
+    assert scan_lock(events) > 0.9
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ScanLockWarning)
+        ef.lightfield.from_events(events, views=8, method="galvo")
+    fast = copy.deepcopy(events.meta["optics"])
+    fast["scan"].update(frequency=625.0, amplitude=0.4)         # 2.5x the mirror's 250 Hz (within the envelope)
+    rng = np.random.default_rng(0)
+    n = len(events)
+    random = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 20_000, n)),
+                            rng.choice([-1, 1], n), 64, 48, events.meta)
+    for stream in (ef.EventStream(events.x, events.y, events.t, events.p, 64, 48, dict(events.meta, optics=fast)),
+                   random):
+        assert scan_lock(stream) < MIN_SCAN_LOCK
+        with pytest.warns(ScanLockWarning, match=r"the events do not repeat with the .* Hz scan"):
+            ef.lightfield.from_events(stream, views=8, method="galvo")
