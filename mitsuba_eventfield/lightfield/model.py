@@ -293,13 +293,18 @@ def scan_lock(events) -> float | None:
     windows = min(int(events.duration_us // (period_us / 4)), 4 * SCAN_LOCK_PERIODS)
     if windows < 8 or not len(events):
         return None
-    k = ((events.t - events.start_us) // (period_us / 4)).astype(np.int64)
+    # window by window (the stream is in time order): a (windows, pixels) array was 236 MB at 1280x720
+    bounds = np.searchsorted(events.t, events.start_us + np.arange(windows + 1) * (period_us / 4), side="left")
     n_pix = events.width * events.height
-    inside = (k >= 0) & (k < windows)
-    pix = events.y[inside].astype(np.int64) * events.width + events.x[inside]
-    counts = np.bincount(k[inside] * n_pix + pix, minlength=windows * n_pix).reshape(windows, n_pix)
-    values = [np.corrcoef(counts[j], counts[j + 4])[0, 1] for j in range(windows - 4)
-              if counts[j].any() and counts[j + 4].any()]
+
+    def counts(j):
+        s = slice(bounds[j], bounds[j + 1])
+        return np.bincount(events.y[s].astype(np.int64) * events.width + events.x[s], minlength=n_pix)
+    values = []
+    for j in range(windows - 4):
+        a, b = counts(j), counts(j + 4)
+        if a.any() and b.any():
+            values.append(np.corrcoef(a, b)[0, 1])
     values = [v for v in values if np.isfinite(v)]
     return float(np.mean(values)) if values else None
 
