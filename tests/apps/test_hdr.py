@@ -34,6 +34,13 @@ def test_event_field_keeps_both_ends_of_the_range(capsys):
         print("\n[HDR light field, 80x60]\n" + r.report())
     assert r.dynamic_range >= 1e4                                   # the scene is HDR as the issue asks
     assert r.regions["bright"].sum() > 50 and r.regions["dark"].sum() > 500
+    # the regions are the exposures' failures, recomputed from the truth: the long frame's clipped codes, the
+    # short frame's codes under a tenth of quantisation error (radiance from the lin-log truth)
+    from mitsuba_eventfield.plugins.pixel_model import linlog_inverse_np
+    linear = linlog_inverse_np(r.truth_log, r.meta["pixel_model"]["linlog_threshold"])
+    exposures = hdr.ldr_exposures(linear)
+    assert np.array_equal(r.regions["bright"], hdr.ldr_codes(linear, exposures["long"]) == 255)
+    assert np.array_equal(r.regions["dark"], hdr.ldr_codes(linear, exposures["short"]) < hdr.WELL_EXPOSED[0])
     ev, short, long = (r.errors[k] for k in ("events", "ldr_short", "ldr_long"))
     # each exposure fails where it clips or underflows; the events hold both ends to within ~2 thresholds (C = 0.2)
     assert short["dark"] > 0.8 and long["bright"] > 0.8
