@@ -252,8 +252,8 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
     worst = (scan or 0.0) + (objects or 0.0)            # a point on a moving object moves by both
     if worst <= MAX_PX_PER_STEP * (1 + 1e-9):
         return
-    parts = [f"the {k} {v:.3g} px" for k, v in (("scan", scan), ("objects", objects)) if v]
-    what = " and ".join(parts) + (f", together {worst:.3g} px" if len(parts) > 1 else "")   # the check is on the sum
+    parts = [f"the {k} {_px(v)} px" for k, v in (("scan", scan), ("objects", objects)) if v]
+    what = " and ".join(parts) + (f", together {_px(worst)} px" if len(parts) > 1 else "")   # the check is on the sum
     allowed = allowed_px_per_step(chosen)
     if worst <= allowed * (1 + 1e-6):
         # what decided the count, in the words of the metadata's stepping.chosen.by: "not accuracy", said when a
@@ -276,6 +276,12 @@ def note_image_motion(timed: TimedScene, t_start: float, duration: float, steps:
             f"px: events between rendered instants are interpolated, not resolved, and missed); {fix}")
     summary.notes.append(note)
     print(f"eventfield: {note}", file=sys.stderr)
+
+
+def _px(v: float) -> str:
+    """Pixels to three digits, or to as many as tell it from the bound (1.0004 px printed as "1", more than 1)."""
+    text = f"{v:.3g}"
+    return f"{v:.5g}" if float(text) == MAX_PX_PER_STEP and v != MAX_PX_PER_STEP else text
 
 
 def allowed_px_per_step(chosen: dict | None) -> float:

@@ -84,3 +84,10 @@ def test_a_moving_object_under_a_scan_moves_by_both():
     slide = object_px_per_step(moving, 0.0, duration, 100) * 100 / duration
     assert scan > 1000 and slide > 100
     assert largest_image_speed(moving, 0.0, duration) == pytest.approx(scan + slide, rel=1e-6)
+
+
+def test_a_step_just_over_a_pixel_is_printed_as_more_than_one():
+    """The coarse-step warning printed "the scan 1 px (more than 1 px ...); 129 steps" for 1.0004 px: pixels
+    are written to as many digits as tell them from the bound."""
+    from mitsuba_eventfield.simulate.image_motion import _px
+    assert [_px(v) for v in (1.0004, 1.0, 3.871, 0.5)] == ["1.0004", "1", "3.87", "0.5"]
