@@ -16,6 +16,8 @@ lacks too, are ``from_events``' ``c_on`` / ``c_off``.
 """
 from __future__ import annotations
 
+import os
+
 from mitsuba_eventfield.errors import ConfigError, EventFieldError
 
 PYTHON_NAMES = {"optics": "optics=", "calibration": "calibration=", "file": "FILE.json or a dict"}
@@ -34,8 +36,6 @@ def with_optics(events, optics=None, calibration=None, *, design: str | None = N
     offers a calibration (``eventfield calibrate`` makes one)."""
     from mitsuba_eventfield.events.stream import EventStream
 
-    import os
-
     from .nominal import nominal_optics, recording_optics
     if not isinstance(events, EventStream):
         raise ConfigError(f"with_optics: events: expected an EventStream (ef.read_events), got "
@@ -45,7 +45,7 @@ def with_optics(events, optics=None, calibration=None, *, design: str | None = N
                               "optics it was made for)")
     if events.meta.get("optics"):
         if optics is not None:
-            shown = optics if isinstance(optics, str) else "(a dict)"
+            shown = os.fspath(optics) if isinstance(optics, (str, os.PathLike)) else "(a dict)"
             raise EventFieldError(f"{names['optics']} {shown}: {where} carries its own "
                                   f"({events.meta['optics'].get('design')}) optics; {names['optics']} is for a "
                                   "camera recording without them")
@@ -119,8 +119,6 @@ def calibrated_lightfield(events, calibration, *, where: str = "the events", nea
 
 def _loaded(calibration, name: str):
     """A calibration given as a loaded file (or a dict of its parts) or a path (str or path-like)."""
-    import os
-
     from .store import load_calibration
     if isinstance(calibration, (str, os.PathLike)):
         return load_calibration(os.fspath(calibration))
