@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import ConfigError, EventFieldError
 from ..focus.depth import DEFAULT_MEASURE
 from ..lightfield.reconstruct import MAX_CUTOFF_HZ
+from ..lightfield.model import clip_log_levels
 from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
@@ -27,7 +28,6 @@ CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a r
 OPTICS_HELP = ("a JSON file of the set-up's nominal optics, for a recording that carries none and no calibration: "
                "\"design\" galvo (fov_x_deg, mirror_distance, mirror_separation, scan, as a render's "
                "meta['optics']) or kaleidoscope / microlens (the sensor's parameters, metres)")
-MAX_LOG_LEVEL = 80.0   # a reconstruction's log level: exp beyond it overflows float32 (e^88.7; an EXR held +inf)
 DEFAULT_PERIOD = 0     # refocus / depth on a galvo stream: its first scan period, DEFAULT_VIEWS views
 GALVO_ONLY, KALEIDOSCOPE_ONLY = ("period", "views"), ("time",)
 
@@ -337,12 +337,9 @@ def run_reconstruct(a) -> int:
     except ValueError as e:
         raise EventFieldError(f"{a.file}: {e}") from None
     os.makedirs(a.output, exist_ok=True)
-    beyond = int(np.count_nonzero(np.abs(frames) > MAX_LOG_LEVEL))
-    if beyond:             # exp of them overflowed float32: +inf in the EXR and NumPy's own warning
-        print(f"eventfield: warning: {a.file}: {beyond} pixel-frames reconstructed beyond a log level of "
-              f"+-{MAX_LOG_LEVEL:g} (float32's range once exponentiated): clipped there", file=sys.stderr)
+    frames = clip_log_levels(frames, a.file)      # (exp beyond e^88.7 overflowed float32: +inf in the EXR)
     for k, (t, log_img) in enumerate(zip(times, frames)):
-        linear = np.exp(np.clip(log_img, -MAX_LOG_LEVEL, MAX_LOG_LEVEL))
+        linear = np.exp(log_img)
         save_image(os.path.join(a.output, f"frame_{k:04d}.png"), linear,
                    _out_meta(a, ev, method=a.method, time_s=float(t), domain="linear = exp(log intensity)"))
     print(f"wrote {len(times)} frame{'s' if len(times) != 1 else ''} ({a.method}) to {a.output}")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,6 +29,10 @@ from ..validate import MAX_VIEWS, array, finite, instance, number
 MAX_SHIFT_VIEWS = 1.0      # the largest refocusing shift of a view, in view sizes (beyond: no overlap at all)
 MAX_DEPTH = 1e9            # scene units: farther is infinity (give math.inf), and overflowed the galvo's maps
 RECORDING_SLACK = 0.01     # of a scan period: how far a recording's event span may fall short of whole periods
+# The log levels a light field (or a reconstructed frame) holds: e^+-40 (1e+-17) is far beyond any sensor's
+# range (120-140 dB: e^14-16) and keeps a view's square (the variance focus measure) and sums of thousands of
+# views inside float32 (e^88.7). Levels beyond are a wrong contrast threshold or runaway drift, not light.
+MAX_LOG_LEVEL = 40.0
 from .views import extract_views
 
 
@@ -190,9 +195,23 @@ def _exp(log_frames, name: str = "from_galvo: log_frames", linear_below: float |
     """Linear frames of log ones: ``exp``, or the pixel's lin-log inverse where the levels are lin-log
     (``linear_below``: its knee; a reconstruction from events on a start frame through ``linlog_np``)."""
     from ..plugins.pixel_model import linlog_inverse_np
-    frames = _floats(log_frames, name)
+    frames = clip_log_levels(_floats(log_frames, name), name)
     # (a level below the pixel's response to no light, e.g. after a noise OFF event, is no radiance: 0)
     return np.exp(frames) if linear_below is None else np.maximum(linlog_inverse_np(frames, linear_below), 0.0)
+
+
+def clip_log_levels(log_frames: np.ndarray, name: str) -> np.ndarray:
+    """``log_frames`` clipped to +-``MAX_LOG_LEVEL``, with a warning naming how many finite levels were beyond
+    (exponentiated, they overflowed float32 and every focus measure after them). Clipped, not refused: one
+    stuck pixel's runaway level should not cost the whole image; a wrong threshold shows in every pixel."""
+    beyond = int(np.count_nonzero(np.isfinite(log_frames) & (np.abs(log_frames) > MAX_LOG_LEVEL)))
+    if beyond:
+        warnings.warn(f"{name}: {beyond} of {log_frames.size} levels beyond a log level of +-{MAX_LOG_LEVEL:g} "
+                      f"(a brightness ratio of {math.exp(MAX_LOG_LEVEL):.0e} either way, beyond any sensor: a "
+                      "stuck pixel, or a contrast threshold larger than the events' own?): clipped there",
+                      stacklevel=3)
+        return np.clip(log_frames, -MAX_LOG_LEVEL, MAX_LOG_LEVEL)
+    return log_frames
 
 
 def galvo_geometry(optics: dict, width: int, height: int) -> GalvoGeometry:
@@ -333,7 +352,7 @@ def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool
     time = finite(time, "from_spatial: time")
     if levels not in LEVELS:
         raise ConfigError(f"from_spatial: levels = {levels!r}; allowed: {', '.join(LEVELS)}")
-    stack = extract_views(np.exp(frame) if log else frame, optics)
+    stack = extract_views(np.exp(clip_log_levels(frame, "from_spatial: frame")) if log else frame, optics)
     h, w = stack.images.shape[1:3]
     return LightField(stack.images, stack.positions, np.full(len(stack.images), time),
                       Disparity.for_spatial(optics, w, h), optics["design"],

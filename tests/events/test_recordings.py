@@ -11,6 +11,7 @@ import pytest
 from conftest import ROOT
 
 import mitsuba_eventfield as ef
+from mitsuba_eventfield.images import read_exr
 
 faery = pytest.importorskip("faery")
 
@@ -178,6 +179,22 @@ def galvo_recording(tmp_path_factory):
 def _cli(*args):
     return subprocess.run([sys.executable, "-m", "mitsuba_eventfield.cli", *map(str, args)], capture_output=True,
                           text=True, timeout=600)
+
+
+def test_a_contrast_far_above_the_recordings_is_said_not_overflowed(galvo_recording):
+    """The recording was made at C = 0.1; told 10, its galvo solve reaches log levels near 400 (exponentiated:
+    beyond float32, and NumPy's overflow lines came before the image): now clipped at +-40 with one warning that
+    names the likely cause, and no NumPy line."""
+    d, raw, cal = galvo_recording
+    r = _cli("refocus", raw, "-o", d / "c10.png", "--depth", "1", "--views", "8", "--calibration", cal,
+             "--contrast", "10")
+    assert r.returncode == 0, r.stderr
+    assert "beyond a log level of +-40" in r.stderr and "contrast threshold larger" in r.stderr, r.stderr
+    assert "overflow" not in r.stderr and "invalid value" not in r.stderr, r.stderr
+    assert np.isfinite(read_exr(str(d / "c10.exr"))[0]["Y"]).all()
+    r = _cli("refocus", raw, "-o", d / "c01.png", "--depth", "1", "--views", "8", "--calibration", cal,
+             "--contrast", "0.1")                  # the recording's own threshold: nothing near the limit
+    assert r.returncode == 0 and "log level" not in r.stderr, r.stderr
 
 
 def test_recording_without_optics_needs_a_calibration(galvo_recording):

@@ -111,7 +111,7 @@ def test_a_refocus_of_a_recording_leaves_its_stuck_pixels_out(stuck_recording, c
 
 def test_a_reconstruction_beyond_float32_is_clipped_and_said(tmp_path, capsys):
     """A pixel that gains 100 in log over 10 s (not stuck: 10 a second) reconstructs to e^100, +inf in float32:
-    clipped at e^80 and said, not written as inf with NumPy's overflow warning."""
+    clipped at e^40 (lightfield.model.MAX_LOG_LEVEL) and said, not written as inf with NumPy's overflow warning."""
     from mitsuba_eventfield.images import read_exr
     t = np.arange(1000) * 10_000
     ev = ef.EventStream(np.zeros(1000, int), np.zeros(1000, int), t, np.ones(1000), 4, 4,
@@ -119,9 +119,9 @@ def test_a_reconstruction_beyond_float32_is_clipped_and_said(tmp_path, capsys):
     ef.write_events(str(tmp_path / "drift.h5"), ev)
     assert cli.main(["reconstruct", str(tmp_path / "drift.h5"), "--times", "9990", "-o", str(tmp_path / "r")]) == 0
     err = capsys.readouterr().err
-    assert "1 pixel-frames reconstructed beyond a log level of +-80" in err and "overflow" not in err
+    assert "1 of 16 levels beyond a log level of +-40" in err and "overflow" not in err
     y = read_exr(str(tmp_path / "r" / "frame_0000.exr"))[0]["Y"]
-    assert np.isfinite(y).all() and y[0, 0] == pytest.approx(math.exp(80), rel=1e-6)
+    assert np.isfinite(y).all() and y[0, 0] == pytest.approx(math.exp(40), rel=1e-6)
 
 
 def test_a_recording_of_stuck_pixels_alone_is_refused_not_written_flat(tmp_path, capsys):
