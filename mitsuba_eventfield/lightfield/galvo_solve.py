@@ -104,7 +104,12 @@ class _Mapper:
 
 
 def _pairs(samples: int, lags) -> list:
-    return [(k, (k + lag) % samples) for lag in lags for k in range(samples)]
+    """(k, k2) sample pairs ``lag`` apart. The state at the period's end (sample ``samples``, the mirrors where
+    they were at sample 0) pairs with the last samples: wrapped to sample 0 instead, pair (S - 1, 0) spanned
+    (S - 1) / S of a period, so one equation in S carried S - 1 samples of object motion (fan, 96x72, 16
+    samples, one plane: log error on the blades 0.444 -> 0.356; static scenes hold either way). Beyond the
+    period's end (lags past one sample) a pair wraps to the same mirror angles a period earlier."""
+    return [(k, k + lag if k + lag <= samples else (k + lag) % samples) for lag in lags for k in range(samples)]
 
 
 def _system(counts, angles, mapper: _Mapper, samples: int, lags):

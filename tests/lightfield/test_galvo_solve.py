@@ -63,7 +63,10 @@ def test_robust_weights_turn_down_the_moving_fan():
     robust, w = galvo_solve.start_image(events, 0.0, depth=1.0, lags=galvo_solve.DYNAMIC_LAGS, robust_iterations=4)
     e_plain, e_robust = _log_error(plain, truth, fan), _log_error(robust, truth, fan)
     print(f"fan pixels: plain {e_plain:.3f}, robust {e_robust:.3f}, turned down {np.mean(w < 1):.2f}")
-    assert e_robust < 0.85 * e_plain                 # measured 0.54 -> 0.39
+    assert e_robust < 0.85 * e_plain                 # measured 0.356 -> 0.214
+    # the last sample pairs with the period's end, not its start (which put 15 samples of blade motion into
+    # one equation in 16: plain 0.444)
+    assert e_plain < 0.40
     assert 0.02 < np.mean(w < 1) < 0.5
 
 
