@@ -221,11 +221,12 @@ def _kaleidoscope_rows(k, events, moving_ids, times, spp, depth, out, images):
     from ..lightfield.views import extract_views
     optics = k.sensor.optics_metadata()
     films = direct(events, times, None, 0.0)                     # log change since t = 0 (start unknown)
-    truths = render_frames(k, times, spp=spp)
+    truths = render_frames(k, times, spp=spp, log=False)       # radiance (lin-log levels need their inverse)
     for t, film, truth in zip(times, films, truths):
         masks = {sid: extract_views(m.astype(np.float32), optics).images > 0.5
                  for sid, m in shape_masks(k, float(t)).items()}
-        lf, ref = from_spatial(film, optics, float(t), levels="events"), from_spatial(truth, optics, float(t))
+        lf = from_spatial(film, optics, float(t), levels="events")
+        ref = from_spatial(truth, optics, float(t), log=False)
         centre = int(np.argmin(np.hypot(*lf.positions.T)))       # refocus is aligned to the centre view
         per_view = [_regions({sid: m[v] for sid, m in masks.items()}, moving_ids) for v in range(len(lf.views))]
         _append(out["views"]["kaleidoscope"], _mean_scores(

@@ -344,15 +344,16 @@ LEVELS = ("frame", "events")
 
 
 def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool = True,
-                 levels: str = "frame") -> LightField:
+                 levels: str = "frame", linear_below: float | None = None) -> LightField:
     """A light field from one kaleidoscope/microlens film image (log or linear): its n x n extracted views.
     ``levels``: where the image's brightness levels come from, a ``frame`` taken through the optics (it holds
-    their vignetting, which a flat field divides out) or ``events`` alone (log changes: no gain survives)."""
+    their vignetting, which a flat field divides out) or ``events`` alone (log changes: no gain survives).
+    ``linear_below``: a log image holds the lin-log levels of a pixel with this knee (as ``from_galvo``)."""
     frame = _floats(log_or_linear_frame, "from_spatial: frame")
     time = finite(time, "from_spatial: time")
     if levels not in LEVELS:
         raise ConfigError(f"from_spatial: levels = {levels!r}; allowed: {', '.join(LEVELS)}")
-    stack = extract_views(np.exp(clip_log_levels(frame, "from_spatial: frame")) if log else frame, optics)
+    stack = extract_views(_exp(frame, "from_spatial: frame", linear_below) if log else frame, optics)
     h, w = stack.images.shape[1:3]
     return LightField(stack.images, stack.positions, np.full(len(stack.images), time),
                       Disparity.for_spatial(optics, w, h), optics["design"],

@@ -169,6 +169,8 @@ def from_events(events, period: int | None = None, views: int | None = None, tim
         t = t1 if time is None else finite(time, "from_events: time")
         if not t0 <= t <= t1 + 1e-9:     # past the end a reconstruction runs on no data (a high-pass decays)
             raise ConfigError(f"from_events: time = {t:g} s: the stream covers {t0:g} to {t1:g} s")
+        from ..plugins.pixel_model import stream_linlog_threshold
         frame = reconstruct.reconstruct(events, [t], method, **kw)[0]
         from_frame = (method == "direct" and kw.get("log_start") is not None) or method == "complementary"
-        return from_spatial(frame, optics, time=t, log=True, levels="frame" if from_frame else "events")
+        return from_spatial(frame, optics, time=t, log=True, levels="frame" if from_frame else "events",
+                            linear_below=stream_linlog_threshold(events.meta))
