@@ -150,7 +150,7 @@ def _solver_warnings_held():
     inside, held as texts in the list yielded: the command says them after its own checks, so a refused command
     says one line. Any other warning is shown as it comes."""
     from ..focus.galvo_periods import SolverWarning
-    from ..lightfield.model import ScanLockWarning
+    from ..lightfield.scan_lock import ScanLockWarning
     held = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SolverWarning)

@@ -292,54 +292,6 @@ def galvo_period_starts(events, periods=None) -> dict:
     return {p: t0 + p * period for p in wanted}
 
 
-# Does a stream follow its scan? A scanned scene fires the same pixels at the same point of every scan period:
-# per-pixel counts in quarter-period windows one period apart correlate (bundled scenes at 96x72: 0.94-1.00
-# static or slow, 0.63 the spinning fan), and a wrong frequency or events that are no galvo's do not (the scan
-# taken 2.5x too fast: 0.07-0.18, 0.7x: 0.17-0.35; random events: 0.00). Below MIN_SCAN_LOCK the light fields,
-# and the confident depths from them, are not the scene's; the check reads at most SCAN_LOCK_PERIODS periods.
-MIN_SCAN_LOCK = 0.4
-SCAN_LOCK_PERIODS = 8
-
-
-class ScanLockWarning(UserWarning):
-    """A galvo stream whose events do not repeat with its scan period (``scan_lock``)."""
-
-
-def scan_lock(events) -> float | None:
-    """The mean correlation of per-pixel event counts in quarter-period windows one scan period apart, over the
-    first ``SCAN_LOCK_PERIODS`` periods; None with fewer than two whole periods or no events."""
-    period_us = scan_period(_galvo_scan(events.meta.get("optics", {}), "scan lock")) * 1e6
-    windows = min(int(events.duration_us // (period_us / 4)), 4 * SCAN_LOCK_PERIODS)
-    if windows < 8 or not len(events):
-        return None
-    # window by window (the stream is in time order): a (windows, pixels) array was 236 MB at 1280x720
-    bounds = np.searchsorted(events.t, events.start_us + np.arange(windows + 1) * (period_us / 4), side="left")
-    n_pix = events.width * events.height
-
-    def counts(j):
-        s = slice(bounds[j], bounds[j + 1])
-        return np.bincount(events.y[s].astype(np.int64) * events.width + events.x[s], minlength=n_pix)
-    values = []
-    for j in range(windows - 4):
-        a, b = counts(j), counts(j + 4)
-        if a.any() and b.any():
-            values.append(np.corrcoef(a, b)[0, 1])
-    values = [v for v in values if np.isfinite(v)]
-    return float(np.mean(values)) if values else None
-
-
-def warn_unlocked(events, where: str) -> None:
-    """A ``ScanLockWarning`` when ``scan_lock`` is below ``MIN_SCAN_LOCK``."""
-    lock = scan_lock(events)
-    if lock is not None and lock < MIN_SCAN_LOCK:
-        import warnings
-        f = 1.0 / scan_period(events.meta["optics"]["scan"])
-        warnings.warn(f"{where}: the events do not repeat with the {f:g} Hz scan (counts one period apart "
-                      f"correlate {lock:.2f}; a scanned scene's 0.6-1.0): the optics' scan frequency is not the "
-                      "mirror's, or these are not a galvo's events; light fields and depths from them are not the "
-                      "scene's", ScanLockWarning, stacklevel=3)
-
-
 LEVELS = ("frame", "events")
 
 

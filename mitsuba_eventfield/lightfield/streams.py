@@ -12,8 +12,8 @@ from ..events.stream import EventStream
 from ..optics.galvo import VIEWS_PER_PERIOD
 from ..validate import MAX_VIEWS, finite, instance, keywords, number
 from . import reconstruct
-from .model import (LightField, _galvo_scan, from_galvo, from_spatial, galvo_period_starts, galvo_view_times,
-                    warn_unlocked)
+from .model import LightField, _galvo_scan, from_galvo, from_spatial, galvo_period_starts, galvo_view_times
+from .scan_lock import warn_unlocked
 
 PERIODS = "periods"     # the per-period galvo solver, each pixel at its own depth (focus.galvo_periods)
 MIN_VIEWS = 2           # one view has no parallax: refocus and depth from it are the image itself

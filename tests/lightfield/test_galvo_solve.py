@@ -129,29 +129,45 @@ def test_blas_runs_on_one_thread_during_a_solve_and_comes_back_after_overlapping
 
 
 def test_events_that_do_not_follow_their_scan_are_warned_about():
-    """``lightfield.model.scan_lock``: a scanned scene fires the same pixels at the same point of every period
-    (galvo_static: counts one period apart correlate 1.00); the same events with a scan 2.5 times too fast in
-    their optics, or random events, do not (0.1-0.2, 0.00): their light fields warn (``ScanLockWarning``) where
-    they made confident, wrong depths without a word; the render's do not."""
+    """``lightfield.scan_lock``: a scanned scene fires the same pixels with the same polarity at the same point of
+    every period (galvo_static: signed counts one period apart correlate 1.00, and still lock with 5 % of its
+    events kept at random, where the unsigned check's absolute level read 0.34-0.41 on such streams); the same
+    events with a scan 2.5x or 0.7x the mirror's in their optics, or random events, do not; a stated frequency
+    half the mirror's repeats every period too, and is said by the half period's equal correlation. Their light
+    fields warn (``ScanLockWarning``) where they made confident, wrong depths without a word."""
     import copy
     import warnings
 
     import mitsuba_eventfield as ef
-    from mitsuba_eventfield.lightfield.model import MIN_SCAN_LOCK, ScanLockWarning, scan_lock
+    from mitsuba_eventfield.lightfield.scan_lock import ScanLockWarning, scan_lock
     events = ef.render_events(load_scene(os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml"),
-                                         width=64, height=48), 0.02)
-    assert scan_lock(events) > 0.9
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", ScanLockWarning)
-        ef.lightfield.from_events(events, views=8, method="galvo")
-    fast = copy.deepcopy(events.meta["optics"])
-    fast["scan"].update(frequency=625.0, amplitude=0.4)         # 2.5x the mirror's 250 Hz (within the envelope)
-    rng = np.random.default_rng(0)
+                                         width=64, height=48), 0.028)          # seven periods at 250 Hz
+    lock = scan_lock(events)
+    assert lock.lock > 0.99 and lock.locked and lock.repeats_every is None
     n = len(events)
-    random = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 20_000, n)),
+    kept = np.random.default_rng(1).random(n) < 0.05
+    thinned = ef.EventStream(events.x[kept], events.y[kept], events.t[kept], events.p[kept], 64, 48, events.meta)
+    assert 0.2 < scan_lock(thinned).lock < 0.9 and scan_lock(thinned).locked
+    for stream in (events, thinned):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", ScanLockWarning)
+            ef.lightfield.from_events(stream, views=8, method="galvo")
+
+    def stated(frequency, amplitude=0.2):
+        optics = copy.deepcopy(events.meta["optics"])
+        optics["scan"].update(frequency=frequency, amplitude=amplitude)
+        return ef.EventStream(events.x, events.y, events.t, events.p, 64, 48, dict(events.meta, optics=optics))
+    rng = np.random.default_rng(0)
+    random = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 28_000, n)),
                             rng.choice([-1, 1], n), 64, 48, events.meta)
-    for stream in (ef.EventStream(events.x, events.y, events.t, events.p, 64, 48, dict(events.meta, optics=fast)),
-                   random):
-        assert scan_lock(stream) < MIN_SCAN_LOCK
+    for stream in (stated(625.0), stated(175.0), random):       # 2.5x, 0.7x the mirror's 250 Hz
+        state = scan_lock(stream)
+        assert state.lock < 0.1 and not state.locked, state
         with pytest.warns(ScanLockWarning, match=r"the events do not repeat with the .* Hz scan"):
             ef.lightfield.from_events(stream, views=8, method="galvo")
+    near = scan_lock(stated(275.0))             # 10 % off: it half-repeats, and repeats better 1.08 periods on
+    assert 0.2 < near.lock < 0.6 and near.peak > 0.9 and not near.locked, near
+    half = scan_lock(stated(125.0))
+    assert half.lock > 0.99 and half.repeats_every == 0.5 and not half.locked
+    with pytest.warns(ScanLockWarning, match=r"repeat every 1/2 of the 125 Hz scan's period.*runs at 250 Hz"):
+        ef.lightfield.from_events(stated(125.0), views=8, method="galvo")
