@@ -119,7 +119,7 @@ def check_event_count(count: float, t0: float, t1: float, pixels: int, path: str
         on = f"{pixels} firing pixels" if path == "host" else f"{pixels} pixels"
         raise EventFieldError(f"{many} events from {t0:.6g} s to {t1:.6g} s on {on} ({count / pixels:.3g} "
                               f"a pixel): more than memory holds ({most:.3g}); raise the contrast threshold (events "
-                              "a pixel grow as 1 / threshold) or take shorter steps")
+                              "a pixel grow as 1 / threshold), or in a render take shorter steps")
 
 
 def expand_crossings(pixel, n, log_prev, log_now, log_ref, c_on, c_off, t0: float, t1: float):
@@ -170,6 +170,18 @@ import functools  # noqa: E402
 from dataclasses import asdict, dataclass, fields  # noqa: E402
 
 
+# Upper limits of the pixel's times and rates: far beyond any sensor's, so that only a unit slip meets them (a
+# refractory of 500 "s" was taken; a shot-noise rate of 1e6 Hz asked the default steps for 100,000 steps in 10 ms,
+# shot noise needing rate x duration / SHOT_NOISE_PER_STEP of them, and ran for minutes without a word).
+PIXEL_UPPER_LIMITS = {
+    "refractory_s": (1.0, "seconds; sensors' refractory periods are 1 us to 10 ms"),
+    "leak_rate_hz": (1e4, "events per pixel per second; sensors leak 0.01-1 Hz"),
+    "shot_noise_hz": (1e3, "events per pixel per second; sensors' dark noise is 0.01-10 Hz, v2e's noisy 5 Hz"),
+    "cutoff_hz": (1e5, "hertz; photoreceptors' bright cutoffs are 100 Hz to a few kHz"),
+    "timestamp_resolution_us": (1e6, "microseconds; sensors' clocks tick every 1 us"),
+}
+
+
 @dataclass
 class PixelConfig:
     """Parameters of the event pixel (log units for thresholds, seconds, hertz, radiance for intensities)."""
@@ -218,6 +230,9 @@ class PixelConfig:
             if getattr(self, name) < 0:
                 raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: must be >= 0 (rates, times and "
                                  "spreads cannot be negative)")
+        for name, (hi, why) in PIXEL_UPPER_LIMITS.items():
+            if getattr(self, name) > hi:
+                raise ConfigError(f"{where}: {name} = {getattr(self, name)!r}: allowed range is [0, {hi:g}] ({why})")
         # thresholds are floored at C / 10 whatever the spread; beyond C / 2 that floor would hold more than 4 % of
         # them and the spread would no longer be the one asked for (v2e's "noisy" sensor, sigma 0.05 at C = 0.2, is
         # C / 4, which the bound of C / 4 exclusive refused)

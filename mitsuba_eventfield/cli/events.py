@@ -73,8 +73,9 @@ def _add_render(sub) -> None:
     r.add_argument("--spp-changing", type=num(1, MAX_SPP, integer=True), metavar="N",
                    help="samples where they matter: pixels whose brightness changes during the render (found by "
                         "probe renders) get N samples per step, the others --spp")
-    r.add_argument("--seed", type=num(0, MAX_SEED, integer=True), default=0, help="sampler seed, and the pixel model's (mismatch, noise) unless --pixel seed=N names "
-                   "another (default 0)")
+    r.add_argument("--seed", type=num(0, MAX_SEED, integer=True), default=0,
+                   help="sampler seed, and the pixel model's (mismatch, noise) unless --pixel seed=N names another "
+                        "(default 0)")
     r.add_argument("--no-reuse", action="store_true",
                    help="render every pixel at every step (default: a static scene renders one scan period; a "
                         "moving one, over enough scan periods to pay for its masks, renders the pixels moving objects "
@@ -84,7 +85,7 @@ def _add_render(sub) -> None:
     _add_thresholds(r, "scene's or 0.2")
     r.add_argument("--linlog-threshold", type=num(0, 1e6, lo_open=True),
                    help="radiance below which the response is linear (1e-3)")
-    _add_pixel_options(r)
+    _add_pixel_options(r, "the scene's own pixel (ideal unless its integrator names a preset; its threshold)")
     r.add_argument("--color", action="store_true", help="render in colour (rgb variant); events use luminance")
     add_defines(r)
     r.add_argument("--preview", help="also write an event-frame PNG of the last --preview-window ms")
@@ -103,8 +104,10 @@ def _add_render(sub) -> None:
                         "at least 1us); the sampler, spp and steps are chosen by the accuracy-limit model")
 
 
-def _add_pixel_options(r) -> None:
-    r.add_argument("--preset", help="event pixel preset: ideal (default), davis346, prophesee_gen4")
+def _add_pixel_options(r, default: str) -> None:
+    r.add_argument("--preset", help="event pixel preset: ideal, davis346, prophesee_gen4; it sets the whole pixel, "
+                                    "its thresholds included (ideal and davis346 C = 0.2, prophesee_gen4 0.25; "
+                                    f"--threshold and --pixel change them); default: {default}")
     r.add_argument("--pixel", action="append", default=[], metavar="NAME=VALUE",
                    help="pixel-model parameter, e.g. --pixel refractory_s=1e-4 --pixel shot_noise_hz=2 (repeatable; "
                         "see docs/pixel_model.md)")
@@ -129,7 +132,9 @@ def _add_convert(sub) -> None:
                             "frames at uneven times, e.g. ESIM's or rpg_vid2e's timestamps.txt")
     _add_thresholds(c, "the preset's; 0.2 for the ideal pixel")
     c.add_argument("--srgb", action="store_true", help="decode gamma-encoded (sRGB) frames to linear light first")
-    _add_pixel_options(c)
+    _add_pixel_options(c, "ideal, C = 0.2")
+    c.add_argument("--seed", type=num(0, MAX_SEED, integer=True),
+                   help="the pixel model's seed (mismatch and noise draws; default 0), as --pixel seed=N")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -147,7 +152,12 @@ def run_convert(a) -> int:
     from ..backend import set_variant
     from ..simulate.convert import events_from_frames
     set_variant(a.variant)
-    summary = events_from_frames(a.input, a.times, fps=a.fps, preset=a.preset, pixel=pixel_overrides(a.pixel),
+    pixel = pixel_overrides(a.pixel)
+    if a.seed is not None:
+        if pixel.get("seed", a.seed) != a.seed:
+            raise EventFieldError(f"--seed {a.seed} and --pixel seed={pixel['seed']}: give the seed once")
+        pixel["seed"] = a.seed
+    summary = events_from_frames(a.input, a.times, fps=a.fps, preset=a.preset, pixel=pixel,
                                  threshold=a.threshold, threshold_on=a.threshold_on, threshold_off=a.threshold_off,
                                  srgb=a.srgb, output=a.output, progress=not a.quiet,
                                  event_buffer_mb=a.event_buffer_mb)

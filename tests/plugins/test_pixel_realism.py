@@ -227,6 +227,12 @@ def test_lowpass_is_slower_for_dim_pixels():
     ({"threshold_sigma": 0.11}, "would sit on their floor of C / 10; must be <= 0.1"),
     ({"refractory_s": float("nan")}, "refractory_s = nan: must be a finite number"),
     ({"colour": 1.0}, "unknown pixel parameter 'colour'"),
+    # unit slips, refused before any step (1e6 Hz of shot noise asked for 100,000 steps in 10 ms, silently)
+    ({"shot_noise_hz": 1e6}, r"shot_noise_hz = 1000000.0: allowed range is \[0, 1000\] \(events per pixel"),
+    ({"refractory_s": 500.0}, r"refractory_s = 500.0: allowed range is \[0, 1\] \(seconds;"),
+    ({"cutoff_hz": 1e6}, r"cutoff_hz = 1000000.0: allowed range is \[0, 100000\]"),
+    ({"leak_rate_hz": 2e4}, r"leak_rate_hz = 20000.0: allowed range is \[0, 10000\]"),
+    ({"timestamp_resolution_us": 2e6}, r"timestamp_resolution_us = 2000000.0: allowed range is \[0, 1e\+06\]"),
 ])
 def test_bad_pixel_parameters(pixel, message):
     timed = ef.load_scene(DEMO, width=16, height=12)

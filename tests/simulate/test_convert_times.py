@@ -205,3 +205,20 @@ def test_a_converted_file_is_indexed_from_its_first_frame(tmp_path, start):
     ef.events_from_frames(source, output=str(tmp_path / "source.h5"))
     with h5py.File(tmp_path / "source.h5") as f:
         assert int(f["t_offset"][()]) == int(start * 1e6) and len(f["events/t"][()]) == len(t)
+
+
+def test_convert_takes_a_seed_as_render_does(tmp_path, capfd):
+    """``convert --seed N`` is the pixel model's seed (``--pixel seed=N``), as ``render --seed`` is: the same
+    davis346 events for the same seed, others for another; the two spellings naming two seeds are refused."""
+    frames = np.random.default_rng(4).random((8, 40, 60)) + 0.05
+    np.savez(tmp_path / "s.npz", frames=frames, times=np.arange(8) / 1000.0)
+    runs = {}
+    for name, extra in (("seed3", ["--seed", "3"]), ("pixel3", ["--pixel", "seed=3"]), ("seed4", ["--seed", "4"])):
+        code, err = _cli([tmp_path / "s.npz", "-o", tmp_path / f"{name}.npz", "--preset", "davis346", *extra], capfd)
+        assert code == 0, err
+        runs[name] = ef.read_events(str(tmp_path / f"{name}.npz"))
+    assert runs["seed3"].equals(runs["pixel3"]) and runs["seed3"].meta["pixel_model"]["seed"] == 3
+    assert not runs["seed3"].equals(runs["seed4"])
+    code, err = _cli([tmp_path / "s.npz", "-o", tmp_path / "x.npz", "--seed", "3", "--pixel", "seed=4"], capfd)
+    assert code == 2 and err == "eventfield: error: --seed 3 and --pixel seed=4: give the seed once", err
+    assert not (tmp_path / "x.npz").exists()
