@@ -42,7 +42,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import event_fill, event_select, pixel_model, pixel_step
+from mitsuba_eventfield.plugins import event_fill, event_memory, event_select, pixel_model, pixel_step
 from mitsuba_eventfield.plugins.frozen import FrozenCache
 from mitsuba_eventfield.plugins.pixel_view import PixelView
 
@@ -130,7 +130,7 @@ def commit_frames(integ, frames, times, base_us: int = 0, intensity: bool = Fals
     final, ends, fired, head = count(view.arrays(), state, frames, t_d, dts, step_last)
     # one read: every step's last slot (the chunk's total is the last), then what the tallies need
     read = head.numpy().astype(np.int64)
-    pixel_model.check_event_count(float(read[-1]), times[0], times[-1], n_pix)   # before the 32-bit ends are trusted
+    event_memory.check_event_count(float(read[-1]), times[0], times[-1], n_pix)   # before the 32-bit ends are trusted
     step_ends = read[:steps]
     _set_state(integ, final)
     stats = {}

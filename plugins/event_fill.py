@@ -31,7 +31,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsuba_eventfield.plugins import pixel_model
+from mitsuba_eventfield.plugins import event_memory, pixel_model
 from mitsuba_eventfield.plugins.event_select import Refractory, Selection, crossing_time, inverse_rise, select_events
 
 
@@ -212,7 +212,7 @@ def _read(values, cls=None) -> list:
 
 
 def approximate_sum(counts):
-    """Counts summed in Float32, capped at 4e9: no wrap past 2^32, for ``pixel_model.check_event_count``."""
+    """Counts summed in Float32, capped at 4e9: no wrap past 2^32, for ``event_memory.check_event_count``."""
     return mi.UInt32(dr.minimum(dr.sum(mi.Float32(counts)), 4.0e9))
 
 
@@ -242,7 +242,7 @@ def crossing_events(n, log_prev, log_now, log_ref, c_on, c_off, width: int, t0: 
     if refractory is not None:
         refractory.last_emit = sel.last_emit
     total, raw, approx, noise_kept, noise_hits = _read(totals)[:5]
-    pixel_model.check_event_count(approx, t0, t1, n_pix)       # before its 32-bit sums are trusted
+    event_memory.check_event_count(approx, t0, t1, n_pix)       # before its 32-bit sums are trusted
     stats = dict(refractory_dropped=raw + noise_hits - total, noise_events=noise_kept)
     if total == 0:
         return DeviceEvents(*empty_columns(), count=0, **stats)
