@@ -49,11 +49,11 @@ def _counts(ev, width, height):
 def _split_frames(timed, steps_per_period):
     """The linear frames the static-pixel split makes at the instants of the second period, and its plan."""
     from mitsuba_eventfield.simulate import static_pixels
-    from mitsuba_eventfield.simulate.render import _event_integrator
+    from mitsuba_eventfield.simulate.pixel_setup import event_integrator
     from mitsuba_eventfield.simulate.stepping import stepping
     steps = steps_per_period * SPEED_PERIODS
     st = stepping(timed, PERIOD * SPEED_PERIODS, steps, False, 0.5, None, None, SPP, 0, "fixed", 0.0, 1.0)
-    integ = _event_integrator(timed, None, None, None, None)
+    integ = event_integrator(timed, None, None, None, None)
     notes = []
     plan = static_pixels.plan(timed, st, integ, notes)
     if plan is None:                 # declined (the note says why): no "static reused" row

@@ -203,9 +203,9 @@ def _default_steps(timed, duration, spp, threshold, max_steps, preset=None, pixe
     99th percentile of a probe's per-pixel log change under C a step, which Monte-Carlo noise drove (a moving
     mesh's edges flip whole samples between dark and bright at any step size): the fan at 346x260 asked for
     2405 steps over 20 ms (481 a scan period, 3 minutes) and then noted that more steps do not help."""
-    from .render import _event_integrator
+    from .pixel_setup import event_integrator
     from .stepping import uniform_default_steps
-    integ = _event_integrator(timed, threshold, None, None, None, preset, pixel)
+    integ = event_integrator(timed, threshold, None, None, None, preset, pixel)
     steps, chosen = uniform_default_steps(timed, duration, spp, integ)
     if steps > max_steps:
         raise ConfigError(f"the scene's image motion needs {steps} steps over {duration:g} s, more than "

@@ -11,17 +11,17 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import time
 
 from .. import backend
 from ..atomic import check_writable
-from ..errors import ConfigError, EventFieldError, raise_if_stopped
+from ..errors import EventFieldError, raise_if_stopped
 from ..events.io import format_of
 from ..plugins.event_fill import film_limit_error
-from ..scene.timed import TimedScene, load_scene
-from ..validate import DEFAULT_SPP, MAX_THRESHOLD, available_memory, flag, instance, number
+from ..scene.timed import load_scene
+from ..validate import DEFAULT_SPP, available_memory, flag, instance
 from .periodic import period_blocks, phase_grid, reuse_plan
+from .pixel_setup import event_integrator
 from . import sample_allocation, static_pixels, step_batch
 from .frames import FrameRenderer, frozen_render, render_frames  # noqa: F401  (render_frames: re-exported)
 from .accuracy_limit import AccuracyLimit
@@ -57,46 +57,6 @@ def check_memory(width: int, height: int, spp: int, where: str = "film") -> int:
         raise EventFieldError(f"{where}: {width}x{height} pixels x {spp} spp needs about {need / 2**30:.1f} GiB of "
                               f"render buffers, more than 80% of the {avail / 2**30:.1f} GiB available")
     return need
-
-
-def _event_integrator(timed: TimedScene, threshold, threshold_on, threshold_off, linlog_threshold, preset=None,
-                      pixel=None, seed=None):
-    """The scene's eventfield integrator (or one wrapping its radiance integrator), configured for this render:
-    the scene's own pixel settings, then ``preset``, then explicit values (never an earlier render's; a bad
-    ``threshold`` named as given, not as threshold_on). The pixel model's seed (its mismatch and noise draws) is
-    the render's ``seed`` unless the pixel parameters or the scene's integrator name one: a sweep over seeds draws
-    new sensor noise too (it kept pixel seed 0; 98 % of a davis346 render's noise events were the same)."""
-    from ..plugins import pixel_model
-    from ..plugins.event_integrator import integrator_class, is_event_integrator
-    integ = timed.scene.integrator()
-    if not is_event_integrator(integ):  # any scene: wrap its radiance integrator
-        integ = integrator_class()(_props_with_inner(integ))
-    if pixel is not None and not isinstance(pixel, dict):
-        raise ConfigError(f"pixel model: pixel = {pixel!r}: must be a dict of pixel parameters (a preset's name "
-                          "goes in preset=)")
-    preset, pixel = pixel_model.preset_and_overrides(preset, pixel)
-    thr = threshold if threshold is None else number(threshold, "render: threshold", 0, MAX_THRESHOLD, lo_open=True,
-                                                           strict=True)
-    overrides = {} if preset is not None else dict(integ.scene_overrides)
-    explicit = dict(pixel_model.explicit_thresholds(thr, threshold_on, threshold_off),
-                    linlog_threshold=linlog_threshold)
-    pixel_model.given_once(explicit, pixel)
-    explicit.update(pixel)
-    for name, v in explicit.items():
-        if v is not None:
-            overrides[name] = v
-    if seed is not None and overrides.get("seed") is None:
-        overrides["seed"] = int(seed)
-    integ.configure(pixel_model.pixel_config(preset or integ.scene_preset, "pixel model", **overrides))
-    width, height = timed.film_size
-    integ.config.check_film(width * height, f"{timed.path or 'scene'}: pixel model")   # before any work
-    return integ
-
-
-def _props_with_inner(inner):
-    props = mi.Properties("eventfield")
-    props["inner"] = inner
-    return props
 
 
 def _advance(bar, elapsed_s: float) -> None:
@@ -390,7 +350,7 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     if output is not None:                          # "" refused, not taken for "in memory"
         check_writable(output, "event file")
         format_of(output, fmt, t_first_s=st.t_start)
-    integ = _event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel, st.seed)
+    integ = event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel, st.seed)
     st, noise, allocation, frozen = _steps_and_samples(timed, st, integ, spp_changing)
     summary = _new_summary(timed, st, output)
     meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,

@@ -67,7 +67,7 @@ class Sink:
     (segments under ``<output>.resume`` for a checkpointed render). ``count`` is called with each chunk's polarities as it leaves the buffer (the render's ON/OFF totals)."""
 
     def __init__(self, output, fmt, width, height, meta, count=None, buffer_mb: float = DEFAULT_EVENT_BUFFER_MB,
-                 segments: list | None = None, on_device: bool = False):
+                 segments: list | None = None, on_device: bool = False, emit_from_us: int | None = None):
         self.capacity = buffer_events(positive(buffer_mb, "event_buffer_mb"))     # refused before any file opens
         self.output, self.width, self.height, self.meta = output, width, height, meta
         self.fmt = format_of(output, fmt) if output else None
@@ -83,6 +83,8 @@ class Sink:
         self.memory = EventBuffer() if self.writer is None and not self.on_device else None   # in-memory result
         self.count = count or (lambda p: None)
         self.device_parts, self.device_events, self.until = [], 0, None
+        # a warm-up's events (before the render's own start) are dropped on the host, before they are counted
+        self.emit_from_us = None if emit_from_us is None else int(emit_from_us)
 
     def report(self, summary) -> None:
         """The background writer's timings into a ``RenderSummary`` (after ``drain``; zero without a writer)."""
@@ -121,9 +123,11 @@ class Sink:
         # host memory. A writer borrows that chunk: its copier thread copies it out and this thread frees it,
         # where Dr.Jit can reuse it (events.writer: freed on the writer's thread, host memory grew with the events)
         chunk = DeviceEvents.concat(parts)
-        self.count(chunk.p)                     # on the device: one number crosses, not a byte an event
+        counted = self.emit_from_us is None     # (a warm-up's chunks are counted on the host, once cut)
+        if counted:
+            self.count(chunk.p)                 # on the device: one number crosses, not a byte an event
         for piece, last in _pieces(chunk, self.capacity):
-            self._add_host(*piece.numpy(), until if last else None, borrowed=True, counted=True)
+            self._add_host(*piece.numpy(), until if last else None, borrowed=True, counted=counted)
 
     def add_step(self, events, complete_until_us: int) -> None:
         """A step's events from ``EventIntegrator.commit_events``: device-side ones are buffered there."""
@@ -151,7 +155,21 @@ class Sink:
             self.count(chunk.p)                  # the ON / OFF totals, counted on the device
             self.device_chunks.append(chunk)
 
+    def _after_warmup(self, x, y, t, p, borrowed: bool):
+        """The events at or after ``emit_from_us`` (a chunk is in time order), copied where cut (a borrowed
+        chunk's memory goes back to Dr.Jit once the writer has copied it); the cut ends once a chunk starts
+        there."""
+        if self.emit_from_us is None or not len(t):
+            return x, y, t, p, borrowed
+        if t[0] >= self.emit_from_us:
+            self.emit_from_us = None
+            return x, y, t, p, borrowed
+        import numpy as np
+        k = int(np.searchsorted(t, self.emit_from_us))
+        return (*(np.array(c[k:]) for c in (x, y, t, p)), False)
+
     def _add_host(self, x, y, t, p, complete_until_us, borrowed: bool = False, counted: bool = False):
+        x, y, t, p, borrowed = self._after_warmup(x, y, t, p, borrowed)
         if not counted:
             self.count(p)
         if self.writer is not None:

@@ -40,11 +40,11 @@ def test_auto_steps_of_a_moving_scene_are_whole_per_scan_period():
     """``--auto`` takes the default rule's steps, whole per scan period under a periodic scan, for a moving
     scene too (the fan, five 4 ms periods: 302 steps before, 60.4 a period) and never fewer than the motion
     needs (0.5 px a step)."""
-    from mitsuba_eventfield.simulate.render import _event_integrator
+    from mitsuba_eventfield.simulate.pixel_setup import event_integrator
     from mitsuba_eventfield.simulate.stepping import uniform_default_steps
     timed = ef.load_scene(FAN, width=96, height=72)
     assert not timed.is_static and timed.scan_period == 0.004
-    steps, why = uniform_default_steps(timed, 0.02, 4, _event_integrator(timed, None, None, None, None, None, None))
+    steps, why = uniform_default_steps(timed, 0.02, 4, event_integrator(timed, None, None, None, None, None, None))
     assert steps % 5 == 0, steps
     assert steps * 0.5 >= why["largest_image_speed_px_per_s"] * 0.02 > (steps - 5) * 0.5
 

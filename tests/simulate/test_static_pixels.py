@@ -11,7 +11,7 @@ import pytest
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.scene.coverage import shape_masks
 from mitsuba_eventfield.simulate import static_pixels as sp
-from mitsuba_eventfield.simulate.render import _event_integrator
+from mitsuba_eventfield.simulate.pixel_setup import event_integrator
 from mitsuba_eventfield.simulate.stepping import stepping
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -80,7 +80,7 @@ def _plan(path):
     timed = ef.load_scene(path)
     st = stepping(timed, DURATION, STEPS, False, 0.5, None, None, 4, 0, "fixed", 0.0, 1.0)
     notes = []
-    return timed, sp.plan(timed, st, _event_integrator(timed, None, None, None, None), notes), notes
+    return timed, sp.plan(timed, st, event_integrator(timed, None, None, None, None), notes), notes
 
 
 def test_the_dynamic_mask_holds_every_pixel_the_moving_ball_covers(ball_scene):
@@ -139,7 +139,7 @@ def test_the_check_warns_when_a_moving_shadow_was_taken_as_static(ball_scene, mo
 def test_the_split_is_declined_when_it_cannot_pay(ball_scene, monkeypatch):
     timed = ef.load_scene(ball_scene["emitting"])
     st = stepping(timed, PERIOD, 20, False, 0.5, None, None, 4, 0, "fixed", 0.0, 1.0)
-    integ = _event_integrator(timed, None, None, None, None)
+    integ = event_integrator(timed, None, None, None, None)
     assert sp.plan(timed, st, integ, []) is None                     # one period: nothing to reuse
     monkeypatch.setattr(sp, "MIN_PERIODS", 5)
     notes = []
