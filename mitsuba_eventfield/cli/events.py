@@ -76,6 +76,10 @@ def _add_render(sub) -> None:
     r.add_argument("--seed", type=num(0, MAX_SEED, integer=True), default=0,
                    help="sampler seed, and the pixel model's (mismatch, noise) unless --pixel seed=N names another "
                         "(default 0)")
+    r.add_argument("--warmup", type=_time_arg("--warmup"), metavar="TIME", default=0.0,
+                   help="render this long before the start and drop its events (a time with a unit, e.g. 0.3s): a "
+                        "pixel that has been running, its photoreceptor low-pass settled (the render says how long "
+                        "one needs)")
     r.add_argument("--no-reuse", action="store_true",
                    help="render every pixel at every step (default: a static scene renders one scan period; a "
                         "moving one, over enough scan periods to pay for its masks, renders the pixels moving objects "
@@ -99,7 +103,7 @@ def _add_render(sub) -> None:
                    help="continue an interrupted render of this output from its last checkpoint (same options)")
     r.add_argument("--auto", action="store_true",
                    help="choose colour, spp and steps from cheap probes (ef.auto), print and record why")
-    r.add_argument("--timing-accuracy", type=_time_arg, metavar="TIME",
+    r.add_argument("--timing-accuracy", type=_time_arg("--timing-accuracy"), metavar="TIME",
                    help="with --auto (implied): the median timestamp error wanted, with a unit (20us, 0.5ms, 1e-5s; "
                         "at least 1us); the sampler, spp and steps are chosen by the accuracy-limit model")
 
@@ -200,16 +204,19 @@ def _auto_plan(a, motion, scene_defines):
     return {"auto_plan": plan.as_dict()}
 
 
-def _time_arg(text):
-    """argparse type of --timing-accuracy: seconds from a time with a unit (one-line error otherwise)."""
+def _time_arg(what: str):
+    """argparse type of a time option (``what``): seconds from a time with a unit (one-line error otherwise)."""
     import argparse
 
     from ..errors import ConfigError
     from ..simulate.auto import parse_time
-    try:
-        return parse_time(text)
-    except ConfigError as e:
-        raise argparse.ArgumentTypeError(str(e).replace("--timing-accuracy ", "", 1)) from None
+
+    def parse(text):
+        try:
+            return parse_time(text, what)
+        except ConfigError as e:
+            raise argparse.ArgumentTypeError(str(e).replace(f"{what} ", "", 1)) from None
+    return parse
 
 
 def run_render(a) -> int:
@@ -231,7 +238,7 @@ def run_render(a) -> int:
         threshold_on=a.threshold_on, threshold_off=a.threshold_off, linlog_threshold=a.linlog_threshold,
         output=a.output, progress=not a.quiet, preset=a.preset, pixel=pixel_overrides(a.pixel), extra_meta=extra,
         event_buffer_mb=a.event_buffer_mb, checkpoint_s=a.checkpoint_every, resume=a.resume,
-        spp_changing=a.spp_changing, reuse=not a.no_reuse)
+        spp_changing=a.spp_changing, reuse=not a.no_reuse, warmup=a.warmup)
     print(summary.format())
     if a.preview:                # every format reads back (a .txt file too: it was skipped without a word)
         _render_preview(a)

@@ -22,6 +22,7 @@ from ..scene.timed import load_scene
 from ..validate import DEFAULT_SPP, available_memory, flag, instance
 from .periodic import period_blocks, phase_grid, reuse_plan
 from .pixel_setup import event_integrator
+from .warmup import note_settling, warmup_seconds, warmup_steps
 from . import sample_allocation, static_pixels, step_batch
 from .frames import FrameRenderer, frozen_render, render_frames  # noqa: F401  (render_frames: re-exported)
 from .accuracy_limit import AccuracyLimit
@@ -70,9 +71,10 @@ class _Loop:
     integrator, orders and reads out the step's events and hands them to the sink."""
 
     def __init__(self, timed, integ, st: Stepping, sink, summary, bar, reuse: bool, checkpoints=None,
-                 allocation=None, noise=None, frozen=None):
+                 allocation=None, noise=None, frozen=None, warmup: float = 0.0):
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
         self.checkpoints, self.allocation = checkpoints, allocation
+        self.warmup = warmup                              # seconds rendered before the kept start (warmup.py)
         sigma, first = noise if noise is not None else (None, None)   # stepping.default_steps' probe
         self.limit = AccuracyLimit.for_stepping(st, sigma)   # what limits timing accuracy: steps or noise
         if allocation is not None:                       # noise where it counts: in the pixels that change
@@ -253,6 +255,7 @@ class _Loop:
         summary, integ = self.summary, self.integ
         summary.steps = steps
         self.limit.note(summary)
+        note_settling(summary, integ.config, self.timed, self.st.t_start, self.warmup)
         if self.static is not None:
             summary.static_pixels = self.static.note(min(integ.threshold_on, integ.threshold_off), summary.notes)
         if self.allocation is not None and integ.k_on is not None:
@@ -319,7 +322,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
                   progress: bool = False, t_start: float = 0.0, reuse: bool = True, preset: str | None = None,
                   pixel: dict | None = None, extra_meta: dict | None = None,
                   event_buffer_mb: float = DEFAULT_EVENT_BUFFER_MB, checkpoint_s: float | None = None,
-                  resume: bool = False, px_per_step: float = 1.0, spp_changing: int | None = None, on_device=False):
+                  resume: bool = False, px_per_step: float = 1.0, spp_changing: int | None = None, on_device=False,
+                  warmup: float = 0.0):
     """Render the event stream of ``scene`` over [t_start, t_start + duration] seconds.
 
     Returns an :class:`EventStream` when ``output`` is None (``on_device``: a :class:`DeviceEventStream`, the
@@ -338,7 +342,8 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     ``checkpoint_s``: save the render's state every so many wall seconds (HDF5 output), so that an
     interrupted render goes on with ``resume=True`` to the events of an uninterrupted one (``checkpoint.py``).
     ``spp_changing``: samples where they matter: pixels whose brightness changes (found by probe renders) get
-    this many samples per step, the others ``spp`` (``sample_allocation.py``).
+    this many samples per step, the others ``spp`` (``sample_allocation.py``). ``warmup``: seconds rendered
+    before ``t_start`` whose events are dropped: a pixel that has been running (``warmup.py``).
     """
     check_on_device(on_device, output)
     reuse, extra_meta = flag(reuse, "render_events: reuse"), instance(extra_meta or {}, dict, "extra_meta")
@@ -350,20 +355,36 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     if output is not None:                          # "" refused, not taken for "in memory"
         check_writable(output, "event file")
         format_of(output, fmt, t_first_s=st.t_start)
+    warm = warmup_seconds(warmup, on_device)
+    start, span = st.t_start, st.duration          # the caller's: recorded, and where events are kept from
+    if warm:
+        st = stepping(timed, span + warm, warmup_steps(steps, span, warm), adaptive, max_log_change, min_step,
+                      max_step, spp, seed, seed_mode, start - warm, px_per_step)
     integ = event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel, st.seed)
     st, noise, allocation, frozen = _steps_and_samples(timed, st, integ, spp_changing)
     summary = _new_summary(timed, st, output)
-    meta = run_metadata(timed, integ, duration=st.duration, t_start=st.t_start, spp=st.spp, seed=st.seed,
-                     seed_mode=st.seed_mode, stepping=st.as_meta(),
-                     sample_allocation=allocation.as_meta() if allocation else None)
+    summary.duration_s = span                      # (rates over the events kept)
+    meta = run_metadata(timed, integ, duration=span, t_start=start, spp=st.spp, seed=st.seed,
+                        seed_mode=st.seed_mode, stepping=st.as_meta(),
+                        sample_allocation=allocation.as_meta() if allocation else None)
+    if warm:
+        meta["warmup_s"] = warm
     meta.update(extra_meta or {})
     checkpoints = checkpoints_for(output, fmt, meta, checkpoint_s, resume)
     sink = Sink(output, fmt, width, height, meta, count=summary.count, buffer_mb=event_buffer_mb,
-                segments=checkpoints.segments if checkpoints else None, on_device=on_device)
+                segments=checkpoints.segments if checkpoints else None, on_device=on_device,
+                emit_from_us=int(round(start * 1e6)) if warm else None)
     bar = _progress_bar(st.duration) if progress else None
+    return _run(lambda: _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation, noise, frozen,
+                              warm), sink, checkpoints, bar, meta, output)
+
+
+def _run(make_loop, sink, checkpoints, bar, meta: dict, output):
+    """The loop made and run to its end: the stream (in memory, on the device, or a format written at the
+    end: RAW, DAT) or, written to ``output``, the summary; on any failure the sink and checkpoints abandoned."""
     wall0 = time.perf_counter()
     try:
-        loop = _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation, noise, frozen)
+        loop = make_loop()
         stream = loop.finish(loop.run(), meta, wall0)
     except BaseException:
         sink.abort()
@@ -373,6 +394,6 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     finally:
         if bar is not None:
             bar.close()
-    if stream is not None:           # in memory, on the device, or a format written at the end (RAW, DAT)
-        stream.meta = {**meta, "render": summary.as_dict()}
-    return stream if output is None else summary
+    if stream is not None:
+        stream.meta = {**meta, "render": loop.summary.as_dict()}
+    return stream if output is None else loop.summary
