@@ -31,7 +31,7 @@ from .device_stream import check_on_device
 from .image_motion import note_image_motion
 from .stepping import SEED_MODES, Stepping, default_steps, step_seed, stepping  # noqa: F401  (SEED_MODES: re-exported)
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
-from .summary import RenderSummary, run_metadata
+from .summary import RenderSummary, pixel_counters, run_metadata
 
 mi, dr = backend.mi, backend.dr
 
@@ -75,6 +75,7 @@ class _Loop:
         self.timed, self.integ, self.st, self.sink, self.summary, self.bar = timed, integ, st, sink, summary, bar
         self.checkpoints, self.allocation = checkpoints, allocation
         self.warmup = warmup                              # seconds rendered before the kept start (warmup.py)
+        self.counters_before = None if warmup else (0, 0, 0)   # the pixel counters once the warm-up is over
         sigma, first = noise if noise is not None else (None, None)   # stepping.default_steps' probe
         self.limit = AccuracyLimit.for_stepping(st, sigma)   # what limits timing accuracy: steps or noise
         if allocation is not None:                       # noise where it counts: in the pixels that change
@@ -155,6 +156,8 @@ class _Loop:
         c_min = min(integ.threshold_on, integ.threshold_off)
         while t < t_end - 1e-12:
             raise_if_stopped()                           # a Ctrl-C a library swallowed (errors.STOP_SIGNALS)
+            if self.counters_before is None and t >= st.t_start + self.warmup - 1e-12:
+                self._warmed_up()
             if self.checkpoints is not None and self.checkpoints.due():
                 if self.batch is not None:
                     self.batch.flush()                   # the saved pixel state is that of every step so far
@@ -183,6 +186,12 @@ class _Loop:
         if self.batch is not None:
             self.batch.flush()
         return k
+
+    def _warmed_up(self) -> None:
+        """The pixel counters where the warm-up ends (to the step), so that the summary's are the kept span's."""
+        if self.batch is not None:
+            self.batch.flush()
+        self.counters_before = pixel_counters(self.integ)
 
     def _next_dt(self, rate, dt, c_min):
         """Adaptive stepping: the step that keeps the largest change near max_log_change x C at this rate."""
@@ -271,7 +280,7 @@ class _Loop:
         tw = time.perf_counter()
         self.sink.drain()
         summary.write_s += time.perf_counter() - tw
-        summary.take_pixel_counters(integ)
+        summary.take_pixel_counters(integ, self.counters_before or (0, 0, 0))
         self.sink.report(summary)
         meta["render"] = summary.as_dict()
         tw = time.perf_counter()

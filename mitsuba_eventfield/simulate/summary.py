@@ -14,6 +14,11 @@ from .._version import __version__
 from ..scene.timed import TimedScene
 
 
+def pixel_counters(integ) -> tuple:
+    """(readout drops, refractory drops, noise events) the integrator has counted so far."""
+    return integ.readout_dropped(), integ.refractory_dropped, integ.noise_events
+
+
 @dataclass
 class RenderSummary:
     """What a render did: counts, timings split by stage, and where the events went."""
@@ -59,12 +64,12 @@ class RenderSummary:
         self.on += n_on
         self.off += n - n_on
 
-    def take_pixel_counters(self, integ) -> None:
-        """The pixel model's drop and noise counters from the integrator, and the readout cap's note: a render
-        and a conversion both, after the sink's drain (its events are counted by then); the converter used to
-        record 0 for each."""
-        self.dropped_readout, self.dropped_refractory = integ.readout_dropped(), integ.refractory_dropped
-        self.noise_events = integ.noise_events
+    def take_pixel_counters(self, integ, before=(0, 0, 0)) -> None:
+        """The pixel model's drop and noise counters from the integrator, less ``before`` (``pixel_counters``
+        at a warm-up's end), and the readout cap's note: a render and a conversion both, after the sink's drain
+        (its events are counted by then); the converter used to record 0 for each."""
+        now = pixel_counters(integ)
+        self.dropped_readout, self.dropped_refractory, self.noise_events = (a - b for a, b in zip(now, before))
         if self.dropped_readout:
             total = self.events + self.dropped_readout
             self.notes.append(f"readout cap dropped {self.dropped_readout} of {total} events "

@@ -33,6 +33,16 @@ def test_a_warm_up_is_the_earlier_start_cut_at_the_start(tmp_path):
     assert summary.events == len(cut) and ef.read_events(str(tmp_path / "w.h5")).equals(warm)
 
 
+def test_the_pixel_counters_are_the_kept_spans():
+    """Shot noise at a steady rate: the summary's noise events of 4 ms kept after a 2 ms warm-up are 4/6 of those
+    of the 6 ms rendered (measured 0.67), not all of them: the counters are read again where the warm-up ends."""
+    timed = ef.load_scene(FAN, width=48, height=36)
+    pixel = {"shot_noise_hz": 500.0, "seed": 1}
+    warm = ef.render_events(timed, 0.004, steps=20, warmup=0.002, pixel=pixel).meta["render"]["noise_events"]
+    early = ef.render_events(timed, 0.006, steps=30, t_start=-0.002, pixel=pixel).meta["render"]["noise_events"]
+    assert early > 2000 and warm / early == pytest.approx(4 / 6, abs=0.04), (warm, early)
+
+
 def test_a_running_lowpass_fires_as_many_on_as_off_events():
     """davis346's low-pass (cutoff proportional to brightness: slow on the dark side of each edge) started
     settled on the first frame drifts for a few hundred ms under the scan, firing ON events: the render says
