@@ -31,7 +31,8 @@ def add_parsers(sub) -> None:
     p.add_argument("-o", "--output", required=True, help="PNG path")
     p.add_argument("--t0", type=num(), help="window start, ms (default: first event; may be negative)")
     p.add_argument("--t1", type=num(), help="window end, ms (default: last event)")
-    p.add_argument("--scale", type=num(1, 64, integer=True), default=1, help="integer upscaling of the image")
+    p.add_argument("--scale", type=num(1, 64, integer=True),
+                   help="integer upscaling of the image (default: a small sensor's to about 400 px)")
     f = sub.add_parser("frame", help="render frames (linear radiance) of a scene at given times: EXR + PNG")
     f.add_argument("scene")
     f.add_argument("-o", "--output", required=True, help="EXR path (PNG alongside); several times: _0000 suffixes")
@@ -252,7 +253,7 @@ def _render_preview(a) -> None:
     # (a .txt file keeps no t_start_us: its duration alone ended the window one first-event time early)
     end = max(ev.start_us + ev.duration_us, int(ev.t[-1]) if len(ev) else 0)
     t0 = max(ev.start_us, end - int(round(a.preview_window * 1e3)))
-    write_preview(a.preview, ev, t0, end + 1, scale=2 if max(ev.width, ev.height) < 400 else 1)
+    write_preview(a.preview, ev, t0, end + 1)
     print(f"wrote {os.path.abspath(a.preview)} (events of {(end - t0) / 1e3:g} ms up to the end)")
 
 

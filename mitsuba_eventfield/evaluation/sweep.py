@@ -186,7 +186,7 @@ def sweep(scene: str, over: dict, base: dict | None = None, out_dir: str | None 
     if both:                     # over's values replaced base's without a word
         raise EventFieldError(f"sweep: {', '.join(both)} in both over and base: sweep it or fix it, not both")
     points = [{k: plain(v) for k, v in dict(base or {}, **p).items()} for p in grid(over)]
-    check_names(points[0])
+    check_names(points[0], scene)
     for point in points:          # every point's pixel values too (a bad one failed in a worker, after spawning)
         check_pixel(point)
     inputs = inputs_digest(scene)
@@ -303,17 +303,26 @@ def check_pixel(point: dict) -> None:
         pixel_model.pixel_config(preset or "ideal", where, **overrides)
 
 
-def check_names(point: dict) -> None:
+def check_names(point: dict, scene: str | None = None) -> None:
     """Refuse, before any worker starts, parameter names that cannot reach their target: an ``xml.`` name
-    that is one of load_scene's own arguments, a ``render.`` name render_events does not take or the sweep
-    sets itself."""
+    that is one of load_scene's own arguments or that the scene file does not declare (a typo failed in every
+    worker, after spawning), a ``render.`` name render_events does not take or the sweep sets itself."""
     import inspect
+
+    from ..scene.timed import declared_defaults
     takes = set(inspect.signature(render_events).parameters) - set(RESERVED_RENDER)
+    declared = None
+    if scene is not None and os.path.isfile(scene):
+        with open(scene, encoding="utf-8", errors="replace") as f:
+            declared = declared_defaults(f.read())
     for name in point:
         kind, _, arg = name.partition(".")
         if kind == "xml" and arg in RESERVED_XML:
             raise EventFieldError(f"sweep parameter {name!r}: {arg!r} is an argument of load_scene, not a scene "
                                   f"default; xml.* names may not be {', '.join(RESERVED_XML)}")
+        if kind == "xml" and declared is not None and arg not in declared:
+            raise EventFieldError(f"sweep parameter {name!r}: {scene} declares no <default name={arg!r}>; its "
+                                  f"defaults are {', '.join(declared) or 'none'}")
         if kind == "render" and arg not in takes:
             raise EventFieldError(f"sweep parameter {name!r}: render_events takes no {arg!r} here; allowed: "
                                   f"{', '.join(sorted(takes))}")

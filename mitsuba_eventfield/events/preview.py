@@ -48,12 +48,23 @@ def event_frame_rgb(events: EventStream, t0_us=None, t1_us=None, saturation: int
     return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
-def write_preview(path: str, events: EventStream, t0_us=None, t1_us=None, scale: int = 1) -> str:
+PREVIEW_MIN_SIDE = 400      # px: a smaller sensor's preview is enlarged by a whole factor (96x72 was unreadable)
+
+
+def auto_scale(width: int, height: int) -> int:
+    """The whole factor (up to 8) that brings a ``width`` x ``height`` preview to ``PREVIEW_MIN_SIDE`` pixels
+    along its longer side, each event pixel a block."""
+    return int(min(8, max(1, -(-PREVIEW_MIN_SIDE // max(width, height, 1)))))
+
+
+def write_preview(path: str, events: EventStream, t0_us=None, t1_us=None, scale: int | None = None) -> str:
+    """A PNG of the events in [t0_us, t1_us) (ON red, OFF blue), enlarged ``scale`` times (None:
+    ``auto_scale``)."""
     import cv2
     path = file_path(path, "write_preview: path")
     if not path.lower().endswith(".png"):
         raise EventFieldError(f"{path}: preview must be a .png file")
-    scale = number(scale, "scale", 1, 64, integer=True)
+    scale = auto_scale(events.width, events.height) if scale is None else number(scale, "scale", 1, 64, integer=True)
     _check_window(events, t0_us, t1_us, "write_preview")
     if window_outside(events, t0_us, t1_us):
         raise EventFieldError(f"{path}: the window t0_us = {t0_us!r}, t1_us = {t1_us!r} is outside the stream, which "

@@ -322,13 +322,19 @@ def _load_error(e: Exception, path: str, original: str, loaded: str | None, xml_
     return message
 
 
+def declared_defaults(text: str) -> list:
+    """The names of a scene XML's ``<default name=...>`` values (those ``-D`` and ``xml.*`` may set)."""
+    import re
+    return re.findall(r"<default\s[^>]*?name=[\"']([^\"']+)[\"']", text)
+
+
 def _unused_defines(e: Exception, text: str, xml_params: dict) -> str | None:
     """Mitsuba's "Found unused parameters: - $widht=96" as the -D names the scene does not declare and the ones
     it does (its ``<default name=...>`` values); None for any other error."""
     import re
     if "Found unused parameters" not in str(e):
         return None
-    declared = re.findall(r"<default\s[^>]*?name=[\"']([^\"']+)[\"']", text)
+    declared = declared_defaults(text)
     unknown = [k for k in xml_params if k not in declared]
     return (f"-D {', '.join(unknown) or ', '.join(xml_params)}: not a value the scene declares; its <default> values "
             f"are {', '.join(declared) or 'none'}")

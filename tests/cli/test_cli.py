@@ -30,6 +30,11 @@ def test_render_info_preview(tmp_path):
     p2 = tmp_path / "window.png"
     pv = run("preview", str(out), "-o", str(p2), "--t0", "2", "--t1", "4")
     assert pv.returncode == 0 and p2.stat().st_size > 0
+    import cv2          # a small sensor's previews enlarged by a whole factor to about 400 px (64 px: 7x)
+    assert cv2.imread(str(png)).shape[:2] == cv2.imread(str(p2)).shape[:2] == (336, 448)
+    p3 = tmp_path / "one.png"
+    assert run("preview", str(out), "-o", str(p3), "--scale", "1").returncode == 0
+    assert cv2.imread(str(p3)).shape[:2] == (48, 64)
 
 
 def _write(tmp_path, name, text):

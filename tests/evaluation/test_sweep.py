@@ -96,6 +96,10 @@ def test_bad_sweep_parameters():
         ef.sweep(GALVO, {"render.stepz": [8]})
     with pytest.raises(ef.EventFieldError, match="takes no 'output'"):
         ef.sweep(GALVO, {"render.output": ["x.h5"]})
+    # a typo in an xml.* name failed in every worker, after spawning them
+    with pytest.raises(ef.EventFieldError, match=r"'xml.frequncy'.*declares no <default name='frequncy'>; its "
+                                                 r"defaults are width, height, frequency, amplitude, phase$"):
+        ef.sweep(GALVO, {"xml.frequncy": [125, 250]})
 
 
 def test_a_sweep_refuses_what_it_would_run_twice_or_drop_and_names_a_failing_point(tmp_path):
