@@ -24,7 +24,9 @@ confident.
   of the pixels came out confident with a 67 % depth error. Evidence = the views' spread at a pixel (std of log
   over the views, averaged over the window) over the least spread the scan must give it (the window's log
   gradient x the RMS view displacement at the searched depth of least parallax / sqrt 2). It is 0 without
-  events and 1-4 with them; below ``MIN_EVIDENCE`` = 0.3 a pixel is not confident.
+  events and 1-4 with them; below ``MIN_EVIDENCE`` = 0.3 a pixel is not confident. (The near-end check below
+  now refuses such pixels too, but as lying nearer than the range: advice to search nearer for views without
+  parallax; this check names the cause: tests/lightfield/test_depth_without_parallax.py.)
 * **Too few events.** Views reconstructed from events change in steps of the threshold, one per event. Where
   the view sequence changes level fewer than ``MIN_CHANGES`` = 2 times per pixel (mean over the window), an
   edge is seen to pass but not where to: with the texture 3 thresholds deep (peak to peak) half the pixels
