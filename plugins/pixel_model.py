@@ -344,9 +344,15 @@ def _sensor_draws(seed, n_pix, threshold_on, threshold_off, sigma, leak_rate_hz,
     return out
 
 
+def lowpass_cutoff(xp, intensity, cutoff_hz, bright_intensity, min_fraction):
+    """The photoreceptor's cutoff at ``intensity`` (``xp``: drjit or numpy): proportional to it up to
+    ``bright_intensity``, never below ``min_fraction`` of ``cutoff_hz``."""
+    return cutoff_hz * xp.clip(intensity / bright_intensity, min_fraction, 1.0)
+
+
 def lowpass_alpha(dr, intensity, dt, cutoff_hz, bright_intensity, min_fraction):
-    """Blend factor of the photoreceptor's first-order low-pass over dt; cutoff proportional to intensity."""
-    f = cutoff_hz * dr.clip(intensity / bright_intensity, min_fraction, 1.0)
+    """Blend factor of the photoreceptor's first-order low-pass over dt (``lowpass_cutoff``)."""
+    f = lowpass_cutoff(dr, intensity, cutoff_hz, bright_intensity, min_fraction)
     return 1.0 - dr.exp(-2.0 * math.pi * f * dt)
 
 

@@ -129,7 +129,7 @@ def write_outputs(result: DemoResult, out_dir: str) -> dict:
     os.makedirs(out_dir, exist_ok=True)
     paths = {"events": write_events(os.path.join(out_dir, "events.h5"), result.events),
              "preview": os.path.join(out_dir, "preview.png"), "refocus": []}
-    write_preview(paths["preview"], result.events, *_preview_window(result.events), scale=2)
+    write_preview(paths["preview"], result.events, *_preview_window(result.events))
     for z, img in result.refocused.items():
         root = os.path.join(out_dir, f"refocus_{z:g}m")
         write_exr(root + ".exr", {"Y": img}, {"depth_m": z})

@@ -77,7 +77,7 @@ def _add_render(sub) -> None:
     r.add_argument("--seed", type=num(0, MAX_SEED, integer=True), default=0,
                    help="sampler seed, and the pixel model's (mismatch, noise) unless --pixel seed=N names another "
                         "(default 0)")
-    r.add_argument("--warmup", type=_time_arg("--warmup"), metavar="TIME", default=0.0,
+    r.add_argument("--warmup", type=_time_arg("--warmup", hi=10.0), metavar="TIME", default=0.0,
                    help="render this long before the start and drop its events (a time with a unit, e.g. 0.3s): a "
                         "pixel that has been running, its photoreceptor low-pass settled (the render says how long "
                         "one needs)")
@@ -205,8 +205,9 @@ def _auto_plan(a, motion, scene_defines):
     return {"auto_plan": plan.as_dict()}
 
 
-def _time_arg(what: str):
-    """argparse type of a time option (``what``): seconds from a time with a unit (one-line error otherwise)."""
+def _time_arg(what: str, hi: float = 1.0):
+    """argparse type of a time option (``what``): seconds from a time with a unit, up to ``hi`` (one-line error
+    otherwise)."""
     import argparse
 
     from ..errors import ConfigError
@@ -214,7 +215,7 @@ def _time_arg(what: str):
 
     def parse(text):
         try:
-            return parse_time(text, what)
+            return parse_time(text, what, hi)
         except ConfigError as e:
             raise argparse.ArgumentTypeError(str(e).replace(f"{what} ", "", 1)) from None
     return parse

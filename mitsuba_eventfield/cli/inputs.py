@@ -3,6 +3,8 @@ event file with its contrast thresholds and without its stuck pixels (``events.s
 galvo period's frames, and the optics of a recording that carries none."""
 from __future__ import annotations
 
+import numpy as np
+
 from ..errors import EventFieldError
 from ..events.stuck_pixels import nonempty, without_stuck_pixels
 from ..validate import MAX_THRESHOLD, number_list
@@ -101,6 +103,9 @@ def start_log(path, events):
     if path is None:
         return None
     img = events.crop_frame(luminance_channel(path), path)        # a frame of the whole sensor, cut as it was
+    bad = int(np.count_nonzero(~np.isfinite(img)))
+    if bad:                # (+inf became a level of +inf, and the frames' radiance inf)
+        raise EventFieldError(f"{path}: {bad} pixels are not finite (inf or NaN): a start frame holds radiance")
     return linlog_np(img, stream_linlog_threshold(events.meta))
 
 

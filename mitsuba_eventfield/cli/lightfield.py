@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import ConfigError, EventFieldError
 from ..focus.depth import DEFAULT_MEASURE
 from ..lightfield.reconstruct import MAX_CUTOFF_HZ
-from ..lightfield.model import clip_log_levels
+from ..lightfield.model import radiance_of_levels
 from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
@@ -327,6 +327,7 @@ def _method_arguments(a, ev, t_frame) -> dict:
 
 def run_reconstruct(a) -> int:
     from ..lightfield.reconstruct import reconstruct
+    from ..plugins.pixel_model import stream_linlog_threshold
     ev = read_input(a)
     if a.method == "galvo" or a.optics:       # the galvo solve reads the scan; other methods need no optics
         ev = give_optics(ev, a.file, a.optics, takes_calibration=False)
@@ -337,11 +338,13 @@ def run_reconstruct(a) -> int:
     except ValueError as e:
         raise EventFieldError(f"{a.file}: {e}") from None
     os.makedirs(a.output, exist_ok=True)
-    frames = clip_log_levels(frames, a.file)      # (exp beyond e^88.7 overflowed float32: +inf in the EXR)
-    for k, (t, log_img) in enumerate(zip(times, frames)):
-        linear = np.exp(log_img)
-        save_image(os.path.join(a.output, f"frame_{k:04d}.png"), linear,
-                   _out_meta(a, ev, method=a.method, time_s=float(t), domain="linear = exp(log intensity)"))
+    # radiance as the light fields take it: the pixel's lin-log response inverted, the levels clipped at +-40
+    # (exp beyond e^88.7 overflowed float32: +inf in the EXR)
+    linear = radiance_of_levels(frames, a.file, stream_linlog_threshold(ev.meta))
+    for k, t in enumerate(times):
+        save_image(os.path.join(a.output, f"frame_{k:04d}.png"), linear[k],
+                   _out_meta(a, ev, method=a.method, time_s=float(t),
+                             domain="linear: the pixel's lin-log response (log intensity above its knee) inverted"))
     print(f"wrote {len(times)} frame{'s' if len(times) != 1 else ''} ({a.method}) to {a.output}")
     return 0
 

@@ -309,20 +309,20 @@ def check_names(point: dict, scene: str | None = None) -> None:
     worker, after spawning), a ``render.`` name render_events does not take or the sweep sets itself."""
     import inspect
 
-    from ..scene.timed import declared_defaults
+    from ..scene.timed import settable_parameters
     takes = set(inspect.signature(render_events).parameters) - set(RESERVED_RENDER)
     declared = None
     if scene is not None and os.path.isfile(scene):
         with open(scene, encoding="utf-8", errors="replace") as f:
-            declared = declared_defaults(f.read())
+            declared = settable_parameters(f.read())
     for name in point:
         kind, _, arg = name.partition(".")
         if kind == "xml" and arg in RESERVED_XML:
             raise EventFieldError(f"sweep parameter {name!r}: {arg!r} is an argument of load_scene, not a scene "
                                   f"default; xml.* names may not be {', '.join(RESERVED_XML)}")
         if kind == "xml" and declared is not None and arg not in declared:
-            raise EventFieldError(f"sweep parameter {name!r}: {scene} declares no <default name={arg!r}>; its "
-                                  f"defaults are {', '.join(declared) or 'none'}")
+            raise EventFieldError(f"sweep parameter {name!r}: {scene} declares no <default name={arg!r}> and uses "
+                                  f"no ${arg}; it takes {', '.join(declared) or 'none'}")
         if kind == "render" and arg not in takes:
             raise EventFieldError(f"sweep parameter {name!r}: render_events takes no {arg!r} here; allowed: "
                                   f"{', '.join(sorted(takes))}")

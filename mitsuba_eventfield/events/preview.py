@@ -64,8 +64,10 @@ def write_preview(path: str, events: EventStream, t0_us=None, t1_us=None, scale:
     path = file_path(path, "write_preview: path")
     if not path.lower().endswith(".png"):
         raise EventFieldError(f"{path}: preview must be a .png file")
-    scale = auto_scale(events.width, events.height) if scale is None else number(scale, "scale", 1, 64, integer=True)
+    if scale is not None:
+        scale = number(scale, "scale", 1, 64, integer=True)
     _check_window(events, t0_us, t1_us, "write_preview")
+    scale = auto_scale(events.width, events.height) if scale is None else scale
     if window_outside(events, t0_us, t1_us):
         raise EventFieldError(f"{path}: the window t0_us = {t0_us!r}, t1_us = {t1_us!r} is outside the stream, which "
                               f"covers {events.start_us} to {events.start_us + int(events.duration_us)} us")

@@ -191,9 +191,11 @@ def _floats(values, name: str) -> np.ndarray:
         raise ConfigError(f"{name}: expected a numeric array, got {type(values).__name__}") from None
 
 
-def _exp(log_frames, name: str = "from_galvo: log_frames", linear_below: float | None = None):
+def radiance_of_levels(log_frames, name: str = "from_galvo: log_frames", linear_below: float | None = None):
     """Linear frames of log ones: ``exp``, or the pixel's lin-log inverse where the levels are lin-log
-    (``linear_below``: its knee; a reconstruction from events on a start frame through ``linlog_np``)."""
+    (``linear_below``: its knee; a reconstruction from events on a start frame through ``linlog_np``), the
+    levels clipped first (``clip_log_levels``). The one home of levels -> radiance: the light fields and
+    ``reconstruct``'s frames."""
     from ..plugins.pixel_model import linlog_inverse_np
     frames = clip_log_levels(_floats(log_frames, name), name)
     # (a level below the pixel's response to no light, e.g. after a noise OFF event, is no radiance: 0)
@@ -201,17 +203,18 @@ def _exp(log_frames, name: str = "from_galvo: log_frames", linear_below: float |
 
 
 def clip_log_levels(log_frames: np.ndarray, name: str) -> np.ndarray:
-    """``log_frames`` clipped to +-``MAX_LOG_LEVEL``, with a warning naming how many finite levels were beyond
-    (exponentiated, they overflowed float32 and every focus measure after them). Clipped, not refused: one
-    stuck pixel's runaway level should not cost the whole image; a wrong threshold shows in every pixel."""
-    beyond = int(np.count_nonzero(np.isfinite(log_frames) & (np.abs(log_frames) > MAX_LOG_LEVEL)))
+    """``log_frames`` clipped to +-``MAX_LOG_LEVEL`` (NaN stays NaN), with a warning naming how many finite
+    levels, or infinitely bright ones, were beyond (exponentiated, they overflowed float32 and every focus
+    measure after them). Clipped, not refused: one stuck pixel's runaway level should not cost the whole
+    image; a wrong threshold shows in every pixel. A level of -inf (no light, in plain log) is 0 either way."""
+    beyond = int(np.count_nonzero((np.isfinite(log_frames) & (np.abs(log_frames) > MAX_LOG_LEVEL))
+                                  | (log_frames == np.inf)))
     if beyond:
         warnings.warn(f"{name}: {beyond} of {log_frames.size} levels beyond a log level of +-{MAX_LOG_LEVEL:g} "
                       f"(a brightness ratio of {math.exp(MAX_LOG_LEVEL):.0e} either way, beyond any sensor: a "
                       "stuck pixel, or a contrast threshold larger than the events' own?): clipped there",
                       stacklevel=3)
-        return np.clip(log_frames, -MAX_LOG_LEVEL, MAX_LOG_LEVEL)
-    return log_frames
+    return np.clip(log_frames, -MAX_LOG_LEVEL, MAX_LOG_LEVEL)
 
 
 def galvo_geometry(optics: dict, width: int, height: int) -> GalvoGeometry:
@@ -230,7 +233,7 @@ def from_galvo(log_frames, times, optics: dict, meta: dict | None = None,
     at the scan position (optical angles) of its time. ``linear_below``: the frames are the lin-log levels of a
     pixel with this knee (``pixel_model.stream_linlog_threshold`` of the events they were reconstructed from),
     else plain log."""
-    frames, times = _exp(log_frames, linear_below=linear_below), array(times, "from_galvo: times", 1)
+    frames, times = radiance_of_levels(log_frames, linear_below=linear_below), array(times, "from_galvo: times", 1)
     if frames.ndim not in (3, 4) or len(times) != len(frames):
         raise ConfigError(f"from_galvo: log_frames of shape {frames.shape} and {len(times)} times: expected "
                           "(K, H, W) or (K, H, W, C) frames, one time per frame")
@@ -305,7 +308,7 @@ def from_spatial(log_or_linear_frame, optics: dict, time: float = 0.0, log: bool
     time = finite(time, "from_spatial: time")
     if levels not in LEVELS:
         raise ConfigError(f"from_spatial: levels = {levels!r}; allowed: {', '.join(LEVELS)}")
-    stack = extract_views(_exp(frame, "from_spatial: frame", linear_below) if log else frame, optics)
+    stack = extract_views(radiance_of_levels(frame, "from_spatial: frame", linear_below) if log else frame, optics)
     h, w = stack.images.shape[1:3]
     return LightField(stack.images, stack.positions, np.full(len(stack.images), time),
                       Disparity.for_spatial(optics, w, h), optics["design"],

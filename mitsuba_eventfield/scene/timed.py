@@ -294,7 +294,7 @@ def _film_override(path: str, xml_params: dict) -> dict:
         raise EventFieldError(f"{FILM_ENV} = {spec!r}: expected WIDTHxHEIGHT, each 8 to 8192 pixels")
     width, height = int(size[1]), int(size[2])
     with open(path) as f:
-        declared = set(re.findall(r'<default\s+name="(\w+)"', f.read()))
+        declared = set(declared_defaults(f.read()))
     out = dict(xml_params)
     if {"width", "height"} <= declared:
         out.update(width=width, height=height)
@@ -323,9 +323,17 @@ def _load_error(e: Exception, path: str, original: str, loaded: str | None, xml_
 
 
 def declared_defaults(text: str) -> list:
-    """The names of a scene XML's ``<default name=...>`` values (those ``-D`` and ``xml.*`` may set)."""
+    """The names of a scene XML's ``<default name=...>`` values."""
     import re
     return re.findall(r"<default\s[^>]*?name=[\"']([^\"']+)[\"']", text)
+
+
+def settable_parameters(text: str) -> list:
+    """What ``-D`` and a sweep's ``xml.*`` may set in a scene XML: its declared defaults, and any ``$name`` it
+    uses without one (Mitsuba substitutes those too, and refuses a load that leaves one unset)."""
+    import re
+    names = declared_defaults(text)
+    return names + [n for n in dict.fromkeys(re.findall(r"\$([A-Za-z_]\w*)", text)) if n not in names]
 
 
 def _unused_defines(e: Exception, text: str, xml_params: dict) -> str | None:

@@ -75,16 +75,17 @@ class Plan:
                 "sampler": self.sampler, "timing": self.timing, "reasons": dict(self.reasons)}
 
 
-def parse_time(text, what: str = "--timing-accuracy") -> float:
+def parse_time(text, what: str = "--timing-accuracy", hi: float = 1.0) -> float:
     """Seconds from a time with a unit: ``20us``, ``0.5 ms``, ``1e-5s`` (units s, ms, us or µs, ns), from 1 us (event
-    timestamps are whole microseconds) to 1 s."""
+    timestamps are whole microseconds) to ``hi`` s."""
     m = re.fullmatch(r"\s*([0-9.eE+-]+)\s*(s|ms|us|µs|ns)\s*", str(text))
     try:
         value = float(m[1]) * TIME_UNITS[m[2]] if m else math.nan
     except ValueError:
         value = math.nan
-    if not (math.isfinite(value) and 1e-6 <= value <= 1.0):        # timestamps are whole microseconds
-        raise ConfigError(f"{what} {text!r}: expected a time from 1us to 1s with a unit, e.g. 20us, 0.5ms, 1e-5s")
+    if not (math.isfinite(value) and 1e-6 <= value <= hi):         # timestamps are whole microseconds
+        raise ConfigError(f"{what} {text!r}: expected a time from 1us to {hi:g}s with a unit, e.g. 20us, 0.5ms, "
+                          "1e-5s")
     return value
 
 

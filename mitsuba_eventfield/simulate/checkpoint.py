@@ -165,6 +165,8 @@ class Checkpoints:
         summary["timing_limit"] = (loop.limit.estimate() if loop.limit.active else None) or summary.get("timing_limit")
         record = {"number": number, "fingerprint": self.fingerprint, "command": self.command, "t": t, "k": k, "dt": dt,
                   "state": state_file, "segments": writer.segments, "summary": summary,
+                  # the pixel counters where a warm-up ended (None: not yet), subtracted at the end
+                  "counters_before": None if loop.counters_before is None else [int(v) for v in loop.counters_before],
                   "saved_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
         tmp = os.path.join(self.folder, "checkpoint.json.tmp")
         with open(tmp, "w") as f:
@@ -187,6 +189,8 @@ class Checkpoints:
         loop.summary.notes.append(f"resumed from checkpoint {s['number'] + 1} (step {s['k']}, "
                                   f"t = {s['t'] * 1e3:.6g} ms, saved {s['saved_utc']}): the stage times add both "
                                   "processes' work, the wall time is this process's")
+        before = s.get("counters_before")
+        loop.counters_before = None if before is None else tuple(before)
         return s["t"], s["k"], s["dt"]
 
 

@@ -22,7 +22,7 @@ from ..scene.timed import load_scene
 from ..validate import DEFAULT_SPP, available_memory, flag, instance
 from .periodic import period_blocks, phase_grid, reuse_plan
 from .pixel_setup import event_integrator
-from .warmup import note_settling, warmup_seconds, warmup_steps
+from .warmup import kept_stepping, note_settling, warmup_seconds, warmup_window
 from . import sample_allocation, static_pixels, step_batch
 from .frames import FrameRenderer, frozen_render, render_frames  # noqa: F401  (render_frames: re-exported)
 from .accuracy_limit import AccuracyLimit
@@ -364,17 +364,17 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
     if output is not None:                          # "" refused, not taken for "in memory"
         check_writable(output, "event file")
         format_of(output, fmt, t_first_s=st.t_start)
-    warm = warmup_seconds(warmup, on_device)
     start, span = st.t_start, st.duration          # the caller's: recorded, and where events are kept from
+    warm, all_steps = warmup_window(warmup_seconds(warmup, on_device), st.steps, span, timed.scan_period)
     if warm:
-        st = stepping(timed, span + warm, warmup_steps(steps, span, warm), adaptive, max_log_change, min_step,
-                      max_step, spp, seed, seed_mode, start - warm, px_per_step)
+        st = stepping(timed, span + warm, all_steps, adaptive, max_log_change, min_step, max_step, spp, seed,
+                      seed_mode, start - warm, px_per_step)
     integ = event_integrator(timed, threshold, threshold_on, threshold_off, linlog_threshold, preset, pixel, st.seed)
     st, noise, allocation, frozen = _steps_and_samples(timed, st, integ, spp_changing)
     summary = _new_summary(timed, st, output)
     summary.duration_s = span                      # (rates over the events kept)
     meta = run_metadata(timed, integ, duration=span, t_start=start, spp=st.spp, seed=st.seed,
-                        seed_mode=st.seed_mode, stepping=st.as_meta(),
+                        seed_mode=st.seed_mode, stepping=kept_stepping(st.as_meta(), st, warm),
                         sample_allocation=allocation.as_meta() if allocation else None)
     if warm:
         meta["warmup_s"] = warm

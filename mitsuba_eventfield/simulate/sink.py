@@ -155,21 +155,26 @@ class Sink:
             self.count(chunk.p)                  # the ON / OFF totals, counted on the device
             self.device_chunks.append(chunk)
 
-    def _after_warmup(self, x, y, t, p, borrowed: bool):
+    def _after_warmup(self, x, y, t, p, until, borrowed: bool):
         """The events at or after ``emit_from_us`` (a chunk is in time order), copied where cut (a borrowed
-        chunk's memory goes back to Dr.Jit once the writer has copied it); the cut ends once a chunk starts
-        there."""
-        if self.emit_from_us is None or not len(t):
-            return x, y, t, p, borrowed
+        chunk's memory goes back to Dr.Jit once the writer has copied it), and a promise of completeness
+        before the kept start dropped (an HDF5 file's millisecond index began at the warm-up); the cut ends
+        once a chunk starts there."""
+        if self.emit_from_us is None:
+            return x, y, t, p, until, borrowed
+        if until is not None and until < self.emit_from_us:
+            until = None
+        if not len(t):
+            return x, y, t, p, until, borrowed
         if t[0] >= self.emit_from_us:
             self.emit_from_us = None
-            return x, y, t, p, borrowed
+            return x, y, t, p, until, borrowed
         import numpy as np
         k = int(np.searchsorted(t, self.emit_from_us))
-        return (*(np.array(c[k:]) for c in (x, y, t, p)), False)
+        return (*(np.array(c[k:]) for c in (x, y, t, p)), until, False)
 
     def _add_host(self, x, y, t, p, complete_until_us, borrowed: bool = False, counted: bool = False):
-        x, y, t, p, borrowed = self._after_warmup(x, y, t, p, borrowed)
+        x, y, t, p, complete_until_us, borrowed = self._after_warmup(x, y, t, p, complete_until_us, borrowed)
         if not counted:
             self.count(p)
         if self.writer is not None:

@@ -34,11 +34,30 @@ def warmup_seconds(warmup, on_device: bool) -> float:
     return w
 
 
-def warmup_steps(steps, duration: float, warmup: float):
-    """Uniform ``steps`` for ``duration`` as many for the warm-up's span (the same step length), or None."""
-    if steps is None or not warmup:
-        return steps
-    return int(math.ceil(int(steps) * (duration + warmup) / duration - 1e-9))
+def warmup_window(warmup: float, steps, duration: float, scan_period: float | None) -> tuple:
+    """(the warm-up used, the steps of warm-up and render together) for a warm-up of at least ``warmup`` s:
+    whole steps of ``duration / steps`` when uniform steps are given, whole scan periods under a scan (the
+    default steps keep a phase grid), so that the kept start is a step's end and period reuse still holds (a
+    warm-up of 1.3 ms at 125 us a step made 124 us steps, which divide no scan period: every step rendered)."""
+    if not warmup:
+        return 0.0, steps
+    if steps is not None:
+        n = int(math.ceil(int(steps) * warmup / duration - 1e-9))
+        return n * duration / int(steps), int(steps) + n
+    if scan_period:
+        return math.ceil(warmup / scan_period - 1e-9) * scan_period, None
+    return warmup, None
+
+
+def kept_stepping(stepping_meta: dict, st, warmup: float) -> dict:
+    """A render's ``stepping`` metadata for the span it keeps: uniform steps counted without the warm-up's
+    (``warmup_steps`` beside them), so that duration / steps is still the step; otherwise the warm-up named."""
+    if not warmup:
+        return stepping_meta
+    if stepping_meta.get("mode") == "uniform":
+        n = int(round(warmup * st.steps / st.duration))
+        return dict(stepping_meta, steps=st.steps - n, warmup_steps=n)
+    return dict(stepping_meta, includes_warmup_s=warmup)
 
 
 def settle_time(config, intensity) -> float:
@@ -47,8 +66,9 @@ def settle_time(config, intensity) -> float:
     if not config.cutoff_hz:
         return 0.0
     dark = float(np.percentile(np.asarray(intensity, np.float64), SETTLE_PERCENTILE))
-    fraction = min(max(dark / config.bright_intensity, config.cutoff_min_fraction), 1.0)
-    return SETTLE_TIME_CONSTANTS / (2 * math.pi * config.cutoff_hz * fraction)
+    from ..plugins.pixel_model import lowpass_cutoff
+    f = float(lowpass_cutoff(np, dark, config.cutoff_hz, config.bright_intensity, config.cutoff_min_fraction))
+    return SETTLE_TIME_CONSTANTS / (2 * math.pi * f)
 
 
 def note_settling(summary, config, timed, t_start: float, warmup: float) -> None:

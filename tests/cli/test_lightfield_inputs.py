@@ -354,3 +354,31 @@ def test_a_galvo_recording_is_not_cropped(captures, capsys, tmp_path):
                       "--contrast", "0.2", "--crop", "0,0,40,30", "--times", "1", "-o", tmp_path / "rc"], capsys)
     assert code == 2 and "cut to the window 0,0,40,30 of its sensor" in err and not (tmp_path / "rc").exists()
     assert not (tmp_path / "rf.png").exists()
+
+
+def test_reconstructed_frames_are_radiance_as_the_light_fields_take_it(tmp_path, capfd):
+    """``reconstruct``'s EXR holds the radiance of its levels by the one rule the light fields use
+    (``lightfield.model.radiance_of_levels``): the pixel's lin-log response inverted, so a start frame's black
+    and 2e-4 pixels (below the 1e-3 knee) come back as themselves (plain exp made them 3.7e-4 and 4.5e-4); a
+    start frame that is not finite is refused in one line (+inf was written as inf)."""
+    from mitsuba_eventfield.images import write_exr
+    meta = {"t_start_us": 0, "duration_us": 1000,
+            "pixel_model": {"threshold_on": 0.2, "threshold_off": 0.2, "linlog_threshold": 1e-3}}
+    ef.write_events(str(tmp_path / "e.h5"), ef.EventStream([0], [0], [500], [1], 16, 12, meta))
+    img = np.full((12, 16), 0.5, np.float32)
+    img[:, :4], img[:, 4:8] = 0.0, 2e-4
+    write_exr(str(tmp_path / "start.exr"), {"Y": img})
+    assert cli(["reconstruct", str(tmp_path / "e.h5"), "--start-frame", str(tmp_path / "start.exr"), "--times", "1",
+                "-o", str(tmp_path / "out")]) == 0
+    y = read_exr(str(tmp_path / "out" / "frame_0000.exr"))[0]["Y"]
+    assert np.allclose(y[1:], img[1:], rtol=1e-5, atol=1e-9)                # every pixel the event left alone
+    # the black pixel's one ON event: 0.2 up the linear branch (slope 1 / knee) from ln(knee) - 1, so 2e-4
+    assert y[0, 0] == pytest.approx(2e-4, rel=1e-4)
+    img[0, 15] = np.inf
+    write_exr(str(tmp_path / "inf.exr"), {"Y": img})
+    capfd.readouterr()
+    assert cli(["reconstruct", str(tmp_path / "e.h5"), "--start-frame", str(tmp_path / "inf.exr"), "--times", "1",
+                "-o", str(tmp_path / "out2")]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "inf.exr: 1 pixels are not finite (inf or NaN)" in err[0], err
+    assert not os.path.exists(tmp_path / "out2")

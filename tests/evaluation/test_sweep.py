@@ -82,7 +82,7 @@ def test_resume_renders_again_when_the_scene_or_its_files_changed(tmp_path):
     assert not ef.sweep(scene, over, BASE, out_dir=out).rows[0]["resumed"]
 
 
-def test_bad_sweep_parameters():
+def test_bad_sweep_parameters(tmp_path):
     with pytest.raises(ef.EventFieldError, match="must start with one of xml., render., pixel."):
         ef.sweep(GALVO, {"frequency": [1, 2]})
     with pytest.raises(ef.EventFieldError, match="non-empty list"):
@@ -97,9 +97,14 @@ def test_bad_sweep_parameters():
     with pytest.raises(ef.EventFieldError, match="takes no 'output'"):
         ef.sweep(GALVO, {"render.output": ["x.h5"]})
     # a typo in an xml.* name failed in every worker, after spawning them
-    with pytest.raises(ef.EventFieldError, match=r"'xml.frequncy'.*declares no <default name='frequncy'>; its "
-                                                 r"defaults are width, height, frequency, amplitude, phase$"):
+    with pytest.raises(ef.EventFieldError, match=r"'xml.frequncy'.*declares no <default name='frequncy'> and "
+                                                 r"uses no \$frequncy; it takes width, height, frequency, "
+                                                 r"amplitude, phase$"):
         ef.sweep(GALVO, {"xml.frequncy": [125, 250]})
+    from mitsuba_eventfield.evaluation.sweep import check_names    # a $name without a <default> is settable
+    scene = tmp_path / "nodefault.xml"
+    scene.write_text('<scene version="3.0.0"><integer name="w" value="$w"/></scene>')
+    check_names({"xml.w": 16}, str(scene))
 
 
 def test_a_sweep_refuses_what_it_would_run_twice_or_drop_and_names_a_failing_point(tmp_path):

@@ -132,3 +132,16 @@ def test_a_recording_of_stuck_pixels_alone_is_refused_not_written_flat(tmp_path,
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].endswith("stuck.raw: no events once its stuck pixels are left out: nothing to reconstruct")
     assert not (tmp_path / "r").exists()
+
+
+def test_log_levels_are_clipped_with_a_count_of_those_beyond():
+    """``lightfield.model.clip_log_levels``: finite levels beyond +-40 and infinitely bright ones are clipped and
+    counted; -inf (no light in plain log) is clipped silently (its radiance is 0 either way); NaN stays NaN."""
+    from mitsuba_eventfield.lightfield.model import clip_log_levels
+    with pytest.warns(UserWarning, match=r"^x: 2 of 6 levels beyond a log level of \+-40"):
+        out = clip_log_levels(np.array([0.0, np.inf, 50.0, -np.inf, np.nan, -39.0]), "x")
+    assert out[[0, 1, 2, 3, 5]].tolist() == [0.0, 40.0, 40.0, -40.0, -39.0] and np.isnan(out[4])
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert clip_log_levels(np.array([-np.inf, 1.0]), "x").tolist() == [-40.0, 1.0]

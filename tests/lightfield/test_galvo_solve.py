@@ -67,6 +67,9 @@ def test_robust_weights_turn_down_the_moving_fan():
     # the last sample pairs with the period's end, not its start (which put 15 samples of blade motion into
     # one equation in 16: plain 0.444)
     assert e_plain < 0.40
+    # given lags past one sample keep only the pairs forward in time (wrapped ones spanned backwards: 0.390)
+    two, _ = galvo_solve.start_image(events, 0.0, depth=1.0, lags=(1, 2))
+    assert _log_error(two, truth, fan) < 0.375                     # measured 0.363
     assert 0.02 < np.mean(w < 1) < 0.5
 
 
@@ -148,6 +151,9 @@ def test_events_that_do_not_follow_their_scan_are_warned_about():
     kept = np.random.default_rng(1).random(n) < 0.05
     thinned = ef.EventStream(events.x[kept], events.y[kept], events.t[kept], events.p[kept], 64, 48, events.meta)
     assert 0.2 < scan_lock(thinned).lock < 0.9 and scan_lock(thinned).locked
+    sparse = np.random.default_rng(2).random(n) < 0.002            # a few events a window: no verdict, no warning
+    few = ef.EventStream(events.x[sparse], events.y[sparse], events.t[sparse], events.p[sparse], 64, 48, events.meta)
+    assert scan_lock(few) is None
     for stream in (events, thinned):
         with warnings.catch_warnings():
             warnings.simplefilter("error", ScanLockWarning)

@@ -54,8 +54,12 @@ def _interrupt_at(monkeypatch, step):
     (DEMO, dict(duration=0.01, steps=20, preset="davis346", pixel={"shot_noise_hz": 200.0, "readout_cap": 1.5e6})),
     # starting 12.5 ms in: the resumed file's segments keep the render's millisecond offset (/t_offset)
     (DEMO, dict(duration=0.01, steps=20, t_start=0.0125)),
+    # a warm-up (4 of its 24 steps): interrupted after it, the counters read where it ended survive the resume
+    (DEMO, dict(duration=0.01, steps=20, warmup=0.002, pixel={"shot_noise_hz": 200.0})),
+    # interrupted during the warm-up (32 of 96 steps), a galvo's reused period and copies after it
+    (GALVO, dict(duration=0.008, steps=64, warmup=0.004, preset="davis346")),
 ], ids=["uniform-ideal", "adaptive-davis346-noise", "adaptive-motion", "galvo-reuse", "default-steps",
-        "uniform-davis346-batched", "late-start"])
+        "uniform-davis346-batched", "late-start", "warmup-noise", "warmup-galvo-davis346"])
 def test_interrupted_render_resumes_to_the_uninterrupted_file(tmp_path, monkeypatch, capsys, scene, kw):
     timed = ef.load_scene(scene, width=48, height=36)
     ref, out = str(tmp_path / "ref.h5"), str(tmp_path / "out.h5")
@@ -74,6 +78,8 @@ def test_interrupted_render_resumes_to_the_uninterrupted_file(tmp_path, monkeypa
     # the timing-accuracy estimate of the first steps survives the resume (it was lost with them), note and all
     ra, rb = (ef.read_events(p).meta["render"] for p in (ref, out))
     assert ra["timing_limit"] == rb["timing_limit"]
+    counters = ("noise_events", "dropped_readout", "dropped_refractory", "events", "on")
+    assert [ra[c] for c in counters] == [rb[c] for c in counters]
     assert [n for n in ra["notes"] if "timing accuracy" in n] == [n for n in rb["notes"] if "timing accuracy" in n]
 
 
