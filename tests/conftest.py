@@ -34,6 +34,12 @@ def needs(module: str, extra: str):
 def pytest_configure(config):
     config.addinivalue_line("markers", "needs(module, extra): the test needs an optional dependency; skipped "
                             "with the reason where it is absent (failed under CI): see needs()")
+    # a shell's background job (`./run tests &`, `bash -c '...' &`) starts with Ctrl-C ignored, and Python then
+    # keeps it ignored, in this process and in every process it starts: the tests of what a Ctrl-C does saw
+    # nothing happen (a second Ctrl-C during a galvo's ramp-down, a sweep's cancelled queue)
+    import signal
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_runtest_setup(item):
