@@ -90,19 +90,12 @@ def calibrated_lightfield(events, calibration, *, where: str = "the events", nea
     from mitsuba_eventfield.focus.galvo_periods import default_depth_range
     from mitsuba_eventfield.lightfield.streams import PERIODS, default_method, from_events
 
-    from .nominal import check_crop
-    from .optics import check_optics, optics_record
-    from .store import apply_to_lightfield, calibrated_events
+    from .store import apply_to_lightfield
     if not isinstance(events, EventStream):
         raise ConfigError(f"calibrated_lightfield: events: expected an EventStream (ef.read_events, then "
                           f"with_optics for a recording), got {type(events).__name__}")
     loaded = None if calibration is None else _loaded(calibration, "calibrated_lightfield: calibration")
-    placed, record = events, None
-    if loaded is not None:
-        record = optics_record(events.meta.get("optics", {}), events.width, events.height, where=where)
-        check_optics(loaded, record)
-        check_crop(loaded, events, where, getattr(loaded, "path", "calibration"))
-        placed = calibrated_events(events, loaded, record)
+    placed, record = (events, None) if loaded is None else calibrated_stream(events, loaded, where)[:2]
     optics = placed.meta.get("optics") or {}
     method = from_events_kw.get("method") or default_method(optics.get("design"),
                                                             from_events_kw.get("log_start") is not None)
@@ -115,6 +108,22 @@ def calibrated_lightfield(events, calibration, *, where: str = "the events", nea
         return apply_to_lightfield(lf, loaded, record)
     except ConfigError as e:                             # a calibration's own refusal names no file
         raise EventFieldError(f"{getattr(loaded, 'path', 'calibration')}: {e}") from None
+
+
+def calibrated_stream(events, calibration, where: str = "the events") -> tuple:
+    """(``events`` with a galvo calibration's phase and depth model in its optics, the stream's optics record,
+    the parts so applied): a calibration made for other optics, or another window of the sensor, is refused
+    first. The one place where a calibration reaches a stream (``calibrated_lightfield``; ``reconstruct``'s
+    galvo solve)."""
+    from .nominal import check_crop
+    from .optics import check_optics, optics_record
+    from .store import calibrated_events
+    loaded = _loaded(calibration, "calibration")
+    record = optics_record(events.meta.get("optics", {}), events.width, events.height, where=where)
+    kinds = check_optics(loaded, record)
+    check_crop(loaded, events, where, getattr(loaded, "path", "calibration"))
+    applied = sorted(set(kinds) & {"galvo", "depth"}) if record.get("design") == "galvo" else []
+    return calibrated_events(events, loaded, record), record, applied
 
 
 def _loaded(calibration, name: str):

@@ -134,6 +134,24 @@ def galvo_frames(ev, period, views, start_frame_log=None):
     return reconstruct(ev, times, method, **kw), times, curve
 
 
+def reconstruct_optics(a, ev) -> tuple:
+    """``reconstruct``'s stream with the optics its method reads, and the calibration parts applied (None: no
+    calibration): ``--method galvo`` the scan (``--optics``) or a calibration's view phase and depth model,
+    which enter its solve (``calibration.recording.calibrated_stream``); the other methods read none."""
+    if a.calibration:
+        from ..calibration import load_calibration
+        from ..calibration.recording import calibrated_stream
+        if a.method != "galvo":
+            raise EventFieldError(f"--calibration {a.calibration}: for --method galvo (its view phase and depth "
+                                  f"model enter the solve); --method {a.method} reads no optics")
+        calibration = load_calibration(a.calibration)
+        ev, _, applied = calibrated_stream(give_optics(ev, a.file, a.optics, calibration), calibration, a.file)
+        return ev, applied
+    if a.method == "galvo" or a.optics:
+        ev = give_optics(ev, a.file, a.optics, takes_calibration=False)
+    return ev, None
+
+
 def give_optics(ev, where: str, optics_file: str | None, calibration=None, design: str | None = None,
                 takes_calibration: bool = True):
     """``ev`` with the optics of a recording that carries none (``calibration.recording.with_optics``, as

@@ -18,7 +18,7 @@ from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import num, save_image, times_ms
-from .inputs import CROP_HELP, give_optics, read_input, start_log
+from .inputs import CROP_HELP, give_optics, read_input, reconstruct_optics, start_log
 
 
 CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a recording that carries none "
@@ -67,6 +67,9 @@ def add_parsers(sub) -> None:
                          "default: the stream's start); the events up to it are in the frame, frames come after it")
     rc.add_argument("--contrast", help=CONTRAST_HELP)
     rc.add_argument("--optics", help=OPTICS_HELP + " (--method galvo)")
+    rc.add_argument("--calibration", help="calibration JSON (eventfield calibrate) for --method galvo: the galvo's "
+                                          "view phase and depth model, in the solve; a recording without optics "
+                                          "takes its optics from it")
     rc.add_argument("--crop", metavar="X,Y,W,H", help=CROP_HELP)
     rc.add_argument("--cutoff", type=num(0, MAX_CUTOFF_HZ, lo_open=True),
                     help="filter cutoff in Hz (highpass, complementary; default 5)")
@@ -329,8 +332,7 @@ def run_reconstruct(a) -> int:
     from ..lightfield.reconstruct import reconstruct
     from ..plugins.pixel_model import stream_linlog_threshold
     ev = read_input(a)
-    if a.method == "galvo" or a.optics:       # the galvo solve reads the scan; other methods need no optics
-        ev = give_optics(ev, a.file, a.optics, takes_calibration=False)
+    ev, applied = reconstruct_optics(a, ev)
     t_frame = _start_time(a, ev)
     times = _reconstruct_times(a, ev, t_frame)
     try:
@@ -344,8 +346,11 @@ def run_reconstruct(a) -> int:
     for k, t in enumerate(times):
         save_image(os.path.join(a.output, f"frame_{k:04d}.png"), linear[k],
                    _out_meta(a, ev, method=a.method, time_s=float(t),
-                             domain="linear: the pixel's lin-log response (log intensity above its knee) inverted"))
-    print(f"wrote {len(times)} frame{'s' if len(times) != 1 else ''} ({a.method}) to {a.output}")
+                             domain="linear: the pixel's lin-log response (log intensity above its knee) inverted",
+                             **({"calibration": {"file": os.path.abspath(a.calibration), "applied": applied}}
+                                if applied is not None else {})))
+    said = f"; calibration applied: {', '.join(applied)}" if applied else ""
+    print(f"wrote {len(times)} frame{'s' if len(times) != 1 else ''} ({a.method}) to {a.output}{said}")
     return 0
 
 

@@ -204,3 +204,35 @@ def test_a_recordings_thresholds_reach_the_default_solver(cards):
     lf = ef.lightfield.from_events(recording, views=16, c_on=0.1, c_off=0.1)          # the render's threshold
     reference = ef.lightfield.from_events(events, views=16)
     assert lf.meta.get("inputs") == "events only" and np.allclose(lf.views, reference.views, rtol=1e-5, atol=1e-6)
+
+
+def test_reconstruct_solves_a_recording_with_its_galvo_calibration(cards, capsys):
+    """``reconstruct --method galvo --calibration``: a camera recording of the lagging rig (no optics) takes its
+    optics and the measured lag from the calibration, and its frames equal those of the true metadata (to
+    float32 rounding); the commanded phase (the lagging metadata, no calibration) gives other frames. Another
+    method with a calibration is refused in one line (it reads no optics)."""
+    from mitsuba_eventfield.images import read_exr
+    events, _, tmp = cards
+    recording, record, galvo = _lagging(events, LAG_S)
+    save_calibration(str(tmp / "rc_cal.json"), record, galvo=galvo)
+    bare = ef.EventStream(events.x, events.y, events.t, events.p, W, H, {"t_start_us": events.start_us})
+    ef.write_events(str(tmp / "bare.h5"), bare)
+    ef.write_events(str(tmp / "true_rc.h5"), events)
+    ef.write_events(str(tmp / "lagging_rc.h5"), recording)
+    common = ["--method", "galvo", "--times", "2"]
+    assert cli(["reconstruct", str(tmp / "bare.h5"), "-o", str(tmp / "rc_cal"), "--calibration",
+                str(tmp / "rc_cal.json"), "--contrast", "0.1", *common]) == 0
+    out = capsys.readouterr().out
+    assert "calibration applied: galvo" in out, out
+    assert cli(["reconstruct", str(tmp / "true_rc.h5"), "-o", str(tmp / "rc_true"), *common]) == 0
+    assert cli(["reconstruct", str(tmp / "lagging_rc.h5"), "-o", str(tmp / "rc_lag"), *common]) == 0
+    (cal, meta), (true, _), (lag, _) = (read_exr(str(tmp / d / "frame_0000.exr")) for d in
+                                        ("rc_cal", "rc_true", "rc_lag"))
+    assert np.allclose(cal["Y"], true["Y"], rtol=1e-3, atol=1e-4)
+    assert np.median(np.abs(np.log(lag["Y"] / true["Y"]))) > 10 * np.median(np.abs(np.log(cal["Y"] / true["Y"])))
+    assert meta["calibration"]["applied"] == ["galvo"]
+    capsys.readouterr()
+    assert cli(["reconstruct", str(tmp / "bare.h5"), "-o", str(tmp / "rc_x"), "--calibration",
+                str(tmp / "rc_cal.json"), "--contrast", "0.1", "--times", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "for --method galvo" in err[0] and "--method direct reads no optics" in err[0], err
