@@ -51,7 +51,8 @@ def warmup_window(warmup: float, steps, duration: float, scan_period: float | No
 
 def kept_stepping(stepping_meta: dict, st, warmup: float) -> dict:
     """A render's ``stepping`` metadata for the span it keeps: uniform steps counted without the warm-up's
-    (``warmup_steps`` beside them), so that duration / steps is still the step; otherwise the warm-up named."""
+    (``warmup_steps`` beside them), so that duration / steps is still the step; otherwise the warm-up named.
+    (The summary's ``steps`` counts every step rendered, the warm-up's too: the work done.)"""
     if not warmup:
         return stepping_meta
     if stepping_meta.get("mode") == "uniform":

@@ -106,3 +106,14 @@ def test_every_command_prints_its_help():
         assert text.startswith("usage: ") and len(text) > 100, name
         seen.append(name)
     assert {"eventfield refocus", "eventfield depth", "eventfield calibrate galvo"} <= set(seen) and len(seen) > 20
+
+
+def test_preview_scale_and_scene_defaults_by_rule():
+    """``preview.auto_scale``: the whole factor (at most 8) bringing the longer side to about 400 px; and
+    ``declared_defaults`` reads ``<default>`` names in either attribute order and quoting (EVENTFIELD_FILM and
+    a sweep's names use it)."""
+    from mitsuba_eventfield.events.preview import auto_scale
+    from mitsuba_eventfield.scene.timed import declared_defaults, settable_parameters
+    assert [auto_scale(*s) for s in ((16, 12), (64, 48), (346, 260), (400, 300), (4000, 10))] == [8, 7, 2, 1, 1]
+    text = "<default name='a' value='1'/><default value=\"2\" name=\"b\"/><float value=\"$c\"/><x v=\"$a\"/>"
+    assert declared_defaults(text) == ["a", "b"] and settable_parameters(text) == ["a", "b", "c"]

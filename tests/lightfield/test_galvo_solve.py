@@ -177,3 +177,40 @@ def test_events_that_do_not_follow_their_scan_are_warned_about():
     assert half.lock > 0.99 and half.repeats_every == 0.5 and not half.locked
     with pytest.warns(ScanLockWarning, match=r"repeat every 1/2 of the 125 Hz scan's period.*runs at 250 Hz"):
         ef.lightfield.from_events(stated(125.0), views=8, method="galvo")
+
+def test_solver_pairs_run_forward_to_the_periods_end():
+    """``galvo_solve._pairs``: every pair forward in time, the last ones ending at the period's end (sample S,
+    the mirrors where they were at sample 0), none wrapped back to the period's start."""
+    assert galvo_solve._pairs(4, (1,)) == [(0, 1), (1, 2), (2, 3), (3, 4)]
+    assert galvo_solve._pairs(4, (2,)) == [(0, 2), (1, 3), (2, 4)]
+    assert galvo_solve._pairs(4, (1, 4)) == [(0, 1), (1, 2), (2, 3), (3, 4), (0, 4)]
+
+
+def test_a_raster_scan_locks_though_its_half_period_repeats_most_of_its_lines(tmp_path):
+    """A raster's second half-period sweeps lines close to its first (galvo_static at 64x48, 4 lines at 250 Hz,
+    a 16 ms period: the half period correlates 0.68 of the lock), so it must not read as a mirror running twice
+    the stated frequency (``scan_lock.SUB_PERIOD_SHARE`` 0.9); a stream of one and a half periods gets no
+    verdict."""
+    import shutil
+
+    import mitsuba_eventfield as ef
+    from mitsuba_eventfield.lightfield.scan_lock import scan_lock
+    src = os.path.join(ROOT, "scenes", "galvo_static")
+    for name in ("letters.png", "text.png"):
+        shutil.copy(os.path.join(src, name), tmp_path / name)
+    text = open(os.path.join(src, "galvo_static.xml")).read()
+    circle = ('<string name="curve" value="circle"/>\n        <float name="frequency" value="$frequency"/>\n'
+              '        <float name="amplitude" value="$amplitude"/>\n        <float name="phase" value="$phase"/>')
+    assert circle in text
+    raster = ('<string name="curve" value="raster"/><float name="frequency" value="250"/>'
+              '<integer name="lines" value="4"/><float name="amplitude_x" value="0.3"/>'
+              '<float name="amplitude_y" value="0.3"/>')
+    (tmp_path / "raster.xml").write_text(text.replace(circle, raster)
+                                         .replace('<default name="frequency" value="250"/>', "")
+                                         .replace('<default name="amplitude" value="0.5"/>', "")
+                                         .replace('<default name="phase" value="0"/>', ""))
+    timed = ef.load_scene(str(tmp_path / "raster.xml"), width=64, height=48)
+    events = ef.render_events(timed, 3 * timed.scan_period)
+    lock = scan_lock(events)
+    assert lock.locked and lock.repeats_every is None and lock.lock > 0.9, lock
+    assert scan_lock(events.time_window(None, events.start_us + int(1.5 * timed.scan_period * 1e6))) is None

@@ -35,3 +35,18 @@ def test_the_lowpass_cutoff_of_dim_pixels_has_a_floor():
     print(f"alpha {alpha}, closed form {want:.6f}")
     assert want == pytest.approx(0.018673, abs=1e-6)
     assert alpha == pytest.approx([want, want], rel=1e-5)
+
+
+def test_the_lowpass_cutoff_stops_rising_at_the_bright_intensity():
+    """``pixel_model.lowpass_cutoff``: proportional to the intensity up to ``bright_intensity``, then flat: a pixel
+    ten times brighter than bright blends as one at bright (1 - exp(-2 pi 300 1e-3) = 0.84823)."""
+    import math
+
+    import drjit as dr
+    import mitsuba as mi
+    import numpy as np
+
+    from mitsuba_eventfield.plugins import pixel_model as pm
+    alpha = pm.lowpass_alpha(dr, mi.Float([10.0, 1.0]), 1e-3, 300.0, 1.0, 0.01).numpy()
+    assert np.allclose(alpha, 1 - math.exp(-2 * math.pi * 0.3), rtol=1e-6)
+    assert pm.lowpass_cutoff(np, np.array([0.0, 0.5, 4.0]), 300.0, 2.0, 0.01).tolist() == [3.0, 75.0, 300.0]

@@ -29,6 +29,9 @@ def test_a_warm_up_is_the_earlier_start_cut_at_the_start(tmp_path):
     assert warm.meta["warmup_s"] == 0.002
     render = warm.meta["render"]
     assert render["events"] == len(cut) and render["on"] == int((cut.p > 0).sum())
+    # the metadata describe the kept span: its 20 steps (the warm-up's 10 beside them), its duration and rate
+    assert warm.meta["stepping"]["steps"] == 20 and warm.meta["stepping"]["warmup_steps"] == 10
+    assert render["duration_s"] == 0.004 and render["rate_ev_per_s"] == pytest.approx(len(cut) / 0.004)
     summary = ef.render_events(timed, 0.004, steps=20, warmup=0.002, output=str(tmp_path / "w.h5"))
     assert summary.events == len(cut) and ef.read_events(str(tmp_path / "w.h5")).equals(warm)
 
@@ -41,6 +44,19 @@ def test_the_pixel_counters_are_the_kept_spans():
     warm = ef.render_events(timed, 0.004, steps=20, warmup=0.002, pixel=pixel).meta["render"]["noise_events"]
     early = ef.render_events(timed, 0.006, steps=30, t_start=-0.002, pixel=pixel).meta["render"]["noise_events"]
     assert early > 2000 and warm / early == pytest.approx(4 / 6, abs=0.04), (warm, early)
+    # exactly: the 6 ms render's, less those of its first 2 ms (the same 10 steps, the same draws)
+    first = ef.render_events(timed, 0.002, steps=10, t_start=-0.002, pixel=pixel).meta["render"]["noise_events"]
+    assert warm == early - first, (warm, early, first)
+
+
+def test_a_warm_up_under_a_scan_is_whole_periods_and_said_in_the_stepping():
+    """Without given steps a scanned scene's warm-up is rounded up to whole scan periods (the default and adaptive
+    steps keep the scan's phase grid): 2 ms on the 250 Hz fan is 4 ms; adaptive stepping's metadata say their
+    step count includes it."""
+    timed = ef.load_scene(FAN, width=48, height=36)
+    ev = ef.render_events(timed, 0.004, adaptive=True, warmup=0.002)
+    assert ev.meta["warmup_s"] == pytest.approx(0.004) and ev.t.min() >= 0
+    assert ev.meta["stepping"]["includes_warmup_s"] == pytest.approx(0.004)
 
 
 def test_a_running_lowpass_fires_as_many_on_as_off_events():
@@ -66,6 +82,19 @@ def test_a_running_lowpass_fires_as_many_on_as_off_events():
     assert not [n for n in running.meta["render"]["notes"] if "photoreceptor low-pass" in n]
     ideal = ef.render_events(timed, 0.02)                      # no low-pass: nothing to settle, nothing said
     assert not [n for n in ideal.meta["render"]["notes"] if "photoreceptor low-pass" in n]
+
+
+def test_render_takes_a_warm_up_with_a_unit(tmp_path):
+    """``render --warmup 4ms`` reaches the render (recorded as ``warmup_s``); up to 10 s, where other times with a
+    unit stop at 1 s."""
+    from mitsuba_eventfield.simulate.auto import parse_time
+    out = tmp_path / "w.h5"
+    assert cli(["render", GALVO, "-D", "width=16", "-D", "height=12", "--duration", "0.004", "--warmup", "4ms",
+                "--quiet", "-o", str(out)]) == 0
+    assert ef.read_events(str(out)).meta["warmup_s"] == pytest.approx(0.004)
+    assert parse_time("2s", "--warmup", 10.0) == 2.0
+    with pytest.raises(ef.EventFieldError, match="from 1us to 1s"):
+        parse_time("2s")
 
 
 def test_a_bad_warm_up_is_one_named_error(tmp_path, capfd):
