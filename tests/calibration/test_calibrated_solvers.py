@@ -236,3 +236,31 @@ def test_reconstruct_solves_a_recording_with_its_galvo_calibration(cards, capsys
                 str(tmp / "rc_cal.json"), "--contrast", "0.1", "--times", "2"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "for --method galvo" in err[0] and "--method direct reads no optics" in err[0], err
+
+
+def test_a_recording_at_the_commanded_phase_is_said_to_be(cards):
+    """A galvo recording given nominal optics, or a calibration without a galvo part (depth only), has its views
+    at the commanded scan phase, which a lagging mirror makes wrong without a word (1.11 / 1.09 m for 0.5 / 1.2
+    above): ``with_optics`` says so (``CommandedPhaseWarning``); a calibration that measured the phase does
+    not."""
+    import warnings
+
+    from mitsuba_eventfield import calibration
+    from mitsuba_eventfield.calibration.recording import CommandedPhaseWarning
+    events, _, tmp = cards
+    recording, record, galvo = _lagging(events, LAG_S)
+    bare = ef.EventStream(events.x, events.y, events.t, events.p, W, H, {"t_start_us": events.start_us})
+    f = focal_length_px(W, 40.0)
+    z = np.array([0.4, 0.6, 1.0, 2.0])
+    depth = fit_depth(z, 2 * f * (1 - 0.15 / z))
+    save_calibration(str(tmp / "phase.json"), record, galvo=galvo)
+    save_calibration(str(tmp / "depth_only.json"), record, depth=depth)
+    nominal = {k: recording.meta["optics"][k] for k in ("design", "scan", "fov_x_deg", "mirror_distance",
+                                                        "mirror_separation")}
+    for given in ({"optics": nominal}, {"calibration": str(tmp / "depth_only.json")}):
+        with pytest.warns(CommandedPhaseWarning, match="commanded scan phase"):
+            calibration.with_optics(bare, **given)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CommandedPhaseWarning)
+        calibration.with_optics(bare, calibration=str(tmp / "phase.json"))
+        calibration.with_optics(events)                 # a render carries its own optics: nothing to say
