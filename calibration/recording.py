@@ -60,7 +60,8 @@ def with_optics(events, optics=None, calibration=None, *, design: str | None = N
         record = nominal_optics(optics if isinstance(optics, dict) else os.fspath(optics), events.width,
                                 events.height, design=design)
     elif calibration is not None:
-        record = recording_optics(_loaded(calibration, names["calibration"]), events, where)
+        calibration = _loaded(calibration, names["calibration"])        # read once: a path is loaded here
+        record = recording_optics(calibration, events, where)
     else:
         raise EventFieldError(f"{where}: the recording carries no optics (no light-field metadata): pass "
                               f"{optics_options(names, design, takes_calibration)}")
@@ -69,7 +70,7 @@ def with_optics(events, optics=None, calibration=None, *, design: str | None = N
         raise EventFieldError(f"{where}: cut to the window {','.join(map(str, crop))} of its sensor: a window is "
                               "for a kaleidoscope's tube image on part of the sensor; galvo optics describe the "
                               "whole film")
-    if record.get("design") == "galvo" and (calibration is None or "galvo" not in _loaded(calibration, "")):
+    if record.get("design") == "galvo" and (calibration is None or "galvo" not in calibration):
         import warnings
         warnings.warn(f"{where}: the views sit at the commanded scan phase, which no galvo calibration measured: a "
                       "mirror that lags its command misplaces them (a quarter period of the 100 Hz circle read "

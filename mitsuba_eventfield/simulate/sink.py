@@ -8,6 +8,8 @@ join at the end, and a peak of one copy of the events). Left on the device (``on
 they are until the end, then are joined once and their ON events counted with one read."""
 from __future__ import annotations
 
+import numpy as np
+
 from ..errors import raise_if_stopped
 from ..events.buffer import EventBuffer
 from ..events.io import format_of, write_events
@@ -169,7 +171,6 @@ class Sink:
         if t[0] >= self.emit_from_us:
             self.emit_from_us = None
             return x, y, t, p, until, borrowed
-        import numpy as np
         k = int(np.searchsorted(t, self.emit_from_us))
         return (*(np.array(c[k:]) for c in (x, y, t, p)), until, False)
 
