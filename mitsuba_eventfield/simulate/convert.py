@@ -26,6 +26,7 @@ from ..validate import MAX_THRESHOLD, number, positive
 from .device_stream import check_on_device
 from .frame_sources import (FrameSource, check_span, from_array, from_device, is_device_array, open_frames,
                             read_times)
+from .frame_times import note_interval
 from .sink import DEFAULT_EVENT_BUFFER_MB, Sink
 from .summary import RenderSummary
 
@@ -173,6 +174,8 @@ def _feed(source: FrameSource, integ, sink: Sink, summary: RenderSummary, progre
                 raise EventFieldError(f"{source.name}: frame times must increase ({t} s after {t_prev} s)")
             if t_first is not None:           # where the span was not known before (a video's own count)
                 check_span(source.name, t - t_first)
+            if index == 1:
+                note_interval(source.name, t - t_first)
             if batched and t_first is not None and group is None:     # the first interval sets the default
                 group = event_batch.default_frames_per_kernel(source.width * source.height, t - t_first)
             if batched and t_first is not None and group > 1:     # one frame a kernel: the per-step kernel

@@ -107,6 +107,30 @@ def times_of(times, count: int | None, fps, where: str):
     return time_of, float(t[-1] - t[0])
 
 
+# First frame intervals outside these (seconds) are most likely a unit slip, and said: milliseconds read as
+# seconds put a 30 fps video's frames 33 s apart (its events then spread over hours, each brightness change
+# interpolated over half a minute), seconds read as microseconds put them below the events' 1 us clock tick.
+LIKELY_FRAME_INTERVAL_S = (1e-6, 1.0)
+
+
+class FrameTimesWarning(UserWarning):
+    """Frame times whose spacing suggests a unit slip (``LIKELY_FRAME_INTERVAL_S``)."""
+
+
+def note_interval(where: str, interval_s: float) -> None:
+    """Warn when the first frame interval lies outside ``LIKELY_FRAME_INTERVAL_S`` (the conversion goes on:
+    a time-lapse may mean it)."""
+    lo, hi = LIKELY_FRAME_INTERVAL_S
+    if lo <= interval_s <= hi:
+        return
+    import warnings
+    slip = ("milliseconds read as seconds?" if interval_s > hi else
+            "seconds read as microseconds? an .npz's 'timestamps_us' are microseconds")
+    warnings.warn(f"{where}: the first two frames are {interval_s:.6g} s apart ({slip}); frame times are seconds "
+                  f"(an .npz's 'times', --times files, fps in Hz): events from frames further apart than "
+                  f"{hi:g} s or closer than {lo:g} s are most likely a unit slip", FrameTimesWarning, stacklevel=3)
+
+
 def check_span(where: str, span_s: float | None) -> None:
     """Frames spanning more than ``MAX_CONVERT_S`` are refused (before any work where the span is known, else
     when a frame passes it): an HDF5 file indexes every millisecond (8 bytes each), and ``--fps 1e-9`` asked

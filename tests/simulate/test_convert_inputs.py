@@ -66,7 +66,9 @@ def test_frames_spanning_more_than_a_day_are_refused_before_any_file(tmp_path, c
     code, err = _cli([tmp_path / "us.npz", "-o", tmp_path / "b.h5"], capfd)
     assert code == 2 and "the frames span 5e+06 s" in err and len(err.splitlines()) == 1
     assert os.listdir(tmp_path) == ["us.npz"]
-    hourly = ef.events_from_frames(frames, fps=1 / 3600.0)
+    from mitsuba_eventfield.simulate.frame_times import FrameTimesWarning
+    with pytest.warns(FrameTimesWarning, match="3600 s apart"):      # converted, and the spacing said
+        hourly = ef.events_from_frames(frames, fps=1 / 3600.0)
     assert len(hourly) == 17 and hourly.t[-1] > 3600e6 and 5 * 3600 <= MAX_CONVERT_S
 
 
@@ -77,11 +79,12 @@ def test_a_long_quiet_span_writes_its_index_in_blocks(tmp_path, monkeypatch):
     frames = np.full((3, 4, 4), 0.1, np.float32)
     frames[:, 1, 1] = [0.1, 0.5, 0.05]
     times = [0.0, 7.3, 12.9]
-    whole = str(tmp_path / "whole.h5")
-    ef.events_from_frames(frames, times, output=whole)
-    monkeypatch.setattr(hdf5, "MS_INDEX_BLOCK", 1000)
-    blocked = str(tmp_path / "blocked.h5")
-    ef.events_from_frames(frames, times, output=blocked)
+    whole, blocked = str(tmp_path / "whole.h5"), str(tmp_path / "blocked.h5")
+    from mitsuba_eventfield.simulate.frame_times import FrameTimesWarning
+    with pytest.warns(FrameTimesWarning, match="7.3 s apart"):
+        ef.events_from_frames(frames, times, output=whole)
+        monkeypatch.setattr(hdf5, "MS_INDEX_BLOCK", 1000)
+        ef.events_from_frames(frames, times, output=blocked)
     import h5py
     with h5py.File(whole) as a, h5py.File(blocked) as b:
         offset_ms = int(a["t_offset"][()]) // 1000          # from the first frame's millisecond

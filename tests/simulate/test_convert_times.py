@@ -222,3 +222,27 @@ def test_convert_takes_a_seed_as_render_does(tmp_path, capfd):
     code, err = _cli([tmp_path / "s.npz", "-o", tmp_path / "x.npz", "--seed", "3", "--pixel", "seed=4"], capfd)
     assert code == 2 and err == "eventfield: error: --seed 3 and --pixel seed=4: give the seed once", err
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_frame_times_in_the_wrong_unit_are_said(tmp_path, capfd):
+    """Milliseconds read as seconds (a 100 fps stack 10 'seconds' apart) and seconds read as microseconds
+    (an .npz's 'timestamps_us' of 0.01 apart) are warned, naming the file and the likely slip; the conversion
+    still runs (a time-lapse may mean it), and times in seconds are not warned."""
+    from mitsuba_eventfield.simulate.frame_times import FrameTimesWarning
+    np.savez(tmp_path / "ms.npz", frames=_ramp(), times=np.array(UNEVEN) * 1e3)
+    with pytest.warns(FrameTimesWarning, match=r"ms\.npz: the first two frames are 10 s apart \(milliseconds"):
+        ev = ef.events_from_frames(str(tmp_path / "ms.npz"), threshold=0.2)
+    # taken as given: 1000x the seconds' timestamps (to 1 us: a float32 fraction of a 10 s interval)
+    assert np.abs(ev.t - [4_000_000, 8_000_000]).max() <= 1
+    np.savez(tmp_path / "us.npz", frames=_ramp(), timestamps_us=np.array(UNEVEN))
+    with pytest.warns(FrameTimesWarning, match=r"us\.npz: .* 1e-08 s apart \(seconds read as microseconds"):
+        ef.events_from_frames(str(tmp_path / "us.npz"), threshold=0.2)
+    code, err = _cli([tmp_path / "ms.npz", "-o", tmp_path / "ms.h5"], capfd)
+    assert code == 0 and "milliseconds read as seconds?" in err
+    import warnings
+    np.savez(tmp_path / "s.npz", frames=_ramp(), times=np.array(UNEVEN))
+    for interval in (1e-6, 1.0):          # the bounds themselves are likely
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", FrameTimesWarning)
+            ef.events_from_frames(_ramp(), [0.0, interval, 2 * interval], threshold=0.2)
+            ef.events_from_frames(str(tmp_path / "s.npz"), threshold=0.2)
