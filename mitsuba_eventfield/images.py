@@ -55,8 +55,21 @@ def write_exr(path: str, channels: dict, meta: dict | None = None) -> str:
         header["eventfield_meta"] = json.dumps(meta, default=str)
     with atomic_output(path, "image") as tmp:
         with OpenEXR.File(header, data) as f:
-            f.write(tmp)
+            try:
+                f.write(tmp)
+            except RuntimeError as e:     # OpenEXR says an OS error in words only: a full disk was "unexpected"
+                raise _os_error_of(e, path) from None
     return path
+
+
+def _os_error_of(e: RuntimeError, path: str) -> Exception:
+    """The OSError an OpenEXR write error names (its message ends with the system's own words for it), so that
+    a full disk reads as one everywhere; other errors as they were."""
+    import errno
+    for code in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EACCES, errno.EROFS):
+        if os.strerror(code) in str(e):
+            return OSError(code, os.strerror(code), path)
+    return e
 
 
 def read_exr(path: str) -> tuple[dict, dict]:

@@ -1,6 +1,7 @@
-"""An application's output folder (``atomic.output_dir_run``): a user's file in it is never replaced, and a run
-that stops early (an error, an interrupt, a kill) leaves what it wrote listed in the folder's manifest, so the
-next run replaces those files instead of refusing them as the user's."""
+"""An application's output folder (``atomic.output_dir_run``): a user's file in it is never replaced; a run that
+fails or is stopped leaves the folder as it found it (what it replaced put back, what it added removed), and a
+run killed outright leaves what it wrote listed in the folder's claims, so the next run replaces those files
+instead of refusing them as the user's, and puts back what it had replaced."""
 import json
 import os
 import subprocess
@@ -18,7 +19,8 @@ def _listed(folder):
 
 
 @pytest.mark.parametrize("made_before", [False, True])
-def test_an_interrupted_run_leaves_its_files_listed_and_the_next_run_replaces_them(tmp_path, made_before):
+def test_an_interrupted_run_into_a_new_folder_leaves_nothing_new(tmp_path, made_before):
+    """What a stopped run added goes with it (a folder it made too); the next run writes as if it had not run."""
     out = tmp_path / "out"
     if made_before:
         out.mkdir()
@@ -27,10 +29,82 @@ def test_an_interrupted_run_leaves_its_files_listed_and_the_next_run_replaces_th
             out.mkdir(exist_ok=True)                      # an application makes its folder
             write_json(str(out / "a.json"), {"run": 1})
             raise KeyboardInterrupt
-    assert _listed(out) == ["a.json"]
+    assert not (out / "a.json").exists() and out.exists() == made_before
+    assert not made_before or os.listdir(out) == []           # (no manifest of nothing either)
     with output_dir_run(str(out), "test"):
-        write_json(str(out / "a.json"), {"run": 2})            # was refused as a file eventfield did not write
+        out.mkdir(exist_ok=True)
+        write_json(str(out / "a.json"), {"run": 2})
     assert json.loads((out / "a.json").read_text()) == {"run": 2} and _listed(out) == ["a.json"]
+
+
+def _run(out, files, fail=None):
+    """A run writing ``files`` (name -> content) into ``out``, raising ``fail`` (an exception) at its end."""
+    with output_dir_run(str(out), "test"):
+        out.mkdir(exist_ok=True)
+        for name, content in files.items():
+            write_json(str(out / name), content)
+        if fail is not None:
+            raise fail
+
+
+def _contents(out):
+    return {n: json.loads((out / n).read_text()) for n in sorted(os.listdir(out)) if not n.startswith(MANIFEST)}
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt(), EventFieldError("bad"), "swallowed"])
+def test_a_failed_rerun_puts_the_earlier_runs_files_back(tmp_path, stop):
+    """A demo stopped half-way left a new event file and depth map beside the old metrics and figure, and said
+    "no partial output kept": the files it replaced are put back and those it added removed, so the folder is
+    the earlier run's again, manifest included. A stop signal a library swallowed (only recorded,
+    ``errors.STOP_SIGNALS``) fails the run the same way, and publishes nothing from then on."""
+    from mitsuba_eventfield.errors import STOP_SIGNALS
+    out = tmp_path / "out"
+    _run(out, {"a.json": 1, "b.json": 1})
+    first = _contents(out)
+    try:
+        with pytest.raises(type(stop) if stop != "swallowed" else KeyboardInterrupt):
+            with output_dir_run(str(out), "test"):
+                write_json(str(out / "a.json"), 2)
+                write_json(str(out / "c.json"), 2)
+                if stop == "swallowed":
+                    STOP_SIGNALS.append(2)
+                    write_json(str(out / "b.json"), 2)       # refused: nothing published after a stop
+                else:
+                    raise stop
+    finally:
+        STOP_SIGNALS.clear()
+    assert _contents(out) == first == {"a.json": 1, "b.json": 1} and _listed(out) == ["a.json", "b.json"]
+    assert sorted(os.listdir(out)) == [MANIFEST, "a.json", "b.json"]      # nothing kept aside is left
+    assert not [n for n in os.listdir(tmp_path) if n != "out"]
+
+
+def test_a_rerun_within_the_second_lists_only_its_own_files(tmp_path):
+    """Runs back to back: the first run's files were newer than "the start minus a second" (the allowance for
+    coarse file times) and counted as the second run's, which then kept 80 frames where it wrote 40."""
+    out = tmp_path / "out"
+    _run(out, {f"f{i:02d}.json": 1 for i in range(40)})
+    _run(out, {f"f{i:02d}.json": 2 for i in range(20)})
+    assert _listed(out) == [f"f{i:02d}.json" for i in range(20)] and _contents(out) == {
+        f"f{i:02d}.json": 2 for i in range(20)}
+
+
+def test_a_killed_reruns_replaced_files_are_put_back_by_the_next_run(tmp_path, capsys):
+    """A rerun killed outright (no cleanup) leaves the earlier files it replaced kept aside: the next run puts
+    them back before it starts, and says so."""
+    out = tmp_path / "out"
+    _run(out, {"a.json": 1})
+    script = ("import os, sys\nfrom mitsuba_eventfield.atomic import output_dir_run, write_json\n"
+              "with output_dir_run(sys.argv[1], 'test'):\n"
+              "    write_json(os.path.join(sys.argv[1], 'a.json'), 2)\n    os._exit(9)\n")
+    r = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 9, r.stderr
+    assert json.loads((out / "a.json").read_text()) == 2
+    assert [n for n in os.listdir(out) if n.startswith(MANIFEST + ".previous-")]
+    capsys.readouterr()
+    with pytest.raises(ValueError):
+        _run(out, {"b.json": 3}, fail=ValueError())
+    assert "put back 1 files" in capsys.readouterr().err
+    assert _contents(out) == {"a.json": 1} and sorted(os.listdir(out)) == [MANIFEST, "a.json"]
 
 
 def test_a_killed_run_leaves_its_files_listed(tmp_path):
@@ -77,7 +151,8 @@ def test_a_users_file_is_kept_and_a_later_one_of_the_runs_replaced(tmp_path, cap
         with output_dir_run(str(out), "test"):
             write_json(str(out / "ours.json"), {})
             write_json(str(out / "mine.json"), {})
-    assert (out / "mine.json").read_text() == "the user's" and _listed(out) == ["ours.json"]
+    # the failed run's own file went with it
+    assert (out / "mine.json").read_text() == "the user's" and os.listdir(out) == ["mine.json"]
     assert not (out / CLAIMS).exists()
     assert "1 other files stay beside the new ones" in capsys.readouterr().err
     with output_dir_run(str(out), "test"):                  # the run's own file is replaced, the user's stays

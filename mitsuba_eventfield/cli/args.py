@@ -66,7 +66,7 @@ OUTPUT_DIRS = ("demo", "reconstruct", "bench", "hdr", "highspeed", "track-focus"
 
 # outputs whose kind their extension must name: a render's --preview was checked after the render (which had
 # written its event file by then)
-OUTPUT_SUFFIXES = {("render", "preview"): (".png",), ("preview", "output"): (".png",),
+OUTPUT_SUFFIXES = {("render", "preview"): (".png",), ("preview", "output"): (".png",), ("frame", "output"): (".exr",),
                    ("refocus", "output"): (".png",), ("depth", "output"): (".png",),
                    ("calibrate", "output"): (".json",)}
 
@@ -103,14 +103,22 @@ def check_outputs(args) -> None:
         check_output_dir(args.output)
 
 
+def check_files(paths, what: str) -> None:
+    """Every file a command will write, checked before its work (``atomic.check_writable``)."""
+    from ..atomic import check_writable
+    for path in paths:
+        check_writable(path, what)
+
+
 def one_line(e: BaseException) -> str:
     return " ".join(str(e).split()) or type(e).__name__
 
 
-def save_image(png_path, linear, meta, suffix=""):
-    """A linear image as EXR (values) and PNG (display) beside each other; returns their common root."""
+def save_image(png_path, linear, meta, suffix="", exr=None):
+    """A linear image as EXR (values; ``exr``, else the PNG's name with .exr) and PNG (display) beside each
+    other; returns their common root."""
     from ..images import to_uint8, write_exr, write_png
     root = os.path.splitext(png_path)[0] + suffix
-    write_exr(root + ".exr", {"Y": linear}, meta)
+    write_exr(exr or root + ".exr", {"Y": linear}, meta)
     write_png(root + ".png", to_uint8(linear))
     return root

@@ -6,7 +6,7 @@ import os
 
 from ..errors import EventFieldError
 from ..validate import DEFAULT_SPP, FRAME_SPP, MAX_DURATION_S, MAX_SEED, MAX_SPP, MAX_STEPS, MAX_THRESHOLD
-from .args import add_defines, defines, num, pairs, save_image, times_ms
+from .args import add_defines, check_files, defines, num, pairs, save_image, times_ms
 
 PIXEL_INTEGERS = ("seed", "readout_cap_native_pixels")
 # the suffixes events.io.FORMATS writes (not imported here: it loads h5py, and --help should be quick)
@@ -318,15 +318,28 @@ def run_frame(a) -> int:
     from ..scene import load_scene
     from ..simulate.render import render_frames
     from ..simulate.summary import sensor_optics
-    scene = load_scene(a.scene, **defines(a))
     times = [t * 1e-3 for t in times_ms(a.times)]
+    roots = _frame_roots(a.output, len(times))
+    scene = load_scene(a.scene, **defines(a))
     frames = render_frames(scene, times, spp=a.spp, log=False)
     optics = sensor_optics(scene)     # what calibrate kaleidoscope records and compares (lens, tube)
-    for k, (t, img) in enumerate(zip(times, frames)):
+    for t, img, (exr, png) in zip(times, frames, roots):
         meta = {"scene": os.path.abspath(a.scene), "time_s": t, "spp": a.spp, "optics": optics}
-        root = save_image(a.output.replace(".exr", ".png"), img, meta, f"_{k:04d}" if len(times) > 1 else "")
-        print(f"wrote {root}.exr/.png (t = {t * 1e3:g} ms)")
+        save_image(png, img, meta, exr=exr)
+        print(f"wrote {exr} and {png} (t = {t * 1e3:g} ms)")
     return 0
+
+
+def _frame_roots(output: str, count: int) -> list:
+    """(EXR, PNG) paths of each of ``count`` frames (``_0000`` suffixes for several), all checked before any
+    rendering: the PNG beside the EXR was checked only when written (a folder in its place failed the command
+    after the EXR had replaced the user's), and the PNG's name was made by replacing every ".exr" in the path
+    (a folder x.exr.d became x.png.d)."""
+    root, ext = os.path.splitext(output)
+    paths = [(f"{root}{f'_{k:04d}' if count > 1 else ''}{ext}", f"{root}{f'_{k:04d}' if count > 1 else ''}.png")
+             for k in range(count)]
+    check_files((path for pair in paths for path in pair), "frame")
+    return paths
 
 
 COMMANDS = {"render": run_render, "convert": run_convert, "info": run_info, "preview": run_preview, "frame": run_frame}

@@ -91,17 +91,19 @@ def main(argv=None) -> int:
     import warnings
 
     from ..backend import quiet_mitsuba_log
-    from ..errors import EventFieldError
-    args = build_parser().parse_args(argv)
+    from ..errors import EventFieldError, raise_if_stopped
     from ..simulate.checkpoint import KEPT
     KEPT.clear()                     # this command's kept checkpoints only (main may run many in one process)
-    # our lines only: no Mitsuba notes (monochrome film, "winding down" on Ctrl-C); restored when main returns
-    was_quiet = quiet_mitsuba_log()
-    show_warning, warnings.showwarning = warnings.showwarning, _warning_line
-    previous = {}
+    show_warning, was_quiet, previous = warnings.showwarning, True, {}
     try:
-        previous = _signals_as_interrupts()
-        return _run(args)
+        previous = _signals_as_interrupts()     # before the parser: a Ctrl-C there printed a traceback
+        args = build_parser().parse_args(argv)
+        # our lines only: no Mitsuba notes (monochrome film, "winding down" on Ctrl-C); restored when main returns
+        was_quiet = quiet_mitsuba_log()
+        warnings.showwarning = _warning_line
+        status = _run(args)
+        raise_if_stopped()                # a stop a library swallowed: said, with the signal's exit status
+        return status
     except EventFieldError as e:
         print(f"eventfield: error: {one_line(e)}", file=sys.stderr)
         return 2
@@ -127,7 +129,6 @@ def main(argv=None) -> int:
         if not was_quiet:
             quiet_mitsuba_log(False)
     signum = stopped[0] if stopped else signal.SIGINT
-    from ..simulate.checkpoint import KEPT
     kept = (f"; its last checkpoint is kept in {KEPT[-1]}: run the same command with --resume to go on"
             if KEPT else "")
     print(f"eventfield: {'terminated' if signum == signal.SIGTERM else 'interrupted'} (no partial output kept)"

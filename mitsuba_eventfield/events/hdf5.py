@@ -11,7 +11,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..atomic import check_writable, remove_stale_partials, temporary_name
+from ..atomic import check_writable, publish, remove_stale_partials, temporary_name
 from ..errors import ConfigError, EventFieldError
 from ..validate import number, usable_cores
 from .disk import HEADER_BYTES, GuardedFile, _disk_full, _free_bytes, _no_space, check_space
@@ -364,7 +364,7 @@ class H5EventWriter:
             g.attrs["meta_json"] = meta_json
             self.f.close()
             self._io.close()
-        os.replace(self.tmp, self.path)
+        publish(self.tmp, self.path)  # (atomic.publish: the one place outputs appear)
         self._closed = True
 
     def abort(self):

@@ -18,7 +18,7 @@ import zipfile
 
 import numpy as np
 
-from ..atomic import check_writable, remove_stale_partials, temporary_name
+from ..atomic import check_writable, publish, remove_stale_partials, temporary_name
 from ..errors import EventFieldError
 from .disk import HEADER_BYTES, check_file_limit, check_room, check_space, disk_errors
 from .hdf5 import H5EventWriter, _json
@@ -58,7 +58,7 @@ class _PartialFile:
         return x, y, t, p
 
     def _publish(self):
-        os.replace(self.tmp, self.path)
+        publish(self.tmp, self.path)  # (atomic.publish: the one place outputs appear)
         self.closed = True
 
     def _remove(self, *paths):

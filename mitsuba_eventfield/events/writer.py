@@ -91,6 +91,7 @@ class BackgroundWriter:
         self.inbox: queue.Queue = queue.Queue(maxsize=depth)     # to the copier
         self.queue: queue.Queue = queue.Queue(maxsize=depth)     # to the writer
         self.error: BaseException | None = None
+        self.aborting = False  # abort() called: queued chunks are dropped, not written
         self.wait_s = 0.0      # the caller's time blocked on a full queue: the writer did not keep up
         self.tail_s = 0.0      # the caller's time draining the queue: at checkpoints and at the end
         self.busy_s = 0.0      # the worker's time writing
@@ -113,7 +114,7 @@ class BackgroundWriter:
                 number, x, y, t, p, until = item
                 del item
                 owned = None
-                if self.error is None:
+                if self.error is None and not self.aborting:
                     try:
                         owned = (None, _own(x), _own(y), _own(t), _own(p), until)
                     except BaseException as e:    # noqa: BLE001 - handed to the caller's thread (a MemoryError)
@@ -134,7 +135,8 @@ class BackgroundWriter:
             item = self.queue.get()
             if item is None:
                 return
-            if self.error is None:            # after an error keep draining: the caller never blocks on it
+            # after an error, or once aborted, keep draining: the caller never blocks on it
+            if self.error is None and not self.aborting:
                 t0 = time.perf_counter()
                 try:
                     self.writer.append(*item[1:])
@@ -215,5 +217,15 @@ class BackgroundWriter:
         self.writer.close(end_us=end_us, meta=meta)
 
     def abort(self):
-        self._stop()
+        """Drop the queued chunks (the threads write and copy nothing more) and remove the partial file. A
+        second Ctrl-C while the threads end is held until the file is gone: escaping the wait left the partial
+        file (or an .npz's column files) beside the output under "no partial output kept". Stopping twice is
+        harmless: the second end marker finds the threads gone and the queues empty."""
+        self.aborting = True
+        while True:
+            try:
+                self._stop()
+                break
+            except KeyboardInterrupt:      # the first stop is on its way up already
+                continue
         self.writer.abort()

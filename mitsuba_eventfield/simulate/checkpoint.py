@@ -43,6 +43,45 @@ def folder_of(output: str) -> str:
     return os.path.abspath(output) + SUFFIX
 
 
+# The process rendering into a resume folder holds an exclusive lock on this file in it (``flock``: released
+# by the kernel however the process ends). Without it a second process on the same output, told by the refusal
+# below to add --resume, resumed from the live render's checkpoint, wrote segments under the names the first
+# was writing and removed its state files: the first render then merged the wrong events and exited 0.
+LOCK_FILE = "lock"
+
+
+def _busy(folder: str, pid: str) -> EventFieldError:
+    return EventFieldError(f"{folder}: another process (pid {pid}) is rendering this output now: wait for it to "
+                           "end, or render to another path")
+
+
+def _lock(folder: str):
+    """The open lock file of ``folder``, locked by this process (None where the platform has no ``flock``);
+    raises when another process holds it."""
+    try:
+        import fcntl
+    except ImportError:               # no flock (Windows): unguarded, as before
+        return None
+    fd = os.open(os.path.join(folder, LOCK_FILE), os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        pid = os.read(fd, 32).decode("ascii", "replace").strip() or "unknown"
+        os.close(fd)
+        raise _busy(folder, pid) from None
+    os.ftruncate(fd, 0)
+    os.write(fd, str(os.getpid()).encode())
+    return fd
+
+
+def check_not_busy(folder: str) -> None:
+    """Raise when a live process renders into ``folder`` (holds its lock)."""
+    if os.path.isfile(os.path.join(folder, LOCK_FILE)):
+        fd = _lock(folder)
+        if fd is not None:
+            os.close(fd)
+
+
 def fingerprint(meta: dict) -> dict:
     """What must be equal for a resumed render to continue the interrupted one."""
     return json.loads(json.dumps({k: v for k, v in meta.items() if k not in VOLATILE}, default=str))
@@ -118,21 +157,35 @@ class Checkpoints:
         self.fingerprint, self.last_save, self.saved = fingerprint(meta), time.perf_counter(), None
         self.command = meta.get("command")
         path = os.path.join(self.folder, "checkpoint.json")
+        check_not_busy(self.folder)
         if resume:
             if not os.path.isfile(path):       # a finished render removes its checkpoint: say which case this is
                 if os.path.exists(output):
                     raise EventFieldError(f"{self.folder}: nothing to resume: no checkpoint, and {output} is there "
                                           "(that render finished); render without --resume to render it again")
                 raise EventFieldError(f"{self.folder}: nothing to resume (no checkpoint here); render without --resume")
-            with open(path) as f:
-                self.saved = json.load(f)
-            diff = _first_difference(self.saved["fingerprint"], self.fingerprint)
-            if diff:
-                raise EventFieldError(f"{self.folder}: the checkpoint is of another render: {diff} (render "
-                                      "without --resume after removing the folder, or resume with the same options)")
         elif os.path.exists(self.folder):
             raise _resumable(self.folder)
         os.makedirs(self.folder, exist_ok=True)
+        self._lock_fd = _lock(self.folder)     # held until the render ends (``release``) or the process does
+        if resume:
+            try:                               # read under the lock: no other process changes it now
+                with open(path) as f:
+                    self.saved = json.load(f)
+                diff = _first_difference(self.saved["fingerprint"], self.fingerprint)
+            except BaseException:
+                self.release()
+                raise
+            if diff:
+                self.release()
+                raise EventFieldError(f"{self.folder}: the checkpoint is of another render: {diff} (render "
+                                      "without --resume after removing the folder, or resume with the same options)")
+
+    def release(self) -> None:
+        """Let go of the folder's lock (the render ended, or never started)."""
+        fd, self._lock_fd = getattr(self, "_lock_fd", None), None
+        if fd is not None:
+            os.close(fd)
 
     @property
     def segments(self) -> list:
@@ -145,6 +198,7 @@ class Checkpoints:
             shutil.rmtree(self.folder, ignore_errors=True)
         else:
             KEPT.append(self.folder)
+        self.release()
 
     def due(self) -> bool:
         return time.perf_counter() - self.last_save >= self.every_s
@@ -213,6 +267,7 @@ def checkpoints_for(output, fmt, meta: dict, checkpoint_s: float | None, resume:
     """The render's checkpoints (None when neither asked for nor resumed); HDF5 output only."""
     if checkpoint_s is None and not resume:
         if output and os.path.isdir(folder_of(output)):     # starting afresh would orphan that work
+            check_not_busy(folder_of(output))               # (or it is a live render's: not to be resumed)
             raise _resumable(folder_of(output))
         return None
     if not output or format_of(output, fmt) != "h5":

@@ -380,29 +380,34 @@ def render_events(scene, duration: float | None = None, *, steps: int | None = N
         meta["warmup_s"] = warm
     meta.update(extra_meta or {})
     checkpoints = checkpoints_for(output, fmt, meta, checkpoint_s, resume)
-    sink = Sink(output, fmt, width, height, meta, count=summary.count, buffer_mb=event_buffer_mb,
-                segments=checkpoints.segments if checkpoints else None, on_device=on_device,
-                emit_from_us=int(round(start * 1e6)) if warm else None)
     bar = _progress_bar(st.duration) if progress else None
-    return _run(lambda: _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation, noise, frozen,
-                              warm), sink, checkpoints, bar, meta, output)
+    return _run(lambda: Sink(output, fmt, width, height, meta, count=summary.count, buffer_mb=event_buffer_mb,
+                             segments=checkpoints.segments if checkpoints else None, on_device=on_device,
+                             emit_from_us=int(round(start * 1e6)) if warm else None),
+                lambda sink: _Loop(timed, integ, st, sink, summary, bar, reuse, checkpoints, allocation, noise,
+                                   frozen, warm), checkpoints, bar, meta, output)
 
 
-def _run(make_loop, sink, checkpoints, bar, meta: dict, output):
-    """The loop made and run to its end: the stream (in memory, on the device, or a format written at the
-    end: RAW, DAT) or, written to ``output``, the summary; on any failure the sink and checkpoints abandoned."""
-    wall0 = time.perf_counter()
+def _run(make_sink, make_loop, checkpoints, bar, meta: dict, output):
+    """The sink and loop made and run to its end: the stream (in memory, on the device, or a format written at
+    the end: RAW, DAT) or, written to ``output``, the summary; on any failure (the sink's own making too) the
+    sink and checkpoints abandoned."""
+    wall0, sink = time.perf_counter(), None
     try:
-        loop = make_loop()
+        sink = make_sink()
+        loop = make_loop(sink)
         stream = loop.finish(loop.run(), meta, wall0)
     except BaseException:
-        sink.abort()
+        if sink is not None:
+            sink.abort()
         if checkpoints is not None:
             checkpoints.abandon()
         raise
     finally:
         if bar is not None:
             bar.close()
+    if checkpoints is not None:
+        checkpoints.release()        # its folder is gone with the merge
     if stream is not None:
         stream.meta = {**meta, "render": loop.summary.as_dict()}
     return stream if output is None else loop.summary

@@ -205,3 +205,40 @@ def test_a_write_needs_its_bytes_and_the_margin_free(tmp_path, monkeypatch):
                 disk.check_space(str(tmp_path / "e.h5"), need)
         else:
             disk.check_space(str(tmp_path / "e.h5"), need)
+
+
+@pytest.mark.parametrize("borrowed", [False, True])
+def test_a_second_ctrl_c_while_aborting_still_removes_the_partial_file(tmp_path, borrowed):
+    """A second Ctrl-C while ``abort`` waited for the writer's thread escaped before the partial file was
+    removed (an .h5.partial, or an .npz's column files, left beside the output under "no partial output
+    kept"): the wait now holds it, the queued chunks are dropped, not written, and the file goes."""
+    import signal
+    import threading
+    import time
+
+    import numpy as np
+    from mitsuba_eventfield.events.writer import BackgroundWriter
+
+    class Slow:
+        appended, aborted = 0, False
+
+        def append(self, *a):
+            time.sleep(0.3)
+            self.appended += 1
+
+        def abort(self):
+            self.aborted = True
+    target = Slow()
+    w = BackgroundWriter(target)
+    one = (np.zeros(1, np.uint16), np.zeros(1, np.uint16), np.zeros(1, np.int64), np.ones(1, np.int8))
+    for _ in range(3):                        # one being written, two queued
+        (w.append_borrowed if borrowed else w.append)(*one)
+    time.sleep(0.05)
+    main = threading.main_thread().ident
+    timer = threading.Timer(0.1, lambda: signal.pthread_kill(main, signal.SIGINT))
+    timer.start()
+    t0 = time.perf_counter()
+    w.abort()
+    timer.join()
+    assert target.aborted and not w.thread.is_alive() and target.appended == 1
+    assert time.perf_counter() - t0 < 0.5     # the queued chunks were dropped, not written (0.3 s each)
