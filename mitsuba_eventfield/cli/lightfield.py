@@ -13,11 +13,11 @@ import numpy as np
 from ..errors import ConfigError, EventFieldError
 from ..focus.depth import DEFAULT_MEASURE
 from ..lightfield.reconstruct import MAX_CUTOFF_HZ
-from ..lightfield.model import radiance_of_levels
+from ..lightfield.model import radiance_of_levels, warn_levels_beyond
 from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
-from .args import num, save_image, times_ms
+from .args import check_files, num, save_image, times_ms
 from .inputs import CROP_HELP, give_optics, read_input, reconstruct_optics, start_log
 
 
@@ -335,16 +335,21 @@ def run_reconstruct(a) -> int:
     ev, applied = reconstruct_optics(a, ev)
     t_frame = _start_time(a, ev)
     times = _reconstruct_times(a, ev, t_frame)
+    os.makedirs(a.output, exist_ok=True)     # every frame's files checked before the work, not as each is written
+    check_files((os.path.join(a.output, f"frame_{k:04d}{x}") for k in range(len(times)) for x in (".exr", ".png")),
+                "frame")
     try:
         frames = reconstruct(ev, times, a.method, **_method_arguments(a, ev, t_frame))
     except ValueError as e:
         raise EventFieldError(f"{a.file}: {e}") from None
-    os.makedirs(a.output, exist_ok=True)
     # radiance as the light fields take it: the pixel's lin-log response inverted, the levels clipped at +-40
-    # (exp beyond e^88.7 overflowed float32: +inf in the EXR)
-    linear = radiance_of_levels(frames, a.file, stream_linlog_threshold(ev.meta))
+    # (exp beyond e^88.7 overflowed float32: +inf in the EXR); a frame at a time: converting the whole stack
+    # made four more copies of it (500 frames of 1280x720 went past 6 GiB)
+    warn_levels_beyond(frames, a.file)
+    knee = stream_linlog_threshold(ev.meta)
     for k, t in enumerate(times):
-        save_image(os.path.join(a.output, f"frame_{k:04d}.png"), linear[k],
+        linear = radiance_of_levels(frames[k], a.file, knee, warn=False)
+        save_image(os.path.join(a.output, f"frame_{k:04d}.png"), linear,
                    _out_meta(a, ev, method=a.method, time_s=float(t),
                              domain="linear: the pixel's lin-log response (log intensity above its knee) inverted",
                              **({"calibration": {"file": os.path.abspath(a.calibration), "applied": applied}}

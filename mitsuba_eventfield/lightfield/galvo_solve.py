@@ -114,13 +114,21 @@ def _pairs(samples: int, lags) -> list:
 
 
 def _system(counts, angles, mapper: _Mapper, samples: int, lags):
-    """Sparse A (equations x pixels) and right-hand side b of the pair equations (module docstring)."""
+    """Sparse A (equations x pixels) and right-hand side b of the pair equations (module docstring). Every row
+    holds five entries, the pixel's +1 and its four bilinear neighbours in the other view (minus their weights),
+    written straight into CSR arrays sized for every pixel of every pair: built as lists of 64-bit COO
+    triplets, concatenated, then converted, one 1280x720 period at 16 samples needed about 8 GiB (a scale
+    audit, 2026-11-28). Duplicate entries (a neighbour that is the pixel itself) are summed as the conversion
+    summed them, so the matrix is the same to the bit."""
     from scipy.sparse import csr_matrix
     h, w = counts.shape[1:]
-    rows, cols, vals, rhs = [], [], [], []
+    pairs = _pairs(samples, lags)
+    bound = len(pairs) * h * w                        # equations at most: every pixel of every pair
+    index = np.int32 if 5 * bound < 2 ** 31 else np.int64
+    cols, vals, rhs = np.empty((bound, 5), index), np.empty((bound, 5)), np.empty(bound)
     n_eq = 0
     pix = np.arange(h * w).reshape(h, w)
-    for k, k2 in _pairs(samples, lags):
+    for k, k2 in pairs:
         sx, sy = mapper(angles[k2], angles[k])                 # view k2 pixel -> view k position
         x0, y0 = np.floor(sx).astype(np.int64), np.floor(sy).astype(np.int64)
         fx, fy = sx - x0, sy - y0
@@ -128,21 +136,23 @@ def _system(counts, angles, mapper: _Mapper, samples: int, lags):
         m = int(ok.sum())
         if not m:
             continue
-        eq = n_eq + np.arange(m)
-        rows.append(eq), cols.append(pix[ok]), vals.append(np.ones(m))
+        eq = slice(n_eq, n_eq + m)
+        cols[eq, 0], vals[eq, 0] = pix[ok], 1.0
         x0, y0, fx, fy = x0[ok], y0[ok], fx[ok], fy[ok]
         interp = np.zeros(m)
         ck = counts[k].ravel()
-        for idx, wt in ((y0 * w + x0, (1 - fx) * (1 - fy)), (y0 * w + x0 + 1, fx * (1 - fy)),
-                        ((y0 + 1) * w + x0, (1 - fx) * fy), ((y0 + 1) * w + x0 + 1, fx * fy)):
-            rows.append(eq), cols.append(idx), vals.append(-wt)
+        for j, (idx, wt) in enumerate(((y0 * w + x0, (1 - fx) * (1 - fy)), (y0 * w + x0 + 1, fx * (1 - fy)),
+                                       ((y0 + 1) * w + x0, (1 - fx) * fy), ((y0 + 1) * w + x0 + 1, fx * fy)), 1):
+            cols[eq, j], vals[eq, j] = idx, -wt
             interp += wt * ck[idx]
-        rhs.append(interp - counts[k2].ravel()[pix[ok]])
+        rhs[eq] = interp - counts[k2].ravel()[pix[ok]]
         n_eq += m
     if n_eq == 0:
         raise ConfigError("the scan moves the image out of the frame: no equations")
-    a = csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_eq, h * w))
-    return a, np.concatenate(rhs)
+    a = csr_matrix((vals[:n_eq].reshape(-1), cols[:n_eq].reshape(-1), np.arange(0, 5 * n_eq + 1, 5, dtype=index)),
+                   shape=(n_eq, h * w))
+    a.sum_duplicates()
+    return a, rhs[:n_eq]
 
 
 def _solve(a, b, prior, prior_weight, robust_iterations, threshold, iterations, tolerance):
@@ -180,6 +190,14 @@ def _one_blas_thread():
                 _blas["limiter"] = None     # the next first solve reads the limits afresh
 
 
+def _transposed_in_place(a):
+    """``a`` for LSQR as an operator whose transpose is a view (``a.T``): scipy's own wrapper took it as
+    ``a.H``, a copy of the whole matrix (1.6 GiB for one 1280x720 period); the products are the same to the
+    bit."""
+    from scipy.sparse.linalg import LinearOperator
+    return LinearOperator(a.shape, matvec=lambda v: a @ v, rmatvec=lambda v: a.T @ v, dtype=a.dtype)
+
+
 def _solve_robust(a, b, prior, prior_weight, robust_iterations, threshold, iterations, tolerance):
     from scipy.sparse import diags
     from scipy.sparse.linalg import lsqr
@@ -189,8 +207,8 @@ def _solve_robust(a, b, prior, prior_weight, robust_iterations, threshold, itera
     delta = np.zeros(a.shape[1])
     for it in range(robust_iterations + 1):
         sw = np.sqrt(weights)
-        aw = diags(sw) @ a
-        delta = lsqr(aw, sw * r0, damp=damp, iter_lim=iterations, atol=tolerance, btol=tolerance,
+        aw = a if it == 0 else diags(sw) @ a          # (unit weights: the same matrix, not a copy of it)
+        delta = lsqr(_transposed_in_place(aw), sw * r0, damp=damp, iter_lim=iterations, atol=tolerance, btol=tolerance,
                      x0=delta if it else None)[0]
         if it == robust_iterations:
             break
@@ -205,7 +223,7 @@ DYNAMIC_LAGS = (1,)
 
 def static_lags(samples: int) -> tuple:
     """Pairs one sample and a quarter period apart: the best conditioned set for a static scene."""
-    return (1, max(1, samples // 4))
+    return tuple(sorted({1, max(1, samples // 4)}))   # one lag below 8 samples: (1, 1) built every equation twice
 
 
 def start_image(events: EventStream, t_start: float, samples: int = 16, depth=math.inf, prior=None,

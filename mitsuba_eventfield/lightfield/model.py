@@ -191,29 +191,39 @@ def _floats(values, name: str) -> np.ndarray:
         raise ConfigError(f"{name}: expected a numeric array, got {type(values).__name__}") from None
 
 
-def radiance_of_levels(log_frames, name: str = "from_galvo: log_frames", linear_below: float | None = None):
+def radiance_of_levels(log_frames, name: str = "from_galvo: log_frames", linear_below: float | None = None,
+                       warn: bool = True):
     """Linear frames of log ones: ``exp``, or the pixel's lin-log inverse where the levels are lin-log
     (``linear_below``: its knee; a reconstruction from events on a start frame through ``linlog_np``), the
-    levels clipped first (``clip_log_levels``). The one home of levels -> radiance: the light fields and
+    levels clipped first (``clip_log_levels``; ``warn=False``: the caller has said it, ``warn_levels_beyond``,
+    and converts a stack a frame at a time). The one home of levels -> radiance: the light fields and
     ``reconstruct``'s frames."""
     from ..plugins.pixel_model import linlog_inverse_np
-    frames = clip_log_levels(_floats(log_frames, name), name)
+    frames = clip_log_levels(_floats(log_frames, name), name, warn)
     # (a level below the pixel's response to no light, e.g. after a noise OFF event, is no radiance: 0)
     return np.exp(frames) if linear_below is None else np.maximum(linlog_inverse_np(frames, linear_below), 0.0)
 
 
-def clip_log_levels(log_frames: np.ndarray, name: str) -> np.ndarray:
-    """``log_frames`` clipped to +-``MAX_LOG_LEVEL`` (NaN stays NaN), with a warning naming how many finite
-    levels, or infinitely bright ones, were beyond (exponentiated, they overflowed float32 and every focus
-    measure after them). Clipped, not refused: one stuck pixel's runaway level should not cost the whole
-    image; a wrong threshold shows in every pixel. A level of -inf (no light, in plain log) is 0 either way."""
-    beyond = int(np.count_nonzero((np.isfinite(log_frames) & (np.abs(log_frames) > MAX_LOG_LEVEL))
-                                  | (log_frames == np.inf)))
+def warn_levels_beyond(log_frames, name: str, stacklevel: int = 3) -> None:
+    """A warning naming how many finite levels of ``log_frames``, or infinitely bright ones, lie beyond
+    +-``MAX_LOG_LEVEL`` (exponentiated, they overflowed float32 and every focus measure after them); counted a
+    frame at a time, so that a long stack is not copied whole."""
+    a = np.asarray(log_frames)
+    beyond = sum(int(np.count_nonzero((np.isfinite(f) & (np.abs(f) > MAX_LOG_LEVEL)) | (f == np.inf)))
+                 for f in (a.reshape(-1, *a.shape[-2:]) if a.ndim >= 2 else [a]))
     if beyond:
-        warnings.warn(f"{name}: {beyond} of {log_frames.size} levels beyond a log level of +-{MAX_LOG_LEVEL:g} "
+        warnings.warn(f"{name}: {beyond} of {a.size} levels beyond a log level of +-{MAX_LOG_LEVEL:g} "
                       f"(a brightness ratio of {math.exp(MAX_LOG_LEVEL):.0e} either way, beyond any sensor: a "
                       "stuck pixel, or a contrast threshold larger than the events' own?): clipped there",
-                      stacklevel=3)
+                      stacklevel=stacklevel)
+
+
+def clip_log_levels(log_frames: np.ndarray, name: str, warn: bool = True) -> np.ndarray:
+    """``log_frames`` clipped to +-``MAX_LOG_LEVEL`` (NaN stays NaN), said first (``warn_levels_beyond``).
+    Clipped, not refused: one stuck pixel's runaway level should not cost the whole image; a wrong threshold
+    shows in every pixel. A level of -inf (no light, in plain log) is 0 either way."""
+    if warn:
+        warn_levels_beyond(log_frames, name, stacklevel=4)
     return np.clip(log_frames, -MAX_LOG_LEVEL, MAX_LOG_LEVEL)
 
 

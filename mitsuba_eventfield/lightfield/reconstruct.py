@@ -50,12 +50,14 @@ def thresholds(events: EventStream, c_on=None, c_off=None):
                  for name, c in (("c_on", c_on), ("c_off", c_off)))
 
 
-def _signed_weights(events, c_on, c_off):
-    return np.where(events.p > 0, c_on, -c_off)
+def _signed_weights(events, c_on, c_off, part=slice(None)):
+    """Each event's log step (``part``: of these events only)."""
+    return np.where(events.p[part] > 0, c_on, -c_off)
 
 
-def _pixel_index(events):
-    return events.y.astype(np.int64) * events.width + events.x
+def _pixel_index(events, part=slice(None)):
+    """Each event's flat pixel index (``part``: of these events only)."""
+    return events.y[part].astype(np.int64) * events.width + events.x[part]
 
 
 def _check_times(times):
@@ -91,11 +93,14 @@ def direct(events: EventStream, times, log_start=None, t_start: float | None = N
     # starts at its first event, which was dropped
     idx = np.r_[np.searchsorted(events.t, t_us[:1], side="left" if t_start is None else "right"),
                 np.searchsorted(events.t, t_us[1:], side="right")]
-    pix, wts = _pixel_index(events), _signed_weights(events, c_on, c_off)
+    # only the events between the start and the last frame are weighed: one scan period of a 5 s, 53 M-event
+    # recording held 16 bytes of every event of it (5.7 GiB at 1280x720 against 5.2 for 0.5 s)
+    lo, hi = int(idx.min()), int(idx.max())
+    pix, wts = _pixel_index(events, slice(lo, hi)), _signed_weights(events, c_on, c_off, slice(lo, hi))
     out = np.empty((len(times), h, w))
     acc = start.ravel().copy()
     for k in range(len(times)):
-        s = slice(idx[k], idx[k + 1])
+        s = slice(idx[k] - lo, idx[k + 1] - lo)
         acc += np.bincount(pix[s], weights=wts[s], minlength=h * w)
         out[k] = acc.reshape(h, w)
     return out

@@ -270,8 +270,8 @@ def test_reused_output_folder_warns_and_keeps_no_stale_files(capture, tmp_path, 
 
 def test_a_users_file_named_like_an_output_is_kept_and_the_run_stops(capture, tmp_path, capsys):
     """A file in a reused folder that eventfield did not write was replaced when the run wrote that name, under
-    a warning that it stayed. Now the run stops there in one line and the file is untouched; what the run did
-    write before is listed in the folder's manifest, so the next run, the file moved away, may replace it."""
+    a warning that it stayed. Now the run stops in one line before any frame is made, and the file is
+    untouched; the next run, the file moved away, writes every frame."""
     out = tmp_path / "frames"
     out.mkdir()
     mine = out / "frame_0001.png"
@@ -281,8 +281,7 @@ def test_a_users_file_named_like_an_output_is_kept_and_the_run_stops(capture, tm
     assert "1 other files stay" in err[0] and len(err) == 2, err
     assert f"{mine}: a file eventfield did not write" in err[1] and "is kept, not replaced" in err[1], err
     assert mine.read_text() == "a file of the user's"
-    written_before = {n for n in os.listdir(out) if n.startswith("frame_0000")}
-    assert written_before, "the run stopped before it wrote its first frame: the check saw nothing it wrote"
+    assert os.listdir(out) == ["frame_0001.png"]          # nothing written, no manifest of nothing
     mine.rename(tmp_path / "mine.png")
     assert cli.main(["reconstruct", capture, "-o", str(out), "--fps", "1000", "--method", "galvo"]) == 0
     err = capsys.readouterr().err
