@@ -19,7 +19,7 @@ import os
 
 import numpy as np
 
-from mitsuba_eventfield.atomic import atomic_output
+from mitsuba_eventfield.atomic import atomic_output, updating
 from mitsuba_eventfield.errors import ConfigError, EventFieldError
 
 from .depth import DepthCalibration
@@ -57,7 +57,13 @@ def _check_same_setup(path: str, data: dict, kind: str, optics: dict) -> None:
 
 def save_calibration(path: str, optics: dict | None = None, **parts) -> str:
     """Write (or extend) a calibration file with ``galvo=``, ``depth=``, ``kaleidoscope=`` results, each made for
-    ``optics`` (an ``optics_record``; default: the result's own ``optics``). Refuses a result with no optics."""
+    ``optics`` (an ``optics_record``; default: the result's own ``optics``). Refuses a result with no optics.
+    Read, extended and written under one lock (``atomic.updating``): two runs at once keep both parts."""
+    with updating(path):
+        return _save(path, optics, parts)
+
+
+def _save(path: str, optics, parts: dict) -> str:
     data = load_calibration_dict(path) if os.path.exists(path) else {"format": FORMAT, "version": VERSION}
     for kind, obj in parts.items():
         if kind not in _KINDS:

@@ -1,6 +1,8 @@
 """The one exception type users see for bad input; the CLI prints it as a single line."""
 from __future__ import annotations
 
+import contextlib
+
 
 class EventFieldError(Exception):
     """Invalid input or unmet precondition, with a message that names the file/field and the allowed range."""
@@ -47,3 +49,30 @@ def raise_if_stopped() -> None:
     if STOP_SIGNALS:
         import signal
         raise KeyboardInterrupt(signal.Signals(STOP_SIGNALS[0]).name)
+
+
+@contextlib.contextmanager
+def interrupts_held():
+    """SIGINT and SIGTERM held while cleanup runs that must not be cut short (a partial file removed, a folder
+    put back): a signal that comes meanwhile is passed to the handler that was in place once the block ends
+    (so a Ctrl-C still stops, after the cleanup). Off the main thread nothing changes: Python takes signals on
+    the main thread only."""
+    import signal
+    import threading
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came = []
+    previous = {sig: signal.signal(sig, lambda signum, frame: came.append(signum))
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        if came:
+            handler = previous[came[0]]
+            if callable(handler):
+                handler(came[0], None)
+            elif handler == signal.SIG_DFL:      # the default action (SIGTERM: the process ends)
+                signal.raise_signal(came[0])

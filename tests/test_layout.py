@@ -12,7 +12,7 @@ PACKAGES = {"mitsuba_eventfield": "mitsuba_eventfield", "mitsuba_eventfield.plug
             "mitsuba_eventfield.calibration": "calibration", "mitsuba_eventfield.device": "device"}
 # lower layers first; a module may import from its layer and those before it
 LAYERS = [
-    {"errors", "_version", "_llvm", "validate", "atomic", "images", "workers"},
+    {"errors", "_version", "_llvm", "validate", "atomic", "output_folders", "images", "workers"},
     {"optics"},
     {"events", "device"},
     {"plugins"},

@@ -1,4 +1,4 @@
-"""An application's output folder (``atomic.output_dir_run``): a user's file in it is never replaced; a run that
+"""An application's output folder (``output_folders.output_dir_run``): a user's file in it is never replaced; a run that
 fails or is stopped leaves the folder as it found it (what it replaced put back, what it added removed), and a
 run killed outright leaves what it wrote listed in the folder's claims, so the next run replaces those files
 instead of refusing them as the user's, and puts back what it had replaced."""
@@ -9,7 +9,8 @@ import sys
 
 import pytest
 
-from mitsuba_eventfield.atomic import CLAIMS, MANIFEST, output_dir_run, write_json
+from mitsuba_eventfield.atomic import write_json
+from mitsuba_eventfield.output_folders import CLAIMS, MANIFEST, output_dir_run
 from mitsuba_eventfield.errors import EventFieldError
 
 
@@ -93,7 +94,8 @@ def test_a_killed_reruns_replaced_files_are_put_back_by_the_next_run(tmp_path, c
     them back before it starts, and says so."""
     out = tmp_path / "out"
     _run(out, {"a.json": 1})
-    script = ("import os, sys\nfrom mitsuba_eventfield.atomic import output_dir_run, write_json\n"
+    script = ("import os, sys\nfrom mitsuba_eventfield.atomic import write_json\n"
+              "from mitsuba_eventfield.output_folders import output_dir_run\n"
               "with output_dir_run(sys.argv[1], 'test'):\n"
               "    write_json(os.path.join(sys.argv[1], 'a.json'), 2)\n    os._exit(9)\n")
     r = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, timeout=120)
@@ -110,7 +112,8 @@ def test_a_killed_reruns_replaced_files_are_put_back_by_the_next_run(tmp_path, c
 def test_a_killed_run_leaves_its_files_listed(tmp_path):
     """Listed before it is written: a process killed outright runs no cleanup at all."""
     out = tmp_path / "out"
-    script = ("import os, sys\nfrom mitsuba_eventfield.atomic import output_dir_run, write_json\n"
+    script = ("import os, sys\nfrom mitsuba_eventfield.atomic import write_json\n"
+              "from mitsuba_eventfield.output_folders import output_dir_run\n"
               "with output_dir_run(sys.argv[1], 'test'):\n"
               "    os.mkdir(sys.argv[1])\n    write_json(os.path.join(sys.argv[1], 'a.json'), {})\n    os._exit(9)\n")
     r = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, timeout=120)
@@ -173,3 +176,57 @@ def test_a_reused_folder_is_announced_as_replaced_only_if_the_run_succeeds(tmp_p
             raise EventFieldError("a bad argument")
     assert "1 files of an earlier run are replaced or removed if this run succeeds" in capsys.readouterr().err
     assert json.loads((out / "a.json").read_text()) == {"run": 1} and _listed(out) == ["a.json"]
+
+
+def test_parts_an_application_keeps_stay_when_a_later_part_fails(tmp_path):
+    """``paper``: one result's failure must not cost the others (its refusal says their outputs are there):
+    what was published before ``keep_outputs`` stays, replaced files included, and is listed."""
+    from mitsuba_eventfield.output_folders import keep_outputs
+    out = tmp_path / "out"
+    _run(out, {"a.json": 1, "b.json": 1})
+    with pytest.raises(EventFieldError):
+        with output_dir_run(str(out), "test"):
+            write_json(str(out / "a.json"), 2)
+            write_json(str(out / "n.json"), 2)
+            keep_outputs(str(out))
+            write_json(str(out / "b.json"), 2)
+            write_json(str(out / "m.json"), 2)
+            raise EventFieldError("the second result failed")
+    assert _contents(out) == {"a.json": 2, "b.json": 1, "n.json": 2} and _listed(out) == ["a.json", "b.json", "n.json"]
+    assert sorted(os.listdir(out)) == [MANIFEST, "a.json", "b.json", "n.json"]
+
+
+def test_a_killed_runs_kept_files_are_put_back_whatever_process_has_its_id_now(tmp_path, capsys):
+    """The kept files' folder was told stale by its process id: a new run with the same id (containers reuse
+    small ids) never put it back, and overwrote the only copy of the earlier file. Now by its lock: a folder
+    nobody holds is a killed run's, here one named with this very process's id."""
+    out = tmp_path / "out"
+    _run(out, {"a.json": 1})
+    stale = out / f"{MANIFEST}.previous-{os.getpid()}-0badf00d"
+    stale.mkdir()
+    os.replace(out / "a.json", stale / "a.json")
+    write_json(str(out / "a.json"), "the killed run's")
+    capsys.readouterr()
+    with pytest.raises(ValueError):
+        _run(out, {"b.json": 2}, fail=ValueError())     # (failed: the folder is what it was before it)
+    assert "put back 1 files" in capsys.readouterr().err
+    assert _contents(out) == {"a.json": 1} and not stale.exists() and _listed(out) == ["a.json"]
+
+
+def test_a_stopped_run_removes_the_folders_it_made(tmp_path):
+    """slomorf writes into frames/ and refocus/: a stopped run left them empty."""
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        with output_dir_run(str(out), "test"):
+            (out / "frames" / "deep").mkdir(parents=True)
+            write_json(str(out / "frames" / "deep" / "f.json"), 1)
+            (out / "refocus").mkdir()
+            raise KeyboardInterrupt
+    assert not out.exists()
+    out.mkdir()
+    (out / "mine").mkdir()
+    with pytest.raises(KeyboardInterrupt):
+        with output_dir_run(str(out), "test"):
+            (out / "frames").mkdir()
+            raise KeyboardInterrupt
+    assert os.listdir(out) == ["mine"]

@@ -173,6 +173,7 @@ def document(rows: list, quick: bool, seconds: float) -> str:
 def generate(out_dir: str, doc_path: str, only=None, quick: bool = False, progress: bool = False) -> list:
     """Run the results (all, or the keys in ``only``), write their outputs and the document; return the rows."""
     from ..atomic import atomic_output
+    from ..output_folders import keep_outputs
     keys = [e.key for e in ENTRIES]
     unknown = sorted(set(only or []) - set(keys))
     if unknown:
@@ -191,6 +192,7 @@ def generate(out_dir: str, doc_path: str, only=None, quick: bool = False, progre
             failed.append(f"{entry.key}: {' '.join(str(e).split())}")
             continue
         paths = result.write(os.path.join(out_dir, entry.key))
+        keep_outputs(out_dir)                      # stays if a later result fails (as the refusal below says)
         image = _copy_figure(paths, entry.key, doc_dir)
         own = entry.rows(result)
         if own is None:

@@ -179,6 +179,7 @@ def run_track_focus(a) -> int:
 def run_scanrate_depth(a) -> int:
     from ..apps import scanrate
     from ..calibration import load_calibration, save_calibration
+    from ..output_folders import keep_outputs
     calibration = load_calibration(a.calibration) if a.calibration else None
     if a.calibrate:
         try:
@@ -189,6 +190,7 @@ def run_scanrate_depth(a) -> int:
         d = calibration["depth"]
         print(f"depth calibration (LED at {len(d.depths)} depths): pivot {d.pivot:.4g}, rms {d.rms_inverse:.3f} "
               f"px/rad -> " + save_calibration(os.path.join(a.output, "calibration.json"), **calibration))
+        keep_outputs(a.output)            # said written: it stays if the run after it fails
     return _application(
         lambda: scanrate.run(a.scene, defines(a), a.periods, a.views, a.near, a.far, a.planes,
                              min_confidence=a.min_confidence, split_depth=a.split_depth, calibration=calibration,

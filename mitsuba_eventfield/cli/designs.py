@@ -37,8 +37,9 @@ def add_parsers(sub) -> None:
 
 
 def _in_output_dir(command: str, a, run, wrote) -> int:
-    """``_application`` inside the output folder's manifest (``atomic.output_dir_run``), the folder checked first."""
-    from ..atomic import check_output_dir, output_dir_run
+    """``_application`` inside the output folder's manifest (``output_folders.output_dir_run``), the folder checked first."""
+    from ..atomic import check_output_dir
+    from ..output_folders import output_dir_run
     check_output_dir(a.output)
     with output_dir_run(a.output, command):
         return _application(run, a.output, wrote)

@@ -62,7 +62,7 @@ def _restore_signals(previous: dict) -> list:
 def _run(args) -> int:
     check_outputs(args)
     if args.command in OUTPUT_DIRS:
-        from ..atomic import output_dir_run
+        from ..output_folders import output_dir_run
         with output_dir_run(args.output, args.command):
             return COMMANDS[args.command](args)
     return COMMANDS[args.command](args)

@@ -41,7 +41,8 @@ def add_parsers(sub) -> None:
 
 def run_scan_frequency(a) -> int:
     from ..apps import scan_frequency
-    from ..atomic import check_output_dir, output_dir_run
+    from ..atomic import check_output_dir
+    from ..output_folders import output_dir_run
     from .apps import _application
     frequencies = number_list(a.frequencies, "--frequencies", lo=0, lo_open=True)
     planes = pairs(a.plane, "--plane") if a.plane is not None else None

@@ -218,14 +218,11 @@ class BackgroundWriter:
 
     def abort(self):
         """Drop the queued chunks (the threads write and copy nothing more) and remove the partial file. A
-        second Ctrl-C while the threads end is held until the file is gone: escaping the wait left the partial
-        file (or an .npz's column files) beside the output under "no partial output kept". Stopping twice is
-        harmless: the second end marker finds the threads gone and the queues empty."""
+        second Ctrl-C meanwhile is held until the file is gone (``errors.interrupts_held``): escaping the wait
+        for the threads, or the file writer's own abort (its compression pool), left the partial file (or an
+        .npz's column files) beside the output under "no partial output kept"."""
+        from ..errors import interrupts_held
         self.aborting = True
-        while True:
-            try:
-                self._stop()
-                break
-            except KeyboardInterrupt:      # the first stop is on its way up already
-                continue
-        self.writer.abort()
+        with interrupts_held():
+            self._stop()
+            self.writer.abort()

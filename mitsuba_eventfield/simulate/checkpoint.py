@@ -65,10 +65,13 @@ def _lock(folder: str):
     fd = os.open(os.path.join(folder, LOCK_FILE), os.O_RDWR | os.O_CREAT, 0o644)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
+    except BlockingIOError:            # held: another process renders into this folder
         pid = os.read(fd, 32).decode("ascii", "replace").strip() or "unknown"
         os.close(fd)
         raise _busy(folder, pid) from None
+    except OSError:                    # no flock on this file system (some FUSE, SMB mounts): unguarded, as before
+        os.close(fd)
+        return None
     os.ftruncate(fd, 0)
     os.write(fd, str(os.getpid()).encode())
     return fd

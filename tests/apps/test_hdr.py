@@ -14,7 +14,7 @@ from conftest import ROOT
 
 from mitsuba_eventfield.apps import hdr
 from mitsuba_eventfield.apps.hdr_lightfield import refocus_bilinear
-from mitsuba_eventfield.atomic import MANIFEST
+from mitsuba_eventfield.output_folders import MANIFEST
 
 SCENE = os.path.join(ROOT, "scenes", "hdr_leds", "hdr_leds.xml")
 LF_SCENE = os.path.join(ROOT, "scenes", "hdr_depth", "hdr_depth.xml")

@@ -15,7 +15,7 @@ from conftest import ROOT, TEST_VARIANT
 
 from mitsuba_eventfield import backend
 from mitsuba_eventfield.apps import slomorf
-from mitsuba_eventfield.atomic import MANIFEST
+from mitsuba_eventfield.output_folders import MANIFEST
 
 SCENE = os.path.join(ROOT, "scenes", "falling", "falling.xml")
 DART = os.path.join(ROOT, "scenes", "dart", "kaleidoscope.xml")

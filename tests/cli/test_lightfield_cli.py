@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from mitsuba_eventfield.atomic import MANIFEST
+from mitsuba_eventfield.output_folders import MANIFEST
 
 GALVO = os.path.join(ROOT, "scenes", "galvo_static", "galvo_static.xml")
 

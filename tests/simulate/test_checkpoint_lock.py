@@ -44,22 +44,42 @@ def test_a_live_checkpointed_render_refuses_a_second_render_of_its_output(tmp_pa
 
 
 def test_a_stop_swallowed_during_the_merge_publishes_nothing_and_keeps_the_checkpoint(tmp_path, monkeypatch):
+    """The stop is recorded while the segments are merged into the output (not at a segment's cut): the
+    output is not published, the checkpoint stays, and the resume gives the undisturbed file."""
     timed = ef.load_scene(DEMO, width=16, height=12)
     ref, out = str(tmp_path / "ref.h5"), str(tmp_path / "out.h5")
     ef.render_events(timed, output=ref, **KW)
-    real = checkpoint.SegmentWriter.close
+    merges = []
 
-    def close(self, *a, **k):
-        STOP_SIGNALS.append(2)         # as if a Ctrl-C had been recorded and its exception lost in a library
-        return real(self, *a, **k)
-    monkeypatch.setattr(checkpoint.SegmentWriter, "close", close)
+    class Merging(checkpoint.H5EventWriter):
+        def close(self, *a, **k):
+            if self.path == os.path.abspath(out):         # the merged output, not a segment
+                merges.append(self.path)
+                STOP_SIGNALS.append(2)   # as if a Ctrl-C had been recorded and its exception lost in a library
+            return super().close(*a, **k)
+    monkeypatch.setattr(checkpoint, "H5EventWriter", Merging)
     try:
         with pytest.raises(KeyboardInterrupt):
             ef.render_events(timed, output=out, checkpoint_s=1e-9, **KW)
     finally:
         STOP_SIGNALS.clear()
         monkeypatch.undo()
+    assert merges == [os.path.abspath(out)]
     assert not os.path.exists(out) and os.path.isfile(out + ".resume/checkpoint.json")
     assert [n for n in os.listdir(tmp_path) if n.startswith("out")] == ["out.h5.resume"]   # no partial file
     ef.render_events(timed, output=out, resume=True, **KW)
     assert _same_file(ref, out)
+
+
+def test_a_file_system_without_flock_renders_unguarded(tmp_path, monkeypatch):
+    """Only a held lock means another renderer: flock refused outright (ENOLCK: some FUSE and SMB mounts)
+    was read as "another process is rendering" and refused every checkpointed render there."""
+    import errno
+    import fcntl
+
+    def no_flock(fd, op):
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+    monkeypatch.setattr(fcntl, "flock", no_flock)
+    timed = ef.load_scene(DEMO, width=16, height=12)
+    ef.render_events(timed, output=str(tmp_path / "a.h5"), checkpoint_s=1e-9, **KW)
+    assert os.listdir(tmp_path) == ["a.h5"]
