@@ -158,15 +158,19 @@ def updating(path: str):
     """Hold an exclusive lock while ``path`` is read, changed and written again (a calibration file that two
     ``calibrate`` runs extend at once: each read the file before the other wrote it, and one part was lost). The
     lock is the folder's (``flock`` on its directory: the file itself is replaced by a rename, so a lock on it
-    would not outlive the first write); where there is no ``flock`` (Windows) the update is not serialised."""
+    would not outlive the first write). Where there is no ``flock`` (Windows, a file system that refuses it) or
+    no folder yet (the write then says why), the update is not serialised."""
     try:
         import fcntl
-    except ImportError:
+        fd = os.open(os.path.dirname(os.path.abspath(path)), os.O_RDONLY)
+    except (ImportError, OSError):
         yield
         return
-    fd = os.open(os.path.dirname(os.path.abspath(path)), os.O_RDONLY)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:                # ENOLCK and the like: unguarded, as without flock
+            pass
         yield
     finally:
         os.close(fd)                   # (closing releases the lock)

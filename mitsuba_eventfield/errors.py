@@ -52,16 +52,20 @@ def raise_if_stopped() -> None:
 
 
 @contextlib.contextmanager
-def interrupts_held():
+def interrupts_held(replay: bool = True):
     """SIGINT and SIGTERM held while cleanup runs that must not be cut short (a partial file removed, a folder
-    put back): a signal that comes meanwhile is passed to the handler that was in place once the block ends
-    (so a Ctrl-C still stops, after the cleanup). Off the main thread nothing changes: Python takes signals on
-    the main thread only."""
+    put back). A signal that came meanwhile is then handed to the handler that was in place (so a Ctrl-C still
+    stops, after the cleanup), unless ``replay`` is False (a finished run's last steps: its outputs are whole)
+    or an exception was already on its way when the block began (the error that failed the run says more than
+    the interrupt: a full disk read as "interrupted"). Off the main thread nothing changes: Python takes
+    signals on the main thread only."""
     import signal
+    import sys
     import threading
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    replay = replay and sys.exc_info()[1] is None
     came = []
     previous = {sig: signal.signal(sig, lambda signum, frame: came.append(signum))
                 for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -70,7 +74,7 @@ def interrupts_held():
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-        if came:
+        if came and replay:
             handler = previous[came[0]]
             if callable(handler):
                 handler(came[0], None)

@@ -40,41 +40,47 @@ _RUNS_LOCK = threading.Lock()
 @contextlib.contextmanager
 def output_dir_run(path: str, command: str):
     """An application writing into the folder ``path`` (module docstring)."""
+    from .atomic import _nearest_existing
+    from .errors import raise_if_stopped
     path = os.path.abspath(path)
     _put_back_stale(path)
     previous = [os.path.join(path, p) for p in _listed(path)]
     foreign = _reuse_warning(path, previous)
-    before, dirs_before = _snapshot(path), _dirs_below(path)
-    existed = os.path.isdir(path)
-    kept = {os.path.join(path, n) for n in foreign}
-    _KEPT.update(kept)
     run = {"command": command, "files": {os.path.relpath(p, path) for p in previous}, "published": set(),
-           "backed": set(), "backup": f"{BACKUP}{os.getpid()}-{uuid.uuid4().hex[:8]}", "lock": None}
+           "backed": set(), "backup": f"{BACKUP}{os.getpid()}-{uuid.uuid4().hex[:8]}", "lock": None,
+           "before": _snapshot(path), "dirs_before": _dirs_below(path), "above": _nearest_existing(path),
+           "kept": {os.path.join(path, n) for n in foreign}}
+    _KEPT.update(run["kept"])
     with _RUNS_LOCK:                   # each file it writes is listed before it is written (``claim``)
         _RUNS[path] = run
     try:
         yield path
-        from .errors import raise_if_stopped
         raise_if_stopped()             # a stop a library swallowed: not a success
+        with interrupts_held(replay=False):     # finished: its end is not cut short, nor called interrupted
+            _succeeded(path, previous, run)
     except BaseException:
         with interrupts_held():        # a second Ctrl-C must not leave the folder half put back
-            _failed(path, command, run, before, dirs_before, kept, existed)
+            _failed(path, run)
         raise
     finally:
-        _KEPT.difference_update(kept)
+        _KEPT.difference_update(run["kept"])
         with _RUNS_LOCK:
             _RUNS.pop(path, None)
-    with interrupts_held():            # the run succeeded: its end is not cut short (its kept files go first, so
-        _drop_backup(path, run)        # that no later run puts them back over this one's)
-        if os.path.isdir(path):
-            written = _changed(path, before, kept)
-            for old in previous:
-                if os.path.relpath(old, path) not in written:
-                    with contextlib.suppress(OSError):
-                        os.remove(old)
-            write_json(os.path.join(path, MANIFEST), {"command": command, "files": written}, "output manifest")
-            with contextlib.suppress(OSError):
-                os.remove(os.path.join(path, CLAIMS))
+
+
+def _succeeded(path: str, previous: list, run: dict) -> None:
+    """A finished run: the manifest of what it wrote first (if that fails, the run fails and its folder is put
+    back whole), then the earlier run's files it did not rewrite removed, then its kept files dropped."""
+    if os.path.isdir(path):
+        written = _changed(path, run["before"], run["kept"])
+        write_json(os.path.join(path, MANIFEST), {"command": run["command"], "files": written}, "output manifest")
+        for old in previous:
+            if os.path.relpath(old, path) not in written:
+                with contextlib.suppress(OSError):
+                    os.remove(old)
+        with contextlib.suppress(OSError):
+            os.remove(os.path.join(path, CLAIMS))
+    _drop_backup(path, run)
 
 
 def claim(path: str, what: str) -> None:
@@ -139,35 +145,46 @@ def keep_outputs(folder: str) -> None:
 
 
 def _backup_folder(folder: str, run: dict) -> str:
-    """The run's folder for the files it replaces, made and locked on first use."""
+    """The run's folder for the files it replaces, made and locked on first use: made under a name no other
+    run looks at, locked, then renamed into sight, so that no other run can take it for a killed run's before
+    its lock is held."""
     root = os.path.join(folder, run["backup"])
-    if run["lock"] is None:
-        os.makedirs(root, exist_ok=True)
-        run["lock"] = _lock_dir(root)
+    if run["lock"] is None and not os.path.isdir(root):
+        making = os.path.join(folder, MANIFEST + ".making-" + run["backup"][len(BACKUP):])
+        os.makedirs(making)
+        run["lock"] = _lock_dir(making)[1]
+        os.rename(making, root)
     return root
 
 
 def _lock_dir(root: str):
-    """An open descriptor of ``root`` holding an exclusive ``flock`` on it (None without ``flock``)."""
+    """(state, descriptor) of an exclusive ``flock`` tried on the folder ``root``: ("locked", an open
+    descriptor holding it), ("held", None) where another process holds it, or ("none", None) without
+    ``flock`` there."""
     try:
         import fcntl
     except ImportError:
-        return None
+        return "none", None
     fd = os.open(root, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:                    # no flock here: the process id is the only sign of life left
+    except BlockingIOError:
         os.close(fd)
-        return None
-    return fd
+        return "held", None
+    except OSError:                    # no flock on this file system: the process id is the only sign of life
+        os.close(fd)
+        return "none", None
+    return "locked", fd
 
 
 def _abandoned(folder: str, name: str) -> bool:
     """A kept-files folder whose run is gone: its lock is free (or, without ``flock``, its process is dead)."""
-    fd = _lock_dir(os.path.join(folder, name))
-    if fd is not None:
+    state, fd = _lock_dir(os.path.join(folder, name))
+    if state == "locked":
         os.close(fd)
         return True
+    if state == "held":
+        return False
     try:
         return not _pid_alive(int(name[len(BACKUP):].split("-")[0]))
     except ValueError:
@@ -211,25 +228,29 @@ def _put_back_stale(path: str) -> None:
                       file=sys.stderr)
 
 
-def _failed(path: str, command: str, run: dict, before: dict, dirs_before: set, kept: set, existed: bool):
+def _failed(path: str, run: dict) -> None:
     """A run that failed or was stopped: the files it replaced put back, those it added removed, and the
-    folders it made if they are empty then; what it wrote past ``publish`` (none of ours does) stays listed,
-    so that the next run replaces it."""
+    folders it made (its own and their parents too) where empty then; what it wrote past ``publish`` (none of
+    ours does) stays listed, so that the next run replaces it."""
     _put_back(path, run["backup"], run["published"] - run["backed"])
     _drop_backup(path, run)
     with contextlib.suppress(OSError):
         os.remove(os.path.join(path, CLAIMS))
-    for made in sorted(_dirs_below(path) - dirs_before, key=len, reverse=True):
+    for made in sorted(_dirs_below(path) - run["dirs_before"], key=len, reverse=True):
         with contextlib.suppress(OSError):
             os.rmdir(os.path.join(path, made))      # only an empty folder goes
-    if not existed:                # a failed run leaves no folder it made, when nothing was written into it
-        with contextlib.suppress(OSError):
-            os.rmdir(path)
+    folder = path
+    while folder != run["above"] and len(folder) > len(run["above"]):    # the run made these: empty, they go
+        try:
+            os.rmdir(folder)
+        except OSError:
+            break
+        folder = os.path.dirname(folder)
     if os.path.isdir(path):
-        files = [f for f in set(run["files"]) | set(_changed(path, before, kept))
+        files = [f for f in set(run["files"]) | set(_changed(path, run["before"], run["kept"]))
                  if os.path.exists(os.path.join(path, f))]
         if files or os.path.exists(os.path.join(path, MANIFEST)):
-            _write_manifest(path, command, files)
+            _write_manifest(path, run["command"], files)
 
 
 def _reuse_warning(path: str, previous: list) -> list:
@@ -287,10 +308,14 @@ def _changed(path: str, before: dict, kept: set) -> list:
 
 
 def _walk(path: str):
-    """``os.walk`` below ``path`` without the manifest's own folders (the files runs keep aside)."""
+    """``os.walk`` below ``path`` without the manifests' own folders (the files runs keep aside) and without
+    the output folders of other applications (running now, or with a manifest of their own: an output folder
+    inside this one holds their files, not this run's)."""
+    with _RUNS_LOCK:
+        others = {folder for folder in _RUNS if folder != path}
     for root, dirs, names in os.walk(path):
-        if root == path:
-            dirs[:] = [d for d in dirs if not d.startswith(MANIFEST)]
+        dirs[:] = [d for d in dirs if not d.startswith(MANIFEST) and os.path.join(root, d) not in others
+                   and not os.path.isfile(os.path.join(root, d, MANIFEST))]
         yield root, dirs, names
 
 
