@@ -190,16 +190,16 @@ def _one_blas_thread():
                 _blas["limiter"] = None     # the next first solve reads the limits afresh
 
 
-def _transposed_in_place(a):
-    """``a`` for LSQR as an operator whose transpose is a view (``a.T``): scipy's own wrapper took it as
-    ``a.H``, a copy of the whole matrix (1.6 GiB for one 1280x720 period); the products are the same to the
-    bit."""
+def _weighted(a, sw):
+    """The rows of ``a`` scaled by ``sw``, for LSQR, as an operator that copies nothing: its transpose is a view
+    (``a.T``; scipy's own wrapper took it as ``a.H``, a copy of the whole matrix: 1.6 GiB for one 1280x720
+    period), and the weights are applied to the products (``diags(sw) @ a`` copied the matrix at every
+    re-weighting). With unit weights the products are those of ``a`` to the bit."""
     from scipy.sparse.linalg import LinearOperator
-    return LinearOperator(a.shape, matvec=lambda v: a @ v, rmatvec=lambda v: a.T @ v, dtype=a.dtype)
+    return LinearOperator(a.shape, matvec=lambda v: sw * (a @ v), rmatvec=lambda v: a.T @ (sw * v), dtype=a.dtype)
 
 
 def _solve_robust(a, b, prior, prior_weight, robust_iterations, threshold, iterations, tolerance):
-    from scipy.sparse import diags
     from scipy.sparse.linalg import lsqr
     r0 = b - a @ prior
     damp = math.sqrt(prior_weight)
@@ -207,8 +207,7 @@ def _solve_robust(a, b, prior, prior_weight, robust_iterations, threshold, itera
     delta = np.zeros(a.shape[1])
     for it in range(robust_iterations + 1):
         sw = np.sqrt(weights)
-        aw = a if it == 0 else diags(sw) @ a          # (unit weights: the same matrix, not a copy of it)
-        delta = lsqr(_transposed_in_place(aw), sw * r0, damp=damp, iter_lim=iterations, atol=tolerance, btol=tolerance,
+        delta = lsqr(_weighted(a, sw), sw * r0, damp=damp, iter_lim=iterations, atol=tolerance, btol=tolerance,
                      x0=delta if it else None)[0]
         if it == robust_iterations:
             break

@@ -123,9 +123,10 @@ def test_static_lags_pair_each_equation_once():
 
 
 def test_the_solve_does_not_copy_the_system():
-    """LSQR took the matrix's transpose as ``a.H``, a copy of it (1.6 GiB for one 1280x720 period); the
-    solve now holds vectors only: under 12 float64 values an equation at its peak, where the copy alone is 7.5
-    (five values and five int32 columns). The solution is the same to the bit as with the copy."""
+    """LSQR took the matrix's transpose as ``a.H``, a copy of it (1.6 GiB for one 1280x720 period), and each
+    re-weighting copied it again (``diags(sw) @ a``); the solve now holds vectors only: under 12 float64 values
+    an equation at its peak, where one copy alone is 7.5 (five values and five int32 columns). Unweighted, the
+    solution is the same to the bit as with the copy."""
     from scipy.sparse.linalg import lsqr
     from mitsuba_eventfield.optics.galvo import GalvoGeometry
     h, w, samples = 90, 160, 16
@@ -137,5 +138,8 @@ def test_the_solve_does_not_copy_the_system():
     args = (np.zeros(h * w), 1e-8, 0, 0.2, 30, 1e-4)
     (x, _), peak = _peak(lambda: galvo_solve._solve(a, b, *args))
     assert peak < 12 * 8 * a.shape[0], peak / (8 * a.shape[0])
+    robust = (np.zeros(h * w), 1e-8, 2, 0.2, 30, 1e-4)        # re-weighted twice: the weights on the products
+    (_, weights), peak = _peak(lambda: galvo_solve._solve(a, b, *robust))
+    assert peak < 12 * 8 * a.shape[0] and weights.min() < 1, peak / (8 * a.shape[0])
     with galvo_solve._one_blas_thread():            # (BLAS's threads would sum the norms in another order)
         assert np.array_equal(x, lsqr(a, b, damp=math.sqrt(1e-8), iter_lim=30, atol=1e-4, btol=1e-4)[0])
