@@ -71,14 +71,22 @@ def _run(args) -> int:
 def _os_error(e: OSError) -> int | None:
     """The exit status of an OSError, or None when it came from an interrupt."""
     if e.errno == errno.ENOSPC:
-        print(f"eventfield: error: disk full while writing {e.filename or 'the output'} (nothing was kept)",
-              file=sys.stderr)
+        print(f"eventfield: error: disk full while writing {e.filename or 'the output'} (no partial output kept)"
+              f"{_kept_checkpoint()}", file=sys.stderr)
         return 2
     if received:
         return None
-    print(f"eventfield: error: {e.filename or ''}{': ' if e.filename else ''}{e.strerror or one_line(e)}",
-          file=sys.stderr)
+    print(f"eventfield: error: {e.filename or ''}{': ' if e.filename else ''}{e.strerror or one_line(e)}"
+          f"{_kept_checkpoint()}", file=sys.stderr)
     return 2
+
+
+def _kept_checkpoint() -> str:
+    """The end of a failure's line when a checkpointed render kept its last checkpoint (a full disk said
+    "nothing was kept" while the work up to it waited in OUT.h5.resume/)."""
+    from ..simulate.checkpoint import KEPT
+    return (f"; its last checkpoint is kept in {KEPT[-1]}: run the same command with --resume to go on"
+            if KEPT else "")
 
 
 def _warning_line(message, category, filename, lineno, file=None, line=None):
@@ -105,7 +113,7 @@ def main(argv=None) -> int:
         raise_if_stopped()                # a stop a library swallowed: said, with the signal's exit status
         return status
     except EventFieldError as e:
-        print(f"eventfield: error: {one_line(e)}", file=sys.stderr)
+        print(f"eventfield: error: {one_line(e)}{_kept_checkpoint()}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         pass                                  # reported below, with the signal's exit status
@@ -129,8 +137,6 @@ def main(argv=None) -> int:
         if not was_quiet:
             quiet_mitsuba_log(False)
     signum = stopped[0] if stopped else signal.SIGINT
-    kept = (f"; its last checkpoint is kept in {KEPT[-1]}: run the same command with --resume to go on"
-            if KEPT else "")
     print(f"eventfield: {'terminated' if signum == signal.SIGTERM else 'interrupted'} (no partial output kept)"
-          f"{kept}", file=sys.stderr)
+          f"{_kept_checkpoint()}", file=sys.stderr)
     return 128 + int(signum)

@@ -83,3 +83,27 @@ def test_a_file_system_without_flock_renders_unguarded(tmp_path, monkeypatch):
     timed = ef.load_scene(DEMO, width=16, height=12)
     ef.render_events(timed, output=str(tmp_path / "a.h5"), checkpoint_s=1e-9, **KW)
     assert os.listdir(tmp_path) == ["a.h5"]
+
+
+def test_a_full_disk_says_the_checkpoint_is_kept(tmp_path, monkeypatch, capsys):
+    """A checkpointed render that ran out of disk said "nothing was kept" while its work up to the last
+    checkpoint waited in OUT.h5.resume/ for --resume."""
+    import errno
+    from mitsuba_eventfield.cli.main import main as cli
+    monkeypatch.setattr(checkpoint, "KEPT", [])
+    out = str(tmp_path / "c.h5")
+    real, calls = render_mod._Loop._step_events, {"n": 0}
+
+    def step_events(self, *a):
+        calls["n"] += 1
+        if calls["n"] == 5:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), out)
+        return real(self, *a)
+    monkeypatch.setattr(render_mod._Loop, "_step_events", step_events)
+    code = cli(["render", DEMO, "-D", "width=16", "-D", "height=12", "--duration", "0.004", "--steps", "8",
+                "--quiet", "-o", out, "--checkpoint-every", "1e-9"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err == (f"eventfield: error: disk full while writing {out} (no partial output kept); its "
+                                 f"last checkpoint is kept in {out}.resume: run the same command with --resume to "
+                                 "go on"), err
+    assert os.path.isfile(out + ".resume/checkpoint.json")
