@@ -153,6 +153,28 @@ def publish(tmp: str, path: str) -> None:
         output_folders.replaced(run, path)
 
 
+def try_lock(path: str, create: bool = False):
+    """(state, descriptor) of an exclusive ``flock`` tried, without waiting, on ``path`` (a folder, or a file,
+    made if ``create``): ("locked", an open descriptor holding it: closing it, or the process ending, lets go),
+    ("held", None) where another process holds it, or ("none", None) without ``flock`` (Windows, some FUSE and
+    SMB mounts). The one way a lock tells a live process from a dead one: by it, not by process ids, which the
+    system reuses."""
+    try:
+        import fcntl
+    except ImportError:
+        return "none", None
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644) if create else os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return "held", None
+    except OSError:
+        os.close(fd)
+        return "none", None
+    return "locked", fd
+
+
 @contextlib.contextmanager
 def updating(path: str):
     """Hold an exclusive lock while ``path`` is read, changed and written again (a calibration file that two

@@ -23,7 +23,7 @@ import os
 import threading
 import uuid
 
-from .atomic import PARTIAL_TAG, _pid_alive, write_json
+from .atomic import PARTIAL_TAG, _pid_alive, try_lock, write_json
 from .errors import EventFieldError, interrupts_held
 
 MANIFEST = ".eventfield-outputs.json"
@@ -152,34 +152,14 @@ def _backup_folder(folder: str, run: dict) -> str:
     if run["lock"] is None and not os.path.isdir(root):
         making = os.path.join(folder, MANIFEST + ".making-" + run["backup"][len(BACKUP):])
         os.makedirs(making)
-        run["lock"] = _lock_dir(making)[1]
+        run["lock"] = try_lock(making)[1]
         os.rename(making, root)
     return root
 
 
-def _lock_dir(root: str):
-    """(state, descriptor) of an exclusive ``flock`` tried on the folder ``root``: ("locked", an open
-    descriptor holding it), ("held", None) where another process holds it, or ("none", None) without
-    ``flock`` there."""
-    try:
-        import fcntl
-    except ImportError:
-        return "none", None
-    fd = os.open(root, os.O_RDONLY)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        return "held", None
-    except OSError:                    # no flock on this file system: the process id is the only sign of life
-        os.close(fd)
-        return "none", None
-    return "locked", fd
-
-
 def _abandoned(folder: str, name: str) -> bool:
     """A kept-files folder whose run is gone: its lock is free (or, without ``flock``, its process is dead)."""
-    state, fd = _lock_dir(os.path.join(folder, name))
+    state, fd = try_lock(os.path.join(folder, name))
     if state == "locked":
         os.close(fd)
         return True

@@ -14,6 +14,16 @@ from mitsuba_eventfield.output_folders import CLAIMS, MANIFEST, output_dir_run
 from mitsuba_eventfield.errors import EventFieldError
 
 
+def _killed_run(out, *lines):
+    """A run into ``out`` that does ``lines`` (Python, ``out`` the folder's path), then dies outright (no
+    cleanup runs), in a process of its own."""
+    script = ("import os, sys\nfrom mitsuba_eventfield.atomic import write_json\n"
+              "from mitsuba_eventfield.output_folders import output_dir_run\nout = sys.argv[1]\n"
+              "with output_dir_run(out, 'test'):\n" + "".join(f"    {line}\n" for line in lines) + "    os._exit(9)\n")
+    r = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 9, r.stderr
+
+
 def _listed(folder):
     with open(os.path.join(folder, MANIFEST)) as f:
         return json.load(f)["files"]
@@ -94,12 +104,7 @@ def test_a_killed_reruns_replaced_files_are_put_back_by_the_next_run(tmp_path, c
     them back before it starts, and says so."""
     out = tmp_path / "out"
     _run(out, {"a.json": 1})
-    script = ("import os, sys\nfrom mitsuba_eventfield.atomic import write_json\n"
-              "from mitsuba_eventfield.output_folders import output_dir_run\n"
-              "with output_dir_run(sys.argv[1], 'test'):\n"
-              "    write_json(os.path.join(sys.argv[1], 'a.json'), 2)\n    os._exit(9)\n")
-    r = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 9, r.stderr
+    _killed_run(out, "write_json(os.path.join(out, 'a.json'), 2)")
     assert json.loads((out / "a.json").read_text()) == 2
     assert [n for n in os.listdir(out) if n.startswith(MANIFEST + ".previous-")]
     capsys.readouterr()
@@ -112,12 +117,7 @@ def test_a_killed_reruns_replaced_files_are_put_back_by_the_next_run(tmp_path, c
 def test_a_killed_run_leaves_its_files_listed(tmp_path):
     """Listed before it is written: a process killed outright runs no cleanup at all."""
     out = tmp_path / "out"
-    script = ("import os, sys\nfrom mitsuba_eventfield.atomic import write_json\n"
-              "from mitsuba_eventfield.output_folders import output_dir_run\n"
-              "with output_dir_run(sys.argv[1], 'test'):\n"
-              "    os.mkdir(sys.argv[1])\n    write_json(os.path.join(sys.argv[1], 'a.json'), {})\n    os._exit(9)\n")
-    r = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 9, r.stderr
+    _killed_run(out, "os.mkdir(out)", "write_json(os.path.join(out, 'a.json'), {})")
     assert (out / CLAIMS).read_text() == "a.json\n" and not (out / MANIFEST).exists()
     with output_dir_run(str(out), "test"):
         write_json(str(out / "a.json"), {"run": 2})

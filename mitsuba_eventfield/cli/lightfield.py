@@ -258,13 +258,10 @@ def _refocus_roots(a, depths) -> list:
     """(depth, output root) of every refocused image, every output path checked before the light field is made
     and any image written (a failure at the second depth left the first one's files; a bad path was found only
     after the solve)."""
-    from ..atomic import check_writable
     if len(set(depths)) != len(depths):
         raise EventFieldError(f"--depth {a.depth}: a depth is given twice")
     roots = [(z, os.path.splitext(a.output)[0] + (f"_{z:g}" if len(depths) > 1 else "")) for z in depths]
-    for _, root in roots:
-        for ext in (".png", ".exr"):
-            check_writable(root + ext, "refocused image")
+    check_files((root + ext for _, root in roots for ext in (".png", ".exr")), "refocused image")
     return roots
 
 

@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 
+from ..atomic import try_lock
 from ..errors import EventFieldError
 from ..events.hdf5 import H5EventWriter
 from ..events.io import format_of
@@ -56,24 +57,17 @@ def _busy(folder: str, pid: str) -> EventFieldError:
 
 
 def _lock(folder: str):
-    """The open lock file of ``folder``, locked by this process (None where the platform has no ``flock``);
-    raises when another process holds it."""
-    try:
-        import fcntl
-    except ImportError:               # no flock (Windows): unguarded, as before
-        return None
-    fd = os.open(os.path.join(folder, LOCK_FILE), os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:            # held: another process renders into this folder
-        pid = os.read(fd, 32).decode("ascii", "replace").strip() or "unknown"
-        os.close(fd)
-        raise _busy(folder, pid) from None
-    except OSError:                    # no flock on this file system (some FUSE, SMB mounts): unguarded, as before
-        os.close(fd)
-        return None
-    os.ftruncate(fd, 0)
-    os.write(fd, str(os.getpid()).encode())
+    """The open lock file of ``folder``, locked by this process (None where there is no ``flock``: unguarded, as
+    before); raises when another process holds it."""
+    path = os.path.join(folder, LOCK_FILE)
+    state, fd = try_lock(path, create=True)
+    if state == "held":
+        with open(path, "rb") as f:
+            pid = f.read(32).decode("ascii", "replace").strip() or "unknown"
+        raise _busy(folder, pid)
+    if fd is not None:
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
     return fd
 
 
