@@ -1,6 +1,6 @@
-"""AEDAT4 event files, through dv-processing: written in chunks after a free-space check (its writer thread
-aborts the process on a full disk), read in a child process that is stopped when a damaged packet leaves it
-making no progress."""
+"""AEDAT4 event files read through dv-processing, the reader where faery (a dependency, which decodes them
+in-process: ``recordings.read_aedat4_faery``) is absent: in a child process that is stopped when a damaged packet
+leaves it making no progress. They are written by faery's encoder (``streaming.Aedat4EventWriter``)."""
 from __future__ import annotations
 
 import json

@@ -42,11 +42,11 @@ def _free_bytes(path: str) -> int | None:
 def _disk_full(path: str, free: int | None, need: int, cause: BaseException | None = None) -> EventFieldError:
     """The one-line error of a write of about ``need`` bytes the file system refused (``cause``, when known, says
     which refusal); a full disk's names the free space asked for, DISK_MARGIN included."""
-    code = getattr(cause, "errno", None)
-    if code == errno.EDQUOT or "quota exceeded" in str(cause or "").lower():
+    code, text = getattr(cause, "errno", None), str(cause or "").lower()     # a library may say it in words only
+    if code == errno.EDQUOT or "quota exceeded" in text:
         return EventFieldError(f"{path}: disk quota exceeded: the file system refused about {_size(need)} more "
                                "(a user or group quota; `quota -s` shows it)")
-    if code == errno.EFBIG:
+    if code == errno.EFBIG or "file too large" in text:      # (faery: "File too large (os error 27)")
         return EventFieldError(f"{path}: file too large: the file system or the process's file-size limit "
                                f"(ulimit -f) refused about {_size(need)} more")
     have = "unknown" if free is None else _size(free)
@@ -87,7 +87,7 @@ _REFUSED_TEXT = ("No space left on device", "Disk quota exceeded", "File too lar
 
 def _no_space(e: BaseException) -> bool:
     """Whether ``e`` is the file system refusing more bytes: a full disk, a quota, a file-size limit (h5py and
-    Python set errno; dv-processing only says it in the message text)."""
+    Python set errno; dv-processing and faery only say it in the message text)."""
     return getattr(e, "errno", None) in _REFUSED or any(t in str(e) for t in _REFUSED_TEXT)
 
 

@@ -15,8 +15,8 @@ so h5dump, MATLAB, Julia or C read the files as they are (LZF, used before, is a
 still read here). docs/design.md "Event file compression" has the measurements behind the level.
 
 Every writer is atomic: the file appears under its name only once complete (``atomic.py``), and checks the free
-disk space before each chunk, so a full disk is one ``EventFieldError`` rather than a crash in HDF5 or
-dv-processing (both can die on ENOSPC: a segfault, an abort from dv's writer thread).
+disk space before each chunk, so a full disk is one ``EventFieldError`` rather than a crash in HDF5 (a segfault
+on ENOSPC; dv-processing, which wrote AEDAT4 before faery, aborted from its writer thread).
 """
 from __future__ import annotations
 

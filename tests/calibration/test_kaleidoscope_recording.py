@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT, TEST_VARIANT, needs
+from conftest import ROOT, TEST_VARIANT
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.images import read_exr, write_exr
@@ -33,9 +33,7 @@ def _cli(*args):
 def capture(tmp_path_factory):
     """The render (.h5, with optics), the same events as an AEDAT4 camera recording (no optics, no thresholds),
     the frame of the target with its metadata and stripped of it, and the nominal optics file. The recording is
-    written through dv-processing, which a GPU image may lack: skipped there with the reason (a failure under
-    CI, whose set-up installs it)."""
-    needs("dv_processing", "aedat4")
+    written through faery (a dependency)."""
     d = tmp_path_factory.mktemp("kaleido_recording")
     ef.set_variant(TEST_VARIANT)
     events = ef.render_events(ef.load_scene(SCENE, views_px=120), 0.01, steps=20)

@@ -147,8 +147,7 @@ def test_recordings_refuse_what_their_words_cannot_hold(tmp_path):
     assert os.listdir(tmp_path) == []
 
 
-def test_aedat4_refuses_what_dv_cannot_hold(tmp_path):
-    pytest.importorskip("dv_processing")
+def test_aedat4_refuses_what_the_format_cannot_hold(tmp_path):
     with pytest.raises(ef.EventFieldError, match=r"a 40000x48 sensor: AEDAT4 holds sensors of 1 to 32767"):
         ef.write_events(str(tmp_path / "a.aedat4"), _stream([1], width=40000))
     with pytest.raises(ef.EventFieldError, match="AEDAT4 holds timestamps >= 0 only"):     # a user's data: one line
@@ -268,11 +267,10 @@ def test_an_aedat4_past_the_file_size_limit_is_one_line_not_an_abort(tmp_path):
     assert "written" in r.stdout and os.path.getsize(out / "small.aedat4") < 4096, (r.stdout, r.stderr[-500:])
 
 
-def test_a_quota_refuses_an_aedat4_chunk_before_dv_processing_sees_it(tmp_path, monkeypatch):
-    """A user quota (a cluster's home) is not in the free-space figure: dv-processing's writer thread met
-    EDQUOT and aborted the process. Each chunk's bytes are reserved first; a refusal is the one line, in this
-    process, with nothing left beside the output (no partial file, no probe)."""
-    pytest.importorskip("dv_processing")
+def test_a_quota_refuses_an_aedat4_chunk_before_the_encoder_sees_it(tmp_path, monkeypatch):
+    """A user quota (a cluster's home) is not in the free-space figure: dv-processing's writer thread (the
+    AEDAT4 writer before faery's) met EDQUOT and aborted the process. Each chunk's bytes are reserved first; a
+    refusal is the one line, in this process, with nothing left beside the output (no partial file, no probe)."""
     from mitsuba_eventfield.events import disk
     reserved = []
 
@@ -290,6 +288,34 @@ def test_a_quota_refuses_an_aedat4_chunk_before_dv_processing_sees_it(tmp_path, 
     assert str(err.value).startswith(f"{path}: disk quota exceeded: the file system refused about ")
     assert "\n" not in str(err.value) and len(reserved) == 2 and reserved[1] > 16 * disk.WRITE_CHUNK
     assert os.listdir(tmp_path) == []
+
+
+def test_the_aedat4_encoders_own_refusal_is_the_one_line(tmp_path):
+    """Past the checks (a limit they could not see), faery's encoder meets EFBIG and says it in words only
+    ("File too large (os error 27)", no errno): the line says file too large, not "disk full" with 40 GiB
+    free, and nothing is left."""
+    import subprocess
+    import sys
+    script = ("import resource, sys, numpy as np, mitsuba_eventfield as ef\n"
+              "from mitsuba_eventfield.events import streaming\n"
+              "for k in ('check_space', 'check_room', 'check_file_limit'):\n"
+              "    setattr(streaming, k, lambda *a, **kw: None)\n"
+              "resource.setrlimit(resource.RLIMIT_FSIZE, (1 << 20, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))\n"
+              "n = 300_000\n"
+              "rng = np.random.default_rng(0)\n"
+              "ev = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 10**6, n)),\n"
+              "                    rng.choice([-1, 1], n), 64, 48)\n"
+              "try:\n"
+              "    ef.write_events(sys.argv[1], ev)\n"
+              "except ef.EventFieldError as e:\n"
+              "    print(e)\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    r = subprocess.run([sys.executable, "-c", script, str(out / "o.aedat4")], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.startswith(f"{out / 'o.aedat4'}: file too large: ") and "disk full" not in r.stdout, r.stdout
+    assert os.listdir(out) == []
 
 
 def test_the_room_probe_meets_the_kernels_refusal(tmp_path):
@@ -341,22 +367,27 @@ def test_a_refused_write_names_what_it_needed(tmp_path, ext):
     assert os.listdir(out) == []
 
 
-def test_the_room_asked_for_holds_the_chunk_still_in_dv_processings_thread(tmp_path, monkeypatch):
-    """dv-processing writes on a thread of its own: the chunk handed over last may not be in the file yet, so
-    each chunk's reservation holds it too (after the header's, the chunks' 16 bytes an event plus headers)."""
-    pytest.importorskip("dv_processing")
+def test_each_aedat4_chunk_is_in_the_file_when_append_returns_and_its_room_was_asked_first(tmp_path, monkeypatch):
+    """dv-processing wrote on a thread of its own, so a chunk's reservation had to hold the one before it too.
+    faery's encoder writes each packet before ``append`` returns: the file has grown by the chunk (LZ4 keeps
+    these dense events under their 16 bytes, never above the 17 reserved), and each reservation is the chunk's
+    own bytes plus a header's."""
     from mitsuba_eventfield.events import disk
-    from mitsuba_eventfield.events.streaming import AEDAT4_BYTES_PER_EVENT
+    from mitsuba_eventfield.events.streaming import AEDAT4_BYTES_PER_EVENT, open_writer
     reserved = []
     monkeypatch.setattr(disk, "_reserve", lambda fd, size: reserved.append(size) or 0)
     n = disk.WRITE_CHUNK
-    from mitsuba_eventfield.events.streaming import open_writer
+    sizes = []
     with open_writer(str(tmp_path / "o.aedat4"), "aedat4", 64, 48) as w:
         for k in range(3):
             t = np.arange(k * n, (k + 1) * n)
             w.append(t % 64, t % 48, t, np.where(t % 2, 1, -1))
+            sizes.append(os.path.getsize(w.tmp))
     need = AEDAT4_BYTES_PER_EVENT * n + disk.HEADER_BYTES
-    assert reserved == [disk.HEADER_BYTES, need, 2 * need, 2 * need]
+    assert reserved == [disk.HEADER_BYTES, need, need, need]
+    grown = np.diff([0] + sizes)
+    assert all(n < g < 16 * n for g in grown), grown          # the packet (compressed), not a buffer's share
+    assert len(ef.read_events(str(tmp_path / "o.aedat4"))) == 3 * n
 
 
 def test_a_timelens_npz_is_read_with_its_size_said(tmp_path):

@@ -18,6 +18,7 @@ from conftest import AEDAT4
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.events import disk
 from mitsuba_eventfield.events import io as eventio
+from mitsuba_eventfield.events import text
 from mitsuba_eventfield.images import read_exr, write_exr
 
 FORMATS = [".h5", ".npz", ".txt", AEDAT4]
@@ -463,7 +464,7 @@ REFUSALS = [(errno.ENOSPC, r"disk full: [\d.]+ [KMG]iB free, need about [\d.]+ [
 
 @pytest.mark.parametrize("code, says", REFUSALS)
 @pytest.mark.parametrize("ext, module, writer", [(".npz", np.lib.format, "write_array_header_1_0"),
-                                                (".txt", np, "savetxt")])
+                                                (".txt", text, "write_lines")])
 def test_enospc_from_a_write_is_one_line(tmp_path, stream, ext, module, writer, code, says, monkeypatch):
     """The disk fills between the check and the write (another program), or a quota or file-size limit
     refuses it: the OSError becomes the one line saying which, and the partial file (and the npz writer's

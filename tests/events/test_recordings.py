@@ -116,7 +116,7 @@ def test_damaged_recording_is_one_line(tmp_path, stream, version, name, damage):
 
 def test_our_aedat4_reads_in_faery_and_dv(tmp_path, stream):
     path = str(tmp_path / "ours.aedat4")
-    ef.write_events(path, stream)                   # written by dv-processing's writer
+    ef.write_events(path, stream)                   # written by faery's encoder, read by dv-processing too
     decoder = faery.events_stream_from_file(path)
     a = np.concatenate(list(decoder))
     assert decoder.dimensions() == (640, 480)
