@@ -248,24 +248,24 @@ def run_render(a) -> int:
 
 
 def _render_preview(a) -> None:
-    from ..events.io import read_events
+    from ..events.io import read_events, summarize_events
     from ..events.preview import write_preview
-    ev = read_events(a.output)
+    _, ends = summarize_events(a.output, count=False)      # (an HDF5 file: its last window alone is read)
     # (a .txt file keeps no t_start_us: its duration alone ended the window one first-event time early)
-    end = max(ev.start_us + ev.duration_us, int(ev.t[-1]) if len(ev) else 0)
-    t0 = max(ev.start_us, end - int(round(a.preview_window * 1e3)))
+    end = max(ends.start_us + ends.duration_us, int(ends.t[-1]) if len(ends) else 0)
+    t0 = max(ends.start_us, end - int(round(a.preview_window * 1e3)))
+    ev = ends if len(ends) > 2 else read_events(a.output, window=(t0, end + 1))    # (> 2: read whole, not HDF5)
     write_preview(a.preview, ev, t0, end + 1)
     print(f"wrote {os.path.abspath(a.preview)} (events of {(end - t0) / 1e3:g} ms up to the end)")
 
 
 def run_info(a) -> int:
-    from ..events.io import read_events
+    from ..events.io import summarize_events
     from ..simulate import checkpoint
     if os.path.isdir(a.file) and a.file.rstrip("/").endswith(checkpoint.SUFFIX):   # an interrupted render
         print(checkpoint.describe(os.path.abspath(a.file.rstrip("/"))))
         return 0
-    ev = read_events(a.file)
-    s = ev.summary()
+    s, ev = summarize_events(a.file)      # ev: the first and last events at least (an HDF5 file is not read whole)
     if a.json:
         print(json.dumps({"summary": s, "meta": ev.meta}, indent=2, default=str))
         return 0
@@ -289,20 +289,21 @@ def run_info(a) -> int:
 
 
 def run_preview(a) -> int:
-    from ..events.io import read_events
+    from ..events.io import read_events, summarize_events
     from ..events.preview import window_outside, write_preview
-    ev = read_events(a.file)
     t0 = None if a.t0 is None else int(round(a.t0 * 1e3))
     t1 = None if a.t1 is None else int(round(a.t1 * 1e3))
     if t0 is not None and t1 is not None and t1 <= t0:       # [t0, t1): empty when t1 = t0
         raise EventFieldError(f"--t0 {a.t0:g} --t1 {a.t1:g}: the window [t0, t1) holds no time (ms): t1 must be "
                               "after t0")
-    start = ev.start_us
-    end = start + int(ev.duration_us)
-    if window_outside(ev, t0, t1):                                          # said with the options' names
+    _, ends = summarize_events(a.file, count=False)     # (an HDF5 file: only the window's events are read)
+    start = ends.start_us
+    end = start + int(ends.duration_us)
+    if window_outside(ends, t0, t1):                                        # said with the options' names
         raise EventFieldError(f"{a.file}: the window {'' if a.t0 is None else f'--t0 {a.t0:g} '}"
                               f"{'' if a.t1 is None else f'--t1 {a.t1:g} '}is outside the stream, which covers "
                               f"{_ms(start)} to {_ms(end)} ms")
+    ev = ends if len(ends) > 2 else read_events(a.file, window=(t0, t1))    # (> 2: read whole, not HDF5)
     write_preview(a.output, ev, t0, t1, scale=a.scale)
     print(f"wrote {a.output}: {len(ev.time_window(t0, t1))} events in the window")
     return 0

@@ -15,7 +15,7 @@ from ..atomic import check_writable, publish, remove_stale_partials, temporary_n
 from ..errors import ConfigError, EventFieldError
 from ..validate import number, usable_cores
 from .disk import HEADER_BYTES, GuardedFile, _disk_full, _free_bytes, _no_space, check_space
-from .stream import MAX_SENSOR, EventStream, chunk_columns, first_out_of_order
+from .stream import MAX_SENSOR, chunk_columns, first_out_of_order
 
 try:    # ISA-L's deflate: a zlib stream like zlib's, 5.8x its speed at level 1 on the fan's events, same size
     from isal import isal_zlib as _isal
@@ -390,27 +390,3 @@ class H5EventWriter:
         else:
             self.abort()
         return False
-
-
-def read_h5(path):
-    import h5py
-    with h5py.File(path, "r") as f:
-        if "events" not in f:
-            raise EventFieldError(f"{path}: no /events group (not a DSEC-layout event file)")
-        ev = f["events"]
-        t = ev["t"][()].astype(np.int64) + int(f["t_offset"][()]) if "t_offset" in f else ev["t"][()]
-        from .io import polarity_of
-        p = polarity_of(ev["p"][()])
-        meta, w, h = {}, None, None
-        if "eventfield" in f:
-            g = f["eventfield"]
-            meta = json.loads(g.attrs["meta_json"])
-            w, h = int(g.attrs["width"]), int(g.attrs["height"])
-        x, y = ev["x"][()], ev["y"][()]
-        if w is None:  # a foreign DSEC file keeps no sensor size: the data's, said (a crop read as the sensor)
-            w, h = (int(x.max()) + 1, int(y.max()) + 1) if len(x) else (0, 0)
-            import warnings
-            warnings.warn(f"{path}: no sensor size in the file (a DSEC-layout file without /eventfield): taken as "
-                          f"{w}x{h} from its largest coordinates; light fields need the sensor's own", stacklevel=2)
-            meta["sensor_size"] = "from the largest coordinates"
-        return EventStream(x, y, t, p, w, h, meta)

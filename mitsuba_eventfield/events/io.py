@@ -29,10 +29,11 @@ import numpy as np
 
 from .._version import __version__
 from ..errors import ConfigError, EventFieldError
-from ..validate import file_path, instance
+from ..validate import file_path, instance, number
 from .aedat import read_aedat4, write_aedat4  # noqa: F401  (re-exported)
 from .disk import DISK_MARGIN, HEADER_BYTES, WRITE_CHUNK, BadFile, GuardedFile, check_space, disk_errors  # noqa: F401
-from .hdf5 import H5_BYTES_PER_EVENT, H5_GZIP_LEVEL, H5EventWriter, _json, read_h5  # noqa: F401
+from .hdf5 import H5_BYTES_PER_EVENT, H5_GZIP_LEVEL, H5EventWriter, _json  # noqa: F401
+from .hdf5_read import h5_summary, read_h5
 from .recordings import EVT_VERSIONS, RECORDING_FORMATS, read_aedat4_faery, read_recording, write_recording
 from .stream import EventStream, first_out_of_order
 from .streaming import AEDAT4_BYTES_PER_EVENT, BYTES_PER_EVENT, NPZ_BYTES_PER_EVENT, open_writer  # noqa: F401
@@ -155,24 +156,67 @@ def _one_line(e: BaseException) -> str:
     return text or type(e).__name__
 
 
-def read_events(path: str, fmt: str | None = None) -> EventStream:
+def read_events(path: str, fmt: str | None = None, window: tuple | None = None) -> EventStream:
     """Read an event file (format by extension, or ``fmt``: evt2 / evt2.1 / evt3 names a RAW file's version when
     its header does not). A missing, empty, truncated or foreign file raises ``EventFieldError`` with one line
     naming the file and the problem. AEDAT4 is decoded by faery (in-process; dv-processing when faery is not
-    installed), RAW and DAT by faery."""
+    installed), RAW and DAT by faery. ``window`` = (t0_us, t1_us), either None for an open end: only the events
+    with t0 <= t < t1, as ``EventStream.time_window`` gives them; an HDF5 file's other rows are not read
+    (``hdf5_read``), other formats are read whole first."""
+    path, fmt = _event_file(path, fmt)
+    if window is not None:
+        window = tuple(window) if isinstance(window, (tuple, list)) else (window,)
+        if len(window) != 2:
+            raise ConfigError(f"read_events: window = {window!r}: expected (t0_us, t1_us), either None")
+        window = tuple(None if v is None else number(v, f"read_events: window {name}", strict=True)
+                       for v, name in zip(window, ("t0_us", "t1_us")))
+        if None not in window and window[1] < window[0]:
+            raise ConfigError(f"read_events: window = {window!r}: t1_us is before t0_us")
+    return _reading(path, fmt, lambda: _read(path, fmt, window))
+
+
+def summarize_events(path: str, fmt: str | None = None, count: bool = True) -> tuple[dict | None, EventStream]:
+    """(``EventStream.summary`` of an event file, an EventStream whose first and last events, span and metadata
+    are the file's): an HDF5 file's columns are not read whole (its polarity column a block at a time; not at
+    all when ``count`` is False, which gives no summary), other formats are read whole."""
+    path, fmt = _event_file(path, fmt)
+    if fmt == "h5":
+        return _reading(path, fmt, lambda: _checked(path, fmt, lambda: h5_summary(path, count)))
+    stream = read_events(path, fmt)
+    return (stream.summary() if count else None), stream
+
+
+def _event_file(path, fmt) -> tuple:
     path = file_path(path, "read_events: path")
     if not os.path.isfile(path):
         raise EventFieldError(f"{path}: a folder, not an event file (image frames become events through "
                               "'eventfield convert')" if os.path.isdir(path) else f"{path}: no such event file")
-    fmt = format_of(path, fmt)
-    try:
-        if fmt in ("raw", "dat") or fmt in NAMED_FORMATS:
-            return read_recording(path, fmt)
-        _check_file(path, fmt)
-        stream = read_h5(path) if fmt == "h5" else _read_npz(path) if fmt == "npz" else \
-            _read_txt(path) if fmt == "txt" else _read_aedat4(path)
+    return path, format_of(path, fmt)
+
+
+def _checked(path, fmt, read):
+    _check_file(path, fmt)
+    return read()
+
+
+def _read(path, fmt, window):
+    if fmt in ("raw", "dat") or fmt in NAMED_FORMATS:
+        stream = read_recording(path, fmt)
+    elif fmt == "h5":
+        stream = _checked(path, fmt, lambda: read_h5(path, window))
+        window = None                                       # (read_h5 windowed it, its order checked)
+    else:
+        stream = _checked(path, fmt, lambda: _read_npz(path) if fmt == "npz" else _read_txt(path) if fmt == "txt"
+                          else _read_aedat4(path))
+    if fmt not in ("raw", "dat") and fmt not in NAMED_FORMATS:
         _check_time_order(stream)
-        return stream
+    return stream if window is None else stream.time_window(*window)
+
+
+def _reading(path, fmt, read):
+    """``read()``, its failures as the one line naming the file."""
+    try:
+        return read()
     except ConfigError as e:         # the stream's own checks, which know no file name
         raise EventFieldError(f"{path}: {e}") from None
     except EventFieldError:

@@ -201,11 +201,16 @@ class EventStream:
         return flat.reshape(self.height, self.width).astype(np.int64)
 
     def summary(self) -> dict:
-        n_on = int(np.count_nonzero(self.p > 0))
-        dur = self.duration_us
-        return {"events": len(self), "on": n_on, "off": len(self) - n_on, "width": self.width,
-                "height": self.height, "duration_s": dur * 1e-6,
-                "rate_ev_per_s": (len(self) / (dur * 1e-6)) if dur > 0 else 0.0}
+        return self.summary_of(len(self), int(np.count_nonzero(self.p > 0)), self.width, self.height,
+                               self.duration_us)
+
+    @staticmethod
+    def summary_of(events: int, on: int, width: int, height: int, duration_us: int) -> dict:
+        """The summary of a stream of ``events`` (``on`` of them ON) over ``duration_us``: also of a file not
+        held in memory (``hdf5_read.h5_summary``)."""
+        return {"events": int(events), "on": int(on), "off": int(events) - int(on), "width": width, "height": height,
+                "duration_s": duration_us * 1e-6, "rate_ev_per_s": (events / (duration_us * 1e-6)) if duration_us > 0
+                else 0.0}
 
     def equals(self, other: "EventStream") -> bool:
         """Same events and same sensor size (metadata ignored); False for anything that is not a stream."""

@@ -95,7 +95,7 @@ def test_every_bad_input_is_one_line_and_writes_nothing(capture, tmp_path, capsy
 def test_unexpected_errors_are_one_line_too(monkeypatch, capsys, capture):
     def broken(*a, **k):
         raise ZeroDivisionError("a bug somewhere")
-    monkeypatch.setattr("mitsuba_eventfield.events.io.read_events", broken)
+    monkeypatch.setattr("mitsuba_eventfield.events.io.summarize_events", broken)
     monkeypatch.delenv("EVENTFIELD_DEBUG", raising=False)
     assert cli.main(["info", capture]) == 3
     err = capsys.readouterr().err.strip().splitlines()
