@@ -38,8 +38,11 @@ _RUNS_LOCK = threading.Lock()
 
 
 @contextlib.contextmanager
-def output_dir_run(path: str, command: str):
-    """An application writing into the folder ``path`` (module docstring)."""
+def output_dir_run(path: str, command: str, inputs=()):
+    """An application writing into the folder ``path`` (module docstring). ``inputs``: files the run reads; one
+    inside the folder that an earlier run wrote stays, and stays listed, when this run succeeds without rewriting
+    it (``scanrate-depth --calibration out/scanrate/calibration.json``, as the README runs it after
+    ``--calibrate``, removed the calibration it had just read)."""
     from .atomic import _nearest_existing
     from .errors import raise_if_stopped
     path = os.path.abspath(path)
@@ -49,7 +52,9 @@ def output_dir_run(path: str, command: str):
     run = {"command": command, "files": {os.path.relpath(p, path) for p in previous}, "published": set(),
            "backed": set(), "backup": f"{BACKUP}{os.getpid()}-{uuid.uuid4().hex[:8]}", "lock": None,
            "before": _snapshot(path), "dirs_before": _dirs_below(path), "above": _nearest_existing(path),
-           "kept": {os.path.join(path, n) for n in foreign}}
+           "kept": {os.path.join(path, n) for n in foreign},
+           "inputs": {os.path.relpath(os.path.abspath(f), path) for f in inputs
+                      if os.path.abspath(f).startswith(path + os.sep)}}
     _KEPT.update(run["kept"])
     with _RUNS_LOCK:                   # each file it writes is listed before it is written (``claim``)
         _RUNS[path] = run
@@ -73,9 +78,11 @@ def _succeeded(path: str, previous: list, run: dict) -> None:
     back whole), then the earlier run's files it did not rewrite removed, then its kept files dropped."""
     if os.path.isdir(path):
         written = _changed(path, run["before"], run["kept"])
-        write_json(os.path.join(path, MANIFEST), {"command": run["command"], "files": written}, "output manifest")
+        read = sorted({os.path.relpath(p, path) for p in previous} & run["inputs"] - set(written))
+        write_json(os.path.join(path, MANIFEST), {"command": run["command"], "files": written + read},
+                   "output manifest")
         for old in previous:
-            if os.path.relpath(old, path) not in written:
+            if os.path.relpath(old, path) not in written + read:
                 with contextlib.suppress(OSError):
                     os.remove(old)
         with contextlib.suppress(OSError):

@@ -230,3 +230,36 @@ def test_a_stopped_run_removes_the_folders_it_made(tmp_path):
             (out / "frames").mkdir()
             raise KeyboardInterrupt
     assert os.listdir(out) == ["mine"]
+
+
+def test_a_file_the_run_reads_from_its_folder_stays(tmp_path, monkeypatch):
+    """The README's scan-rate sequence: ``--calibrate`` writes OUT/calibration.json, then ``--calibration
+    OUT/calibration.json`` into the same folder read it and, succeeding without rewriting it, removed it as an
+    earlier run's file: the documented command then failed ("calibration file not found"). A file a run reads
+    stays, and stays listed (a later run that does not read it replaces or removes it, as any earlier output)."""
+    import importlib
+    cli_main = importlib.import_module("mitsuba_eventfield.cli.main")
+    out = tmp_path / "scan"
+    _run(out, {"calibration.json": {"pivot": 1}, "depth.json": {"run": 1}})
+    read = []
+
+    def fake_scanrate(a):            # reads its calibration, writes its depth maps
+        with open(a.calibration) as f:
+            read.append(json.load(f))
+        write_json(os.path.join(a.output, "depth.json"), {"run": 2})
+        return 0
+    monkeypatch.setitem(cli_main.COMMANDS, "scanrate-depth", fake_scanrate)
+    for _ in range(2):               # the same command twice, as a user reruns it
+        assert cli_main.main(["scanrate-depth", "-o", str(out), "--calibration", str(out / "calibration.json")]) == 0
+    assert read == [{"pivot": 1}] * 2 and sorted(_listed(out)) == ["calibration.json", "depth.json"]
+
+
+def test_inputs_kept_by_output_dir_run(tmp_path):
+    out = tmp_path / "out"
+    _run(out, {"a.json": 1, "b.json": 2})
+    with output_dir_run(str(out), "test", inputs=[str(out / "a.json"), str(tmp_path / "elsewhere.json")]):
+        write_json(str(out / "b.json"), 3)
+    assert sorted(os.listdir(out)) == sorted(["a.json", "b.json", MANIFEST])
+    assert sorted(_listed(out)) == ["a.json", "b.json"]
+    _run(out, {"b.json": 4})                   # a run that does not read it: a.json was an earlier run's output
+    assert sorted(os.listdir(out)) == sorted(["b.json", MANIFEST])

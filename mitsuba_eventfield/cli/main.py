@@ -63,9 +63,15 @@ def _run(args) -> int:
     check_outputs(args)
     if args.command in OUTPUT_DIRS:
         from ..output_folders import output_dir_run
-        with output_dir_run(args.output, args.command):
+        with output_dir_run(args.output, args.command, _input_files(args)):
             return COMMANDS[args.command](args)
     return COMMANDS[args.command](args)
+
+
+def _input_files(args) -> list:
+    """The existing files the command's options name (its inputs: a calibration, an event file), which its output
+    folder's clean-up must leave (``output_dir_run``)."""
+    return [v for k, v in vars(args).items() if k != "output" and isinstance(v, str) and os.path.isfile(v)]
 
 
 def _os_error(e: OSError) -> int | None:
