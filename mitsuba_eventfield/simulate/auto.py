@@ -144,10 +144,16 @@ def _estimate(frames, sigma, dt, spp) -> dict | None:
     return lim.estimate()
 
 
-def _noise_model(scene, frames, dt, probe_spp) -> dict | None:
+def _noise_model(scene, dt, probe_spp) -> dict | None:
     """A sampler's noise measured at ``PROBES`` x ``probe_spp``: the timing error (us) and median sigma (log) at
     each, and between them power laws in spp (below the first and beyond the last, the nearest piece's exponent,
-    kept within [0.25, 1.25]: stratified samplers fall faster once their strata are fine)."""
+    kept within [0.25, 1.25]: stratified samplers fall faster once their strata are fine).
+
+    The slopes every probe divides its noise by come from one set of frames at the finest probe's spp, the
+    closest to the image's own slopes: slopes taken from 4-spp frames carried their noise, which made every pixel
+    look steep and the predicted timing error small, the more so the finer the probe (the demo at 48x36: 27 us
+    predicted at 64 spp, 5.4 us at 256, where a render's own estimate said about 200 us at 16 and at 256)."""
+    frames = render_frames(scene, [0.0, dt, 2 * dt], spp=probe_spp * PROBES[-1])
     points = []
     for factor in PROBES:
         spp = probe_spp * factor
@@ -171,7 +177,7 @@ def _predict(model, spp) -> tuple:
     return anchor[1] * f, anchor[2] * f
 
 
-def _timing_choice(scene_path, defines, timed, frames, dt, target_s, sigma_cap, probe_spp, max_spp) -> dict:
+def _timing_choice(scene_path, defines, timed, dt, target_s, sigma_cap, probe_spp, max_spp) -> dict:
     """The cheapest (sampler, spp) whose predicted noise error is within NOISE_SHARE of ``target_s``."""
     own = _own_sampler(timed)
     budget_us = NOISE_SHARE * target_s * 1e6
@@ -179,7 +185,7 @@ def _timing_choice(scene_path, defines, timed, frames, dt, target_s, sigma_cap, 
     for order, name in enumerate((own,) + tuple(s for s in SAMPLERS if s != own)):
         scene = timed if name == own else load_with_sampler(scene_path, {"type": name, "sample_count": probe_spp},
                                                             **defines)
-        m = _noise_model(scene, frames, dt, probe_spp)
+        m = _noise_model(scene, dt, probe_spp)
         if m is None:
             raise ConfigError("--timing-accuracy: no pixel changes in the probe frames at the start of the render, "
                               "so there is no event timing to predict")
@@ -295,9 +301,8 @@ def plan(scene_path: str, duration: float, threshold: float | None = None, noise
         reasons["steps"] = f"{steps}: {why}"
         return Plan(color=not grey, spp=spp, steps=_reuse(timed, duration, steps, reasons), static=timed.is_static,
                     reasons=reasons, defines=defines)
-    frames = render_frames(timed, [0.0, dt, 2 * dt], spp=probe_spp)
-    choice = _timing_choice(scene_path, defines, timed, frames, dt, timing_accuracy, noise_fraction * threshold,
-                            probe_spp, max_spp)
+    choice = _timing_choice(scene_path, defines, timed, dt, timing_accuracy, noise_fraction * threshold, probe_spp,
+                            max_spp)
     floor, why = _default_steps(timed, duration, probe_spp, threshold, max_steps, preset, pixel)
     steps, need, steps_us = _timing_steps(choice, duration, dt, timing_accuracy, floor, max_steps)
     return _timing_plan(grey, timed, choice, steps, need, floor, why, steps_us, timing_accuracy, duration,
