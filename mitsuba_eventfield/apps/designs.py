@@ -206,7 +206,7 @@ def _galvo_rows(g, events, moving_ids, views, spp, depth, out, images):
         regions = _regions(shape_masks(g, t_mid, centre_pinhole(g)), moving_ids)
         images.update(galvo_reference=reference)
         for row, light_field in (("galvo", lf), ("galvo_rendered_views", rendered)):
-            img = refocus(light_field, depth)
+            img = refocus(light_field, depth, on_motion="ignore")    # (the moving card's blur is scored, not warned)
             images[row] = img
             _append(out["refocus"][row], region_scores(img, reference, regions))
         _append(out["views"]["galvo"], _mean_scores(view_rows))
@@ -231,7 +231,7 @@ def _kaleidoscope_rows(k, events, moving_ids, times, spp, depth, out, images):
         per_view = [_regions({sid: m[v] for sid, m in masks.items()}, moving_ids) for v in range(len(lf.views))]
         _append(out["views"]["kaleidoscope"], _mean_scores(
             [region_scores(lf.views[v], ref.views[v], per_view[v]) for v in range(len(lf.views))]))
-        img, img_ref = refocus(lf, depth), refocus(ref, depth)
+        img, img_ref = refocus(lf, depth, on_motion="ignore"), refocus(ref, depth, on_motion="ignore")
         _append(out["refocus"]["kaleidoscope"], region_scores(img, img_ref, per_view[centre]))
         images.update(kaleidoscope=img, kaleidoscope_reference=img_ref)
 

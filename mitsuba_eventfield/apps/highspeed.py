@@ -146,9 +146,11 @@ def refocus_planes(scene_path: str, planes: dict, defines: dict | None = None, p
     check_planes_seen(timed, planes, np.unique([0.0, span / 2, span]), region_tolerance, scene_path)
     cap = capture(scene_path, defines, periods, views, start, spp=spp, progress=progress)
     t0 = time.perf_counter()
-    refocused = {n: np.stack([refocus(lf, z) for lf in cap.lightfields]) for n, z in planes.items()}
+    def stacks(lfs):       # (a moving plane's blur is what this scores, not a mistake: 20 warnings a run before)
+        return {n: np.stack([refocus(lf, z, on_motion="ignore") for lf in lfs]) for n, z in planes.items()}
+    refocused = stacks(cap.lightfields)
     t1 = time.perf_counter()
-    truth = {n: np.stack([refocus(lf, z) for lf in cap.truth_lightfields]) for n, z in planes.items()}
+    truth = stacks(cap.truth_lightfields)
     gain = 1.0 if start == "frame" else fit_gain(np.stack(list(refocused.values())), np.stack(list(truth.values())))
     scores = {n: {"psnr_db": [], "ssim": []} for n in planes}
     focus = {n: {m: [] for m in planes} for n in planes}       # region n refocused on plane m
@@ -285,7 +287,7 @@ def track_focus_depth(scene_path: str, roi, near: float, far: float, object_far:
     depths, images, rois, velocities = track_focus(cap.lightfields, depth_planes(near, far, planes), roi_px,
                                                    smooth=smooth, follow=True, compensate_motion=compensate_motion)
     bg = far if background_depth is None else background_depth
-    background = np.stack([refocus(lf, bg) for lf in cap.lightfields])
+    background = np.stack([refocus(lf, bg, on_motion="ignore") for lf in cap.lightfields])
     t1 = time.perf_counter()
     times = np.array([float(lf.times.mean()) for lf in cap.lightfields])
     truth, spread = [], []

@@ -263,7 +263,8 @@ def _score_periods(cap, capped_lfs, planes, tolerance, margin, t_show) -> tuple:
         periods.append({"instant": centre_frame(cap.timed, mids[k], log=False, spp=TRUTH_SPP),
                         "regions": {n: inner & np.isfinite(z) & (np.abs(z / d - 1) < tolerance)
                                     for n, d in planes.items()},
-                        "refocused": {n: {s: refocus(l, d) for s, l in sources.items()} for n, d in planes.items()}})
+                        "refocused": {n: {s: refocus(l, d, on_motion="ignore") for s, l in sources.items()}   # (scored)
+                                      for n, d in planes.items()}})
     gains = {}
     if cap.lightfields and cap.lightfields[0].meta.get("inputs") == INPUTS["events"]:
         for s in ("events", "capped") if capped_lfs else ("events",):

@@ -27,6 +27,18 @@ def num(lo=None, hi=None, integer=False, lo_open=False):
     return parse
 
 
+def velocity(text):
+    """An argparse type: ``VX,VY``, two finite numbers (pixels per second)."""
+    from ..validate import number_list
+    try:
+        values = number_list(text, "value")
+    except ConfigError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    if len(values) != 2:
+        raise argparse.ArgumentTypeError(f"{text}: expected VX,VY (pixels per second)")
+    return tuple(values)
+
+
 def pairs(items, what: str) -> dict:
     """{NAME: VALUE} of repeated ``NAME=VALUE`` arguments (values stay text; the scene or the caller converts)."""
     out = {}

@@ -12,12 +12,13 @@ import numpy as np
 
 from ..errors import ConfigError, EventFieldError
 from ..focus.depth import DEFAULT_MEASURE
+from ..lightfield.galvo_solve import solver_progress
 from ..lightfield.reconstruct import MAX_CUTOFF_HZ
 from ..lightfield.model import radiance_of_levels, warn_levels_beyond
 from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
-from .args import check_files, num, save_image, times_ms
+from .args import check_files, num, save_image, times_ms, velocity
 from .inputs import CROP_HELP, give_optics, read_input, reconstruct_optics, start_log
 
 
@@ -77,6 +78,7 @@ def add_parsers(sub) -> None:
     rf = sub.add_parser("refocus", parents=[lf_args], help="refocus the light field at one or more depths")
     rf.add_argument("-o", "--output", required=True, help="PNG path (EXR alongside; _<depth> suffix for several)")
     rf.add_argument("--depth", required=True, help="comma-separated depths in scene units (inf allowed)")
+    rf.add_argument("--follow", metavar="VX,VY", type=velocity, help="make content moving at VX,VY px/s sharp")
 
     dp = sub.add_parser("depth", parents=[lf_args], help="depth from focus: EXR (depth, confidence, reason) + colour "
                                                          "PNG")
@@ -139,7 +141,7 @@ def _lightfield(a, ev, nearest: float | None = None):
                   time=None if a.time is None else a.time * 1e-3, method=a.method,
                   log_start=start_log(a.start_frame, ev))
     try:
-        with _solver_warnings_held() as held:
+        with _solver_warnings_held() as held, solver_progress(f"{os.path.basename(a.file)}: solving"):
             lf = calibrated_lightfield(ev, calibration, where=a.file, nearest=nearest, **kw)
         lf.meta["warnings"] = [f"{a.file}: {w}" for w in held]
     except (ValueError, KeyError, StopIteration) as e:
@@ -336,7 +338,8 @@ def run_reconstruct(a) -> int:
     check_files((os.path.join(a.output, f"frame_{k:04d}{x}") for k in range(len(times)) for x in (".exr", ".png")),
                 "frame")
     try:
-        frames = reconstruct(ev, times, a.method, **_method_arguments(a, ev, t_frame))
+        with solver_progress(f"{os.path.basename(a.file)}: solving"):       # (the galvo methods: minutes at 720p)
+            frames = reconstruct(ev, times, a.method, **_method_arguments(a, ev, t_frame))
     except ValueError as e:
         raise EventFieldError(f"{a.file}: {e}") from None
     # radiance as the light fields take it: the pixel's lin-log response inverted, the levels clipped at +-40
@@ -370,7 +373,8 @@ def run_refocus(a) -> int:
     _flat_warning(a, lf)
     _solver_warning(lf)
     for z, root in roots:
-        save_image(root + ".png", refocus(lf, z), _out_meta(a, ev, lf, depth=z, views=len(lf.views)))
+        meta = _out_meta(a, ev, lf, depth=z, views=len(lf.views), **({"follow_px_s": a.follow} if a.follow else {}))
+        save_image(root + ".png", refocus(lf, z, motion=a.follow), meta)
         print(f"wrote {root}.png/.exr (refocused at {z:g} m; from {_inputs(a)}{_calibrated(lf)})")
     return 0
 

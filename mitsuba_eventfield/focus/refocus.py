@@ -271,7 +271,8 @@ def _flag_motion(lf: LightField, depth, on_motion: str) -> None:
     vx, vy = m["velocity_px_s"]
     msg = (f"refocus at {depth:g} m: content moves {m['motion_px']:.1f} px while the views are taken (more than "
            f"{MOTION_LIMIT_PX:g} px; {m['moving_share']:.0%} of the textured image): it is smeared by as much; "
-           f"refocus(..., motion=({vx:.0f}, {vy:.0f})) follows it (pixels per second)")
+           f"refocus(..., motion=({vx:.0f}, {vy:.0f})) follows it (pixels per second; eventfield refocus --follow="
+           f"{vx:.0f},{vy:.0f})")
     if on_motion == "raise":
         raise ConfigError(msg)
     warnings.warn(msg, MotionBlurWarning, stacklevel=3)

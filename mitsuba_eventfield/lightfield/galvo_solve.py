@@ -37,6 +37,7 @@ No rendered frame is used anywhere; everything comes from the events and the opt
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import math
 import threading
 
@@ -190,13 +191,40 @@ def _one_blas_thread():
                 _blas["limiter"] = None     # the next first solve reads the limits afresh
 
 
-def _weighted(a, sw):
+# the progress line of the solves run in this context (``solver_progress``), or None
+_PROGRESS = contextvars.ContextVar("galvo_solve_progress", default=None)
+PROGRESS_DELAY_S = 2.0      # a solve shorter than this prints nothing (a test's, a small film's)
+
+
+@contextlib.contextmanager
+def solver_progress(desc: str):
+    """A progress line on stderr for the galvo solves run inside this block (in this thread): LSQR iterations
+    counted as they run, shown once the block has taken ``PROGRESS_DELAY_S``. The solve's iteration count is not
+    known ahead (LSQR stops at its tolerance), so the line gives the count and the rate, not a fraction: at
+    1280x720 a refocus solves for minutes, which the command line spent silent."""
+    from ..simulate.summary import progress_bar
+    bar = progress_bar(total=None, desc=f"{desc} (LSQR iterations)", unit="it", delay=PROGRESS_DELAY_S)
+    token = _PROGRESS.set(bar)
+    try:
+        yield bar
+    finally:
+        _PROGRESS.reset(token)
+        bar.close()
+
+
+def _weighted(a, sw, bar=None):
     """The rows of ``a`` scaled by ``sw``, for LSQR, as an operator that copies nothing: its transpose is a view
     (``a.T``; scipy's own wrapper took it as ``a.H``, a copy of the whole matrix: 1.6 GiB for one 1280x720
     period), and the weights are applied to the products (``diags(sw) @ a`` copied the matrix at every
-    re-weighting). With unit weights the products are those of ``a`` to the bit."""
+    re-weighting). With unit weights the products are those of ``a`` to the bit. ``bar``: a progress line
+    ticked once an iteration (LSQR takes one product with ``a`` each)."""
     from scipy.sparse.linalg import LinearOperator
-    return LinearOperator(a.shape, matvec=lambda v: sw * (a @ v), rmatvec=lambda v: a.T @ (sw * v), dtype=a.dtype)
+
+    def matvec(v):
+        if bar is not None:
+            bar.update()
+        return sw * (a @ v)
+    return LinearOperator(a.shape, matvec=matvec, rmatvec=lambda v: a.T @ (sw * v), dtype=a.dtype)
 
 
 def _solve_robust(a, b, prior, prior_weight, robust_iterations, threshold, iterations, tolerance):
@@ -207,8 +235,8 @@ def _solve_robust(a, b, prior, prior_weight, robust_iterations, threshold, itera
     delta = np.zeros(a.shape[1])
     for it in range(robust_iterations + 1):
         sw = np.sqrt(weights)
-        delta = lsqr(_weighted(a, sw), sw * r0, damp=damp, iter_lim=iterations, atol=tolerance, btol=tolerance,
-                     x0=delta if it else None)[0]
+        delta = lsqr(_weighted(a, sw, _PROGRESS.get()), sw * r0, damp=damp, iter_lim=iterations, atol=tolerance,
+                     btol=tolerance, x0=delta if it else None)[0]
         if it == robust_iterations:
             break
         res = np.abs(a @ delta - r0)

@@ -135,3 +135,23 @@ def test_calibrate_commands(galvo_capture, tmp_path):
     bad = run("calibrate", "galvo", str(d / "g.h5"), "--patch", "1,1", "-o", cal)
     assert bad.returncode == 2 and "does not fit in the 120x90 frames (allowed: x in [28, 91] and y in [28, 61])" \
         in bad.stderr, bad.stderr
+
+
+def test_refocus_follows_moving_content_as_its_warning_says(tmp_path):
+    """The moving-content warning's advice was Python's (refocus(..., motion=...)), which the command line could
+    not take. It now names ``--follow=VX,VY`` too, and following that advice takes the warning away (the views'
+    motion at that velocity taken out) and records the velocity; a malformed one is refused before the solve."""
+    fan = os.path.join(ROOT, "scenes", "fan", "fan.xml")
+    r = run("render", fan, "-o", str(tmp_path / "fan.h5"), "-D", "width=96", "-D", "height=72", "-D", "amplitude=2",
+            "-D", "mirror_distance=0.2", "--duration", "0.008", "--quiet")
+    assert r.returncode == 0, r.stderr
+    r = run("refocus", str(tmp_path / "fan.h5"), "-o", str(tmp_path / "r.png"), "--depth", "0.6")
+    advice = re.search(r"eventfield refocus (--follow=-?\d+,-?\d+)", r.stderr)
+    assert r.returncode == 0 and advice, r.stderr
+    r = run("refocus", str(tmp_path / "fan.h5"), "-o", str(tmp_path / "f.png"), "--depth", "0.6", advice.group(1))
+    assert r.returncode == 0 and "content moves" not in r.stderr, r.stderr
+    from mitsuba_eventfield.images import read_exr
+    vx, vy = (float(v) for v in advice.group(1).split("=")[1].split(","))
+    assert read_exr(str(tmp_path / "f.exr"))[1]["follow_px_s"] == [vx, vy]
+    r = run("refocus", str(tmp_path / "fan.h5"), "-o", str(tmp_path / "g.png"), "--depth", "0.6", "--follow=1,2,3")
+    assert r.returncode == 2 and "argument --follow: 1,2,3: expected VX,VY (pixels per second)" in r.stderr, r.stderr

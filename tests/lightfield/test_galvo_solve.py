@@ -91,9 +91,10 @@ def test_bad_input_is_one_named_error(cards):
         galvo_solve.start_image(events, 0.0, depth=np.ones((3, 3)))
     with pytest.raises(ConfigError, match="near < far"):
         next(galvo_periods.reconstruct_periods(events, depth_range=(2.0, 1.0)))
-    events.meta["optics"] = {"design": "kaleidoscope"}
-    with pytest.raises(ConfigError, match="galvo event stream"):
-        galvo_solve.start_image(events, 0.0)
+    import dataclasses
+    other = dataclasses.replace(events, meta=dict(events.meta, optics={"design": "kaleidoscope"}))
+    with pytest.raises(ConfigError, match="galvo event stream"):     # (a copy: the module's fixture stays galvo)
+        galvo_solve.start_image(other, 0.0)
 
 
 def test_blas_runs_on_one_thread_during_a_solve_and_comes_back_after_overlapping_ones():
@@ -214,3 +215,21 @@ def test_a_raster_scan_locks_though_its_half_period_repeats_most_of_its_lines(tm
     lock = scan_lock(events)
     assert lock.locked and lock.repeats_every is None and lock.lock > 0.9, lock
     assert scan_lock(events.time_window(None, events.start_us + int(1.5 * timed.scan_period * 1e6))) is None
+
+
+def test_a_long_solve_says_it_is_alive_and_a_short_one_nothing(cards, monkeypatch, capsys):
+    """``solver_progress``: LSQR's iterations counted on stderr once the block has run PROGRESS_DELAY_S (a
+    1280x720 refocus solved for minutes without a line); a solve shorter than that prints nothing. The count
+    is the solve's own iterations (the result is the same with the line as without)."""
+    _, events, _ = cards
+    plain, _ = galvo_solve.start_image(events, 0.0, depth=0.5)
+    monkeypatch.setattr(galvo_solve, "PROGRESS_DELAY_S", 3600.0)   # shorter than the delay (however loaded the CPU)
+    with galvo_solve.solver_progress("cards: solving") as bar:
+        quiet, _ = galvo_solve.start_image(events, 0.0, depth=0.5)
+    assert capsys.readouterr().err == "" and bar.n > 10 and np.array_equal(quiet, plain)
+    monkeypatch.setattr(galvo_solve, "PROGRESS_DELAY_S", 0.0)
+    monkeypatch.setattr("mitsuba_eventfield.simulate.summary.LOG_PROGRESS_INTERVAL_S", 0.0)
+    with galvo_solve.solver_progress("cards: solving") as bar:
+        galvo_solve.start_image(events, 0.0, depth=0.5)
+    err = capsys.readouterr().err
+    assert "cards: solving (LSQR iterations): " in err and f"{bar.n}it " in err, err[-300:]
