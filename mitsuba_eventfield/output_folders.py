@@ -53,8 +53,7 @@ def output_dir_run(path: str, command: str, inputs=()):
            "backed": set(), "backup": f"{BACKUP}{os.getpid()}-{uuid.uuid4().hex[:8]}", "lock": None,
            "before": _snapshot(path), "dirs_before": _dirs_below(path), "above": _nearest_existing(path),
            "kept": {os.path.join(path, n) for n in foreign},
-           "inputs": {os.path.relpath(os.path.abspath(f), path) for f in inputs
-                      if os.path.abspath(f).startswith(path + os.sep)}}
+           "inputs": _inside(path, inputs)}
     _KEPT.update(run["kept"])
     with _RUNS_LOCK:                   # each file it writes is listed before it is written (``claim``)
         _RUNS[path] = run
@@ -71,6 +70,14 @@ def output_dir_run(path: str, command: str, inputs=()):
         _KEPT.difference_update(run["kept"])
         with _RUNS_LOCK:
             _RUNS.pop(path, None)
+
+
+def _inside(path: str, files) -> set:
+    """``files`` that lie in the folder ``path``, relative to it, through links too (the folder given as a link,
+    an input named by a link to a file in it: matched by their real paths, which ``check_outputs`` uses too)."""
+    real = os.path.realpath(path)
+    found = (os.path.realpath(f) for f in files)
+    return {os.path.relpath(f, real) for f in found if f.startswith(real + os.sep)}
 
 
 def _succeeded(path: str, previous: list, run: dict) -> None:

@@ -90,6 +90,17 @@ def finite(value, name: str, error=ConfigError) -> float:
     return number(value, name, strict=True, error=error)
 
 
+def number_or_pair(value, name: str, error=ConfigError):
+    """A number or an (x, y) pair of finite numbers, as given (a float or a float tuple)."""
+    import numpy as np
+    if np.iterable(value) and not isinstance(value, str):
+        items = list(value)
+        if len(items) != 2:
+            raise error(f"{name} = {value!r}: expected a number or an (x, y) pair")
+        return tuple(finite(v, name, error) for v in items)
+    return finite(value, name, error)
+
+
 def positive(value, name: str, integer: bool = False, error=ConfigError):
     """A real number (or whole number) > 0."""
     return number(value, name, 0, integer=integer, lo_open=True, strict=True, error=error)

@@ -263,3 +263,25 @@ def test_inputs_kept_by_output_dir_run(tmp_path):
     assert sorted(_listed(out)) == ["a.json", "b.json"]
     _run(out, {"b.json": 4})                   # a run that does not read it: a.json was an earlier run's output
     assert sorted(os.listdir(out)) == sorted(["b.json", MANIFEST])
+
+
+@pytest.mark.parametrize("how", ["link to the input", "link to the folder", "dot-dot"])
+def test_an_input_named_through_a_link_stays_too(tmp_path, how):
+    """The input and the folder are matched by their real paths: an input named by a link to a file in the
+    folder, or the folder given as a link, removed the input as an earlier run's output."""
+    out = tmp_path / "scan"
+    _run(out, {"calibration.json": {"pivot": 1}, "depth.json": {"run": 1}})
+    folder, given = out, out / "calibration.json"
+    if how == "link to the input":
+        given = tmp_path / "cal.json"
+        given.symlink_to(out / "calibration.json")
+    elif how == "link to the folder":
+        folder = tmp_path / "scanlink"
+        folder.symlink_to(out)
+    else:
+        (tmp_path / "sub").mkdir()
+        given = tmp_path / "sub" / ".." / "scan" / "calibration.json"
+    with output_dir_run(str(folder), "test", inputs=[str(given)]):
+        write_json(str(folder / "depth.json"), {"run": 2})
+    assert sorted(os.listdir(out)) == sorted(["calibration.json", "depth.json", MANIFEST])
+    assert sorted(_listed(out)) == ["calibration.json", "depth.json"]

@@ -38,6 +38,10 @@ def _open(f, path: str):
     """(events group, t_offset, metadata, width, height) of an open file; width None for a foreign file."""
     if "events" not in f:
         raise EventFieldError(f"{path}: no /events group (not a DSEC-layout event file)")
+    lengths = [f["events"][k].shape[0] for k in "xytp"]       # (before any part is read: a part's would be 0s)
+    if len(set(lengths)) > 1:
+        raise EventFieldError(f"{path}: event stream: x, y, t, p must have one length (got "
+                              f"{', '.join(map(str, lengths))})")
     meta, w, h = {}, None, None
     if "eventfield" in f:
         g = f["eventfield"]
@@ -101,10 +105,24 @@ def read_h5(path: str, window: tuple | None = None) -> EventStream:
         return part.time_window(t0, t1)
 
 
+def _checked_on_count(path: str, ev, t_offset: int, w: int, h: int) -> int:
+    """The ON events of the whole file, read a block at a time, each block checked as a whole read checks the
+    stream (coordinates on the sensor, polarity values, time order, within and across blocks): ``info`` read
+    only the first and last events and took an unsorted file's, or one with x past its sensor, as valid."""
+    from .io import _check_time_order
+    on, last = 0, None
+    for i in range(0, ev["t"].shape[0], READ_BLOCK):
+        part = _rows(path, ev, t_offset, {}, w, h, slice(i, i + READ_BLOCK))
+        _check_time_order(part, offset=i, before=last)
+        on += int(np.count_nonzero(part.p > 0))
+        last = int(part.t[-1])
+    return on
+
+
 def h5_summary(path: str, count: bool = True) -> tuple[dict | None, EventStream]:
     """(``EventStream.summary`` of the file, an EventStream of its first and last events with its metadata and
-    span), reading the polarity column a block at a time and nothing else whole; ``count`` False: no summary
-    (None), the column not read."""
+    span), reading the columns a block at a time (``_checked_on_count``), none whole; ``count`` False: no
+    summary (None), only the two events read."""
     import h5py
     with h5py.File(path, "r") as f:
         ev, t_offset, meta, w, h = _open(f, path)
@@ -116,5 +134,5 @@ def h5_summary(path: str, count: bool = True) -> tuple[dict | None, EventStream]
                                             for r in rows])
         if not count:
             return None, ends
-        on = sum(int(np.count_nonzero(ev["p"][i:i + READ_BLOCK] > 0)) for i in range(0, n, READ_BLOCK))
+        on = _checked_on_count(path, ev, t_offset, ends.width, ends.height)
     return EventStream.summary_of(n, on, ends.width, ends.height, ends.duration_us), ends

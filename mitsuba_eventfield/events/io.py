@@ -225,13 +225,19 @@ def _reading(path, fmt, read):
         raise EventFieldError(f"{path}: cannot read as {fmt} event file: {_one_line(e)}") from None
 
 
-def _check_time_order(stream) -> None:
+def _check_time_order(stream, offset: int = 0, before: int | None = None) -> None:
     """Files are read as they are, and everything downstream (time windows, the index, light fields) takes the
-    events in time order: an unsorted foreign file's window [1000, 2500) held its event at 3000."""
+    events in time order: an unsorted foreign file's window [1000, 2500) held its event at 3000. ``offset``,
+    ``before``: ``stream`` is a block of a file read in blocks, starting at event ``offset``, after an event at
+    ``before`` us."""
     t, i = stream.t, first_out_of_order(stream.t)
+    if before is not None and len(t) and t[0] < before:
+        i, previous = 0, before
+    elif i is not None:
+        previous = int(t[i - 1])
     if i is not None:
-        raise ConfigError(f"events are not in time order: event {i} at t = {int(t[i])} us follows "
-                          f"{int(t[i - 1])} us (sort the file by t)")
+        raise ConfigError(f"events are not in time order: event {offset + i} at t = {int(t[i])} us follows "
+                          f"{previous} us (sort the file by t)")
 
 
 def _read_aedat4(path):

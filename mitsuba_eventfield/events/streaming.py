@@ -113,6 +113,8 @@ class TxtEventWriter(_PartialFile):
         self.count += len(t)
 
     def close(self, end_us=None, meta=None):
+        if self.closed:             # closed or aborted already: nothing to do (as H5EventWriter)
+            return
         with disk_errors(self.path, HEADER_BYTES):
             self.f.close()
         self._publish()
@@ -160,6 +162,8 @@ class NpzEventWriter(_PartialFile):
                 yield convert(values) if convert else values
 
     def close(self, end_us=None, meta=None):
+        if self.closed:             # closed or aborted already: nothing to do (as H5EventWriter)
+            return
         for f in self.columns.values():
             f.close()
         self.meta.update(meta or {})
@@ -224,6 +228,8 @@ class Aedat4EventWriter(_PartialFile):
         self.count += len(t)
 
     def close(self, end_us=None, meta=None):
+        if self.closed:             # closed or aborted already: nothing to do (as H5EventWriter)
+            return
         encoder = self.__dict__.pop("encoder")
         with disk_errors(self.path, HEADER_BYTES):
             encoder.__exit__(None, None, None)             # writes the data table and closes the file

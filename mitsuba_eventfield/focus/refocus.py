@@ -41,7 +41,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..lightfield.model import LightField
-from ..validate import MAX_PLANES, finite, number
+from ..validate import MAX_PLANES, finite, number, number_or_pair
 from ..workers import ordered_map
 from .measures import log_gradient
 
@@ -286,16 +286,6 @@ def check_lightfield(lf, where: str) -> None:
                           f"got {type(lf).__name__}")
 
 
-def _pair(value, name: str):
-    """A number or (x, y) pair of finite numbers, as given (a float or a float tuple)."""
-    if np.iterable(value) and not isinstance(value, str):
-        items = list(value)
-        if len(items) != 2:
-            raise ConfigError(f"{name} = {value!r}: expected a number or an (x, y) pair")
-        return tuple(finite(v, name) for v in items)
-    return finite(value, name)
-
-
 def _check_refocus(depth, alpha, motion):
     """refocus's depth (> 0, math.inf allowed) or alpha (a number or (x, y)), and motion ((vx, vy) px/s)."""
     if alpha is None:
@@ -303,12 +293,21 @@ def _check_refocus(depth, alpha, motion):
             raise ConfigError(f"refocus: depth = {depth!r}: must be > 0 (math.inf for infinity), or give alpha")
         depth = float(depth)
     else:
-        alpha = _pair(alpha, "refocus: alpha")
+        alpha = number_or_pair(alpha, "refocus: alpha")
     if motion is not None:
         if isinstance(motion, str) or not np.iterable(motion):
             raise ConfigError(f"refocus: motion = {motion!r}: expected (vx, vy) in pixels per second")
-        motion = _pair(motion, "refocus: motion")
+        motion = number_or_pair(motion, "refocus: motion")
     return depth, alpha, motion
+
+
+def _check_motion_within_image(lf: LightField, motion) -> None:
+    """Content moved farther than the image over the views is refused (--follow=1e308,1: minutes of OpenCV)."""
+    span, side = float(np.abs(lf.times - lf.times.mean()).max()), max(np.shape(lf.views[0])[:2])
+    if not max(abs(motion[0]), abs(motion[1])) * span <= side:
+        raise ConfigError(f"refocus: motion = ({motion[0]:g}, {motion[1]:g}) px/s moves content "
+                          f"{max(abs(motion[0]), abs(motion[1])) * span:.4g} px from the views' mean time, farther "
+                          f"than the {side}-pixel image: allowed |v| up to {side / max(span, 1e-12):.4g} px/s here")
 
 
 def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None,
@@ -328,6 +327,8 @@ def refocus(lf: LightField, depth: float | None = None, alpha=None, motion=None,
         raise ConfigError(f"refocus: on_motion = {on_motion!r}: allowed {', '.join(ON_MOTION)}")
     if on_motion != "ignore" and motion is None and alpha is None:
         _flag_motion(lf, depth, on_motion)
+    if motion is not None:
+        _check_motion_within_image(lf, motion)
     if alpha is None and not lf.shift_invariant:
         return _refocus_warped(lf, depth, motion)
     shifts = lf.shifts(depth, alpha)

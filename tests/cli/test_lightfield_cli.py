@@ -155,3 +155,19 @@ def test_refocus_follows_moving_content_as_its_warning_says(tmp_path):
     assert read_exr(str(tmp_path / "f.exr"))[1]["follow_px_s"] == [vx, vy]
     r = run("refocus", str(tmp_path / "fan.h5"), "-o", str(tmp_path / "g.png"), "--depth", "0.6", "--follow=1,2,3")
     assert r.returncode == 2 and "argument --follow: 1,2,3: expected VX,VY (pixels per second)" in r.stderr, r.stderr
+
+
+def test_a_velocity_beyond_the_image_is_refused():
+    """``refocus(..., motion=...)`` with content moved farther than the image over the views: one line (a
+    --follow of 1e308 px/s warped views by 10^305 px, minutes of OpenCV past SIGTERM)."""
+    import math
+
+    from mitsuba_eventfield.errors import ConfigError
+    from mitsuba_eventfield.focus.refocus import refocus
+    from mitsuba_eventfield.lightfield.model import Disparity, LightField
+    rng = np.random.default_rng(0)
+    lf = LightField(rng.random((8, 32, 48)), np.zeros((8, 2)), np.linspace(0, 0.004, 8), Disparity((0.0, 0.0), (0.0, 0.0)))
+    refocus(lf, math.inf, motion=(1000, 0))                                   # 2 px from the mean time: fine
+    with pytest.raises(ConfigError, match=r"moves content 2e\+305 px .* farther than the 48-pixel image: allowed "
+                                          r"\|v\| up to 2.4e\+04 px/s"):
+        refocus(lf, math.inf, motion=(1e308, 1))

@@ -404,3 +404,18 @@ def test_a_timelens_npz_is_read_with_its_size_said(tmp_path):
     np.savez(path, x=np.zeros(0, np.uint16), y=np.zeros(0, np.uint16), timestamp=np.zeros(0), polarity=np.zeros(0))
     with pytest.raises(ef.EventFieldError, match=r"tl\.npz: .*no events and no width / height"):
         ef.read_events(str(path))
+
+
+@pytest.mark.parametrize("ext", [".txt", ".npz", ".aedat4", ".h5"])
+def test_closing_twice_or_after_abort_does_nothing(tmp_path, ext):
+    """As H5EventWriter: a second close, or a close after abort, is a no-op (the AEDAT4 writer raised KeyError,
+    the npz writer FileNotFoundError, leaving its partial file beside the output)."""
+    from mitsuba_eventfield.events.streaming import open_writer
+    t = np.arange(10)
+    for ending in ("close", "abort"):
+        path = tmp_path / f"{ending}{ext}"
+        w = open_writer(str(path), ext[1:], 64, 48)
+        w.append(t % 64, t % 48, t, np.where(t % 2, 1, -1))
+        w.close() if ending == "close" else w.abort()
+        w.close()
+        assert [n for n in os.listdir(tmp_path) if n.startswith(ending)] == ([path.name] if ending == "close" else [])

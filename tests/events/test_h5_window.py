@@ -49,7 +49,7 @@ def test_few_events_and_none(tmp_path):
 
 def test_a_window_reads_only_its_rows(tmp_path, monkeypatch):
     """1 ms of a 2M-event file: a few dozen single elements (the bisection) and the window's rows, not the
-    columns (the whole file was read for a preview of 10 ms)."""
+    columns (the whole file was read for a preview of 10 ms); the summary reads the columns a block at a time."""
     n = 2_000_000
     rng = np.random.default_rng(1)
     ev = ef.EventStream(rng.integers(0, 64, n), rng.integers(0, 48, n), np.sort(rng.integers(0, 10 ** 7, n)),
@@ -69,8 +69,11 @@ def test_a_window_reads_only_its_rows(tmp_path, monkeypatch):
     assert len(part) == inside and np.array_equal(part.t, ev.t[(ev.t >= 5_000_000) & (ev.t < 5_001_000)])
     assert sum(read) < 4 * inside + 200, sum(read)
     read.clear()
+    from mitsuba_eventfield.events import hdf5_read
+    monkeypatch.setattr(hdf5_read, "READ_BLOCK", 1 << 18)
     s, _ = summarize_events(path)
-    assert s == ev.summary() and sum(read) < n + 100            # the polarity column only, and four elements
+    # every column checked (as a whole read checks it), a block at a time: never more than a block in memory
+    assert s == ev.summary() and max(read) <= 1 << 18 and sum(read) < 4 * n + 100
 
 
 def test_a_foreign_file_without_the_index_is_checked_whole(tmp_path):
@@ -121,3 +124,33 @@ def test_info_and_preview_of_a_file_read_in_part(tmp_path, capsys):
     assert "covers 1.3 to 53.3 ms" in outputs[".h5"][1]
     import cv2
     assert np.array_equal(cv2.imread(str(tmp_path / "p.h5.png")), cv2.imread(str(tmp_path / "p.npz.png")))
+
+
+@pytest.mark.parametrize("case", ["unsorted", "polarity", "off the sensor", "lengths"])
+def test_info_checks_the_whole_file_a_block_at_a_time(tmp_path, case, monkeypatch):
+    """``info`` read only the first and last events: an unsorted file, polarity values 2 and 5 or x past the
+    sensor were summarised as valid (a whole read refuses them), and a /events/t one row longer was said as
+    "(got 0, 0, 1, 0)". Blocks of 2 rows here, so the faults fall within a block and across blocks."""
+    from mitsuba_eventfield.events import hdf5_read
+    monkeypatch.setattr(hdf5_read, "READ_BLOCK", 2)
+    t, x, p = [1, 2, 3, 4, 5], [0, 1, 2, 3, 0], [1, 0, 1, 1, 0]
+    says = {"unsorted": "events are not in time order: event 2 at t = 1 us follows 2 us",
+            "polarity": "polarity values (0, 1, )?2, 5", "off the sensor": "coordinates exceed the 4x4 sensor",
+            "lengths": r"x, y, t, p must have one length \(got 5, 5, 6, 5\)"}[case]
+    if case == "unsorted":
+        t = [1, 2, 1, 4, 5]
+    elif case == "polarity":
+        p = [0, 1, 2, 5, 1]
+    elif case == "off the sensor":
+        x = [0, 1, 2, 9, 0]
+    path = tmp_path / "bad.h5"
+    with h5py.File(path, "w") as f:
+        f["events/t"] = np.array(t + ([6] if case == "lengths" else []), np.int64)
+        f["events/x"], f["events/y"] = np.array(x, np.uint16), np.zeros(5, np.uint16)
+        f["events/p"] = np.array(p, np.uint8)
+        g = f.create_group("eventfield")
+        g.attrs.update(width=4, height=4, meta_json="{}", format_version=1)
+    with pytest.raises(ef.EventFieldError, match=says):
+        summarize_events(str(path))
+    with pytest.raises(ef.EventFieldError, match=says):
+        ef.read_events(str(path))                                   # the whole read says the same
