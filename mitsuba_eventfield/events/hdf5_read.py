@@ -1,10 +1,10 @@
 """Reading DSEC-layout HDF5 event files (``io`` has the layout): whole, a time window, or the little that
-``eventfield info`` prints, the last two without reading the columns whole.
+``eventfield info`` prints, the last two without holding the columns whole.
 
 A 1280x720 render of a few seconds holds 10^8-10^9 events (13 bytes each in memory, more while converting):
 `info` and `preview` of a 10 ms window read all of them, gigabytes for a line of text or one picture. A window
 is found by bisection on ``/events/t`` (a few dozen element reads, each decompressing one chunk of HDF5's cache)
-and only its rows are read. Bisection needs time order, which a file holding ``/ms_to_idx`` has (the DSEC
+and only its rows are read; ``info`` reads the columns a block at a time, checking each as a whole read would. Bisection needs time order, which a file holding ``/ms_to_idx`` has (the DSEC
 index is made of sorted events; our writer refuses unsorted chunks); a file without it is read whole and
 windowed after its order is checked, as before."""
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import EventFieldError
 from .stream import EventStream
 
-READ_BLOCK = 1 << 22        # rows of a column read at once where a whole column would be counted
+READ_BLOCK = 1 << 22        # rows read at once where the whole file is checked and counted (``info``)
 
 
 class _Column:

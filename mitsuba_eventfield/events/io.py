@@ -177,8 +177,8 @@ def read_events(path: str, fmt: str | None = None, window: tuple | None = None) 
 
 def summarize_events(path: str, fmt: str | None = None, count: bool = True) -> tuple[dict | None, EventStream]:
     """(``EventStream.summary`` of an event file, an EventStream whose first and last events, span and metadata
-    are the file's): an HDF5 file's columns are not read whole (its polarity column a block at a time; not at
-    all when ``count`` is False, which gives no summary), other formats are read whole."""
+    are the file's): an HDF5 file's columns are never held whole (read and checked a block at a time; only its
+    first and last events when ``count`` is False, which gives no summary), other formats are read whole."""
     path, fmt = _event_file(path, fmt)
     if fmt == "h5":
         return _reading(path, fmt, lambda: _checked(path, fmt, lambda: h5_summary(path, count)))
