@@ -203,8 +203,11 @@ class Aedat4EventWriter(_PartialFile):
             raise EventFieldError(f"{path}: a {width}x{height} sensor: AEDAT4 holds sensors of 1 to "
                                   f"{AEDAT4_MAX_SIDE} pixels a side (16-bit signed coordinates)")
         super().__init__(path, width, height, meta)
-        import faery
-        from faery.extension import aedat
+        try:
+            import faery
+            from faery.extension import aedat
+        except ImportError:
+            raise EventFieldError(f"{path}: AEDAT4 export needs faery (pip install faery)") from None
         self.dtype = faery.EVENTS_DTYPE
         check_space(self.path, HEADER_BYTES)
         check_room(self.path, self.tmp, HEADER_BYTES)

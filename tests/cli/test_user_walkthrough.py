@@ -92,6 +92,7 @@ def test_a_render_starting_before_zero_is_refused_for_aedat4_before_rendering(tm
 
 
 def test_a_source_whose_times_are_known_late_is_still_refused_whole(tmp_path):
+    pytest.importorskip("faery")                   # (the AEDAT4 writer; the GPU image lacks it)
     from mitsuba_eventfield.simulate.frame_sources import FrameSource
     frames = [np.full((8, 8), v, np.float32) for v in np.exp(np.linspace(0, 1, 6))]
     src = FrameSource("gen", 8, 8, None, lambda: zip(np.linspace(-0.5, -0.495, 6), frames), {"kind": "generator"})

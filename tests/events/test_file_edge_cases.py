@@ -7,6 +7,7 @@ import os
 import h5py
 import numpy as np
 import pytest
+from conftest import AEDAT4
 
 import mitsuba_eventfield as ef
 from mitsuba_eventfield.cli.main import main as cli
@@ -148,6 +149,7 @@ def test_recordings_refuse_what_their_words_cannot_hold(tmp_path):
 
 
 def test_aedat4_refuses_what_the_format_cannot_hold(tmp_path):
+    pytest.importorskip("faery")                    # (the AEDAT4 writer; the GPU image lacks it)
     with pytest.raises(ef.EventFieldError, match=r"a 40000x48 sensor: AEDAT4 holds sensors of 1 to 32767"):
         ef.write_events(str(tmp_path / "a.aedat4"), _stream([1], width=40000))
     with pytest.raises(ef.EventFieldError, match="AEDAT4 holds timestamps >= 0 only"):     # a user's data: one line
@@ -231,6 +233,7 @@ def test_an_aedat4_past_the_file_size_limit_is_one_line_not_an_abort(tmp_path):
     """Under ``ulimit -f`` (a file-size limit; a quota behaves alike but cannot be seen) dv-processing's writer
     thread met EFBIG and aborted the whole process (exit 134, a partial file left). The limit is checked with
     the free space before each chunk: one line, no file; under no limit the same write is taken."""
+    pytest.importorskip("faery")                    # (the AEDAT4 writer; the GPU image lacks it)
     import resource
     import subprocess
     import sys
@@ -271,6 +274,7 @@ def test_a_quota_refuses_an_aedat4_chunk_before_the_encoder_sees_it(tmp_path, mo
     """A user quota (a cluster's home) is not in the free-space figure: dv-processing's writer thread (the
     AEDAT4 writer before faery's) met EDQUOT and aborted the process. Each chunk's bytes are reserved first; a
     refusal is the one line, in this process, with nothing left beside the output (no partial file, no probe)."""
+    pytest.importorskip("faery")                    # (the AEDAT4 writer; the GPU image lacks it)
     from mitsuba_eventfield.events import disk
     reserved = []
 
@@ -294,6 +298,7 @@ def test_the_aedat4_encoders_own_refusal_is_the_one_line(tmp_path):
     """Past the checks (a limit they could not see), faery's encoder meets EFBIG and says it in words only
     ("File too large (os error 27)", no errno): the line says file too large, not "disk full" with 40 GiB
     free, and nothing is left."""
+    pytest.importorskip("faery")                    # (the AEDAT4 writer; the GPU image lacks it)
     import subprocess
     import sys
     script = ("import resource, sys, numpy as np, mitsuba_eventfield as ef\n"
@@ -372,6 +377,7 @@ def test_each_aedat4_chunk_is_in_the_file_when_append_returns_and_its_room_was_a
     faery's encoder writes each packet before ``append`` returns: the file has grown by the chunk (LZ4 keeps
     these dense events under their 16 bytes, never above the 17 reserved), and each reservation is the chunk's
     own bytes plus a header's."""
+    pytest.importorskip("faery")                    # (the AEDAT4 writer; the GPU image lacks it)
     from mitsuba_eventfield.events import disk
     from mitsuba_eventfield.events.streaming import AEDAT4_BYTES_PER_EVENT, open_writer
     reserved = []
@@ -406,7 +412,7 @@ def test_a_timelens_npz_is_read_with_its_size_said(tmp_path):
         ef.read_events(str(path))
 
 
-@pytest.mark.parametrize("ext", [".txt", ".npz", ".aedat4", ".h5"])
+@pytest.mark.parametrize("ext", [".txt", ".npz", AEDAT4, ".h5"])
 def test_closing_twice_or_after_abort_does_nothing(tmp_path, ext):
     """As H5EventWriter: a second close, or a close after abort, is a no-op (the AEDAT4 writer raised KeyError,
     the npz writer FileNotFoundError, leaving its partial file beside the output)."""

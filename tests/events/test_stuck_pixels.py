@@ -67,6 +67,7 @@ def test_a_realistic_pixel_under_the_scan_is_not_stuck(pixel):
 def stuck_recording(tmp_path_factory):
     """One scan period of the static galvo scene at 64x48 with three pixels stuck ON at 100 kHz, as a camera
     recording (RAW, no optics), and the same period clean."""
+    pytest.importorskip("faery")                    # (the RAW writer; the GPU image lacks it)
     d = tmp_path_factory.mktemp("recordings")
     ev = ef.render_events(ef.load_scene(GALVO, width=64, height=48), 0.004, steps=32)
     optics = d / "optics.json"
@@ -126,6 +127,7 @@ def test_a_reconstruction_beyond_float32_is_clipped_and_said(tmp_path, capsys):
 
 def test_a_recording_of_stuck_pixels_alone_is_refused_not_written_flat(tmp_path, capsys):
     """One pixel stuck ON for 200 ms and nothing else: reconstruct wrote a flat frame as done. Now one line."""
+    pytest.importorskip("faery")                    # (the RAW writer; the GPU image lacks it)
     ev = ef.EventStream(np.zeros(2000, int), np.zeros(2000, int), np.arange(2000) * 100, np.ones(2000), 8, 6)
     ef.write_events(str(tmp_path / "stuck.raw"), ev)
     assert cli.main(["reconstruct", str(tmp_path / "stuck.raw"), "--contrast", "0.2", "-o", str(tmp_path / "r")]) == 2
