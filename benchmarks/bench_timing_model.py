@@ -39,23 +39,20 @@ def _by_pixel(ev, pol, width):
 def timing_errors_us(ev, ref, width: int) -> dict:
     """Two readings of the timing error against the reference: ``nearest``, every reference event to the nearest
     event of its pixel and polarity (a missing or extra event counts as the distance to the next one), and
-    ``equal_counts``, the k-th event against the k-th in the pixels (and polarities) whose counts agree: the
-    timing alone. Medians in us, and the share of reference events in agreeing pixels."""
-    nearest, paired, agreeing = [], [], 0
+    ``equal_counts``, the k-th event against the k-th in the pixels whose counts agree (``bench_v2e.compare``:
+    the timing alone). Medians in us, and the share of the reference's events in agreeing pixels."""
+    from bench_v2e import as_events, compare
+    nearest = []
     for pol in (1, -1):
         test = _by_pixel(ev, pol, width)
         for pixel, a in _by_pixel(ref, pol, width).items():
             b = test.get(pixel)
-            if b is None:
-                continue
-            i = np.clip(np.searchsorted(b, a), 0, len(b) - 1)
-            nearest.append(np.minimum(np.abs(b[i] - a), np.abs(b[np.maximum(i - 1, 0)] - a)))
-            if len(b) == len(a):
-                paired.append(np.abs(b - a))
-                agreeing += len(a)
-    return {"nearest": float(np.median(np.concatenate(nearest))),
-            "equal_counts": float(np.median(np.concatenate(paired))) if paired else float("nan"),
-            "agreeing_share": agreeing / len(ref)}
+            if b is not None:
+                i = np.clip(np.searchsorted(b, a), 0, len(b) - 1)
+                nearest.append(np.minimum(np.abs(b[i] - a), np.abs(b[np.maximum(i - 1, 0)] - a)))
+    paired = compare(*(as_events(e.x, e.y, e.t, e.p, width) for e in (ev, ref)), width * ref.height)
+    return {"nearest": float(np.median(np.concatenate(nearest))), "equal_counts": paired["dt_us_p50"],
+            "agreeing_share": paired["timed_events"] / len(ref)}
 
 
 def main():
@@ -68,7 +65,8 @@ def main():
     t0 = time.perf_counter()
     ref = ef.render_events(scene(), DURATION, steps=REFERENCE_STEPS, spp=REFERENCE_SPP, seed=7)
     ref_s = time.perf_counter() - t0
-    model = auto._noise_model(scene(), DURATION / 200, 4)
+    probe = scene()
+    model = auto._noise_model(probe, auto._slope_frames(probe, DURATION / 200, 4), DURATION / 200, 4)
     rows = []
     for spp in SPPS:
         ev = ef.render_events(scene(), DURATION, steps=STEPS, spp=spp)

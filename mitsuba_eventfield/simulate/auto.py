@@ -144,16 +144,15 @@ def _estimate(frames, sigma, dt, spp) -> dict | None:
     return lim.estimate()
 
 
-def _noise_model(scene, dt, probe_spp) -> dict | None:
+def _noise_model(scene, frames, dt, probe_spp) -> dict | None:
     """A sampler's noise measured at ``PROBES`` x ``probe_spp``: the timing error (us) and median sigma (log) at
     each, and between them power laws in spp (below the first and beyond the last, the nearest piece's exponent,
     kept within [0.25, 1.25]: stratified samplers fall faster once their strata are fine).
 
-    The slopes every probe divides its noise by come from one set of frames at the finest probe's spp, the
-    closest to the image's own slopes: slopes taken from 4-spp frames carried their noise, which made every pixel
-    look steep and the predicted timing error small, the more so the finer the probe (the demo at 48x36: 27 us
-    predicted at 64 spp, 5.4 us at 256, where a render's own estimate said about 200 us at 16 and at 256)."""
-    frames = render_frames(scene, [0.0, dt, 2 * dt], spp=probe_spp * PROBES[-1])
+    ``frames``: the image at 0, dt and 2 dt (``_slope_frames``), whose slopes every probe divides its noise by.
+    Slopes taken from 4-spp frames carried their noise, which made every pixel look steep and the predicted
+    timing error small, the more so the finer the probe (the demo at 48x36: 27 us predicted at 64 spp, 5.4 us at
+    256, where a render's own estimate said about 200 us at 16 and at 256)."""
     points = []
     for factor in PROBES:
         spp = probe_spp * factor
@@ -164,6 +163,12 @@ def _noise_model(scene, dt, probe_spp) -> dict | None:
         points.append((spp, max(est["noise_us"], 1e-9), float(np.median(sigma)), est["steps_us"]))
     slopes = [math.log(a[1] / b[1]) / math.log(b[0] / a[0]) for a, b in zip(points, points[1:])]
     return {"points": points, "slopes": slopes, "steps_us": points[0][3]}
+
+
+def _slope_frames(timed, dt, probe_spp):
+    """The image at 0, dt and 2 dt at the finest probe's spp, the closest to its own slopes: one set for every
+    sampler probed (the image is the same whichever sampler renders it)."""
+    return render_frames(timed, [0.0, dt, 2 * dt], spp=probe_spp * PROBES[-1])
 
 
 def _predict(model, spp) -> tuple:
@@ -182,10 +187,11 @@ def _timing_choice(scene_path, defines, timed, dt, target_s, sigma_cap, probe_sp
     own = _own_sampler(timed)
     budget_us = NOISE_SHARE * target_s * 1e6
     models, best = {}, None
+    frames = _slope_frames(timed, dt, probe_spp)
     for order, name in enumerate((own,) + tuple(s for s in SAMPLERS if s != own)):
         scene = timed if name == own else load_with_sampler(scene_path, {"type": name, "sample_count": probe_spp},
                                                             **defines)
-        m = _noise_model(scene, dt, probe_spp)
+        m = _noise_model(scene, frames, dt, probe_spp)
         if m is None:
             raise ConfigError("--timing-accuracy: no pixel changes in the probe frames at the start of the render, "
                               "so there is no event timing to predict")

@@ -134,7 +134,7 @@ def test_the_plans_noise_prediction_is_the_renders_own_estimate():
     falling with spp, within 3x of the render's estimate at 16 and 64 spp (measured 187 / 216 us and 74 / 206
     us; the rest of the gap is the probe's finer time step, docs/design.md), and the 20 us request refused."""
     scene = ef.load_scene(bundled_scene("demo/demo.xml"), width=48, height=36)
-    model = auto._noise_model(scene, 0.01 / 200, 4)
+    model = auto._noise_model(scene, auto._slope_frames(scene, 0.01 / 200, 4), 0.01 / 200, 4)
     errors = [p[1] for p in model["points"]]
     assert errors == sorted(errors, reverse=True), errors
     for spp in (16, 64):
