@@ -4,7 +4,9 @@ Two estimates, from the first frames of a uniform render (one extra render of th
 seed; no other cost):
 
 - **noise**: a crossing's time moves by about sigma_L / |dL/dt|, where sigma_L is the pixel's Monte-Carlo noise
-  in log brightness (half the difference of two seeds' renders, times sqrt 2) and dL/dt its log slope;
+  in log brightness (half the difference of two seeds' renders, times sqrt 2) and dL/dt its log slope, taken over
+  the shortest baseline that resolves it (:func:`event_slopes`: the first steps' differences read the frames'
+  own noise as change, and made the estimate 2.5-10x optimistic on the rendered demo);
 - **steps**: linear interpolation between rendered instants misplaces a crossing by about
   dt^2 |L''| / (8 |L'|) (the error bound of linear interpolation), from the second difference of three frames.
 
@@ -15,11 +17,18 @@ not lower a noise limit; four times the samples halve it.
 """
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 
 MIN_STEPS = 3
+# a slope baseline resolves a pixel whose error is E when it is at least RESOLVE x E (frames' noise as its own):
+# the slope's noise, sqrt 2 sigma_f / baseline, is then at most 0.35 of the slope sigma / E (event_slopes). At
+# 2.8 (half) the demo's 4-spp render read 171 us where two seeds differ by 319; at 4, 213; at 5.7, 286 but the
+# demo at 48x36 took 6.4 ms baselines over 10 ms and read 814 us where two seeds say 491 (docs/design.md)
+RESOLVE = 4.0
+MAX_BASELINES = 12         # frames a render keeps for slopes: its steps 4, 8, 16, ... (powers of two)
 MEDIAN_SAMPLE = 16384      # pixels of the random sample that brackets a large image's weighted median
 MEDIAN_MARGINS = (0.05, 0.2)   # the brackets tried: the sample's weighted quantiles 0.5 -/+ each
 
@@ -67,6 +76,43 @@ def event_median(values: np.ndarray, weights: np.ndarray) -> float:
             if below < half <= below + float(weights[inside].sum()):
                 return _sorted_median(values[inside], weights[inside], below, half)
     return _sorted_median(values, weights)
+
+
+def _rms(a) -> float:
+    return float(np.sqrt(np.mean(np.square(a, dtype=np.float64))))
+
+
+def event_slopes(first, later, sigma, frame_sigma=None) -> dict | None:
+    """Per-pixel |dL/dt| for the noise estimate: ``first`` frame (log brightness) against ``later`` ones,
+    ``[(baseline_s, frame), ...]`` in ascending order, and the noise-timing error sigma / |dL/dt| they give (the
+    median over events, seconds). ``sigma``: the noise whose timing error is wanted; ``frame_sigma``: the frames'
+    own (default the same: a render's frames are its own spp).
+
+    A baseline's slope carries its two frames' noise, sqrt 2 sigma_f / baseline: for a pixel whose error is
+    E = sigma / |L'| that is sqrt 2 (sigma_f / sigma) E / baseline of its slope. The first baseline of at least
+    ``RESOLVE`` (sigma_f / sigma) E (the median event's slope within about a third) is taken; a shorter one
+    makes slow pixels steep (their noise difference reads as change) and their errors small: 74 us predicted at
+    64 spp on the demo at 48x36 from a 50 us baseline, 486 us measured by two seeds' renders
+    (benchmarks/results/timing_model.md).
+    Longer ones average a change that is not linear (an edge passing, a scan turning), so none longer is taken.
+    Where none resolves, the baseline closest to it (``resolved`` False: an error at least about that large).
+    Static pixels of a frozen sampler have no difference at all and no slope. Returns {slope, baseline_s,
+    error_s, resolved}, or None when no pixel changes."""
+    ratio = 1.0 if frame_sigma is None else _rms(frame_sigma) / max(_rms(sigma), 1e-30)
+    best = None
+    for baseline, frame in later:
+        slope = np.abs(frame - first) / baseline
+        active = slope > 0
+        if not active.any():
+            continue
+        error = event_median(sigma[active] / slope[active], slope[active])
+        score = baseline / (RESOLVE * ratio * error) if error > 0 else math.inf
+        found = {"slope": slope, "baseline_s": baseline, "error_s": error, "resolved": score >= 1}
+        if found["resolved"]:
+            return found
+        if best is None or score > best[0]:
+            best = (score, found)
+    return best[1] if best else None
 
 
 def other_seed(seed: int) -> int:
@@ -118,6 +164,8 @@ class AccuracyLimit:
         self.dts = tuple(dt) if isinstance(dt, (tuple, list)) else (dt, dt)
         self.spp, self.active = spp, active
         self.frames, self.sigma, self.probed, self.other = [], None, None, None
+        self.baselines = []        # (seconds since the first frame, frame) at steps 4, 8, 16, ...: event_slopes
+        self.frame_sigma = None    # the frames' own noise where it is not ``sigma``'s (a plan's probe frames)
 
     @classmethod
     def for_stepping(cls, st, sigma: np.ndarray | None = None) -> "AccuracyLimit":
@@ -179,17 +227,56 @@ class AccuracyLimit:
         dr.eval(end)       # its own small kernel now (queued, not waited for): the frames it reads can go
         self.step_frame(end)
 
+    def baseline_frame(self, integ, steps_done: int, elapsed: float) -> None:
+        """After step ``steps_done`` (1-based), ``elapsed`` seconds after the first frame: keep the frame for a
+        longer slope baseline (:func:`event_slopes`) at steps 4, 8, 16, ... (at most ``MAX_BASELINES``; the first
+        two are ``step_frame``'s). Called before the step is committed or held: its staged frame, the rendered
+        log brightness the noise map measures (a low-pass's state would differ between a step committed and one
+        held for a batch), evaluated now (a queued kernel; the frame also goes on to the commit or the batch)."""
+        if not (self.active and self.frames and steps_done >= 4 and steps_done & (steps_done - 1) == 0
+                and len(self.baselines) < MAX_BASELINES):
+            return
+        from .. import backend
+        frame = type(integ.staged)(integ.staged)
+        backend.dr.eval(frame)
+        self.baselines.append((elapsed, frame))
+
+    def state(self) -> dict:
+        """The frames kept so far as NumPy arrays (``limit_*`` keys) for a checkpoint: a resumed render keeps
+        longer baselines after it and estimates as the uninterrupted one does (:meth:`restore`)."""
+        if not (self.active and self.frames):
+            return {}
+        self.estimate()                    # the other seed's frame into sigma; every frame read back once
+        out = {f"limit_frame_{i}": _host(f) for i, f in enumerate(self.frames)}
+        out.update({f"limit_baseline_{i}": _host(f) for i, (_, f) in enumerate(self.baselines)})
+        out["limit_baseline_s"] = np.array([b for b, _ in self.baselines], np.float64)
+        if self.sigma is not None:
+            out["limit_sigma"] = self.sigma
+        return out
+
+    def restore(self, state: dict) -> None:
+        """The frames of :meth:`state` back, from a checkpoint's arrays (keys without ``limit_`` ignored)."""
+        if "limit_frame_0" not in state:
+            return
+        self.frames = [state[f"limit_frame_{i}"] for i in range(3) if f"limit_frame_{i}" in state]
+        self.baselines = [(float(b), state[f"limit_baseline_{i}"]) for i, b in enumerate(state["limit_baseline_s"])]
+        self.sigma = state.get("limit_sigma")
+
     def estimate(self) -> dict | None:
         if self.other is not None:           # the other seed's first frame, kept on the device until now
             self.sigma, self.other = np.abs(_host(self.frames[0]) - _host(self.other)) / math.sqrt(2), None
         if self.sigma is None or len(self.frames) < 3:
             return None
         self.frames = [_host(f) for f in self.frames]      # read back once (a checkpoint estimates at each save)
+        if isinstance(self.baselines, list):     # (a plan's are NumPy already, rendered only when reached)
+            self.baselines = [(b, _host(f)) for b, f in self.baselines]
         l0, l1, l2 = self.frames
         d1, d2 = self.dts
         slope = np.abs(l1 - l0) / d1
         active = slope > 0
-        if not active.any():
+        slopes = event_slopes(l0, itertools.chain([(d1, l1), (d1 + d2, l2)], self.baselines), self.sigma,
+                              self.frame_sigma)
+        if not active.any() or slopes is None:
             return None
         rate = slope[active]
         # the second divided difference (uniform steps: (l2 - 2 l1 + l0) / dt^2), and the first steps' length
@@ -199,10 +286,11 @@ class AccuracyLimit:
         # its slope. The median over pixels (of the noise, then of the slopes) was that of a pixel barely
         # changing, which seldom fires, and grew as the steps shrank: the fan at 96x72 read 172, 481 and
         # 1312 us at 16, 55 and 480 steps (now 22, 23, 13)
-        noise_us = event_median(self.sigma[active] / rate, rate) * 1e6
+        noise_us = slopes["error_s"] * 1e6
         steps_us = event_median(dt ** 2 * curvature / (8 * rate), rate) * 1e6
         return {"limit": "Monte-Carlo noise" if noise_us > steps_us else "steps", "noise_us": noise_us,
-                "steps_us": steps_us, "spp": self.spp}
+                "steps_us": steps_us, "spp": self.spp, "slope_baseline_us": slopes["baseline_s"] * 1e6,
+                "slope_resolved": bool(slopes["resolved"])}
 
     def note(self, summary) -> None:
         est = self.estimate() if self.active else None
@@ -211,6 +299,10 @@ class AccuracyLimit:
         summary.timing_limit = est
         if est is None:
             return
+        if not est.get("slope_resolved", True):      # (a checkpoint's estimate from before 2026-11-28 has none)
+            summary.notes.append(f"timing: the slowest changing pixels' slopes were not resolved within "
+                                 f"{est['slope_baseline_us']:.3g} us of frames: their noise timing error is at "
+                                 "least the estimate below")
         if est["limit"] == "steps":
             summary.notes.append(f"timing accuracy is limited by the time step: about {est['steps_us']:.3g} us "
                                  f"(Monte-Carlo noise about {est['noise_us']:.3g} us); twice the steps quarter it")

@@ -19,7 +19,8 @@ accuracy, against the analytic scene's exact events in tests/simulate/test_auto_
 With ``timing_accuracy`` (seconds: the median timestamp error wanted; ``eventfield render --auto
 --timing-accuracy 20us``) the sampler and spp come from the accuracy-limit model instead
 (``simulate/accuracy_limit.py``: a crossing moves by about sigma_L / |dL/dt| from Monte-Carlo noise and by
-dt^2 |L''| / (8 |L'|) from the time step). Three probe frames give |dL/dt| and |L''|; two seeds of one frame
+dt^2 |L''| / (8 |L'|) from the time step). Probe frames at 0, dt, 2 dt give |L''|, and with frames at 4, 8, 16 ...
+dt the shortest slope baseline that the frames' noise does not swamp gives |dL/dt|; two seeds of one frame
 at 1, 4 and 16 x ``probe_spp`` give each candidate sampler's noise and how fast it falls with spp
 (independent: 1/sqrt(spp); stratified and multi-jittered samplers faster on smooth pixels). The cheapest
 (sampler, spp) whose predicted noise error is at most ``NOISE_SHARE`` of the request (and whose noise stays
@@ -38,7 +39,7 @@ import numpy as np
 from ..backend import set_variant
 from ..errors import ConfigError
 from ..scene.timed import load_scene
-from .accuracy_limit import AccuracyLimit, noise_map
+from .accuracy_limit import MAX_BASELINES, AccuracyLimit, noise_map
 from .render import render_frames
 from .stepping import whole_number, whole_per_period
 
@@ -137,38 +138,61 @@ def _own_sampler(timed) -> str:
     return {"lowdiscrepancy": "ldsampler"}.get(name, name)
 
 
-def _estimate(frames, sigma, dt, spp) -> dict | None:
-    """accuracy_limit's estimate (noise_us, steps_us) from three frames ``dt`` apart and a noise map."""
+def _estimate(probe: dict, sigma, dt, spp) -> dict | None:
+    """accuracy_limit's estimate (noise_us, steps_us) from ``_slope_frames``' frames and a noise map."""
     lim = AccuracyLimit(dt, spp)
-    lim.frames, lim.sigma = list(frames), sigma
+    lim.frames, lim.baselines, lim.sigma = list(probe["frames"]), probe["baselines"], sigma
+    lim.frame_sigma = probe["sigma"]
     return lim.estimate()
 
 
-def _noise_model(scene, frames, dt, probe_spp) -> dict | None:
+def _noise_model(scene, probe, dt, probe_spp) -> dict | None:
     """A sampler's noise measured at ``PROBES`` x ``probe_spp``: the timing error (us) and median sigma (log) at
     each, and between them power laws in spp (below the first and beyond the last, the nearest piece's exponent,
     kept within [0.25, 1.25]: stratified samplers fall faster once their strata are fine).
 
-    ``frames``: the image at 0, dt and 2 dt (``_slope_frames``), whose slopes every probe divides its noise by.
-    Slopes taken from 4-spp frames carried their noise, which made every pixel look steep and the predicted
-    timing error small, the more so the finer the probe (the demo at 48x36: 27 us predicted at 64 spp, 5.4 us at
-    256, where a render's own estimate said about 200 us at 16 and at 256)."""
+    ``probe``: ``_slope_frames``, whose slopes every probe divides its noise by. Slopes taken from 4-spp frames
+    carried their noise, which made every pixel look steep and the predicted timing error small, the more so the
+    finer the probe (the demo at 48x36: 27 us predicted at 64 spp, 5.4 us at 256, where a render's own estimate
+    said about 200 us at 16 and at 256); 64-spp frames one step apart still did (74 us predicted at 64 spp, 486
+    measured): the baseline now grows until it resolves them (``accuracy_limit.event_slopes``)."""
     points = []
     for factor in PROBES:
         spp = probe_spp * factor
-        sigma = noise_map(scene, spp, 0, 0.0)
-        est = _estimate(frames, sigma, dt, spp)
+        sigma = probe["sigma"] if scene is probe["scene"] and spp == probe["spp"] else noise_map(scene, spp, 0, 0.0)
+        est = _estimate(probe, sigma, dt, spp)
         if est is None:
             return None
         points.append((spp, max(est["noise_us"], 1e-9), float(np.median(sigma)), est["steps_us"]))
     slopes = [math.log(a[1] / b[1]) / math.log(b[0] / a[0]) for a, b in zip(points, points[1:])]
-    return {"points": points, "slopes": slopes, "steps_us": points[0][3]}
+    return {"points": points, "slopes": slopes, "steps_us": points[0][3], "resolved": est["slope_resolved"],
+            "slope_baseline_us": est["slope_baseline_us"]}
 
 
-def _slope_frames(timed, dt, probe_spp):
-    """The image at 0, dt and 2 dt at the finest probe's spp, the closest to its own slopes: one set for every
-    sampler probed (the image is the same whichever sampler renders it)."""
-    return render_frames(timed, [0.0, dt, 2 * dt], spp=probe_spp * PROBES[-1])
+class _Baselines:
+    """(baseline, frame) pairs at 4, 8, 16 ... dt up to half the duration, each rendered the first time an
+    iteration reaches it and kept: ``event_slopes`` stops at the first baseline that resolves, so the longer
+    ones cost nothing where the first steps suffice (the demo at full size: none of seven 64-spp frames)."""
+
+    def __init__(self, timed, dt, duration, spp):
+        self.timed, self.spp = timed, spp
+        self.times = [dt * 2 ** k for k in range(2, 2 + MAX_BASELINES) if dt * 2 ** k <= duration / 2]
+        self.frames = []
+
+    def __iter__(self):
+        for i, t in enumerate(self.times):
+            if i == len(self.frames):
+                self.frames.append(render_frames(self.timed, [t], spp=self.spp)[0])
+            yield t, self.frames[i]
+
+
+def _slope_frames(timed, dt, probe_spp, duration) -> dict:
+    """The image at 0, dt and 2 dt (slopes, curvature) and, when those do not resolve the slopes, at 4, 8, 16 ...
+    dt (``_Baselines``), at the finest probe's spp, and those frames' own noise: one set for every sampler probed
+    (the image is the same whichever sampler renders it)."""
+    spp = probe_spp * PROBES[-1]
+    return {"frames": render_frames(timed, [0.0, dt, 2 * dt], spp=spp), "sigma": noise_map(timed, spp, 0, 0.0),
+            "baselines": _Baselines(timed, dt, duration, spp), "scene": timed, "spp": spp}
 
 
 def _predict(model, spp) -> tuple:
@@ -182,16 +206,16 @@ def _predict(model, spp) -> tuple:
     return anchor[1] * f, anchor[2] * f
 
 
-def _timing_choice(scene_path, defines, timed, dt, target_s, sigma_cap, probe_spp, max_spp) -> dict:
+def _timing_choice(scene_path, defines, timed, dt, duration, target_s, sigma_cap, probe_spp, max_spp) -> dict:
     """The cheapest (sampler, spp) whose predicted noise error is within NOISE_SHARE of ``target_s``."""
     own = _own_sampler(timed)
     budget_us = NOISE_SHARE * target_s * 1e6
     models, best = {}, None
-    frames = _slope_frames(timed, dt, probe_spp)
+    probe = _slope_frames(timed, dt, probe_spp, duration)
     for order, name in enumerate((own,) + tuple(s for s in SAMPLERS if s != own)):
         scene = timed if name == own else load_with_sampler(scene_path, {"type": name, "sample_count": probe_spp},
                                                             **defines)
-        m = _noise_model(scene, frames, dt, probe_spp)
+        m = _noise_model(scene, probe, dt, probe_spp)
         if m is None:
             raise ConfigError("--timing-accuracy: no pixel changes in the probe frames at the start of the render, "
                               "so there is no event timing to predict")
@@ -307,8 +331,8 @@ def plan(scene_path: str, duration: float, threshold: float | None = None, noise
         reasons["steps"] = f"{steps}: {why}"
         return Plan(color=not grey, spp=spp, steps=_reuse(timed, duration, steps, reasons), static=timed.is_static,
                     reasons=reasons, defines=defines)
-    choice = _timing_choice(scene_path, defines, timed, dt, timing_accuracy, noise_fraction * threshold, probe_spp,
-                            max_spp)
+    choice = _timing_choice(scene_path, defines, timed, dt, duration, timing_accuracy, noise_fraction * threshold,
+                            probe_spp, max_spp)
     floor, why = _default_steps(timed, duration, probe_spp, threshold, max_steps, preset, pixel)
     steps, need, steps_us = _timing_steps(choice, duration, dt, timing_accuracy, floor, max_steps)
     return _timing_plan(grey, timed, choice, steps, need, floor, why, steps_us, timing_accuracy, duration,
@@ -333,9 +357,13 @@ def _timing_plan(grey, timed, choice, steps, need, floor, why, steps_us, target_
     reasons["steps"] = (f"{steps}: the time step's error falls as dt^2; {need} steps keep it, in quadrature with the "
                         f"noise, under {target_us:g} us; the image motion needs {floor} (count accuracy: {why})")
     steps = _reuse(timed, duration, steps, reasons)
+    chosen = models[choice["sampler"]]
     reasons["timing"] = (f"requested median timestamp error {target_us:g} us; predicted {total:.3g} us "
-                         f"(noise {choice['noise_us']:.3g} us, steps {steps_us:.3g} us)")
+                         f"(noise {choice['noise_us']:.3g} us, steps {steps_us:.3g} us); the image's slopes over "
+                         f"{chosen['slope_baseline_us']:.3g} us of probe frames"
+                         + ("" if chosen["resolved"] else ", not resolved there: the noise error is at least that"))
     timing = {"requested_s": target_s, "predicted_us": total, "noise_us": choice["noise_us"], "steps_us": steps_us,
+              "slope_baseline_us": chosen["slope_baseline_us"], "slopes_resolved": chosen["resolved"],
               "steps_for_timing": need, "steps_for_motion": floor, "noise_share": NOISE_SHARE,
               "samplers": {name: {"probe_spp": [p[0] for p in m["points"]], "noise_us": [p[1] for p in m["points"]],
                                   "slopes": m["slopes"]} for name, m in models.items()}}

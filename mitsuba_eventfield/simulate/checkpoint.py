@@ -209,7 +209,7 @@ class Checkpoints:
         state_file = f"state_{number:05d}.npz"
         tmp = os.path.join(self.folder, state_file + ".tmp")
         with open(tmp, "wb") as f:
-            np.savez(f, **loop.integ.get_state())
+            np.savez(f, **loop.integ.get_state(), **loop.limit.state())
         os.replace(tmp, os.path.join(self.folder, state_file))
         summary = {k_: v for k_, v in loop.summary.as_dict().items() if k_ not in ("output",)}
         # the timing-accuracy estimate comes from the first steps, which a resumed process does not see again
@@ -231,7 +231,8 @@ class Checkpoints:
         """The saved (t, k, dt); the integrator and the summary put back as they were."""
         s = self.saved
         with np.load(os.path.join(self.folder, s["state"]), allow_pickle=False) as z:
-            loop.integ.set_state({k: z[k] for k in z.files})
+            loop.integ.set_state({k: z[k] for k in z.files if not k.startswith("limit_")})
+            loop.limit.restore({k: z[k] for k in z.files if k.startswith("limit_")})
         for key, value in s["summary"].items():
             if key == "notes":
                 loop.summary.notes[:0] = [n for n in value if n not in loop.summary.notes]

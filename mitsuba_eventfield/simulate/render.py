@@ -228,6 +228,7 @@ class _Loop:
             p_idx, j = divmod(k, steps_per_period)
             step = st.duration / st.steps
             t0, t1, base_us = j * step, (j + 1) * step, grid_base_us + p_idx * period_us
+        self.limit.baseline_frame(self.integ, k + 1, t_next - st.t_start)
         if self.batch is not None:                       # held on the device, committed with the next steps
             self.limit.step_held(self.integ, t1 - t0)
             self.batch.add(t0, t1, base_us, complete_until_us=int(math.floor(t_next * 1e6)))
