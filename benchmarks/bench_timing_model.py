@@ -10,7 +10,7 @@ agree (timing alone, no missing or extra event in it). The reference's own noise
 spp if the noise halves per 4x the samples). A second render with another seed, compared with the first in the
 same way (``events.pairing``), measures the Monte-Carlo part alone, with no reference. Until 2026-11-28 both
 estimates took slopes over one step and were 2.5-10x optimistic here (74 us predicted at 64 spp, 563 measured);
-they now take the shortest baseline that resolves them (``accuracy_limit.event_slopes``).
+they now take the baseline where the error stops growing with it (``accuracy_limit.event_slopes``).
 Writes benchmarks/results/timing_model.json and .md.
 Usage: ./run bench timing_model
 """
@@ -81,6 +81,7 @@ def main():
                      "two_seeds_us": two_seed_timing_us(ev, other),
                      "render_estimate_us": ev.meta["render"]["timing_limit"]["noise_us"],
                      "render_slope_baseline_us": ev.meta["render"]["timing_limit"]["slope_baseline_us"],
+                     "render_slope_resolved": ev.meta["render"]["timing_limit"]["slope_resolved"],
                      "plan_us": auto._predict(model, spp)[0]})
     res = {"scene": "demo/demo.xml", "size": SIZE, "duration_s": DURATION, "reference_events": len(ref),
            "reference_s": ref_s, "rows": rows, "targets": {}}
@@ -92,12 +93,14 @@ def main():
           "prediction us | the render's slope baseline us |", "|---|---|---|---|---|---|---|---|"]
     md += [f"| {r['spp']} | {r['events']} | {r['measured_us']:.0f} | {r['equal_counts_us']:.0f} "
            f"({r['agreeing_share']:.0%}) | {r['two_seeds_us']:.0f} | {r['render_estimate_us']:.0f} | "
-           f"{r['plan_us']:.0f} | {r['render_slope_baseline_us']:.0f} |" for r in rows]
+           f"{r['plan_us']:.0f} | {r['render_slope_baseline_us']:.0f}{'' if r['render_slope_resolved'] else '*'} |"
+           for r in rows]
     ratios = [r[k] / r["equal_counts_us"] for r in rows for k in ("plan_us", "render_estimate_us")]
     md += ["", "Both estimates are of the form sigma / |dL/dt| (Monte-Carlo noise over the log slope, the median "
-           "over events), the slope taken over the shortest baseline the frames' noise does not swamp "
-           "(accuracy_limit.event_slopes; until 2026-11-28 over one step: 74 us predicted at 64 spp where 563 us "
-           f"was measured). Here they are {min(ratios):.2g}x to {max(ratios):.2g}x the measured k-th-event error "
+           "over events), the slope taken over growing time baselines up to where the error stops growing with "
+           "the baseline and the frames' noise no longer swamps it (accuracy_limit.event_slopes; until 2026-11-28 "
+           "over one step: 74 us predicted at 64 spp where 563 us was measured; an unresolved baseline is marked "
+           f"*). Here they are {min(ratios):.2g}x to {max(ratios):.2g}x the measured k-th-event error "
            "(below 1: optimistic). On the analytic scene they are within 2x of the exact errors (accuracy.md, "
            "test_auto_timing.py). The same render with another seed, compared event by event where counts agree, "
            "measures the Monte-Carlo part directly (its difference holds two renders' noise: / sqrt 2).", ""]

@@ -26,8 +26,11 @@ MIN_STEPS = 3
 # a slope baseline resolves a pixel whose error is E when it is at least RESOLVE x E (frames' noise as its own):
 # the slope's noise, sqrt 2 sigma_f / baseline, is then at most 0.35 of the slope sigma / E (event_slopes). At
 # 2.8 (half) the demo's 4-spp render read 171 us where two seeds differ by 319; at 4, 213; at 5.7, 286 but the
-# demo at 48x36 took 6.4 ms baselines over 10 ms and read 814 us where two seeds say 491 (docs/design.md)
+# demo at 48x36 took 6.4 ms baselines over 10 ms and read 814 us where two seeds say 491 (docs/design.md,
+# measured before the plateau rule)
 RESOLVE = 4.0
+SELECT_SAMPLE = 65536      # pixels of a larger image that event_slopes chooses its baseline on
+FLAT = 0.5                 # a plateau: the error grows at most as baseline^FLAT between two (event_slopes)
 MAX_BASELINES = 12         # frames a render keeps for slopes: its steps 4, 8, 16, ... (powers of two)
 MEDIAN_SAMPLE = 16384      # pixels of the random sample that brackets a large image's weighted median
 MEDIAN_MARGINS = (0.05, 0.2)   # the brackets tried: the sample's weighted quantiles 0.5 -/+ each
@@ -82,37 +85,61 @@ def _rms(a) -> float:
     return float(np.sqrt(np.mean(np.square(a, dtype=np.float64))))
 
 
+def _error(first, frame, baseline, sigma, pick=None):
+    """(sigma / |dL/dt| over the events, seconds; the slopes) of one baseline, over the pixels ``pick`` (all:
+    None). The error is None where no pixel changes."""
+    if pick is not None:
+        first, frame, sigma = first[pick], frame[pick], sigma[pick]
+    slope = np.abs(frame - first) / baseline
+    active = slope > 0
+    return (event_median(sigma[active] / slope[active], slope[active]) if active.any() else None), slope
+
+
 def event_slopes(first, later, sigma, frame_sigma=None) -> dict | None:
     """Per-pixel |dL/dt| for the noise estimate: ``first`` frame (log brightness) against ``later`` ones,
     ``[(baseline_s, frame), ...]`` in ascending order, and the noise-timing error sigma / |dL/dt| they give (the
     median over events, seconds). ``sigma``: the noise whose timing error is wanted; ``frame_sigma``: the frames'
     own (default the same: a render's frames are its own spp).
 
-    A baseline's slope carries its two frames' noise, sqrt 2 sigma_f / baseline: for a pixel whose error is
-    E = sigma / |L'| that is sqrt 2 (sigma_f / sigma) E / baseline of its slope. The first baseline of at least
-    ``RESOLVE`` (sigma_f / sigma) E (the median event's slope within about a third) is taken; a shorter one
-    makes slow pixels steep (their noise difference reads as change) and their errors small: 74 us predicted at
-    64 spp on the demo at 48x36 from a 50 us baseline, 486 us measured by two seeds' renders
-    (benchmarks/results/timing_model.md).
-    Longer ones average a change that is not linear (an edge passing, a scan turning), so none longer is taken.
-    Where none resolves, the baseline closest to it (``resolved`` False: an error at least about that large).
-    Static pixels of a frozen sampler have no difference at all and no slope. Returns {slope, baseline_s,
-    error_s, resolved}, or None when no pixel changes."""
+    Over growing baselines b the error E(b) grows in proportion to b wherever it is wrong, and stays flat where
+    it is right:
+    - the frames' noise: a slope carries sqrt 2 sigma_f / b of it, which makes slow pixels steep (noise / b)
+      until b is several times E (74 us predicted at 64 spp on the demo at 48x36 from a 50 us baseline, 486 us
+      measured by two seeds' renders: benchmarks/results/timing_model.md);
+    - a few jumping pixels: at fine steps pixels where one sample crosses an edge jump by whole contrasts, and
+      their slope jump / b carried 90 % of the weight (the same demo at 16 spp over 400 or 1000 steps: 3.3 or
+      1.3 us read, 741 us measured);
+    - a change that is not linear over b (an edge passed, a scan turned): contrast / b.
+    So the first pair of consecutive baselines over which E grows by at most b^``FLAT`` (a plateau), the longer
+    of them resolved (b >= ``RESOLVE`` (sigma_f / sigma) E: the median event's slope within about a third), is
+    taken, with the longer one's slopes. Where none is, the longest (``resolved`` False). Static pixels of a
+    frozen sampler have no difference and no slope. A single baseline is taken if it resolves.
+
+    The choice is made on ``SELECT_SAMPLE`` random pixels of a larger image (a median at 1280x720 takes
+    ~25 ms, and a long render keeps up to 14 baselines), the returned error on every pixel. Returns {slope,
+    baseline_s, error_s, resolved}, or None when no pixel changes."""
     ratio = 1.0 if frame_sigma is None else _rms(frame_sigma) / max(_rms(sigma), 1e-30)
-    best = None
+    first, sigma = np.ravel(first), np.ravel(sigma)
+    pick = np.random.default_rng(1).integers(0, len(first), SELECT_SAMPLE) if len(first) > SELECT_SAMPLE else None
+    scored = []                  # (baseline, frame, error on the sample) where some pixel changes
     for baseline, frame in later:
-        slope = np.abs(frame - first) / baseline
-        active = slope > 0
-        if not active.any():
-            continue
-        error = event_median(sigma[active] / slope[active], slope[active])
-        score = baseline / (RESOLVE * ratio * error) if error > 0 else math.inf
-        found = {"slope": slope, "baseline_s": baseline, "error_s": error, "resolved": score >= 1}
-        if found["resolved"]:
-            return found
-        if best is None or score > best[0]:
-            best = (score, found)
-    return best[1] if best else None
+        frame = np.ravel(frame)
+        error = _error(first, frame, baseline, sigma, pick)[0]
+        if error is not None:
+            scored.append((baseline, frame, error))
+
+    def resolves(k):
+        return scored[k][0] >= RESOLVE * ratio * scored[k][2]
+
+    def flat(k):                 # from baseline k - 1 to k
+        (b0, _, e0), (b1, _, e1) = scored[k - 1], scored[k]
+        return e0 <= 0 or abs(math.log(max(e1, 1e-30) / e0)) <= FLAT * math.log(b1 / b0)
+    if not scored:
+        return None
+    chosen = [k for k in range(len(scored)) if resolves(k) and (len(scored) == 1 or k and flat(k))]
+    k = chosen[0] if chosen else len(scored) - 1
+    error, slope = _error(first, scored[k][1], scored[k][0], sigma)
+    return {"slope": slope, "baseline_s": scored[k][0], "error_s": error, "resolved": bool(chosen)}
 
 
 def other_seed(seed: int) -> int:
@@ -202,8 +229,8 @@ class AccuracyLimit:
 
     @property
     def wants_frames(self) -> bool:
-        """True from the first frame (:meth:`first_frame`; a resumed render has none, and keeps its checkpoint's
-        estimate) until the first two steps' frames are kept (:meth:`step_frame`)."""
+        """True from the first frame (:meth:`first_frame`; a resumed render gets the frames its checkpoint kept,
+        :meth:`restore`) until the first two steps' frames are kept (:meth:`step_frame`)."""
         return self.active and 1 <= len(self.frames) < 3
 
     def step_frame(self, log_now) -> None:
@@ -222,7 +249,10 @@ class AccuracyLimit:
         from .. import backend
         from ..plugins import pixel_step
         mi, dr = backend.mi, backend.dr
-        end = pixel_step.lowpassed(integ, self.frames[-1], integ.staged, integ.staged_intensity,
+        last = self.frames[-1]
+        if isinstance(last, np.ndarray):        # restored from a checkpoint: back onto the device
+            last = type(integ.log_prev)(last)
+        end = pixel_step.lowpassed(integ, last, integ.staged, integ.staged_intensity,
                                    dr.opaque(mi.Float, dt))
         dr.eval(end)       # its own small kernel now (queued, not waited for): the frames it reads can go
         self.step_frame(end)
@@ -268,8 +298,7 @@ class AccuracyLimit:
         if self.sigma is None or len(self.frames) < 3:
             return None
         self.frames = [_host(f) for f in self.frames]      # read back once (a checkpoint estimates at each save)
-        if isinstance(self.baselines, list):     # (a plan's are NumPy already, rendered only when reached)
-            self.baselines = [(b, _host(f)) for b, f in self.baselines]
+        self.baselines = [(b, _host(f)) for b, f in self.baselines]
         l0, l1, l2 = self.frames
         d1, d2 = self.dts
         slope = np.abs(l1 - l0) / d1
@@ -286,23 +315,23 @@ class AccuracyLimit:
         # its slope. The median over pixels (of the noise, then of the slopes) was that of a pixel barely
         # changing, which seldom fires, and grew as the steps shrank: the fan at 96x72 read 172, 481 and
         # 1312 us at 16, 55 and 480 steps (now 22, 23, 13)
-        noise_us = slopes["error_s"] * 1e6
+        noise_us = float(slopes["error_s"]) * 1e6
         steps_us = event_median(dt ** 2 * curvature / (8 * rate), rate) * 1e6
         return {"limit": "Monte-Carlo noise" if noise_us > steps_us else "steps", "noise_us": noise_us,
-                "steps_us": steps_us, "spp": self.spp, "slope_baseline_us": slopes["baseline_s"] * 1e6,
+                "steps_us": steps_us, "spp": self.spp, "slope_baseline_us": float(slopes["baseline_s"]) * 1e6,
                 "slope_resolved": bool(slopes["resolved"])}
 
     def note(self, summary) -> None:
         est = self.estimate() if self.active else None
         if est is None and summary.timing_limit is not None:
-            est = summary.timing_limit             # a resumed render: the estimate its checkpoint saved
+            est = summary.timing_limit             # resumed from a checkpoint that kept no frames (before 11-28)
         summary.timing_limit = est
         if est is None:
             return
         if not est.get("slope_resolved", True):      # (a checkpoint's estimate from before 2026-11-28 has none)
-            summary.notes.append(f"timing: the slowest changing pixels' slopes were not resolved within "
-                                 f"{est['slope_baseline_us']:.3g} us of frames: their noise timing error is at "
-                                 "least the estimate below")
+            summary.notes.append(f"timing: the pixels' slopes were not resolved within {est['slope_baseline_us']:.3g}"
+                                 " us of frames (an estimate over a baseline shorter than about 4x itself): the "
+                                 "noise estimate below is uncertain")
         if est["limit"] == "steps":
             summary.notes.append(f"timing accuracy is limited by the time step: about {est['steps_us']:.3g} us "
                                  f"(Monte-Carlo noise about {est['noise_us']:.3g} us); twice the steps quarter it")

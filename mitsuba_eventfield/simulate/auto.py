@@ -169,30 +169,15 @@ def _noise_model(scene, probe, dt, probe_spp) -> dict | None:
             "slope_baseline_us": est["slope_baseline_us"]}
 
 
-class _Baselines:
-    """(baseline, frame) pairs at 4, 8, 16 ... dt up to half the duration, each rendered the first time an
-    iteration reaches it and kept: ``event_slopes`` stops at the first baseline that resolves, so the longer
-    ones cost nothing where the first steps suffice (the demo at full size: none of seven 64-spp frames)."""
-
-    def __init__(self, timed, dt, duration, spp):
-        self.timed, self.spp = timed, spp
-        self.times = [dt * 2 ** k for k in range(2, 2 + MAX_BASELINES) if dt * 2 ** k <= duration / 2]
-        self.frames = []
-
-    def __iter__(self):
-        for i, t in enumerate(self.times):
-            if i == len(self.frames):
-                self.frames.append(render_frames(self.timed, [t], spp=self.spp)[0])
-            yield t, self.frames[i]
-
-
 def _slope_frames(timed, dt, probe_spp, duration) -> dict:
-    """The image at 0, dt and 2 dt (slopes, curvature) and, when those do not resolve the slopes, at 4, 8, 16 ...
-    dt (``_Baselines``), at the finest probe's spp, and those frames' own noise: one set for every sampler probed
-    (the image is the same whichever sampler renders it)."""
+    """The image at 0, dt and 2 dt (slopes, curvature) and at 4, 8, 16 ... dt up to half the duration (longer
+    slope baselines: ``accuracy_limit.event_slopes``), at the finest probe's spp, and those frames' own noise:
+    one set for every sampler probed (the image is the same whichever sampler renders it)."""
     spp = probe_spp * PROBES[-1]
-    return {"frames": render_frames(timed, [0.0, dt, 2 * dt], spp=spp), "sigma": noise_map(timed, spp, 0, 0.0),
-            "baselines": _Baselines(timed, dt, duration, spp), "scene": timed, "spp": spp}
+    later = [dt * 2 ** k for k in range(2, 2 + MAX_BASELINES) if dt * 2 ** k <= duration / 2]
+    frames = render_frames(timed, [0.0, dt, 2 * dt] + later, spp=spp)
+    return {"frames": frames[:3], "baselines": list(zip(later, frames[3:])), "scene": timed, "spp": spp,
+            "sigma": noise_map(timed, spp, 0, 0.0)}
 
 
 def _predict(model, spp) -> tuple:
@@ -220,11 +205,18 @@ def _timing_choice(scene_path, defines, timed, dt, duration, target_s, sigma_cap
             raise ConfigError("--timing-accuracy: no pixel changes in the probe frames at the start of the render, "
                               "so there is no event timing to predict")
         models[name] = m
+        if not m["resolved"]:          # an error of at least its prediction: no request can be promised on it
+            continue
         for spp in _ladder(name, max_spp):
             us, sigma = _predict(m, spp)
             if us <= budget_us and sigma <= sigma_cap:
                 best = min(best or (spp, order, name, us), (spp, order, name, us))
                 break
+    if best is None and not any(m["resolved"] for m in models.values()):
+        longest = max(m["slope_baseline_us"] for m in models.values())
+        raise ConfigError(f"--timing-accuracy {target_s * 1e6:g}us: the probe frames do not resolve the image's "
+                          f"slopes within {longest:.3g} us (half the duration at most), so no timing error can be "
+                          "promised; render a longer span, or without --timing-accuracy")
     if best is None:
         floor = min(_predict(m, max_spp)[0] for m in models.values())
         raise ConfigError(f"--timing-accuracy {target_s * 1e6:g}us cannot be met within {max_spp} spp: Monte-Carlo "
@@ -360,10 +352,9 @@ def _timing_plan(grey, timed, choice, steps, need, floor, why, steps_us, target_
     chosen = models[choice["sampler"]]
     reasons["timing"] = (f"requested median timestamp error {target_us:g} us; predicted {total:.3g} us "
                          f"(noise {choice['noise_us']:.3g} us, steps {steps_us:.3g} us); the image's slopes over "
-                         f"{chosen['slope_baseline_us']:.3g} us of probe frames"
-                         + ("" if chosen["resolved"] else ", not resolved there: the noise error is at least that"))
+                         f"{chosen['slope_baseline_us']:.3g} us of probe frames")
     timing = {"requested_s": target_s, "predicted_us": total, "noise_us": choice["noise_us"], "steps_us": steps_us,
-              "slope_baseline_us": chosen["slope_baseline_us"], "slopes_resolved": chosen["resolved"],
+              "slope_baseline_us": chosen["slope_baseline_us"],
               "steps_for_timing": need, "steps_for_motion": floor, "noise_share": NOISE_SHARE,
               "samplers": {name: {"probe_spp": [p[0] for p in m["points"]], "noise_us": [p[1] for p in m["points"]],
                                   "slopes": m["slopes"]} for name, m in models.items()}}

@@ -212,7 +212,8 @@ class Checkpoints:
             np.savez(f, **loop.integ.get_state(), **loop.limit.state())
         os.replace(tmp, os.path.join(self.folder, state_file))
         summary = {k_: v for k_, v in loop.summary.as_dict().items() if k_ not in ("output",)}
-        # the timing-accuracy estimate comes from the first steps, which a resumed process does not see again
+        # the timing-accuracy estimate so far; the frames behind it go into the state file (limit_*), from which a
+        # resumed process estimates again as it goes on
         summary["timing_limit"] = (loop.limit.estimate() if loop.limit.active else None) or summary.get("timing_limit")
         record = {"number": number, "fingerprint": self.fingerprint, "command": self.command, "t": t, "k": k, "dt": dt,
                   "state": state_file, "segments": writer.segments, "summary": summary,
