@@ -6,7 +6,8 @@ Parameters (angles in mechanical degrees, lengths in scene units, frequencies in
 =================  =========  ==========  ===============================================================
 Parameter          Type       Default     Description
 =================  =========  ==========  ===============================================================
-fov                float      --          horizontal field of view of the camera (degrees)
+fov                float      (Mitsuba)   field of view in degrees along fov_axis (default x); or focal_length
+                                          (e.g. "35mm"); neither: Mitsuba's perspective default (50 mm)
 aperture_radius    float      0           > 0: thin lens focused at focus_distance
 focus_distance     float      1           thin-lens focus distance
 mirror_distance    float      0.03        camera centre to the X mirror pivot
@@ -34,7 +35,6 @@ recompiles a kernel.
 """
 from __future__ import annotations
 
-import math
 
 import drjit as dr
 import mitsuba as mi
@@ -42,6 +42,9 @@ import mitsuba as mi
 from mitsuba_eventfield.optics import galvo as galvo_optics
 
 from ._per_variant import per_variant, subclass
+from .properties import number_prop
+
+WHERE = "sensor 'galvo'"
 
 _FLOAT_PARAMS = ("frequency", "amplitude", "phase", "offset_x", "offset_y", "freq_x", "freq_y", "amplitude_x",
                  "amplitude_y", "phase_x", "phase_y")
@@ -57,20 +60,21 @@ def curve_from_props(props) -> tuple:
                                                     galvo_model)
     from mitsuba_eventfield.optics.scan import curve_to_dict, make_curve
     from mitsuba_eventfield.validate import number
+    where = "sensor 'galvo'"
     name = props.get("curve", "circle")
-    params = {k: float(props.get(k)) for k in _FLOAT_PARAMS if k in props}
-    params.update({k: int(props.get(k)) for k in _INT_PARAMS if k in props})
+    # counts stay as given: make_curve refuses a fraction and names their ranges (int() made 4.7 lines 4)
+    params = {k: number_prop(props, k, None, where, integer=k in _INT_PARAMS)
+              for k in _FLOAT_PARAMS + _INT_PARAMS if k in props}
     if "axis" in props:
         params["axis"] = props.get("axis")
-    where = "sensor 'galvo'"
     envelope = galvo_model(props.get("galvo_model", DEFAULT_GALVO_MODEL), where,
-                           float(props.get("max_angle")) if "max_angle" in props else None)
+                           number_prop(props, "max_angle", None, where, 0, lo_open=True))
     if "volts_per_deg" in props:         # the rig's driver scaling, as `eventfield device --volts-per-deg`
         envelope = replace(envelope, volts_per_deg=number(props.get("volts_per_deg"), f"{where}: volts_per_deg",
                                                           *VOLTS_PER_DEG_RANGE))
     limits = {"envelope": envelope, "where": where}
-    bandwidth = float(props.get("bandwidth", 0.0))
-    damping = float(props.get("damping", DEFAULT_DAMPING))
+    bandwidth = number_prop(props, "bandwidth", 0.0, where, 0)
+    damping = number_prop(props, "damping", DEFAULT_DAMPING, where, 0, lo_open=True)
     commanded = make_curve(name, **limits, **params)
     moving = make_curve(name, bandwidth_hz=bandwidth, damping=damping, **limits, **params) if bandwidth else commanded
     return moving, curve_to_dict(commanded, bandwidth, damping)
@@ -84,21 +88,16 @@ class _GalvoSensorMethods:
         self.curve, self.scan_description = curve_from_props(props)
         size = self.film().size()
         self.aspect = size.x / size.y
+        number_prop(props, "fov", None, WHERE, 0, 180, lo_open=True)    # (Mitsuba's says 0 is in [0, 180])
         self.fov_x = float(mi.parse_fov(props, self.aspect))
         self.tan_half = galvo_optics.tan_half_fov(self.fov_x)
-        self.aperture_radius = float(props.get("aperture_radius", 0.0))
-        self.focus_distance = float(props.get("focus_distance", 1.0))
-        self.mirror_distance = float(props.get("mirror_distance", 0.03))
-        self.mirror_separation = float(props.get("mirror_separation", 0.01))
-        self.far_clip = float(props.get("far_clip", 1e4))
-        galvo_optics.checked_optics(self.fov_x, self.mirror_distance, self.mirror_separation, "sensor 'galvo'",
+        self.aperture_radius = number_prop(props, "aperture_radius", 0.0, WHERE, 0)     # 0: a pinhole
+        self.focus_distance = number_prop(props, "focus_distance", 1.0, WHERE, 0, lo_open=True)
+        self.mirror_distance = number_prop(props, "mirror_distance", 0.03, WHERE)
+        self.mirror_separation = number_prop(props, "mirror_separation", 0.01, WHERE)
+        self.far_clip = number_prop(props, "far_clip", 1e4, WHERE, 0, lo_open=True)
+        galvo_optics.checked_optics(self.fov_x, self.mirror_distance, self.mirror_separation, WHERE,
                                     error=ValueError, names=("fov", "mirror_distance", "mirror_separation"))
-        for name, v, ok, allowed in (
-                ("aperture_radius", self.aperture_radius, self.aperture_radius >= 0, ">= 0 (0: pinhole)"),
-                ("focus_distance", self.focus_distance, self.focus_distance > 0, "> 0"),
-                ("far_clip", self.far_clip, self.far_clip > 0, "> 0")):
-            if not (math.isfinite(v) and ok):
-                raise ValueError(f"sensor 'galvo': {name} = {v!r} is out of range; allowed: {allowed}")
         self.m_needs_sample_3 = self.aperture_radius > 0
         self.scan_time = mi.Float(0.0)
         dr.make_opaque(self.scan_time)

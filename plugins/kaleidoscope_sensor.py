@@ -9,8 +9,8 @@ layout              string     kaleidoscope        kaleidoscope | microlens (pix
 focal_length        float      0.05                main lens focal length
 focus_distance      float      1.0                 main lens focus distance (> focal_length)
 aperture_radius     float      1.05 x needed       main lens; must pass every sub-aperture (microlens: 0.01)
-tube_width          float      0.012               kaleidoscope tube cross-section
-tube_height         float      width x film aspect
+tube_width          float      0.012               kaleidoscope tube cross-section (microlens: the image plane's)
+tube_height         float      width x film aspect (kaleidoscope: must match the film's aspect)
 tube_length         float      0.06                tube length L
 relay_distance      float      0.03                relay pupil to tube exit R; views per axis n = (R + L) / R
 relay_aperture      float      0                   > 0: finite relay pupil (sub-aperture disks)
@@ -34,10 +34,12 @@ import numpy as np
 
 from . import kaleido_optics
 from ._per_variant import per_variant, subclass
+from .properties import number_prop
 
 MODES = ("lenses", "tube_only", "physical_tube")
 LAYOUTS = ("kaleidoscope", "microlens")
 WHERE = "sensor 'kaleidoscope'"
+KALEIDOSCOPE_ONLY = ("tube_length", "relay_distance", "relay_aperture")   # (width, height: microlens too)
 
 
 class _KaleidoscopeSensorMethods:
@@ -45,7 +47,7 @@ class _KaleidoscopeSensorMethods:
 
     def __init__(self, props):
         mi.Sensor.__init__(self, props)
-        g = lambda k, d: float(props.get(k, d))  # noqa: E731
+        g = lambda k, d: number_prop(props, k, d, WHERE)  # noqa: E731   (ranges: kaleido_geometry)
         self.layout = props.get("layout", "kaleidoscope")
         self.mode = props.get("mode", "lenses")
         if self.layout not in LAYOUTS:
@@ -56,8 +58,13 @@ class _KaleidoscopeSensorMethods:
         self.film_w, self.film_h = int(size.x), int(size.y)
         if self.film_w < 1 or self.film_h < 1:           # the tube's default height divides by the width
             raise ValueError(f"{WHERE}: film {self.film_w}x{self.film_h}: each side must be at least 1 pixel")
+        if self.layout == "microlens":       # read below, they would pass Mitsuba's check of unused values
+            unused = [k for k in KALEIDOSCOPE_ONLY if k in props]
+            if unused:
+                raise ValueError(f"{WHERE}: {', '.join(unused)}: the kaleidoscope's tube and relay, not used by "
+                                 "layout = 'microlens'; remove it, or use layout = 'kaleidoscope'")
         self.tube_width = g("tube_width", 0.012)
-        self.tube_height = g("tube_height", 0.012 * self.film_h / self.film_w)
+        self.tube_height = g("tube_height", self.tube_width * self.film_h / self.film_w)
         self.tube_length, self.relay_distance = g("tube_length", 0.06), g("relay_distance", 0.03)
         self.focal_length, self.focus_distance = g("focal_length", 0.05), g("focus_distance", 1.0)
         self.relay_aperture = g("relay_aperture", 0.0)
@@ -79,7 +86,7 @@ class _KaleidoscopeSensorMethods:
         probe = self._geometry(1e9)
         needed = math.hypot(probe["half"] * probe["subaperture_pitch"][0],
                             probe["half"] * probe["subaperture_pitch"][1]) + probe["subaperture_radius"]
-        self.aperture = float(props.get("aperture_radius", 1.05 * needed))
+        self.aperture = number_prop(props, "aperture_radius", 1.05 * needed, WHERE)
         self.geo = self._geometry(self.aperture)
         self.n = self.geo["n"]
         tube_aspect = self.tube_width / self.tube_height
@@ -89,13 +96,11 @@ class _KaleidoscopeSensorMethods:
                              "must match")
 
     def _init_microlens(self, props):
-        self.n = int(props.get("views", 3))
-        if self.n < 1:
-            raise ValueError(f"{WHERE}: views = {self.n}: must be an integer >= 1")
+        self.n = number_prop(props, "views", 3, WHERE, 1, integer=True)
         if self.focal_length <= 0 or self.focus_distance <= self.focal_length:
             raise ValueError(f"{WHERE}: focus_distance = {self.focus_distance} must exceed focal_length = "
                              f"{self.focal_length} > 0")
-        self.aperture = float(props.get("aperture_radius", 0.01))
+        self.aperture = number_prop(props, "aperture_radius", 0.01, WHERE)
         if not self.aperture > 0:
             raise ValueError(f"{WHERE}: aperture_radius = {self.aperture}: must be > 0 for a microlens array")
         self.geo = {"n": self.n, "lens_to_entrance": 1.0 / (1.0 / self.focal_length - 1.0 / self.focus_distance)}

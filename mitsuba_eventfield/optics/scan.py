@@ -283,11 +283,6 @@ _ARGS = {
 _FREQ_KEYS = ("frequency", "freq_x", "freq_y")
 
 
-def _whole(params: dict, names: tuple, where: str) -> dict:
-    """``params`` with its counts (``names``) as ints; a fraction is refused (``lines=2.5`` became 2 lines)."""
-    return {k: int(number(v, f"{where}: {k}", 1, integer=True)) if k in names else v for k, v in params.items()}
-
-
 def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: float = 0.0,
                damping: float = DEFAULT_DAMPING, where: str = "scan", galvo_model: str = DEFAULT_GALVO_MODEL,
                envelope=None, **params) -> ScanCurve:
@@ -323,11 +318,11 @@ def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: floa
         curve = Lissajous(**limits, freq_x=f, freq_y=f, amplitude_x=a if axis == "x" else 0.0,
                           amplitude_y=a if axis == "y" else 0.0, phase_x=ph, phase_y=ph, kind="line")
     elif name == "raster":
-        from .tabulated import raster
-        curve = raster(**limits, **_whole(params, ("lines", "samples_per_line"), where))
+        from .tabulated import raster, whole_counts
+        curve = raster(**limits, **whole_counts(params, where))
     else:
-        from .tabulated import moore
-        curve = moore(**limits, **_whole(params, ("order", "samples_per_segment"), where))
+        from .tabulated import moore, whole_counts
+        curve = moore(**limits, **whole_counts(params, where))
     curve.validate(where, envelope)              # the commanded scan is what the galvo must be able to drive
     if bandwidth_hz:              # 0: the default, an ideal mirror
         number(bandwidth_hz, f"{where}: bandwidth (Hz; 0: an ideal mirror)", 0, strict=True)

@@ -7,7 +7,19 @@ import math
 import numpy as np
 
 from ..errors import ConfigError
+from ..validate import number
 from .scan import DEFAULT_MAX_ANGLE_DEG, TabulatedCurve, _frac
+
+# the counts of a tabulated scan and their ranges: the table holds 2 lines x samples_per_line (raster) or
+# 4^order x samples_per_segment (moore) points; lines = 1e8 asked numpy for 95 GiB and said only that
+COUNT_RANGES = {"lines": (1, 4096), "samples_per_line": (2, 1024), "order": (1, 8), "samples_per_segment": (1, 64)}
+
+
+def whole_counts(params: dict, where: str) -> dict:
+    """``params`` with its counts as ints within ``COUNT_RANGES``; a fraction is refused (``lines=2.5`` became
+    2 lines)."""
+    return {k: int(number(v, f"{where}: {k}", *COUNT_RANGES[k], integer=True)) if k in COUNT_RANGES else v
+            for k, v in params.items()}
 
 
 def raster(frequency=250.0, lines=8, amplitude_x=1.0, amplitude_y=1.0, samples_per_line=64,

@@ -344,8 +344,8 @@ def _unused_defines(e: Exception, text: str, xml_params: dict) -> str | None:
         return None
     declared = declared_defaults(text)
     unknown = [k for k in xml_params if k not in declared]
-    return (f"-D {', '.join(unknown) or ', '.join(xml_params)}: not a value the scene declares; its <default> values "
-            f"are {', '.join(declared) or 'none'}")
+    return (f"scene value {', '.join(unknown) or ', '.join(xml_params)} (-D, or a keyword of load_scene): not a "
+            f"value the scene declares; its <default> values are {', '.join(declared) or 'none'}")
 
 
 def _mitsuba_message(e: Exception) -> str:

@@ -318,8 +318,8 @@ def test_scene_value_errors_name_the_users_file_and_the_declared_values(tmp_path
     demo = os.path.join(ROOT, "scenes", "demo", "demo.xml")
     for define, message in (("width=abc", f"Error while loading {demo} (line 24, col 14): could not parse integer "
                                           'value "abc"'),
-                            ("widht=96", "-D widht: not a value the scene declares; its <default> values are width, "
-                                         "height, max_depth")):
+                            ("widht=96", "scene value widht (-D, or a keyword of load_scene): not a value the scene "
+                                         "declares; its <default> values are width, height, max_depth")):
         code = cli.main(["render", demo, "-o", str(tmp_path / "x.h5"), "-D", define,
                          "--duration", "0.001", "--steps", "2"])
         err = capsys.readouterr().err.strip()

@@ -1,0 +1,60 @@
+"""A scene author's typing slips in the sensor plugins' parameters (``plugins/properties.py``): one line naming
+the plugin, the parameter, the value and the allowed range, where Python's own message named none of them
+("could not convert string to float: 'two'"), a count was cut without a word (4.7 lines became 4) or a huge one
+ran out of memory (lines = 1e8: 95 GiB); and the kaleidoscope's documented defaults hold."""
+import re
+
+import pytest
+
+
+def _mi():
+    import mitsuba as mi
+    return mi
+
+
+def _load(sensor_type, film=(96, 96), **params):
+    mi = _mi()
+    sensor = dict({"type": sensor_type, "film": {"type": "hdrfilm", "width": film[0], "height": film[1]}}, **params)
+    return mi.load_dict({"type": "scene", "sensor": sensor}).sensors()[0]
+
+
+@pytest.mark.parametrize("params, message", [
+    ({"amplitude": "two"}, "sensor 'galvo': amplitude = 'two': must be a number"),
+    ({"focus_distance": "far"}, "sensor 'galvo': focus_distance = 'far': must be a number (0, inf)"),
+    ({"curve": "raster", "lines": 4.7}, "sensor 'galvo': lines = 4.7: must be a whole number"),
+    ({"curve": "raster", "lines": 100_000_000}, "sensor 'galvo': lines = 100000000: allowed range is [1, 4096]"),
+    ({"curve": "moore", "samples_per_segment": 10_000}, "samples_per_segment = 10000: allowed range is [1, 64]"),
+    ({"fov": 0.0}, "sensor 'galvo': fov = 0.0: allowed range is (0, 180]"),
+    ({"damping": -1.0}, "sensor 'galvo': damping = -1.0: allowed range is (0, inf)"),
+    ({"max_angle": "wide"}, "sensor 'galvo': max_angle = 'wide': must be a number"),
+])
+def test_galvo_parameters_are_named_with_their_range(params, message):
+    with pytest.raises(Exception, match=re.escape(message)):
+        _load("galvo", **params)
+
+
+@pytest.mark.parametrize("params, message", [
+    ({"focal_length": "fifty"}, "sensor 'kaleidoscope': focal_length = 'fifty': must be a number"),
+    ({"layout": "microlens", "views": 3.5}, "sensor 'kaleidoscope': views = 3.5: must be a whole number [1, inf)"),
+    ({"layout": "microlens", "tube_length": 0.05, "relay_distance": 0.02},
+     "sensor 'kaleidoscope': tube_length, relay_distance: the kaleidoscope's tube and relay, not used by layout = "
+     "'microlens'"),
+])
+def test_kaleidoscope_parameters_are_named(params, message):
+    with pytest.raises(Exception, match=re.escape(message)):
+        _load("kaleidoscope", **params)
+
+
+def test_a_numeric_string_and_a_whole_float_are_their_numbers():
+    """As Mitsuba reads its own XML defaults: "0.2" is 0.2, 8.0 lines are 8."""
+    galvo = _load("galvo", curve="raster", lines=8.0, mirror_distance="0.05")
+    assert galvo.mirror_distance == 0.05 and galvo.scan_description["lines"] == 8
+
+
+def test_the_tube_height_defaults_to_the_width_times_the_film_aspect():
+    """The documented default: tube_width 0.02 on a square film made a 0.02 x 0.012 tube (the default width's
+    height), which the aspect check then refused."""
+    square = _load("kaleidoscope", tube_width=0.02)
+    assert square.tube_height == pytest.approx(0.02)
+    wide = _load("kaleidoscope", film=(96, 48), tube_width=0.02)
+    assert wide.tube_height == pytest.approx(0.01)
