@@ -76,8 +76,30 @@ def curve_from_props(props) -> tuple:
     bandwidth = number_prop(props, "bandwidth", 0.0, where, 0)
     damping = number_prop(props, "damping", DEFAULT_DAMPING, where, 0, lo_open=True)
     commanded = make_curve(name, **limits, **params)
+    _warn_long_period(commanded, where)
     moving = make_curve(name, bandwidth_hz=bandwidth, damping=damping, **limits, **params) if bandwidth else commanded
     return moving, curve_to_dict(commanded, bandwidth, damping)
+
+
+LONG_PERIOD_S = 1.0      # a scan that repeats less often than this is of no use to the light-field commands
+
+
+class ScanPeriodWarning(UserWarning):
+    """A scan whose period is longer than ``LONG_PERIOD_S`` (or that never repeats)."""
+
+
+def _warn_long_period(curve, where: str) -> None:
+    """Lissajous frequencies without a small whole-number ratio (100 and 141.4213562 Hz) repeat after an hour
+    or never: the render is fine, but refocus, depth and reconstruct need a whole scan period of events, and
+    said so only then ("the stream spans 10 ms, less than one whole scan period of 3.2075e+06 ms")."""
+    import warnings
+    period = curve.period
+    if period is not None and period <= LONG_PERIOD_S:
+        return
+    warnings.warn(f"{where}: the {curve.name} scan repeats {'never' if period is None else f'only every {period:.4g} s'}"
+                  ": light fields (refocus, depth, reconstruct) need a whole scan period of events; frequencies in a "
+                  "small whole-number ratio (e.g. 200 and 300 Hz) repeat within milliseconds", ScanPeriodWarning,
+                  stacklevel=2)
 
 
 class _GalvoSensorMethods:

@@ -38,8 +38,10 @@ def add_parsers(sub) -> None:
     f.add_argument("-o", "--output", required=True, help="EXR path (PNG alongside); several times: _0000 suffixes")
     f.add_argument("--times", default="0", help="comma-separated times in ms (default 0)")
     f.add_argument("--spp", type=num(1, MAX_SPP, integer=True), default=FRAME_SPP,
-                   help=f"samples per pixel (default {FRAME_SPP}, as ef.render_frames; a render's {DEFAULT_SPP} gives "
-                        "the very image the event pixel saw)")
+                   help=f"samples per pixel (default {FRAME_SPP}, as ef.render_frames; a start frame for events: the "
+                        f"render's own, {DEFAULT_SPP} by default, which gives the very image the event pixel saw)")
+    f.add_argument("--seed", type=num(0, MAX_SEED, integer=True), default=0,
+                   help="sampler seed (default 0; a start frame for events: the render's --seed)")
     add_defines(f)
 
 
@@ -322,10 +324,10 @@ def run_frame(a) -> int:
     times = [t * 1e-3 for t in times_ms(a.times)]
     roots = _frame_roots(a.output, len(times))
     scene = load_scene(a.scene, **defines(a))
-    frames = render_frames(scene, times, spp=a.spp, log=False)
+    frames = render_frames(scene, times, spp=a.spp, seed=a.seed, log=False)
     optics = sensor_optics(scene)     # what calibrate kaleidoscope records and compares (lens, tube)
     for t, img, (exr, png) in zip(times, frames, roots):
-        meta = {"scene": os.path.abspath(a.scene), "time_s": t, "spp": a.spp, "optics": optics}
+        meta = {"scene": os.path.abspath(a.scene), "time_s": t, "spp": a.spp, "seed": a.seed, "optics": optics}
         save_image(png, img, meta, exr=exr)
         print(f"wrote {exr} and {png} (t = {t * 1e3:g} ms)")
     return 0

@@ -82,17 +82,22 @@ def with_contrast(ev, contrast, where: str):
     return ev
 
 
-def luminance_channel(path):
+def luminance_channel(path, with_meta: bool = False):
     """The luminance of an EXR frame: its Y channel, or of its R, G, B (a colour camera's frame: its red channel
-    alone was taken, and a depth from it read 3.9 % off against 1.8 %), or a single R; a named error without."""
+    alone was taken, and a depth from it read 3.9 % off against 1.8 %), or a single R; a named error without.
+    ``with_meta``: (luminance, the metadata ``eventfield frame`` wrote: scene, time, spp, seed)."""
     from ..images import luminance, read_exr
-    channels, _ = read_exr(path)
+    channels, meta = read_exr(path)
     if "Y" in channels:
-        return channels["Y"]
-    if all(c in channels for c in "RGB"):
-        return luminance(channels["R"], channels["G"], channels["B"])
-    if "R" in channels and not ({"G", "B"} & set(channels)):
-        return channels["R"]
+        img = channels["Y"]
+    elif all(c in channels for c in "RGB"):
+        img = luminance(channels["R"], channels["G"], channels["B"])
+    elif "R" in channels and not ({"G", "B"} & set(channels)):
+        img = channels["R"]
+    else:
+        img = None
+    if img is not None:
+        return (img, meta) if with_meta else img
     raise EventFieldError(f"{path}: needs a Y channel, or R, G and B (linear, for their luminance); it has "
                           f"{', '.join(sorted(channels)) or 'none'}")
 
@@ -102,11 +107,37 @@ def start_log(path, events):
     from ..plugins.pixel_model import linlog_np, stream_linlog_threshold
     if path is None:
         return None
-    img = events.crop_frame(luminance_channel(path), path)        # a frame of the whole sensor, cut as it was
+    img, meta = luminance_channel(path, with_meta=True)
+    img = events.crop_frame(img, path)        # a frame of the whole sensor, cut as it was
     bad = int(np.count_nonzero(~np.isfinite(img)))
     if bad:                # (+inf became a level of +inf, and the frames' radiance inf)
         raise EventFieldError(f"{path}: {bad} pixels are not finite (inf or NaN): a start frame holds radiance")
+    note = _other_samples(path, meta, events.meta)
+    if note:                 # (a warning: the light-field commands hold it until their own checks have passed)
+        import warnings
+        warnings.warn(note, StartFrameWarning, stacklevel=2)
     return linlog_np(img, stream_linlog_threshold(events.meta))
+
+
+class StartFrameWarning(UserWarning):
+    """A rendered start frame whose samples are not the render's (``_other_samples``)."""
+
+
+def _other_samples(path, frame_meta: dict, stream_meta: dict) -> str | None:
+    """A rendered start frame whose samples (spp, seed) are not the render's, said in one line. The events
+    are changes from the pixels' own first image; a frame with other Monte-Carlo noise differs from it by up to
+    whole log units per pixel (16 against 4 spp on the demo: 5.4), a fixed pattern in every reconstructed view
+    that pulls depth from focus toward the zero-shift plane (a scene author's 1.5 m plane read 1.34 m, 1.53 m
+    with the render's own 4 spp). A camera's frame (no such metadata) is what it is: None."""
+    spp, seed = frame_meta.get("spp"), frame_meta.get("seed", 0)
+    if spp is None or "spp" not in stream_meta or stream_meta.get("seed_mode", "fixed") != "fixed":
+        return None
+    if (spp, seed) == (stream_meta["spp"], stream_meta.get("seed", 0)):
+        return None
+    return (f"{path}: rendered at {spp} spp, seed {seed}; the events at {stream_meta['spp']} spp, seed "
+            f"{stream_meta.get('seed', 0)}: its noise is not the pixels' own first image and stays in every view as "
+            f"a fixed pattern (depth leans toward the zero-shift plane); render it with `eventfield frame --spp "
+            f"{stream_meta['spp']} --seed {stream_meta.get('seed', 0)}`")
 
 
 def galvo_scan(ev):

@@ -19,7 +19,7 @@ from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import check_files, num, save_image, times_ms, velocity
-from .inputs import CROP_HELP, give_optics, read_input, reconstruct_optics, start_log
+from .inputs import CROP_HELP, StartFrameWarning, give_optics, read_input, reconstruct_optics, start_log
 
 
 CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a recording that carries none "
@@ -138,10 +138,11 @@ def _lightfield(a, ev, nearest: float | None = None):
         kw = dict(period=period, views=views, method=PERIODS)     # searching the nearer depths the command needs
     else:
         kw = dict(period=period if galvo else None, views=views if galvo else None,
-                  time=None if a.time is None else a.time * 1e-3, method=a.method,
-                  log_start=start_log(a.start_frame, ev))
+                  time=None if a.time is None else a.time * 1e-3, method=a.method)
     try:
         with _solver_warnings_held() as held, solver_progress(f"{os.path.basename(a.file)}: solving"):
+            if a.method != PERIODS:
+                kw["log_start"] = start_log(a.start_frame, ev)          # (its warning held with the solver's)
             lf = calibrated_lightfield(ev, calibration, where=a.file, nearest=nearest, **kw)
         lf.meta["warnings"] = [f"{a.file}: {w}" for w in held]
     except (ValueError, KeyError, StopIteration) as e:
@@ -151,18 +152,17 @@ def _lightfield(a, ev, nearest: float | None = None):
 
 @contextlib.contextmanager
 def _solver_warnings_held():
-    """The solver's and the scan lock's warnings (``SolverWarning``, ``ScanLockWarning``) of the light field made
-    inside, held as texts in the list yielded: the command says them after its own checks, so a refused command
-    says one line. Any other warning is shown as it comes."""
+    """Warnings of the light field made inside (the solver's, the scan lock's, a start frame's), held as texts in
+    the list yielded: said after the command's own checks, so a refused command says one line. Others as they come."""
     from ..focus.galvo_periods import SolverWarning
     from ..lightfield.scan_lock import ScanLockWarning
-    held = []
+    kinds, held = (SolverWarning, ScanLockWarning, StartFrameWarning), []
     with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", SolverWarning)
-        warnings.simplefilter("always", ScanLockWarning)
+        for kind in kinds:
+            warnings.simplefilter("always", kind)
         yield held
     for w in caught:
-        if issubclass(w.category, (SolverWarning, ScanLockWarning)):
+        if issubclass(w.category, kinds):
             held.append(str(w.message))
         else:
             warnings.showwarning(w.message, w.category, w.filename, w.lineno)

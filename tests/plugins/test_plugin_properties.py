@@ -58,3 +58,14 @@ def test_the_tube_height_defaults_to_the_width_times_the_film_aspect():
     assert square.tube_height == pytest.approx(0.02)
     wide = _load("kaleidoscope", film=(96, 48), tube_width=0.02)
     assert wide.tube_height == pytest.approx(0.01)
+
+
+def test_a_scan_that_hardly_repeats_is_named_when_the_scene_loads():
+    """100 and 141.4213562 Hz repeat every 3207.5 s: the render was silent and refocus said so only later."""
+    from mitsuba_eventfield.plugins.galvo_sensor import ScanPeriodWarning
+    with pytest.warns(ScanPeriodWarning, match=r"the lissajous scan repeats only every 3208 s"):
+        _load("galvo", curve="lissajous", freq_x=100.0, freq_y=141.4213562)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ScanPeriodWarning)
+        _load("galvo", curve="lissajous", freq_x=200.0, freq_y=300.0)          # 10 ms: no word
