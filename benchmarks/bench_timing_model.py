@@ -70,7 +70,7 @@ def main():
     ref = ef.render_events(scene(), DURATION, steps=REFERENCE_STEPS, spp=REFERENCE_SPP, seed=7)
     ref_s = time.perf_counter() - t0
     probe = scene()
-    model = auto._noise_model(probe, auto._slope_frames(probe, DURATION / 200, 4, DURATION), DURATION / 200, 4)
+    model = auto._noise_model(probe, auto._slope_frames(probe, DURATION / 200, 4, DURATION), 4)
     rows = []
     for spp in SPPS:
         ev = ef.render_events(scene(), DURATION, steps=STEPS, spp=spp)

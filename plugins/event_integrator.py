@@ -62,9 +62,9 @@ from mitsuba_eventfield.plugins import (counter_rng, event_batch, event_fill, ev
                                         pixel_state, pixel_step, readout)
 
 from ._per_variant import per_variant, subclass
+from .properties import number_prop
 
-DEFAULT_THRESHOLD = 0.2
-DEFAULT_LINLOG = 1e-3
+WHERE, DEFAULT_THRESHOLD, DEFAULT_LINLOG = "integrator 'eventfield'", 0.2, 1e-3
 
 
 def is_event_integrator(obj) -> bool:
@@ -87,11 +87,10 @@ class _EventIntegratorMethods:
                 if self.inner is not None:
                     raise ValueError("integrator 'eventfield': give at most one nested radiance integrator")
                 self.inner = value
-            elif name in names:
-                overrides[name] = int(value) if name in ("seed", "readout_cap_native_pixels") else float(value)
-            elif name == "threshold":
-                overrides.setdefault("threshold_on", float(value))
-                overrides.setdefault("threshold_off", float(value))
+            elif name in names or name == "threshold":      # (ranges: the pixel model's own checks)
+                v = number_prop(props, name, None, WHERE, integer=name in ("seed", "readout_cap_native_pixels"))
+                # threshold sets both; threshold_on / _off, given too, win whatever their order
+                overrides.update({name: v} if name in names else {"threshold_on": v, "threshold_off": v} | overrides)
             elif name != "preset":
                 raise ValueError(f"integrator 'eventfield': unknown parameter {name!r}; allowed: preset, "
                                  f"threshold, {', '.join(sorted(names))}")

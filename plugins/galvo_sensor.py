@@ -110,7 +110,8 @@ class _GalvoSensorMethods:
         self.curve, self.scan_description = curve_from_props(props)
         size = self.film().size()
         self.aspect = size.x / size.y
-        number_prop(props, "fov", None, WHERE, 0, 180, lo_open=True)    # (Mitsuba's says 0 is in [0, 180])
+        if number_prop(props, "fov", 1.0, WHERE, 0, 180, lo_open=True) == 180:    # (Mitsuba's lists 0 as allowed)
+            raise ValueError(f"{WHERE}: fov = 180: allowed range is (0, 180) degrees")
         self.fov_x = float(mi.parse_fov(props, self.aspect))
         self.tan_half = galvo_optics.tan_half_fov(self.fov_x)
         self.aperture_radius = number_prop(props, "aperture_radius", 0.0, WHERE, 0)     # 0: a pinhole

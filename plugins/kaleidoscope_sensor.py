@@ -97,6 +97,11 @@ class _KaleidoscopeSensorMethods:
 
     def _init_microlens(self, props):
         self.n = number_prop(props, "views", 3, WHERE, 1, integer=True)
+        for name, v in (("tube_width", self.tube_width), ("tube_height", self.tube_height)):   # the image plane
+            number_prop({name: v}, name, None, WHERE, 0, lo_open=True)
+        if self.mode != "lenses":
+            raise ValueError(f"{WHERE}: mode = {self.mode!r}: the tube's validation modes need layout = "
+                             "'kaleidoscope'; a microlens array has lenses only")
         if self.focal_length <= 0 or self.focus_distance <= self.focal_length:
             raise ValueError(f"{WHERE}: focus_distance = {self.focus_distance} must exceed focal_length = "
                              f"{self.focal_length} > 0")

@@ -319,10 +319,10 @@ def make_curve(name: str, max_angle_deg: float | None = None, bandwidth_hz: floa
                           amplitude_y=a if axis == "y" else 0.0, phase_x=ph, phase_y=ph, kind="line")
     elif name == "raster":
         from .tabulated import raster, whole_counts
-        curve = raster(**limits, **whole_counts(params, where))
+        curve = raster(**limits, **whole_counts("raster", params, where))
     else:
         from .tabulated import moore, whole_counts
-        curve = moore(**limits, **whole_counts(params, where))
+        curve = moore(**limits, **whole_counts("moore", params, where))
     curve.validate(where, envelope)              # the commanded scan is what the galvo must be able to drive
     if bandwidth_hz:              # 0: the default, an ideal mirror
         number(bandwidth_hz, f"{where}: bandwidth (Hz; 0: an ideal mirror)", 0, strict=True)

@@ -10,16 +10,27 @@ from ..errors import ConfigError
 from ..validate import number
 from .scan import DEFAULT_MAX_ANGLE_DEG, TabulatedCurve, _frac
 
-# the counts of a tabulated scan and their ranges: the table holds 2 lines x samples_per_line (raster) or
-# 4^order x samples_per_segment (moore) points; lines = 1e8 asked numpy for 95 GiB and said only that
-COUNT_RANGES = {"lines": (1, 4096), "samples_per_line": (2, 1024), "order": (1, 8), "samples_per_segment": (1, 64)}
+# the counts of a tabulated scan and their ranges, and the most points its table may hold: 2 lines x
+# samples_per_line (raster) or 4^order x samples_per_segment (moore); lines = 1e8 asked numpy for 95 GiB and
+# said only that. Generous each (files written before the ranges must still read), bounded together.
+COUNT_RANGES = {"lines": (1, 65536), "samples_per_line": (2, 65536), "order": (1, 8),
+                "samples_per_segment": (1, 65536)}
+MAX_TABLE_POINTS = 1 << 24          # 16.8 M points: 268 MB of float64 angles
 
 
-def whole_counts(params: dict, where: str) -> dict:
-    """``params`` with its counts as ints within ``COUNT_RANGES``; a fraction is refused (``lines=2.5`` became
-    2 lines)."""
-    return {k: int(number(v, f"{where}: {k}", *COUNT_RANGES[k], integer=True)) if k in COUNT_RANGES else v
-            for k, v in params.items()}
+def whole_counts(name: str, params: dict, where: str) -> dict:
+    """``params`` of a ``name`` ("raster" or "moore") scan with its counts as ints within ``COUNT_RANGES`` and
+    the table they make within ``MAX_TABLE_POINTS``; a fraction is refused (``lines=2.5`` became 2 lines)."""
+    out = {k: int(number(v, f"{where}: {k}", *COUNT_RANGES[k], integer=True)) if k in COUNT_RANGES else v
+           for k, v in params.items()}
+    if name == "moore":
+        points = 4 ** out.get("order", 3) * out.get("samples_per_segment", 8)
+    else:
+        points = 2 * out.get("lines", 8) * out.get("samples_per_line", 64)
+    if points > MAX_TABLE_POINTS:
+        raise ConfigError(f"{where}: {', '.join(f'{k} = {v}' for k, v in out.items() if k in COUNT_RANGES)}: "
+                          f"a table of {points} points; at most {MAX_TABLE_POINTS} (fewer lines or samples)")
+    return out
 
 
 def raster(frequency=250.0, lines=8, amplitude_x=1.0, amplitude_y=1.0, samples_per_line=64,

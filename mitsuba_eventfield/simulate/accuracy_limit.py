@@ -81,10 +81,6 @@ def event_median(values: np.ndarray, weights: np.ndarray) -> float:
     return _sorted_median(values, weights)
 
 
-def _rms(a) -> float:
-    return float(np.sqrt(np.mean(np.square(a, dtype=np.float64))))
-
-
 def _error(first, frame, baseline, sigma, pick=None):
     """(sigma / |dL/dt| over the events, seconds; the slopes) of one baseline, over the pixels ``pick`` (all:
     None). The error is None where no pixel changes."""
@@ -95,51 +91,67 @@ def _error(first, frame, baseline, sigma, pick=None):
     return (event_median(sigma[active] / slope[active], slope[active]) if active.any() else None), slope
 
 
-def event_slopes(first, later, sigma, frame_sigma=None) -> dict | None:
+def event_slopes(first, later, sigma, longest: float = math.inf) -> dict | None:
     """Per-pixel |dL/dt| for the noise estimate: ``first`` frame (log brightness) against ``later`` ones,
-    ``[(baseline_s, frame), ...]`` in ascending order, and the noise-timing error sigma / |dL/dt| they give (the
-    median over events, seconds). ``sigma``: the noise whose timing error is wanted; ``frame_sigma``: the frames'
-    own (default the same: a render's frames are its own spp).
+    ``[(baseline_s, frame), ...]`` in ascending order (those past ``longest`` seconds left out: a scan's
+    quarter period, past which a frame difference is no slope), and the noise-timing error sigma / |dL/dt|
+    they give (the median over events, seconds). ``sigma``: the frames' own noise (a render's spp; a plan's
+    probe frames, the finest probe's).
 
-    Over growing baselines b the error E(b) grows in proportion to b wherever it is wrong, and stays flat where
-    it is right:
-    - the frames' noise: a slope carries sqrt 2 sigma_f / b of it, which makes slow pixels steep (noise / b)
+    Over growing baselines b the error E(b) grows in proportion to b wherever it is wrong, and stops growing
+    where it is right:
+    - the frames' noise: a slope carries sqrt 2 sigma / b of it, which makes slow pixels steep (noise / b)
       until b is several times E (74 us predicted at 64 spp on the demo at 48x36 from a 50 us baseline, 486 us
       measured by two seeds' renders: benchmarks/results/timing_model.md);
     - a few jumping pixels: at fine steps pixels where one sample crosses an edge jump by whole contrasts, and
       their slope jump / b carried 90 % of the weight (the same demo at 16 spp over 400 or 1000 steps: 3.3 or
       1.3 us read, 741 us measured);
     - a change that is not linear over b (an edge passed, a scan turned): contrast / b.
-    So the first pair of consecutive baselines over which E grows by at most b^``FLAT`` (a plateau), the longer
-    of them resolved (b >= ``RESOLVE`` (sigma_f / sigma) E: the median event's slope within about a third), is
-    taken, with the longer one's slopes. Where none is, the longest (``resolved`` False). Static pixels of a
-    frozen sampler have no difference and no slope. A single baseline is taken if it resolves.
+    So the first pair of consecutive baselines over which E grows by at most b^``FLAT`` (a plateau, or E
+    falling), the longer of them resolved (b >= ``RESOLVE`` E: the median event's slope within about a third),
+    is taken, with the longer one's slopes. Where none is, the longest (``resolved`` False; while noise
+    dominates the error grows with the baseline, so the longest is the closest). Noise-free frames (sigma 0)
+    take the first baseline: nothing to resolve.
+    Static pixels of a frozen sampler have no difference and no slope. A single baseline is taken if it
+    resolves.
 
     The choice is made on ``SELECT_SAMPLE`` random pixels of a larger image (a median at 1280x720 takes
     ~25 ms, and a long render keeps up to 14 baselines), the returned error on every pixel. Returns {slope,
     baseline_s, error_s, resolved}, or None when no pixel changes."""
-    ratio = 1.0 if frame_sigma is None else _rms(frame_sigma) / max(_rms(sigma), 1e-30)
     first, sigma = np.ravel(first), np.ravel(sigma)
     pick = np.random.default_rng(1).integers(0, len(first), SELECT_SAMPLE) if len(first) > SELECT_SAMPLE else None
     scored = []                  # (baseline, frame, error on the sample) where some pixel changes
     for baseline, frame in later:
+        if baseline > longest and scored:
+            break
         frame = np.ravel(frame)
         error = _error(first, frame, baseline, sigma, pick)[0]
         if error is not None:
             scored.append((baseline, frame, error))
-
-    def resolves(k):
-        return scored[k][0] >= RESOLVE * ratio * scored[k][2]
-
-    def flat(k):                 # from baseline k - 1 to k
-        (b0, _, e0), (b1, _, e1) = scored[k - 1], scored[k]
-        return e0 <= 0 or abs(math.log(max(e1, 1e-30) / e0)) <= FLAT * math.log(b1 / b0)
     if not scored:
         return None
-    chosen = [k for k in range(len(scored)) if resolves(k) and (len(scored) == 1 or k and flat(k))]
+
+    def resolves(k):
+        return scored[k][0] >= RESOLVE * scored[k][2]
+
+    def flat(k):                 # from baseline k - 1 to k: E grows by at most (b1 / b0)^FLAT
+        (b0, _, e0), (b1, _, e1) = scored[k - 1], scored[k]
+        return e0 > 0 and math.log(max(e1, 1e-300) / e0) <= FLAT * math.log(b1 / b0)
+    if not np.any(sigma):
+        chosen = [0]
+    else:
+        chosen = [k for k in range(len(scored)) if resolves(k) and (len(scored) == 1 or k and flat(k))]
     k = chosen[0] if chosen else len(scored) - 1
     error, slope = _error(first, scored[k][1], scored[k][0], sigma)
-    return {"slope": slope, "baseline_s": scored[k][0], "error_s": error, "resolved": bool(chosen)}
+    return {"slope": slope, "baseline_s": scored[k][0], "error_s": error,
+            "resolved": bool(chosen) and scored[k][0] <= longest}        # (a first step longer than that: no)
+
+
+def longest_baseline(period: float | None) -> float:
+    """The longest slope baseline under a scan of ``period`` seconds (None or 0: no scan): a quarter of it; a
+    frame difference across a period is no slope (galvo_static in 5 steps over two periods took 6.4 ms and read
+    145 us where two seeds measure 9.2)."""
+    return period / 4 if period else math.inf
 
 
 def other_seed(seed: int) -> int:
@@ -192,10 +204,10 @@ class AccuracyLimit:
         self.spp, self.active = spp, active
         self.frames, self.sigma, self.probed, self.other = [], None, None, None
         self.baselines = []        # (seconds since the first frame, frame) at steps 4, 8, 16, ...: event_slopes
-        self.frame_sigma = None    # the frames' own noise where it is not ``sigma``'s (a plan's probe frames)
+        self.longest = math.inf    # the longest slope baseline: a quarter of a scan period (for_stepping)
 
     @classmethod
-    def for_stepping(cls, st, sigma: np.ndarray | None = None) -> "AccuracyLimit":
+    def for_stepping(cls, st, sigma: np.ndarray | None = None, period: float | None = None) -> "AccuracyLimit":
         """Active for fixed-seed renders of at least MIN_STEPS steps known before rendering (uniform, or placed
         by the image motion: the default's or ``adaptive="motion"``, whose estimate takes the first two steps,
         the shortest where the motion is fastest, so later longer steps may do worse); otherwise every method
@@ -209,6 +221,7 @@ class AccuracyLimit:
             dts, steps = st.duration / st.steps, st.steps
         limit = cls(dts, st.spp, active=steps >= MIN_STEPS and st.seed_mode == "fixed")
         limit.probed = sigma
+        limit.longest = longest_baseline(period)
         return limit
 
     def first_frame(self, loop, t_start: float) -> None:
@@ -264,7 +277,7 @@ class AccuracyLimit:
         log brightness the noise map measures (a low-pass's state would differ between a step committed and one
         held for a batch), evaluated now (a queued kernel; the frame also goes on to the commit or the batch)."""
         if not (self.active and self.frames and steps_done >= 4 and steps_done & (steps_done - 1) == 0
-                and len(self.baselines) < MAX_BASELINES):
+                and len(self.baselines) < MAX_BASELINES and elapsed <= self.longest):
             return
         from .. import backend
         frame = type(integ.staged)(integ.staged)
@@ -292,6 +305,12 @@ class AccuracyLimit:
         self.baselines = [(float(b), state[f"limit_baseline_{i}"]) for i, b in enumerate(state["limit_baseline_s"])]
         self.sigma = state.get("limit_sigma")
 
+    def slopes(self) -> dict | None:
+        """``event_slopes`` of the frames kept (read back by :meth:`estimate`)."""
+        (l0, l1, l2), (d1, d2) = self.frames, self.dts
+        return event_slopes(l0, itertools.chain([(d1, l1), (d1 + d2, l2)], self.baselines), self.sigma,
+                            self.longest)
+
     def estimate(self) -> dict | None:
         if self.other is not None:           # the other seed's first frame, kept on the device until now
             self.sigma, self.other = np.abs(_host(self.frames[0]) - _host(self.other)) / math.sqrt(2), None
@@ -303,8 +322,7 @@ class AccuracyLimit:
         d1, d2 = self.dts
         slope = np.abs(l1 - l0) / d1
         active = slope > 0
-        slopes = event_slopes(l0, itertools.chain([(d1, l1), (d1 + d2, l2)], self.baselines), self.sigma,
-                              self.frame_sigma)
+        slopes = self.slopes()
         if not active.any() or slopes is None:
             return None
         rate = slope[active]
@@ -329,9 +347,9 @@ class AccuracyLimit:
         if est is None:
             return
         if not est.get("slope_resolved", True):      # (a checkpoint's estimate from before 2026-11-28 has none)
-            summary.notes.append(f"timing: the pixels' slopes were not resolved within {est['slope_baseline_us']:.3g}"
-                                 " us of frames (an estimate over a baseline shorter than about 4x itself): the "
-                                 "noise estimate below is uncertain")
+            summary.notes.append(f"timing: no time baseline of the kept frames (up to "
+                                 f"{est['slope_baseline_us'] / 1e3:.3g} ms) resolved the pixels' slopes (it needs "
+                                 "4x the error and a steady error): the noise estimate below is uncertain")
         if est["limit"] == "steps":
             summary.notes.append(f"timing accuracy is limited by the time step: about {est['steps_us']:.3g} us "
                                  f"(Monte-Carlo noise about {est['noise_us']:.3g} us); twice the steps quarter it")

@@ -39,7 +39,7 @@ import numpy as np
 from ..backend import set_variant
 from ..errors import ConfigError
 from ..scene.timed import load_scene
-from .accuracy_limit import MAX_BASELINES, AccuracyLimit, noise_map
+from .accuracy_limit import MAX_BASELINES, AccuracyLimit, event_median, longest_baseline, noise_map
 from .render import render_frames
 from .stepping import whole_number, whole_per_period
 
@@ -138,15 +138,7 @@ def _own_sampler(timed) -> str:
     return {"lowdiscrepancy": "ldsampler"}.get(name, name)
 
 
-def _estimate(probe: dict, sigma, dt, spp) -> dict | None:
-    """accuracy_limit's estimate (noise_us, steps_us) from ``_slope_frames``' frames and a noise map."""
-    lim = AccuracyLimit(dt, spp)
-    lim.frames, lim.baselines, lim.sigma = list(probe["frames"]), probe["baselines"], sigma
-    lim.frame_sigma = probe["sigma"]
-    return lim.estimate()
-
-
-def _noise_model(scene, probe, dt, probe_spp) -> dict | None:
+def _noise_model(scene, probe, probe_spp) -> dict | None:
     """A sampler's noise measured at ``PROBES`` x ``probe_spp``: the timing error (us) and median sigma (log) at
     each, and between them power laws in spp (below the first and beyond the last, the nearest piece's exponent,
     kept within [0.25, 1.25]: stratified samplers fall faster once their strata are fine).
@@ -155,29 +147,38 @@ def _noise_model(scene, probe, dt, probe_spp) -> dict | None:
     carried their noise, which made every pixel look steep and the predicted timing error small, the more so the
     finer the probe (the demo at 48x36: 27 us predicted at 64 spp, 5.4 us at 256, where a render's own estimate
     said about 200 us at 16 and at 256); 64-spp frames one step apart still did (74 us predicted at 64 spp, 486
-    measured): the baseline now grows until it resolves them (``accuracy_limit.event_slopes``)."""
+    measured). One slope for every probe (a baseline chosen per probe's noise made the model jump: runner,
+    11.6 / 22.7 / 9.41 us at 4 / 16 / 64 spp)."""
+    est, slope = probe["estimate"], probe["slope"]
+    if est is None:
+        return None
+    active = slope > 0
     points = []
     for factor in PROBES:
         spp = probe_spp * factor
         sigma = probe["sigma"] if scene is probe["scene"] and spp == probe["spp"] else noise_map(scene, spp, 0, 0.0)
-        est = _estimate(probe, sigma, dt, spp)
-        if est is None:
-            return None
-        points.append((spp, max(est["noise_us"], 1e-9), float(np.median(sigma)), est["steps_us"]))
+        noise_us = event_median(np.ravel(sigma)[active] / slope[active], slope[active]) * 1e6
+        points.append((spp, max(noise_us, 1e-9), float(np.median(sigma)), est["steps_us"]))
     slopes = [math.log(a[1] / b[1]) / math.log(b[0] / a[0]) for a, b in zip(points, points[1:])]
-    return {"points": points, "slopes": slopes, "steps_us": points[0][3], "resolved": est["slope_resolved"],
+    return {"points": points, "slopes": slopes, "steps_us": est["steps_us"], "resolved": est["slope_resolved"],
             "slope_baseline_us": est["slope_baseline_us"]}
 
 
 def _slope_frames(timed, dt, probe_spp, duration) -> dict:
-    """The image at 0, dt and 2 dt (slopes, curvature) and at 4, 8, 16 ... dt up to half the duration (longer
-    slope baselines: ``accuracy_limit.event_slopes``), at the finest probe's spp, and those frames' own noise:
-    one set for every sampler probed (the image is the same whichever sampler renders it)."""
+    """The image's slopes for every sampler probed (the image is the same whichever sampler renders it): frames
+    at 0, dt and 2 dt (slopes, curvature) and at 4, 8, 16 ... dt up to half the duration or a quarter of a scan
+    period (longer slope baselines), at the finest probe's spp, their noise, and the estimate and per-pixel
+    slope ``accuracy_limit`` takes from them (``event_slopes``)."""
     spp = probe_spp * PROBES[-1]
-    later = [dt * 2 ** k for k in range(2, 2 + MAX_BASELINES) if dt * 2 ** k <= duration / 2]
+    longest = min(duration / 2, longest_baseline(timed.scan_period))
+    later = [dt * 2 ** k for k in range(2, 2 + MAX_BASELINES) if dt * 2 ** k <= longest]
     frames = render_frames(timed, [0.0, dt, 2 * dt] + later, spp=spp)
-    return {"frames": frames[:3], "baselines": list(zip(later, frames[3:])), "scene": timed, "spp": spp,
-            "sigma": noise_map(timed, spp, 0, 0.0)}
+    lim = AccuracyLimit(dt, spp)
+    lim.frames, lim.baselines, lim.sigma = list(frames[:3]), list(zip(later, frames[3:])), noise_map(timed, spp, 0, 0.0)
+    lim.longest = longest
+    est = lim.estimate()
+    return {"scene": timed, "spp": spp, "sigma": lim.sigma, "estimate": est,
+            "slope": lim.slopes()["slope"] if est is not None else None}
 
 
 def _predict(model, spp) -> tuple:
@@ -200,7 +201,7 @@ def _timing_choice(scene_path, defines, timed, dt, duration, target_s, sigma_cap
     for order, name in enumerate((own,) + tuple(s for s in SAMPLERS if s != own)):
         scene = timed if name == own else load_with_sampler(scene_path, {"type": name, "sample_count": probe_spp},
                                                             **defines)
-        m = _noise_model(scene, probe, dt, probe_spp)
+        m = _noise_model(scene, probe, probe_spp)
         if m is None:
             raise ConfigError("--timing-accuracy: no pixel changes in the probe frames at the start of the render, "
                               "so there is no event timing to predict")

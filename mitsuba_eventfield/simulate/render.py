@@ -77,7 +77,7 @@ class _Loop:
         self.warmup = warmup                              # seconds rendered before the kept start (warmup.py)
         self.counters_before = None if warmup else (0, 0, 0)   # the pixel counters once the warm-up is over
         sigma, first = noise if noise is not None else (None, None)   # stepping.default_steps' probe
-        self.limit = AccuracyLimit.for_stepping(st, sigma)   # what limits timing accuracy: steps or noise
+        self.limit = AccuracyLimit.for_stepping(st, sigma, timed.scan_period)   # what limits timing: steps or noise
         if allocation is not None:                       # noise where it counts: in the pixels that change
             self.limit.spp = allocation.spp_changing
         self.width, self.height = timed.film_size

@@ -160,7 +160,7 @@ def test_a_one_frequency_curve_has_its_period_at_any_frequency_and_counts_are_wh
         assert ef.make_curve("line", frequency=f, amplitude=0.5).period == pytest.approx(1 / f, rel=1e-12)
     assert ef.make_curve("lissajous", freq_x=100, freq_y=150, amplitude_x=0.5, amplitude_y=0.5).period == \
         pytest.approx(0.02)
-    with pytest.raises(ef.EventFieldError, match=r"scan: lines = 2\.5: must be a whole number \[1, 4096\]"):
+    with pytest.raises(ef.EventFieldError, match=r"scan: lines = 2\.5: must be a whole number \[1, 65536\]"):
         ef.make_curve("raster", frequency=100, amplitude_x=0.2, amplitude_y=0.2, lines=2.5)
     assert ef.make_curve("raster", frequency=100, amplitude_x=0.2, amplitude_y=0.2, lines=3.0).period == \
         pytest.approx(0.03)

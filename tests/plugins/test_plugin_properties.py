@@ -22,9 +22,12 @@ def _load(sensor_type, film=(96, 96), **params):
     ({"amplitude": "two"}, "sensor 'galvo': amplitude = 'two': must be a number"),
     ({"focus_distance": "far"}, "sensor 'galvo': focus_distance = 'far': must be a number (0, inf)"),
     ({"curve": "raster", "lines": 4.7}, "sensor 'galvo': lines = 4.7: must be a whole number"),
-    ({"curve": "raster", "lines": 100_000_000}, "sensor 'galvo': lines = 100000000: allowed range is [1, 4096]"),
-    ({"curve": "moore", "samples_per_segment": 10_000}, "samples_per_segment = 10000: allowed range is [1, 64]"),
+    ({"curve": "raster", "lines": 100_000_000}, "sensor 'galvo': lines = 100000000: allowed range is [1, 65536]"),
+    ({"curve": "raster", "lines": 65536, "samples_per_line": 256},
+     "lines = 65536, samples_per_line = 256: a table of 33554432 points; at most 16777216"),
+    ({"curve": "moore", "order": 8, "samples_per_segment": 1000}, "a table of 65536000 points; at most 16777216"),
     ({"fov": 0.0}, "sensor 'galvo': fov = 0.0: allowed range is (0, 180]"),
+    ({"fov": 180.0}, "sensor 'galvo': fov = 180: allowed range is (0, 180) degrees"),
     ({"damping": -1.0}, "sensor 'galvo': damping = -1.0: allowed range is (0, inf)"),
     ({"max_angle": "wide"}, "sensor 'galvo': max_angle = 'wide': must be a number"),
 ])
@@ -36,6 +39,8 @@ def test_galvo_parameters_are_named_with_their_range(params, message):
 @pytest.mark.parametrize("params, message", [
     ({"focal_length": "fifty"}, "sensor 'kaleidoscope': focal_length = 'fifty': must be a number"),
     ({"layout": "microlens", "views": 3.5}, "sensor 'kaleidoscope': views = 3.5: must be a whole number [1, inf)"),
+    ({"layout": "microlens", "tube_width": 0.0}, "sensor 'kaleidoscope': tube_width = 0.0: allowed range is (0, inf)"),
+    ({"layout": "microlens", "mode": "tube_only"}, "mode = 'tube_only': the tube's validation modes need layout"),
     ({"layout": "microlens", "tube_length": 0.05, "relay_distance": 0.02},
      "sensor 'kaleidoscope': tube_length, relay_distance: the kaleidoscope's tube and relay, not used by layout = "
      "'microlens'"),
@@ -69,3 +74,14 @@ def test_a_scan_that_hardly_repeats_is_named_when_the_scene_loads():
     with warnings.catch_warnings():
         warnings.simplefilter("error", ScanPeriodWarning)
         _load("galvo", curve="lissajous", freq_x=200.0, freq_y=300.0)          # 10 ms: no word
+
+
+@pytest.mark.parametrize("params, message", [
+    ({"threshold": "two"}, "integrator 'eventfield': threshold = 'two': must be a number"),
+    ({"seed": 4.7}, "integrator 'eventfield': seed = 4.7: must be a whole number"),
+])
+def test_the_event_integrators_numbers_are_named(params, message):
+    mi = _mi()
+    with pytest.raises(Exception, match=re.escape(message)):
+        mi.load_dict({"type": "scene", "integrator": dict({"type": "eventfield"}, **params),
+                      "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 8, "height": 8}}})

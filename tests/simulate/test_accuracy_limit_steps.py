@@ -136,3 +136,19 @@ def test_event_median_sorts_only_its_bracket_and_agrees_with_sorting_everything(
             assert sorted_sizes == [n]                       # the fallback
         else:
             assert len(sorted_sizes) == 1 and sorted_sizes[0] < n // 2
+
+
+@pytest.mark.parametrize("steps", [5, 8, 40])
+def test_no_slope_baseline_spans_more_than_a_quarter_scan_period(steps):
+    """A frame difference across a scan period is no slope: galvo_static (4 ms period) in 5 steps over 8 ms took
+    a 6.4 ms baseline, read 145 us and called it resolved, where two seeds' renders differ by 9.2 us. Baselines
+    now stop at a quarter period (a first step longer than that is kept, unresolved): 36 / 32 / 31 us against
+    11 / 13 / 28 us measured, at 5 / 8 / 40 steps."""
+    import mitsuba_eventfield as ef
+    from mitsuba_eventfield.events.pairing import two_seed_timing_us
+    from mitsuba_eventfield.scene import bundled_scene
+    a, b = (ef.render_events(ef.load_scene(bundled_scene("galvo_static/galvo_static.xml"), width=48, height=36),
+                             0.008, steps=steps, spp=4, seed=seed) for seed in (0, 1))
+    est = a.meta["render"]["timing_limit"]
+    assert est["slope_baseline_us"] <= 1000 or (est["slope_baseline_us"] == 1600 and not est["slope_resolved"])
+    assert est["noise_us"] < 4 * two_seed_timing_us(a, b), est

@@ -137,7 +137,7 @@ def test_the_plans_and_the_renders_noise_estimates_match_two_seeds_renders():
     584 / 584 against 491 at 64 spp (plan / render / two seeds)."""
     from mitsuba_eventfield.events.pairing import two_seed_timing_us
     scene = ef.load_scene(bundled_scene("demo/demo.xml"), width=48, height=36)
-    model = auto._noise_model(scene, auto._slope_frames(scene, 0.01 / 200, 4, 0.01), 0.01 / 200, 4)
+    model = auto._noise_model(scene, auto._slope_frames(scene, 0.01 / 200, 4, 0.01), 4)
     errors = [p[1] for p in model["points"]]
     assert errors == sorted(errors, reverse=True), errors
     for spp, steps in ((16, 200), (64, 200), (16, 400)):
