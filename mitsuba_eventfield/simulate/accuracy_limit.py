@@ -350,7 +350,11 @@ class AccuracyLimit:
             summary.notes.append(f"timing: no time baseline of the kept frames (up to "
                                  f"{est['slope_baseline_us'] / 1e3:.3g} ms) resolved the pixels' slopes (it needs "
                                  "4x the error and a steady error): the noise estimate below is uncertain")
-        if est["limit"] == "steps":
+        if est["noise_us"] == 0:           # a jitter-free sampler: every seed renders the same image
+            summary.notes.append(f"timing accuracy: the sampler renders the same image for every seed (no "
+                                 f"Monte-Carlo noise); the step alone moves events by about {est['steps_us']:.3g} us, "
+                                 "and the sampling pattern's own fixed error is not estimated")
+        elif est["limit"] == "steps":
             summary.notes.append(f"timing accuracy is limited by the time step: about {est['steps_us']:.3g} us "
                                  f"(Monte-Carlo noise about {est['noise_us']:.3g} us); twice the steps quarter it")
         else:

@@ -206,7 +206,9 @@ def _timing_choice(scene_path, defines, timed, dt, duration, target_s, sigma_cap
             raise ConfigError("--timing-accuracy: no pixel changes in the probe frames at the start of the render, "
                               "so there is no event timing to predict")
         models[name] = m
-        if not m["resolved"]:          # an error of at least its prediction: no request can be promised on it
+        # unresolved: an error of at least its prediction; jitter-free (no seed-to-seed noise: runner's own
+        # stratified sampler predicted 1e-9 us and was planned at 1 spp): a fixed pattern the model cannot see
+        if not m["resolved"] or m["points"][-1][2] == 0:
             continue
         for spp in _ladder(name, max_spp):
             us, sigma = _predict(m, spp)
@@ -338,6 +340,7 @@ def _timing_plan(grey, timed, choice, steps, need, floor, why, steps_us, target_
     target_us = target_s * 1e6
     models = choice["models"]
     listed = "; ".join(f"{name}: " + ", ".join(f"{us:.3g} us at {spp}" for spp, us, _, _ in m["points"]) + " spp"
+                       + (" (jitter-free: no noise to model, not a candidate)" if m["points"][-1][2] == 0 else "")
                        for name, m in models.items())
     sampler = None if choice["sampler"] == choice["own_sampler"] else {"type": choice["sampler"],
                                                                           "sample_count": choice["spp"]}

@@ -159,3 +159,16 @@ def test_the_plans_and_the_renders_noise_estimates_match_two_seeds_renders():
         auto.plan(bundled_scene("demo/demo.xml"), 0.001, defines={"width": 48, "height": 36}, timing_accuracy=2e-3)
     with pytest.raises(ConfigError, match="20us cannot be met within 256 spp"):
         auto.plan(bundled_scene("demo/demo.xml"), 0.1, defines={"width": 48, "height": 36}, timing_accuracy=20e-6)
+
+
+def test_a_jitter_free_sampler_is_no_candidate_for_a_timing_request():
+    """The runner's own sampler is stratified without jitter: every seed renders the same image, so the noise
+    model read 1e-9 us and planned 1 spp. Its error is a fixed sampling pattern the model cannot see: the plan
+    takes a sampler with noise to model instead, and a render with the jitter-free one says so."""
+    import mitsuba_eventfield as ef
+    p = auto.plan(bundled_scene("runner/runner.xml"), 0.02, defines={"width": 48, "height": 36},
+                  timing_accuracy=100e-6)
+    assert p.sampler is not None and p.sampler["type"] != "stratified" and p.timing["noise_us"] > 1
+    assert "stratified: " in p.reasons["sampler"] and "jitter-free" in p.reasons["sampler"]
+    ev = ef.render_events(ef.load_scene(bundled_scene("runner/runner.xml"), width=48, height=36), 0.004, steps=16)
+    assert any("renders the same image for every seed" in n for n in ev.meta["render"]["notes"])
