@@ -5,6 +5,7 @@ import json
 import os
 
 from ..errors import EventFieldError
+from ..scene.sampler import SAMPLERS
 from ..validate import DEFAULT_SPP, FRAME_SPP, MAX_DURATION_S, MAX_SEED, MAX_SPP, MAX_STEPS, MAX_THRESHOLD
 from .args import add_defines, check_files, defines, num, pairs, save_image, times_ms
 
@@ -42,6 +43,8 @@ def add_parsers(sub) -> None:
                         f"render's own, {DEFAULT_SPP} by default, which gives the very image the event pixel saw)")
     f.add_argument("--seed", type=num(0, MAX_SEED, integer=True), default=0,
                    help="sampler seed (default 0; a start frame for events: the render's --seed)")
+    f.add_argument("--sampler", choices=SAMPLERS,
+                   help="in place of the scene's own (a start frame for an --auto render that chose another)")
     add_defines(f)
 
 
@@ -319,15 +322,17 @@ def _ms(us: int) -> str:
 
 def run_frame(a) -> int:
     from ..scene import load_scene
+    from ..scene.sampler import plugin_name
     from ..simulate.render import render_frames
     from ..simulate.summary import sensor_optics
     times = [t * 1e-3 for t in times_ms(a.times)]
     roots = _frame_roots(a.output, len(times))
-    scene = load_scene(a.scene, **defines(a))
+    scene = load_scene(a.scene, sampler={"type": a.sampler} if a.sampler else None, **defines(a))
     frames = render_frames(scene, times, spp=a.spp, seed=a.seed, log=False)
     optics = sensor_optics(scene)     # what calibrate kaleidoscope records and compares (lens, tube)
+    samples = {"spp": a.spp, "seed": a.seed, "sampler": plugin_name(scene.sensor.sampler().class_name())}
     for t, img, (exr, png) in zip(times, frames, roots):
-        meta = {"scene": os.path.abspath(a.scene), "time_s": t, "spp": a.spp, "seed": a.seed, "optics": optics}
+        meta = {"scene": os.path.abspath(a.scene), "time_s": t, **samples, "optics": optics}
         save_image(png, img, meta, exr=exr)
         print(f"wrote {exr} and {png} (t = {t * 1e3:g} ms)")
     return 0

@@ -124,20 +124,36 @@ class StartFrameWarning(UserWarning):
 
 
 def _other_samples(path, frame_meta: dict, stream_meta: dict) -> str | None:
-    """A rendered start frame whose samples (spp, seed) are not the render's, said in one line. The events
+    """A rendered start frame (``eventfield frame``: spp, seed and sampler in its metadata) that is not the
+    render's first image, said in one line; a camera's frame (no such metadata), or one that is: None. The events
     are changes from the pixels' own first image; a frame with other Monte-Carlo noise differs from it by up to
-    whole log units per pixel (16 against 4 spp on the demo: 5.4), a fixed pattern in every reconstructed view
-    that pulls depth from focus toward the zero-shift plane (a scene author's 1.5 m plane read 1.34 m, 1.53 m
-    with the render's own 4 spp). A camera's frame (no such metadata) is what it is: None."""
-    spp, seed = frame_meta.get("spp"), frame_meta.get("seed", 0)
-    if spp is None or "spp" not in stream_meta or stream_meta.get("seed_mode", "fixed") != "fixed":
+    whole log units (16 against 4 spp on the demo: 5.4), a fixed pattern in every view that pulls depth from
+    focus toward the zero-shift plane (a scene author's 1.5 m plane read 1.34 m, 1.53 m with the render's own
+    4 spp). No frame at one spp is the first image of a render that allocated samples (--spp-changing) or split
+    off static pixels (a moving scene under a scan, by default from 40 periods)."""
+    from ..scene.sampler import plugin_name
+    from ..simulate.stepping import step_seed
+    spp = frame_meta.get("spp")
+    if spp is None or "spp" not in stream_meta:
         return None
-    if (spp, seed) == (stream_meta["spp"], stream_meta.get("seed", 0)):
+    if stream_meta.get("sample_allocation"):
+        return (f"{path}: the events had samples where they matter (--spp-changing): no frame of one spp is their "
+                "first image; for an exact start frame render the events with --spp alone")
+    if (stream_meta.get("render") or {}).get("static_pixels"):
+        return (f"{path}: the events reused static pixels' frames (a moving scene under a scan): no frame is their "
+                "first image; for an exact start frame render the events with --no-reuse")
+    seed = stream_meta.get("seed", 0)
+    if stream_meta.get("seed_mode", "fixed") != "fixed":            # the first image's seed (stepping)
+        seed = step_seed(seed, 0)
+    sampler = plugin_name((stream_meta.get("sampler") or {}).get("type", "")) or frame_meta.get("sampler")
+    ours = (spp, frame_meta.get("seed", 0), frame_meta.get("sampler", sampler))      # (older frames: no sampler)
+    if ours == (stream_meta["spp"], seed, sampler):
         return None
-    return (f"{path}: rendered at {spp} spp, seed {seed}; the events at {stream_meta['spp']} spp, seed "
-            f"{stream_meta.get('seed', 0)}: its noise is not the pixels' own first image and stays in every view as "
-            f"a fixed pattern (depth leans toward the zero-shift plane); render it with `eventfield frame --spp "
-            f"{stream_meta['spp']} --seed {stream_meta.get('seed', 0)}`")
+    return (f"{path}: rendered at {ours[0]} spp, seed {ours[1]}, {ours[2]} sampler; the events at "
+            f"{stream_meta['spp']} spp, seed {seed}, {sampler} sampler: its noise is not the pixels' own first image "
+            f"and stays in every view as a fixed pattern (depth leans toward the zero-shift plane); render it with "
+            f"`eventfield frame --spp {stream_meta['spp']} --seed {seed}"
+            + (f" --sampler {sampler}`" if ours[2] != sampler else "`"))
 
 
 def galvo_scan(ev):

@@ -19,7 +19,7 @@ from ..lightfield.streams import MIN_VIEWS
 from ..optics.galvo import VIEWS_PER_PERIOD as DEFAULT_VIEWS
 from ..validate import MAX_PLANES, MAX_VIEWS, number_list
 from .args import check_files, num, save_image, times_ms, velocity
-from .inputs import CROP_HELP, StartFrameWarning, give_optics, read_input, reconstruct_optics, start_log
+from .inputs import CROP_HELP, give_optics, read_input, reconstruct_optics, start_log
 
 
 CONTRAST_HELP = ("ON[,OFF]: contrast thresholds (log intensity per event) of a recording that carries none "
@@ -142,7 +142,7 @@ def _lightfield(a, ev, nearest: float | None = None):
     try:
         with _solver_warnings_held() as held, solver_progress(f"{os.path.basename(a.file)}: solving"):
             if a.method != PERIODS:
-                kw["log_start"] = start_log(a.start_frame, ev)          # (its warning held with the solver's)
+                kw["log_start"] = start_log(a.start_frame, ev)
             lf = calibrated_lightfield(ev, calibration, where=a.file, nearest=nearest, **kw)
         lf.meta["warnings"] = [f"{a.file}: {w}" for w in held]
     except (ValueError, KeyError, StopIteration) as e:
@@ -152,11 +152,11 @@ def _lightfield(a, ev, nearest: float | None = None):
 
 @contextlib.contextmanager
 def _solver_warnings_held():
-    """Warnings of the light field made inside (the solver's, the scan lock's, a start frame's), held as texts in
-    the list yielded: said after the command's own checks, so a refused command says one line. Others as they come."""
+    """Warnings of the light field made inside (the solver's, the scan lock's), held as texts in the list
+    yielded: said after the command's own checks, so a refused command says one line. Others as they come."""
     from ..focus.galvo_periods import SolverWarning
     from ..lightfield.scan_lock import ScanLockWarning
-    kinds, held = (SolverWarning, ScanLockWarning, StartFrameWarning), []
+    kinds, held = (SolverWarning, ScanLockWarning), []
     with warnings.catch_warnings(record=True) as caught:
         for kind in kinds:
             warnings.simplefilter("always", kind)

@@ -87,6 +87,11 @@ def _os_error(e: OSError) -> int | None:
     return 2
 
 
+def _start_frame_warning():
+    from .inputs import StartFrameWarning
+    return StartFrameWarning
+
+
 def _kept_checkpoint() -> str:
     """The end of a failure's line when a checkpointed render kept its last checkpoint (a full disk said
     "nothing was kept" while the work up to it waited in OUT.h5.resume/)."""
@@ -95,10 +100,19 @@ def _kept_checkpoint() -> str:
             if KEPT else "")
 
 
+DEFERRED = []        # warnings said once the command has succeeded (``_warning_line``)
+
+
 def _warning_line(message, category, filename, lineno, file=None, line=None):
-    """A Python warning from the library (e.g. refocus's MotionBlurWarning) as one line of ours, no source line."""
-    print(f"eventfield: warning: {one_line(message) if isinstance(message, BaseException) else message}",
-          file=sys.stderr)
+    """A Python warning from the library (e.g. refocus's MotionBlurWarning) as one line of ours, no source line.
+    A start frame's (``inputs.StartFrameWarning``) waits in ``DEFERRED`` until the command has succeeded: said
+    while the inputs are read, it came before a refused command's one-line error."""
+    from .inputs import StartFrameWarning
+    text = f"eventfield: warning: {one_line(message) if isinstance(message, BaseException) else message}"
+    if issubclass(category, StartFrameWarning):
+        DEFERRED.append(text)
+    else:
+        print(text, file=sys.stderr)
 
 
 def main(argv=None) -> int:
@@ -115,8 +129,14 @@ def main(argv=None) -> int:
         # our lines only: no Mitsuba notes (monochrome film, "winding down" on Ctrl-C); restored when main returns
         was_quiet = quiet_mitsuba_log()
         warnings.showwarning = _warning_line
-        status = _run(args)
+        DEFERRED.clear()
+        with warnings.catch_warnings():   # (said at every run: main may run many commands in one process)
+            warnings.showwarning = _warning_line
+            warnings.simplefilter("always", _start_frame_warning())
+            status = _run(args)
         raise_if_stopped()                # a stop a library swallowed: said, with the signal's exit status
+        for text in DEFERRED:
+            print(text, file=sys.stderr)
         return status
     except EventFieldError as e:
         print(f"eventfield: error: {one_line(e)}{_kept_checkpoint()}", file=sys.stderr)

@@ -20,9 +20,18 @@ import re
 import tempfile
 
 DEFAULT_SAMPLER = {"type": "multijitter"}
+# the samplers a plan or a frame may take in place of a scene's own (plugin names)
+SAMPLERS = ("independent", "multijitter", "stratified", "ldsampler")
 
 _SENSOR_OPEN = re.compile(r"<sensor\b[^>]*?(/?)>")
 _SAMPLER = re.compile(r"<sampler\b[^>]*/>|<sampler\b.*?</sampler>", re.S)
+
+
+def plugin_name(class_name: str) -> str:
+    """A Mitsuba sampler's plugin name from its class name: MultijitterSampler -> multijitter,
+    LowDiscrepancySampler -> ldsampler (what ``<sampler type=...>`` and ``load_scene(sampler=)`` take)."""
+    name = str(class_name).removesuffix("Sampler").lower()
+    return {"lowdiscrepancy": "ldsampler"}.get(name, name)
 
 
 def sampler_xml(sampler: dict) -> str:

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..backend import set_variant
 from ..errors import ConfigError
+from ..scene.sampler import SAMPLERS, plugin_name   # candidates for a timing request (the scene's own first)
 from ..scene.timed import load_scene
 from .accuracy_limit import MAX_BASELINES, AccuracyLimit, event_median, longest_baseline, noise_map
 from .render import render_frames
@@ -45,8 +46,6 @@ from .stepping import whole_number, whole_per_period
 
 NOISE_SHARE = 0.6          # of a requested timing accuracy, the part Monte-Carlo noise may take
 PROBES = (1, 4, 16)        # a timing request probes each sampler's noise at these multiples of probe_spp
-# candidate samplers for a timing request (the scene's own first) and the sample counts each takes exactly
-SAMPLERS = ("independent", "multijitter", "stratified", "ldsampler")
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
 
 
@@ -134,8 +133,7 @@ def _ladder(sampler: str, max_spp: int) -> list:
 
 
 def _own_sampler(timed) -> str:
-    name = timed.sensor.sampler().class_name().removesuffix("Sampler").lower()
-    return {"lowdiscrepancy": "ldsampler"}.get(name, name)
+    return plugin_name(timed.sensor.sampler().class_name())
 
 
 def _noise_model(scene, probe, probe_spp) -> dict | None:
