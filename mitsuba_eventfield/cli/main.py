@@ -12,6 +12,7 @@ import threading
 from . import apps, calibrate, designs, device, evaluate, events, lightfield, paper, scan_frequency
 from ..errors import STOP_SIGNALS
 from .args import OUTPUT_DIRS, Parser, check_outputs, one_line
+from .inputs import StartFrameWarning
 
 MODULES = (events, lightfield, calibrate, evaluate, apps, designs, scan_frequency, paper, device)
 COMMANDS = {name: run for module in MODULES for name, run in module.COMMANDS.items()}
@@ -87,11 +88,6 @@ def _os_error(e: OSError) -> int | None:
     return 2
 
 
-def _start_frame_warning():
-    from .inputs import StartFrameWarning
-    return StartFrameWarning
-
-
 def _kept_checkpoint() -> str:
     """The end of a failure's line when a checkpointed render kept its last checkpoint (a full disk said
     "nothing was kept" while the work up to it waited in OUT.h5.resume/)."""
@@ -107,7 +103,6 @@ def _warning_line(message, category, filename, lineno, file=None, line=None):
     """A Python warning from the library (e.g. refocus's MotionBlurWarning) as one line of ours, no source line.
     A start frame's (``inputs.StartFrameWarning``) waits in ``DEFERRED`` until the command has succeeded: said
     while the inputs are read, it came before a refused command's one-line error."""
-    from .inputs import StartFrameWarning
     text = f"eventfield: warning: {one_line(message) if isinstance(message, BaseException) else message}"
     if issubclass(category, StartFrameWarning):
         DEFERRED.append(text)
@@ -132,7 +127,7 @@ def main(argv=None) -> int:
         DEFERRED.clear()
         with warnings.catch_warnings():   # (said at every run: main may run many commands in one process)
             warnings.showwarning = _warning_line
-            warnings.simplefilter("always", _start_frame_warning())
+            warnings.simplefilter("always", StartFrameWarning)
             status = _run(args)
         raise_if_stopped()                # a stop a library swallowed: said, with the signal's exit status
         for text in DEFERRED:

@@ -5,8 +5,8 @@ seed; no other cost):
 
 - **noise**: a crossing's time moves by about sigma_L / |dL/dt|, where sigma_L is the pixel's Monte-Carlo noise
   in log brightness (half the difference of two seeds' renders, times sqrt 2) and dL/dt its log slope, taken over
-  the shortest baseline that resolves it (:func:`event_slopes`: the first steps' differences read the frames'
-  own noise as change, and made the estimate 2.5-10x optimistic on the rendered demo);
+  a time baseline where the error stops growing with it (:func:`event_slopes`: the first step's difference read
+  the frames' own noise as change, and made the estimate 2.5-10x optimistic on the rendered demo);
 - **steps**: linear interpolation between rendered instants misplaces a crossing by about
   dt^2 |L''| / (8 |L'|) (the error bound of linear interpolation), from the second difference of three frames.
 

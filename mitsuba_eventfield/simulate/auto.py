@@ -20,7 +20,7 @@ With ``timing_accuracy`` (seconds: the median timestamp error wanted; ``eventfie
 --timing-accuracy 20us``) the sampler and spp come from the accuracy-limit model instead
 (``simulate/accuracy_limit.py``: a crossing moves by about sigma_L / |dL/dt| from Monte-Carlo noise and by
 dt^2 |L''| / (8 |L'|) from the time step). Probe frames at 0, dt, 2 dt give |L''|, and with frames at 4, 8, 16 ...
-dt the shortest slope baseline that the frames' noise does not swamp gives |dL/dt|; two seeds of one frame
+dt a baseline where the error stops growing with it gives |dL/dt| (``event_slopes``); two seeds of one frame
 at 1, 4 and 16 x ``probe_spp`` give each candidate sampler's noise and how fast it falls with spp
 (independent: 1/sqrt(spp); stratified and multi-jittered samplers faster on smooth pixels). The cheapest
 (sampler, spp) whose predicted noise error is at most ``NOISE_SHARE`` of the request (and whose noise stays
@@ -190,6 +190,13 @@ def _predict(model, spp) -> tuple:
     return anchor[1] * f, anchor[2] * f
 
 
+def _candidate(model) -> bool:
+    """A noise model a timing request may rest on: its slopes resolved (else its error is at least its
+    prediction), and noise to model (a jitter-free sampler renders the same image for every seed: the runner's
+    own stratified sampler read 1e-9 us and was planned at 1 spp; its error is a fixed pattern no seed shows)."""
+    return model["resolved"] and model["points"][-1][2] > 0
+
+
 def _timing_choice(scene_path, defines, timed, dt, duration, target_s, sigma_cap, probe_spp, max_spp) -> dict:
     """The cheapest (sampler, spp) whose predicted noise error is within NOISE_SHARE of ``target_s``."""
     own = _own_sampler(timed)
@@ -204,9 +211,7 @@ def _timing_choice(scene_path, defines, timed, dt, duration, target_s, sigma_cap
             raise ConfigError("--timing-accuracy: no pixel changes in the probe frames at the start of the render, "
                               "so there is no event timing to predict")
         models[name] = m
-        # unresolved: an error of at least its prediction; jitter-free (no seed-to-seed noise: runner's own
-        # stratified sampler predicted 1e-9 us and was planned at 1 spp): a fixed pattern the model cannot see
-        if not m["resolved"] or m["points"][-1][2] == 0:
+        if not _candidate(m):
             continue
         for spp in _ladder(name, max_spp):
             us, sigma = _predict(m, spp)
@@ -216,10 +221,10 @@ def _timing_choice(scene_path, defines, timed, dt, duration, target_s, sigma_cap
     if best is None and not any(m["resolved"] for m in models.values()):
         longest = max(m["slope_baseline_us"] for m in models.values())
         raise ConfigError(f"--timing-accuracy {target_s * 1e6:g}us: the probe frames do not resolve the image's "
-                          f"slopes within {longest:.3g} us (half the duration at most), so no timing error can be "
-                          "promised; render a longer span, or without --timing-accuracy")
+                          f"slopes within {longest:.3g} us (half the duration or a quarter scan period at most), so "
+                          "no timing error can be promised; render a longer span, or without --timing-accuracy")
     if best is None:
-        floor = min(_predict(m, max_spp)[0] for m in models.values())
+        floor = min(_predict(m, max_spp)[0] for m in models.values() if _candidate(m))
         raise ConfigError(f"--timing-accuracy {target_s * 1e6:g}us cannot be met within {max_spp} spp: Monte-Carlo "
                           f"noise alone is predicted to move event times by {floor:.3g} us at best")
     spp, _, name, noise_us = best
