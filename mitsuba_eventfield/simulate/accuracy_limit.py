@@ -32,6 +32,9 @@ RESOLVE = 4.0
 SELECT_SAMPLE = 65536      # pixels of a larger image that event_slopes chooses its baseline on
 FLAT = 0.5                 # a plateau: the error grows at most as baseline^FLAT between two (event_slopes)
 MAX_BASELINES = 12         # frames a render keeps for slopes: its steps 4, 8, 16, ... (powers of two)
+# the most seed-to-seed spread (log) of a sampler that renders one image for every seed: a jitter-free stratified
+# sampler still orders its strata by the seed, and the sums' rounding differs by ~1e-7
+NOISE_FLOOR = 1e-5
 MEDIAN_SAMPLE = 16384      # pixels of the random sample that brackets a large image's weighted median
 MEDIAN_MARGINS = (0.05, 0.2)   # the brackets tried: the sample's weighted quantiles 0.5 -/+ each
 
@@ -137,7 +140,7 @@ def event_slopes(first, later, sigma, longest: float = math.inf) -> dict | None:
     def flat(k):                 # from baseline k - 1 to k: E grows by at most (b1 / b0)^FLAT
         (b0, _, e0), (b1, _, e1) = scored[k - 1], scored[k]
         return e0 > 0 and math.log(max(e1, 1e-300) / e0) <= FLAT * math.log(b1 / b0)
-    if not np.any(sigma):
+    if not noisy(sigma):
         chosen = [0]
     else:
         chosen = [k for k in range(len(scored)) if resolves(k) and (len(scored) == 1 or k and flat(k))]
@@ -145,6 +148,12 @@ def event_slopes(first, later, sigma, longest: float = math.inf) -> dict | None:
     error, slope = _error(first, scored[k][1], scored[k][0], sigma)
     return {"slope": slope, "baseline_s": scored[k][0], "error_s": error,
             "resolved": bool(chosen) and scored[k][0] <= longest}        # (a first step longer than that: no)
+
+
+def noisy(sigma) -> bool:
+    """Whether a noise map holds Monte-Carlo noise: any pixel past ``NOISE_FLOOR`` (else every seed renders the
+    same image, up to rounding)."""
+    return bool(np.max(sigma, initial=0.0) > NOISE_FLOOR)
 
 
 def longest_baseline(period: float | None) -> float:
@@ -337,7 +346,7 @@ class AccuracyLimit:
         steps_us = event_median(dt ** 2 * curvature / (8 * rate), rate) * 1e6
         return {"limit": "Monte-Carlo noise" if noise_us > steps_us else "steps", "noise_us": noise_us,
                 "steps_us": steps_us, "spp": self.spp, "slope_baseline_us": float(slopes["baseline_s"]) * 1e6,
-                "slope_resolved": bool(slopes["resolved"])}
+                "slope_resolved": bool(slopes["resolved"]), "noise_free": not noisy(self.sigma)}
 
     def note(self, summary) -> None:
         est = self.estimate() if self.active else None
@@ -350,10 +359,10 @@ class AccuracyLimit:
             summary.notes.append(f"timing: no time baseline of the kept frames (up to "
                                  f"{est['slope_baseline_us'] / 1e3:.3g} ms) resolved the pixels' slopes (it needs "
                                  "4x the error and a steady error): the noise estimate below is uncertain")
-        if est["noise_us"] == 0:           # a jitter-free sampler: every seed renders the same image
-            summary.notes.append(f"timing accuracy: the sampler renders the same image for every seed (no "
-                                 f"Monte-Carlo noise); the step alone moves events by about {est['steps_us']:.3g} us, "
-                                 "and the sampling pattern's own fixed error is not estimated")
+        if est.get("noise_free"):           # a jitter-free sampler: every seed renders the same image
+            summary.notes.append(f"timing accuracy is limited by the time step: about {est['steps_us']:.3g} us; the "
+                                 "sampler renders the same image for every seed (no Monte-Carlo noise), and the "
+                                 "sampling pattern's own fixed error is not estimated")
         elif est["limit"] == "steps":
             summary.notes.append(f"timing accuracy is limited by the time step: about {est['steps_us']:.3g} us "
                                  f"(Monte-Carlo noise about {est['noise_us']:.3g} us); twice the steps quarter it")

@@ -41,6 +41,7 @@ from ..errors import ConfigError
 from ..scene.sampler import SAMPLERS, plugin_name   # candidates for a timing request (the scene's own first)
 from ..scene.timed import load_scene
 from .accuracy_limit import MAX_BASELINES, AccuracyLimit, event_median, longest_baseline, noise_map
+from .accuracy_limit import noisy as is_noisy
 from .render import render_frames
 from .stepping import whole_number, whole_per_period
 
@@ -151,15 +152,16 @@ def _noise_model(scene, probe, probe_spp) -> dict | None:
     if est is None:
         return None
     active = slope > 0
-    points = []
+    points, noisy = [], False
     for factor in PROBES:
         spp = probe_spp * factor
         sigma = probe["sigma"] if scene is probe["scene"] and spp == probe["spp"] else noise_map(scene, spp, 0, 0.0)
         noise_us = event_median(np.ravel(sigma)[active] / slope[active], slope[active]) * 1e6
         points.append((spp, max(noise_us, 1e-9), float(np.median(sigma)), est["steps_us"]))
+        noisy = noisy or is_noisy(sigma)      # (a scene of flat regions: median 0, its edges noisy)
     slopes = [math.log(a[1] / b[1]) / math.log(b[0] / a[0]) for a, b in zip(points, points[1:])]
     return {"points": points, "slopes": slopes, "steps_us": est["steps_us"], "resolved": est["slope_resolved"],
-            "slope_baseline_us": est["slope_baseline_us"]}
+            "slope_baseline_us": est["slope_baseline_us"], "noise_free": not noisy}
 
 
 def _slope_frames(timed, dt, probe_spp, duration) -> dict:
@@ -194,7 +196,7 @@ def _candidate(model) -> bool:
     """A noise model a timing request may rest on: its slopes resolved (else its error is at least its
     prediction), and noise to model (a jitter-free sampler renders the same image for every seed: the runner's
     own stratified sampler read 1e-9 us and was planned at 1 spp; its error is a fixed pattern no seed shows)."""
-    return model["resolved"] and model["points"][-1][2] > 0
+    return model["resolved"] and not model["noise_free"]
 
 
 def _timing_choice(scene_path, defines, timed, dt, duration, target_s, sigma_cap, probe_spp, max_spp) -> dict:
@@ -218,7 +220,10 @@ def _timing_choice(scene_path, defines, timed, dt, duration, target_s, sigma_cap
             if us <= budget_us and sigma <= sigma_cap:
                 best = min(best or (spp, order, name, us), (spp, order, name, us))
                 break
-    if best is None and not any(m["resolved"] for m in models.values()):
+    if best is None and not any(_candidate(m) for m in models.values()):
+        if any(m["resolved"] for m in models.values()):       # every sampler renders one image for all seeds
+            raise ConfigError(f"--timing-accuracy {target_s * 1e6:g}us: no sampler shows Monte-Carlo noise in the "
+                              "probe frames, so there is no noise timing to predict")
         longest = max(m["slope_baseline_us"] for m in models.values())
         raise ConfigError(f"--timing-accuracy {target_s * 1e6:g}us: the probe frames do not resolve the image's "
                           f"slopes within {longest:.3g} us (half the duration or a quarter scan period at most), so "
@@ -343,7 +348,7 @@ def _timing_plan(grey, timed, choice, steps, need, floor, why, steps_us, target_
     target_us = target_s * 1e6
     models = choice["models"]
     listed = "; ".join(f"{name}: " + ", ".join(f"{us:.3g} us at {spp}" for spp, us, _, _ in m["points"]) + " spp"
-                       + (" (jitter-free: no noise to model, not a candidate)" if m["points"][-1][2] == 0 else "")
+                       + (" (jitter-free: no noise to model, not a candidate)" if m["noise_free"] else "")
                        for name, m in models.items())
     sampler = None if choice["sampler"] == choice["own_sampler"] else {"type": choice["sampler"],
                                                                           "sample_count": choice["spp"]}
