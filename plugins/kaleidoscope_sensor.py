@@ -32,6 +32,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mitsuba_eventfield.validate import number
+
 from . import kaleido_optics
 from ._per_variant import per_variant, subclass
 from .properties import number_prop
@@ -98,7 +100,7 @@ class _KaleidoscopeSensorMethods:
     def _init_microlens(self, props):
         self.n = number_prop(props, "views", 3, WHERE, 1, integer=True)
         for name, v in (("tube_width", self.tube_width), ("tube_height", self.tube_height)):   # the image plane
-            number_prop({name: v}, name, None, WHERE, 0, lo_open=True)
+            number(v, f"{WHERE}: {name}", 0, lo_open=True, error=ValueError)
         if self.mode != "lenses":
             raise ValueError(f"{WHERE}: mode = {self.mode!r}: the tube's validation modes need layout = "
                              "'kaleidoscope'; a microlens array has lenses only")

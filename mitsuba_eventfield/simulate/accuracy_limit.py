@@ -214,6 +214,7 @@ class AccuracyLimit:
         self.frames, self.sigma, self.probed, self.other = [], None, None, None
         self.baselines = []        # (seconds since the first frame, frame) at steps 4, 8, 16, ...: event_slopes
         self.longest = math.inf    # the longest slope baseline: a quarter of a scan period (for_stepping)
+        self.chosen = None         # the last estimate's event_slopes (its baseline and per-pixel slope)
 
     @classmethod
     def for_stepping(cls, st, sigma: np.ndarray | None = None, period: float | None = None) -> "AccuracyLimit":
@@ -331,7 +332,7 @@ class AccuracyLimit:
         d1, d2 = self.dts
         slope = np.abs(l1 - l0) / d1
         active = slope > 0
-        slopes = self.slopes()
+        slopes = self.chosen = self.slopes()      # (kept: a plan divides every sampler's noise by its slope)
         if not active.any() or slopes is None:
             return None
         rate = slope[active]

@@ -178,7 +178,7 @@ def _slope_frames(timed, dt, probe_spp, duration) -> dict:
     lim.longest = longest
     est = lim.estimate()
     return {"scene": timed, "spp": spp, "sigma": lim.sigma, "estimate": est,
-            "slope": lim.slopes()["slope"] if est is not None else None}
+            "slope": lim.chosen["slope"] if est is not None else None}
 
 
 def _predict(model, spp) -> tuple:
